@@ -1,0 +1,11 @@
+#pragma once
+// Every `phos` command registers its options and its action here.
+
+#include <CLI/CLI.hpp>
+
+namespace phos::app {
+
+void RegisterSimulate(CLI::App& app);
+void RegisterPlot(CLI::App& app);
+
+}  // namespace phos::app

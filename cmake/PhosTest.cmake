@@ -1,0 +1,21 @@
+# One line registers a test (after Ceres' CERES_TEST macro):
+#   phos_test(model material)  ->  tests/model/material_test.cpp, target model_material_test,
+# linked with the part's library phos_<part> (when there is one) and any extra
+# libraries given after the name.
+find_package(GTest REQUIRED)
+include(GoogleTest)
+
+function(phos_test part name)
+  set(target ${part}_${name}_test)
+  add_executable(${target} ${CMAKE_SOURCE_DIR}/tests/${part}/${name}_test.cpp)
+  if(TARGET phos_${part})
+    target_link_libraries(${target} PRIVATE phos_${part})
+  endif()
+  target_link_libraries(${target} PRIVATE GTest::gtest GTest::gtest_main ${ARGN})
+  target_include_directories(${target} PRIVATE ${CMAKE_SOURCE_DIR}/tests)
+  target_compile_definitions(${target} PRIVATE
+    PHOS_FIXTURES_DIR="${PHOS_FIXTURES_DIR}"
+    PHOS_BINARY="$<TARGET_FILE:phos>")
+  add_dependencies(${target} phos)
+  gtest_discover_tests(${target} DISCOVERY_TIMEOUT 60 PROPERTIES TIMEOUT 600)
+endfunction()

@@ -1,0 +1,61 @@
+#pragma once
+// A phosphorescent material (Sec. 8.3, Eq. 8.1-8.2) and its file format
+// `phos.material/1` (DESIGN.md, "Files").
+//
+// Per excited state i (nc = 1..4 of them):
+//   kr      decay rate, 1/s
+//   ke[b]   excitation rate per unit band-integrated irradiance E[b], 1/s per
+//           unit irradiance; a value may be unknown (JSON null) when it was
+//           never measured (Table 8.1 has ke only for bands 1-3, and none for
+//           bottle, gloves, stickers). Unknown is not zero: a material whose
+//           ke is unknown in a band refuses to be charged there.
+//   Lambda[b] emitted radiance per unit kr*r (the re-radiation function)
+// Albedo (diffuse reflectance per band) is optional: Table 8.1 does not give it.
+
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json_fwd.hpp>
+
+#include "phos/model/spectral.h"
+
+namespace phos {
+
+inline constexpr int kMaxStates = 4;
+inline constexpr const char* kMaterialSchema = "phos.material/1";
+
+struct ExcitedState {
+  double kr = 0.0;                         // 1/s
+  std::vector<std::optional<double>> ke;   // per band, 1/s per unit irradiance; nullopt = unknown
+  std::vector<double> Lambda;              // per band, radiance per unit kr*r
+
+  bool ke_known(int b) const { return ke[b].has_value(); }
+};
+
+struct Material {
+  std::string name;
+  SpectralGrid bands;
+  std::optional<std::vector<double>> albedo;  // per band, in [0, 1]
+  std::vector<ExcitedState> states;
+  std::string source;  // provenance (optional, free text)
+
+  int band_count() const { return bands.band_count(); }
+  int state_count() const { return static_cast<int>(states.size()); }
+  // True if every ke of every state is known in band b.
+  bool ChargeableIn(int b) const;
+};
+
+// Loads and validates a material file. Any problem is a UserError naming the
+// file and the field, e.g. "green.json: states[0].kr: expected a number >= 0, got -1".
+Material LoadMaterial(const std::filesystem::path& path);
+// Validates and converts already-parsed JSON; `source` names it in errors.
+Material MaterialFromJson(const nlohmann::json& json, const std::string& source);
+nlohmann::json MaterialToJson(const Material& material);
+// Writes atomically (temporary file + rename): an existing file is never left half-written.
+void SaveMaterial(const Material& material, const std::filesystem::path& path);
+// Checks a material built in code by the same rules as a loaded one.
+void ValidateMaterial(const Material& material, const std::string& source);
+
+}  // namespace phos

@@ -1,0 +1,39 @@
+#pragma once
+// A light schedule at one point: consecutive phases of constant,
+// band-integrated irradiance E[b] (Eq. 8.1 holds E piecewise constant). A
+// phase with E = 0 everywhere is darkness, where the state decays in closed form.
+
+#include <string>
+#include <vector>
+
+#include "phos/model/material.h"
+
+namespace phos {
+
+struct IrradiancePhase {
+  double duration_s = 0.0;
+  std::vector<double> E;  // per band of the material's grid
+  std::string label;      // "charge", "dark", ...
+  bool dark() const;
+};
+
+class IrradianceSchedule {
+ public:
+  // The schedule of `phos simulate`: charge for charge_s under E, then dark for decay_s.
+  static IrradianceSchedule ChargeThenDecay(const std::vector<double>& E, double charge_s, double decay_s);
+
+  void Add(double duration_s, std::vector<double> E, std::string label);
+  const std::vector<IrradiancePhase>& phases() const { return phases_; }
+  double total_s() const;
+
+ private:
+  std::vector<IrradiancePhase> phases_;
+};
+
+// The excitation rate a_i = sum_b ke_i[b] E[b] of every state (Eq. 8.1), in 1/s.
+// Irradiance in a band where some ke is unknown is a UserError naming the
+// state, the band and `where`: such a material may decay but not be charged there.
+std::vector<double> ExcitationRates(const Material& material, const std::vector<double>& E,
+                                    const std::string& where);
+
+}  // namespace phos

@@ -1,0 +1,43 @@
+#!/usr/bin/env bash
+# Installs, through apt, every Debian package phos needs to build, test and
+# benchmark. Called by the Makefile before every configure; does nothing (and
+# needs no network) when everything is already installed.
+set -euo pipefail
+
+PACKAGES=(
+  # toolchain
+  build-essential cmake ninja-build pkg-config git
+  # model / fit: Ceres with Eigen, OpenCV for image regions
+  libceres-dev libeigen3-dev libopencv-dev
+  # acquire: Aravis (GigE Vision / USB3 Vision) and its tools, libgpiod v1.6
+  libaravis-dev aravis-tools libusb-1.0-0-dev zlib1g-dev libgpiod-dev
+  # render: Embree 3, OpenImageIO (+ OpenEXR), TBB
+  libembree-dev libopenimageio-dev openimageio-tools libopenexr-dev libtbb-dev
+  # tests and benchmarks
+  libgtest-dev libgmock-dev libbenchmark-dev
+  # JSON, command line, HTTP (editor)
+  nlohmann-json3-dev libcli11-dev libcpp-httplib-dev
+)
+
+missing=()
+for p in "${PACKAGES[@]}"; do
+  if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then
+    missing+=("$p")
+  fi
+done
+
+if [ ${#missing[@]} -eq 0 ]; then
+  exit 0
+fi
+
+echo "bootstrap: installing ${#missing[@]} missing package(s): ${missing[*]}"
+SUDO=""
+if [ "$(id -u)" -ne 0 ]; then
+  if command -v sudo >/dev/null 2>&1; then SUDO="sudo"; else
+    echo "bootstrap: need root (or sudo) to install: ${missing[*]}" >&2; exit 2
+  fi
+fi
+export DEBIAN_FRONTEND=noninteractive
+$SUDO apt-get update -qq
+$SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+echo "bootstrap: done"

@@ -1,0 +1,72 @@
+#pragma once
+// Helpers shared by the tests: fixtures, temporary folders, running the
+// `phos` command and capturing what it prints.
+
+#include <sys/wait.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+namespace phos::testing {
+
+inline std::filesystem::path Fixture(const std::string& relative) {
+  return std::filesystem::path(PHOS_FIXTURES_DIR) / relative;
+}
+
+// A fresh folder under the system temp dir, removed when the test ends.
+class TempDir {
+ public:
+  TempDir() {
+    std::string pattern = (std::filesystem::temp_directory_path() / "phos-test-XXXXXX").string();
+    path_ = ::mkdtemp(pattern.data());
+  }
+  ~TempDir() {
+    std::error_code ec;
+    std::filesystem::remove_all(path_, ec);
+  }
+  const std::filesystem::path& path() const { return path_; }
+  std::filesystem::path operator/(const std::string& name) const { return path_ / name; }
+
+ private:
+  std::filesystem::path path_;
+};
+
+inline std::string ReadText(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+inline void WriteText(const std::filesystem::path& path, const std::string& text) {
+  std::ofstream(path, std::ios::binary) << text;
+}
+
+struct CommandResult {
+  int exit_code = -1;
+  std::string out, err;
+};
+
+// Runs `phos <arguments>` (arguments are passed to the shell as written).
+inline CommandResult RunPhos(const std::string& arguments) {
+  TempDir dir;
+  std::string command = std::string(PHOS_BINARY) + " " + arguments + " >" + (dir / "out").string() + " 2>" +
+                        (dir / "err").string() + " </dev/null";
+  int status = std::system(command.c_str());
+  CommandResult result;
+  result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  result.out = ReadText(dir / "out");
+  result.err = ReadText(dir / "err");
+  return result;
+}
+
+inline int LineCount(const std::string& text) {
+  int lines = 0;
+  for (char c : text) lines += c == '\n';
+  return lines;
+}
+
+}  // namespace phos::testing

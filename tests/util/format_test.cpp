@@ -1,0 +1,43 @@
+#include "phos/util/format.h"
+
+#include <cmath>
+#include <gtest/gtest.h>
+#include <random>
+
+namespace phos {
+namespace {
+
+TEST(FormatDouble, ShortestFormReadsBackExactly) {
+  EXPECT_EQ(FormatDouble(0.1), "0.1");
+  EXPECT_EQ(FormatDouble(0.0), "0");
+  EXPECT_EQ(FormatDouble(1e-300), "1e-300");
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> exponent(-300, 300);
+  for (int i = 0; i < 10000; ++i) {
+    double v = std::pow(10.0, exponent(rng)) * (rng() % 2 ? 1 : -1);
+    double back = 0;
+    ASSERT_TRUE(ParseDouble(FormatDouble(v), &back)) << FormatDouble(v);
+    EXPECT_EQ(back, v);
+  }
+}
+
+TEST(ParseDouble, RejectsWhatIsNotOneFiniteNumber) {
+  double v = 0;
+  EXPECT_TRUE(ParseDouble("+2.5", &v));
+  EXPECT_EQ(v, 2.5);
+  for (const char* bad : {"", "abc", "1.0x", "nan", "inf", "1e999", " 1", "1,2"}) EXPECT_FALSE(ParseDouble(bad, &v)) << bad;
+}
+
+TEST(ParseDoubleList, SplitsOnCommasAndNamesTheBadItem) {
+  std::vector<double> values;
+  std::string bad;
+  ASSERT_TRUE(ParseDoubleList("1,0.5,0", &values, &bad));
+  EXPECT_EQ(values, (std::vector<double>{1, 0.5, 0}));
+  EXPECT_FALSE(ParseDoubleList("1,,2", &values, &bad));
+  EXPECT_EQ(bad, "");
+  EXPECT_FALSE(ParseDoubleList("1,x", &values, &bad));
+  EXPECT_EQ(bad, "x");
+}
+
+}  // namespace
+}  // namespace phos

@@ -1,0 +1,66 @@
+#pragma once
+// Validated reading of JSON input files. A JsonField is a value together with
+// the file it came from and its path inside it ("states[0].ke[3]"), so every
+// complaint names both, in the one form of UserError.
+
+#include <cstddef>
+#include <filesystem>
+#include <initializer_list>
+#include <limits>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+namespace phos {
+
+// Reads and parses a JSON file; a missing file or a syntax error is a UserError.
+nlohmann::json ReadJsonFile(const std::filesystem::path& path);
+
+// Writes text to path through a temporary file and a rename, so a reader (or a
+// crash) never sees half a file and an existing file is replaced whole.
+void WriteFileAtomically(const std::filesystem::path& path, std::string_view text);
+
+class JsonField {
+ public:
+  JsonField(const nlohmann::json& value, std::string source, std::string path = "");
+
+  const nlohmann::json& value() const { return *value_; }
+  const std::string& path() const { return path_; }
+  const std::string& source() const { return source_; }
+
+  bool Has(std::string_view key) const;
+  JsonField operator[](std::string_view key) const;  // required member of an object
+  std::optional<JsonField> Optional(std::string_view key) const;
+  JsonField At(std::size_t index) const;  // element of an array
+  std::size_t ArraySize() const;          // fails unless an array
+  bool IsNull() const { return value_->is_null(); }
+
+  double Number() const;  // finite number
+  double NumberAtLeast(double lower) const;
+  double NumberInRange(double lower, double upper) const;
+  int Integer(int lower, int upper) const;
+  std::string String() const;
+  std::string NonEmptyString() const;
+  // An array of finite numbers >= lower with exactly `size` elements (any size if 0).
+  std::vector<double> NumberArray(std::size_t size = 0,
+                                  double lower = -std::numeric_limits<double>::infinity()) const;
+
+  // Fails on a member whose name is not in `known` (a typo must not pass silently).
+  void RejectUnknownKeys(std::initializer_list<std::string_view> known) const;
+
+  [[noreturn]] void Fail(std::string_view message) const;
+
+ private:
+  void RequireObject() const;
+  const nlohmann::json* value_;
+  std::string source_;
+  std::string path_;
+};
+
+// A short description of a JSON value for error messages: -1, "abc", an array, null.
+std::string DescribeJson(const nlohmann::json& value);
+
+}  // namespace phos

@@ -1,0 +1,175 @@
+#include "phos/util/json.h"
+
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <sstream>
+#include <unistd.h>
+
+#include "phos/util/error.h"
+#include "phos/util/format.h"
+
+namespace phos {
+
+nlohmann::json ReadJsonFile(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) ThrowUserError(path.string(), "", "cannot open the file for reading");
+  std::stringstream text;
+  text << in.rdbuf();
+  try {
+    return nlohmann::json::parse(text.str());
+  } catch (const nlohmann::json::exception& e) {
+    // Drop nlohmann's "[json.exception.parse_error.101] " prefix: the user
+    // needs the position and the reason.
+    std::string what = e.what();
+    if (auto close = what.find("] "); what.rfind("[json.exception", 0) == 0 && close != std::string::npos)
+      what = what.substr(close + 2);
+    ThrowUserError(path.string(), "", "not valid JSON: " + what);
+  }
+}
+
+void WriteFileAtomically(const std::filesystem::path& path, std::string_view text) {
+  std::filesystem::path temporary = path;
+  temporary += ".tmp." + std::to_string(::getpid());
+  {
+    std::ofstream out(temporary, std::ios::binary | std::ios::trunc);
+    if (!out) ThrowUserError(path.string(), "", "cannot open the file for writing");
+    out.write(text.data(), static_cast<std::streamsize>(text.size()));
+    out.flush();
+    if (!out) {
+      std::error_code ignored;
+      std::filesystem::remove(temporary, ignored);
+      ThrowUserError(path.string(), "", "writing failed (disk full?)");
+    }
+  }
+  std::error_code ec;
+  std::filesystem::rename(temporary, path, ec);
+  if (ec) {
+    std::filesystem::remove(temporary, ec);
+    ThrowUserError(path.string(), "", "cannot replace the file: " + ec.message());
+  }
+}
+
+std::string DescribeJson(const nlohmann::json& value) {
+  switch (value.type()) {
+    case nlohmann::json::value_t::null: return "null";
+    case nlohmann::json::value_t::object: return "an object";
+    case nlohmann::json::value_t::array: return "an array";
+    case nlohmann::json::value_t::boolean: return value.get<bool>() ? "true" : "false";
+    case nlohmann::json::value_t::string: {
+      std::string s = value.get<std::string>();
+      if (s.size() > 40) s = s.substr(0, 37) + "...";
+      return "\"" + s + "\"";
+    }
+    default:
+      if (value.is_number()) return FormatDouble(value.get<double>());
+      return value.dump();
+  }
+}
+
+JsonField::JsonField(const nlohmann::json& value, std::string source, std::string path)
+    : value_(&value), source_(std::move(source)), path_(std::move(path)) {}
+
+void JsonField::Fail(std::string_view message) const {
+  ThrowUserError(source_, path_.empty() ? std::string_view("(top level)") : std::string_view(path_), message);
+}
+
+void JsonField::RequireObject() const {
+  if (!value_->is_object()) Fail("expected an object, got " + DescribeJson(*value_));
+}
+
+bool JsonField::Has(std::string_view key) const {
+  RequireObject();
+  return value_->contains(key);
+}
+
+JsonField JsonField::operator[](std::string_view key) const {
+  RequireObject();
+  std::string child = path_.empty() ? std::string(key) : path_ + "." + std::string(key);
+  auto it = value_->find(key);
+  if (it == value_->end()) ThrowUserError(source_, child, "missing (required)");
+  return JsonField(*it, source_, child);
+}
+
+std::optional<JsonField> JsonField::Optional(std::string_view key) const {
+  RequireObject();
+  if (!value_->contains(key)) return std::nullopt;
+  return (*this)[key];
+}
+
+std::size_t JsonField::ArraySize() const {
+  if (!value_->is_array()) Fail("expected an array, got " + DescribeJson(*value_));
+  return value_->size();
+}
+
+JsonField JsonField::At(std::size_t index) const {
+  if (index >= ArraySize()) Fail("index " + std::to_string(index) + " out of range");
+  return JsonField((*value_)[index], source_, path_ + "[" + std::to_string(index) + "]");
+}
+
+double JsonField::Number() const {
+  if (!value_->is_number()) Fail("expected a number, got " + DescribeJson(*value_));
+  double v = value_->get<double>();
+  if (!std::isfinite(v)) Fail("expected a finite number, got " + FormatDouble(v));
+  return v;
+}
+
+double JsonField::NumberAtLeast(double lower) const {
+  double v = Number();
+  if (v < lower) Fail("expected a number >= " + FormatDouble(lower) + ", got " + FormatDouble(v));
+  return v;
+}
+
+double JsonField::NumberInRange(double lower, double upper) const {
+  double v = Number();
+  if (v < lower || v > upper)
+    Fail("expected a number in [" + FormatDouble(lower) + ", " + FormatDouble(upper) + "], got " +
+         FormatDouble(v));
+  return v;
+}
+
+int JsonField::Integer(int lower, int upper) const {
+  if (!value_->is_number_integer() && !(value_->is_number() && std::floor(value_->get<double>()) == value_->get<double>()))
+    Fail("expected a whole number, got " + DescribeJson(*value_));
+  double v = value_->get<double>();
+  if (v < lower || v > upper)
+    Fail("expected a whole number from " + std::to_string(lower) + " to " + std::to_string(upper) +
+         ", got " + FormatDouble(v));
+  return static_cast<int>(v);
+}
+
+std::string JsonField::String() const {
+  if (!value_->is_string()) Fail("expected a string, got " + DescribeJson(*value_));
+  return value_->get<std::string>();
+}
+
+std::string JsonField::NonEmptyString() const {
+  std::string s = String();
+  if (s.empty()) Fail("expected a non-empty string");
+  return s;
+}
+
+std::vector<double> JsonField::NumberArray(std::size_t size, double lower) const {
+  std::size_t n = ArraySize();
+  if (size != 0 && n != size)
+    Fail("expected " + std::to_string(size) + " values (one per band), got " + std::to_string(n));
+  std::vector<double> values(n);
+  for (std::size_t i = 0; i < n; ++i) values[i] = At(i).NumberAtLeast(lower);
+  return values;
+}
+
+void JsonField::RejectUnknownKeys(std::initializer_list<std::string_view> known) const {
+  RequireObject();
+  for (auto it = value_->begin(); it != value_->end(); ++it) {
+    bool found = false;
+    for (std::string_view k : known) found = found || it.key() == k;
+    if (!found) {
+      std::string list;
+      for (std::string_view k : known) list += (list.empty() ? "" : ", ") + std::string(k);
+      std::string child = path_.empty() ? it.key() : path_ + "." + it.key();
+      ThrowUserError(source_, child, "unknown field (expected one of: " + list + ")");
+    }
+  }
+}
+
+}  // namespace phos
