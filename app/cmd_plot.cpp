@@ -1,6 +1,7 @@
 // phos plot: draws the total emitted radiance of one or more `phos simulate`
 // CSV files over time, one line per file, as an SVG.
 
+#include <algorithm>
 #include <filesystem>
 #include <memory>
 
@@ -42,6 +43,14 @@ void RunPlot(const PlotArgs& args) {
   options.x_label = "time (s)";
   options.y_label = args.log_y ? "total emitted radiance (log)" : "total emitted radiance";
   options.log_y = args.log_y;
+  if (args.log_y) {
+    // Eight decades below the brightest point: a long decay would otherwise
+    // squeeze what the eye can see into the top of the plot.
+    double peak = 0;
+    for (const PlotSeries& s : series)
+      for (double y : s.y) peak = std::max(peak, y);
+    if (peak > 0) options.y_min = peak * 1e-8;
+  }
   WriteFileAtomically(args.out, PlotSvg(series, options));
 }
 

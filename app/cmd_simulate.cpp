@@ -94,6 +94,7 @@ std::string ToSvg(const SimulationResult& result, const Material& material, doub
   total.y.assign(result.sample_count(), 0.0);
   for (int b = 0; b < result.nb; ++b) {
     PlotSeries s{material.bands.BandName(b)};
+    s.color = WavelengthColor(material.bands.center_nm(b));
     s.x = result.t_s;
     bool any = false;
     for (std::size_t m = 0; m < result.sample_count(); ++m) {

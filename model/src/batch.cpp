@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <type_traits>
 
 #include <Eigen/Core>
 #include <tbb/blocked_range.h>
@@ -14,90 +15,164 @@
 namespace phos {
 namespace {
 
-// Points per chunk: every temporary of a chunk stays in L1, and the loop
-// bodies are whole Eigen expressions that vectorize (exp and log have packet
-// versions for float and double).
-constexpr Eigen::Index kChunk = 256;
+// Points per chunk handed to one task.
+constexpr std::size_t kChunk = 1024;
 // Below this many points one thread does it all: TBB's overhead would dominate.
 constexpr std::size_t kParallelThreshold = 1 << 15;
 
-template <typename Real>
-using ChunkArray = Eigen::Array<Real, Eigen::Dynamic, 1, 0, kChunk, 1>;
-template <typename Real>
-using ConstSegment = Eigen::Map<const Eigen::Array<Real, Eigen::Dynamic, 1>>;
-template <typename Real>
-using Segment = Eigen::Map<Eigen::Array<Real, Eigen::Dynamic, 1>>;
+// The kernel is one pass over memory with everything in registers: per
+// packet of points (8 floats or 4 doubles with AVX2) it loads the irradiance
+// of each lit band once, forms a_i for every state, advances each state and
+// writes Lp. It uses Eigen's packet math (exp for float and double) directly;
+// an expression per step would make a pass over L1 per operation and run
+// several times slower (docs/model.md has the measurements).
+namespace ei = Eigen::internal;
 
-// e^x for x <= 0, vectorized. Eigen's packet exp clamps its argument at the
-// bottom of the normal range (for double, e^-1000 comes back as 5.6e-309), so
-// results below the smallest normal number are flushed to 0 here: a state
-// under 1e-308 (1e-38 in float) is zero for every purpose of phos.
 template <typename Real>
-ChunkArray<Real> Exp(const ChunkArray<Real>& x) {
-  const Real lowest = std::log(std::numeric_limits<Real>::min());
-  return (x < lowest).select(ChunkArray<Real>::Zero(x.size()), x.exp());
+using Packet = typename ei::packet_traits<Real>::type;
+template <typename Real>
+constexpr int kPacketSize = ei::unpacket_traits<Packet<Real>>::size;
+
+// 1 - e^x for -1/2 < x <= 0 as the Taylor series -x * sum_n x^n / (n+1)!,
+// cut where the next term is below half an ulp (degree 7 in float, 13 in
+// double). A naive 1 - e^x would lose every digit as x -> 0 (charging from
+// r = 0 with a short step), and Eigen has no packet expm1 for double.
+template <typename Real>
+EIGEN_STRONG_INLINE Packet<Real> OneMinusExpSeries(const Packet<Real>& x) {
+  using P = Packet<Real>;
+  // 1/(n+1)!, n = 0..13; float uses the first 8.
+  static constexpr double kInverseFactorial[] = {1.0,
+                                                 1.0 / 2,
+                                                 1.0 / 6,
+                                                 1.0 / 24,
+                                                 1.0 / 120,
+                                                 1.0 / 720,
+                                                 1.0 / 5040,
+                                                 1.0 / 40320,
+                                                 1.0 / 362880,
+                                                 1.0 / 3628800,
+                                                 1.0 / 39916800,
+                                                 1.0 / 479001600,
+                                                 1.0 / 6227020800,
+                                                 1.0 / 87178291200};
+  constexpr int kDegree = sizeof(Real) == 4 ? 7 : 13;
+  P series = ei::pset1<P>(static_cast<Real>(kInverseFactorial[kDegree]));
+  for (int n = kDegree - 1; n >= 0; --n)
+    series = ei::pmadd(series, x, ei::pset1<P>(static_cast<Real>(kInverseFactorial[n])));
+  return ei::pmul(ei::pnegate(x), series);
 }
 
-// 1 - e^x for x <= 0, given u = Exp(x); accurate to a few ulp for every x.
-// Eigen has no packet expm1 for double, so for |x| < 1 this is Kahan's
-// identity expm1(x) = (u - 1) x / log(u), which cancels the rounding of u and
-// loses no digits however small |x| is; for x <= -1, u <= 0.37 and 1 - u is
-// already accurate (and log(u) would not be, near underflow).
+// e^x for x <= 0. Eigen's packet exp clamps its argument at the bottom of the
+// normal range (in double, e^-1000 comes back as 5.6e-309), so results below
+// the smallest normal number are flushed to 0: a state under 1e-308 (1e-38
+// in float) is zero for every purpose of phos.
 template <typename Real>
-ChunkArray<Real> OneMinusExp(const ChunkArray<Real>& x, const ChunkArray<Real>& u) {
-  ChunkArray<Real> kahan = (Real(1) - u) * x / u.log();
-  // u == 1: |x| is below half an ulp of 1 and 1 - e^x = -x to full precision.
-  ChunkArray<Real> small = (u == Real(1)).select(-x, kahan);
-  return (x <= Real(-1)).select(Real(1) - u, small);
+EIGEN_STRONG_INLINE Packet<Real> ExpNonPositive(const Packet<Real>& x) {
+  using P = Packet<Real>;
+  static const Real lowest = std::log(std::numeric_limits<Real>::min());
+  return ei::pselect(ei::pcmp_lt(x, ei::pset1<P>(lowest)), ei::pzero(x), ei::pexp(x));
 }
 
-template <typename Real>
-void EmitChunk(const BatchCoefficients<Real>& c, const StateBatch<Real>& s, Real* Lp, std::size_t Lp_stride,
-               std::size_t j0, Eigen::Index m) {
-  for (int b = 0; b < c.n_em; ++b) {
-    Segment<Real> out(Lp + static_cast<std::size_t>(b) * Lp_stride + j0, m);
-    out = c.emission[static_cast<std::size_t>(b) * c.nc] * ConstSegment<Real>(s.state(0) + j0, m);
-    for (int i = 1; i < c.nc; ++i)
-      out += c.emission[static_cast<std::size_t>(b) * c.nc + i] * ConstSegment<Real>(s.state(i) + j0, m);
+// One packet of one state; returns k = a + kr for the stability check.
+template <typename Real, Integrator kIntegrator>
+EIGEN_STRONG_INLINE Packet<Real> StepPacket(Packet<Real>& r, const Packet<Real>& a, Real kr, Real h) {
+  using P = Packet<Real>;
+  const P k = ei::padd(a, ei::pset1<P>(kr));
+  const P one = ei::pset1<P>(Real(1)), zero = ei::pzero(k);
+  if constexpr (kIntegrator == Integrator::kExact) {
+    // r(t+h) = r e^{-kh} + r_inf (1 - e^{-kh}), r_inf = a / k (Eq. 8.1, exact)
+    const P x = ei::pmul(k, ei::pset1<P>(-h));
+    const P half = ei::pset1<P>(Real(-0.5));
+    // rise = 1 - e^{-kh}, decay = e^{-kh}, both to a few ulp. For kh < 1/2
+    // the series gives rise and decay = 1 - rise loses nothing (decay > 0.6):
+    // no exp at all, the common case of frame-sized steps. Past that,
+    // decay < 0.61 and rise = 1 - decay loses nothing.
+    P rise = OneMinusExpSeries<Real>(x), decay;
+    if (ei::predux_min(x) > Real(-0.5)) {
+      decay = ei::psub(one, rise);
+    } else {
+      decay = ExpNonPositive<Real>(x);
+      const P large = ei::pcmp_le(x, half);
+      rise = ei::pselect(large, ei::psub(one, decay), rise);
+      decay = ei::pselect(large, decay, ei::psub(one, rise));
+    }
+    const P r_inf = ei::pdiv(a, ei::pmax(k, ei::pset1<P>(std::numeric_limits<Real>::min())));
+    const P next = ei::pmadd(r, decay, ei::pmul(r_inf, rise));
+    // The exact value lies between r and r_inf; the clamp removes rounding ulps only.
+    r = ei::pmin(one, ei::pmax(zero, next));
+  } else {
+    // f(r) = a (1 - r) - kr r = a - k r
+    const P h_p = ei::pset1<P>(h);
+    auto f = [&](const P& x) { return ei::psub(a, ei::pmul(k, x)); };
+    if constexpr (kIntegrator == Integrator::kEuler) {
+      r = ei::pmadd(h_p, f(r), r);
+    } else {
+      const P half_h = ei::pset1<P>(Real(0.5) * h);
+      const P k1 = f(r);
+      const P k2 = f(ei::pmadd(half_h, k1, r));
+      const P k3 = f(ei::pmadd(half_h, k2, r));
+      const P k4 = f(ei::pmadd(h_p, k3, r));
+      const P sum = ei::padd(ei::padd(k1, k4), ei::pmul(ei::pset1<P>(Real(2)), ei::padd(k2, k3)));
+      r = ei::pmadd(ei::pset1<P>(h / Real(6)), sum, r);
+    }
   }
+  return k;
 }
 
 template <typename Real, Integrator kIntegrator>
-double AdvanceChunk(const BatchCoefficients<Real>& c, const Real* E, std::size_t E_stride, Real h,
-                    StateBatch<Real>& s, Real* Lp, std::size_t Lp_stride, std::size_t j0, Eigen::Index m) {
-  double max_hk = 0.0;
-  ChunkArray<Real> a(m);
-  for (int i = 0; i < c.nc; ++i) {
-    // a = sum_b ke[b] E[b] (Eq. 8.1), only over the bands that carry light.
-    a.setZero();
-    for (int b = 0; b < c.n_exc; ++b)
-      a += c.ke[static_cast<std::size_t>(i) * c.n_exc + b] *
-           ConstSegment<Real>(E + static_cast<std::size_t>(b) * E_stride + j0, m);
-    const Real kr = c.kr[i];
-    Segment<Real> r(s.state(i) + j0, m);
-    if constexpr (kIntegrator == Integrator::kExact) {
-      ChunkArray<Real> k = a + kr;
-      ChunkArray<Real> x = -h * k;
-      ChunkArray<Real> decay = Exp<Real>(x);
-      ChunkArray<Real> r_inf = a / k.max(std::numeric_limits<Real>::min());
-      // Convex combination of r and r_inf; the clamp removes rounding ulps only.
-      r = (r * decay + r_inf * OneMinusExp<Real>(x, decay)).max(Real(0)).min(Real(1));
-    } else if constexpr (kIntegrator == Integrator::kEuler) {
-      max_hk = std::max(max_hk, static_cast<double>(h * (a.maxCoeff() + kr)));
-      r += h * (a * (Real(1) - r) - kr * r);
-    } else {
-      static_assert(kIntegrator == Integrator::kRk4);
-      max_hk = std::max(max_hk, static_cast<double>(h * (a.maxCoeff() + kr)));
-      auto f = [&](const ChunkArray<Real>& x) -> ChunkArray<Real> { return a * (Real(1) - x) - kr * x; };
-      ChunkArray<Real> k1 = f(r);
-      ChunkArray<Real> k2 = f(r + Real(0.5) * h * k1);
-      ChunkArray<Real> k3 = f(r + Real(0.5) * h * k2);
-      ChunkArray<Real> k4 = f(r + h * k3);
-      r += (h / Real(6)) * (k1 + Real(2) * k2 + Real(2) * k3 + k4);
+Real StepScalar(Real r, Real a, Real kr, Real h) {
+  if constexpr (kIntegrator == Integrator::kExact) return ExactStep(r, a, kr, h);
+  else if constexpr (kIntegrator == Integrator::kEuler) return EulerStep(r, a, kr, h);
+  else return Rk4Step(r, a, kr, h);
+}
+
+// Points [j0, j1) of a batch with kStates states. Returns max k (1/s).
+template <typename Real, Integrator kIntegrator, int kStates>
+Real AdvanceRange(const BatchCoefficients<Real>& c, const Real* E, std::size_t E_stride, Real h, StateBatch<Real>& s,
+                  Real* Lp, std::size_t Lp_stride, std::size_t j0, std::size_t j1) {
+  using P = Packet<Real>;
+  constexpr int W = kPacketSize<Real>;
+  const std::size_t n = s.n;
+  Real* r_base = s.r.data();
+  P k_max = ei::pzero(P());
+  std::size_t j = j0;
+  for (; j + W <= j1; j += W) {
+    P a[kStates];
+    for (int i = 0; i < kStates; ++i) a[i] = ei::pzero(P());
+    for (int b = 0; b < c.n_exc; ++b) {
+      const P e = ei::ploadu<P>(E + b * E_stride + j);
+      for (int i = 0; i < kStates; ++i) a[i] = ei::pmadd(ei::pset1<P>(c.ke[i * c.n_exc + b]), e, a[i]);
     }
+    P r[kStates];
+    for (int i = 0; i < kStates; ++i) {
+      r[i] = ei::ploadu<P>(r_base + i * n + j);
+      k_max = ei::pmax(k_max, StepPacket<Real, kIntegrator>(r[i], a[i], c.kr[i], h));
+      ei::pstoreu(r_base + i * n + j, r[i]);
+    }
+    if (Lp != nullptr)
+      for (int b = 0; b < c.n_em; ++b) {  // Eq. 8.2
+        P L = ei::pmul(ei::pset1<P>(c.emission[b * kStates]), r[0]);
+        for (int i = 1; i < kStates; ++i) L = ei::pmadd(ei::pset1<P>(c.emission[b * kStates + i]), r[i], L);
+        ei::pstoreu(Lp + b * Lp_stride + j, L);
+      }
   }
-  if (Lp != nullptr) EmitChunk(c, s, Lp, Lp_stride, j0, m);
-  return max_hk;
+  Real k_tail = 0;
+  for (; j < j1; ++j) {  // the last few points, one at a time
+    for (int i = 0; i < kStates; ++i) {
+      Real a = 0;
+      for (int b = 0; b < c.n_exc; ++b) a += c.ke[i * c.n_exc + b] * E[b * E_stride + j];
+      Real& r = r_base[i * n + j];
+      r = StepScalar<Real, kIntegrator>(r, a, c.kr[i], h);
+      k_tail = std::max(k_tail, a + c.kr[i]);
+    }
+    if (Lp != nullptr)
+      for (int b = 0; b < c.n_em; ++b) {
+        Real L = 0;
+        for (int i = 0; i < kStates; ++i) L += c.emission[b * kStates + i] * r_base[i * n + j];
+        Lp[b * Lp_stride + j] = L;
+      }
+  }
+  return std::max(k_tail, ei::predux_max(k_max));
 }
 
 // Runs body(j0, m) -> double over all chunks, in parallel for large batches;
@@ -108,7 +183,7 @@ double ForEachChunk(std::size_t n, Body body) {
   auto run = [&](std::size_t c0, std::size_t c1, double init) {
     for (std::size_t c = c0; c < c1; ++c) {
       std::size_t j0 = c * kChunk;
-      init = std::max(init, body(j0, static_cast<Eigen::Index>(std::min<std::size_t>(kChunk, n - j0))));
+      init = std::max(init, body(j0, std::min<std::size_t>(j0 + kChunk, n)));
     }
     return init;
   };
@@ -148,6 +223,26 @@ BatchCoefficients<Real> BatchCoefficients<Real>::Compile(const Material& materia
   return c;
 }
 
+template <typename Real, Integrator kIntegrator>
+Real AdvanceAll(const BatchCoefficients<Real>& c, const Real* E, std::size_t E_stride, Real h, StateBatch<Real>& s,
+                Real* Lp, std::size_t Lp_stride) {
+  // The state count is a template argument so that a[] and r[] stay in registers.
+  auto run = [&](auto states) {
+    return ForEachChunk(s.n, [&](std::size_t j0, std::size_t j1) {
+      return static_cast<double>(
+          AdvanceRange<Real, kIntegrator, decltype(states)::value>(c, E, E_stride, h, s, Lp, Lp_stride, j0, j1));
+    });
+  };
+  switch (c.nc) {
+    case 1: return static_cast<Real>(run(std::integral_constant<int, 1>()));
+    case 2: return static_cast<Real>(run(std::integral_constant<int, 2>()));
+    case 3: return static_cast<Real>(run(std::integral_constant<int, 3>()));
+    case 4: return static_cast<Real>(run(std::integral_constant<int, 4>()));
+  }
+  PHOS_CHECK(!"1 to 4 states");
+  return 0;
+}
+
 template <typename Real>
 BatchStepInfo AdvanceBatch(Integrator integrator, const BatchCoefficients<Real>& c, const Real* E,
                            std::size_t E_stride, Real h_s, StateBatch<Real>& s, Real* Lp, std::size_t Lp_stride) {
@@ -156,19 +251,13 @@ BatchStepInfo AdvanceBatch(Integrator integrator, const BatchCoefficients<Real>&
   BatchStepInfo info;
   switch (integrator) {
     case Integrator::kExact:
-      ForEachChunk(s.n, [&](std::size_t j0, Eigen::Index m) {
-        return AdvanceChunk<Real, Integrator::kExact>(c, E, E_stride, h_s, s, Lp, Lp_stride, j0, m);
-      });
+      AdvanceAll<Real, Integrator::kExact>(c, E, E_stride, h_s, s, Lp, Lp_stride);
       break;
     case Integrator::kEuler:
-      info.max_hk = ForEachChunk(s.n, [&](std::size_t j0, Eigen::Index m) {
-        return AdvanceChunk<Real, Integrator::kEuler>(c, E, E_stride, h_s, s, Lp, Lp_stride, j0, m);
-      });
+      info.max_hk = h_s * AdvanceAll<Real, Integrator::kEuler>(c, E, E_stride, h_s, s, Lp, Lp_stride);
       break;
     case Integrator::kRk4:
-      info.max_hk = ForEachChunk(s.n, [&](std::size_t j0, Eigen::Index m) {
-        return AdvanceChunk<Real, Integrator::kRk4>(c, E, E_stride, h_s, s, Lp, Lp_stride, j0, m);
-      });
+      info.max_hk = h_s * AdvanceAll<Real, Integrator::kRk4>(c, E, E_stride, h_s, s, Lp, Lp_stride);
       break;
     case Integrator::kReference:
       PHOS_CHECK(!"the reference integrator is scalar: use Simulate()");
@@ -179,12 +268,13 @@ BatchStepInfo AdvanceBatch(Integrator integrator, const BatchCoefficients<Real>&
 template <typename Real>
 void DecayBatch(const BatchCoefficients<Real>& c, Real h_s, StateBatch<Real>& s) {
   PHOS_CHECK(s.nc == c.nc);
-  // In the dark a = 0, so e^{-kr h} is one number per state: a multiply per point.
+  // In the dark a = 0, so e^{-kr h} is one number per state: a multiply per
+  // point, exact for any h (the closed-form jump across dark intervals).
   for (int i = 0; i < c.nc; ++i) {
     const Real decay = std::exp(-c.kr[i] * h_s);
     Real* r = s.state(i);
-    ForEachChunk(s.n, [&](std::size_t j0, Eigen::Index m) {
-      Segment<Real>(r + j0, m) *= decay;
+    ForEachChunk(s.n, [&](std::size_t j0, std::size_t j1) {
+      for (std::size_t j = j0; j < j1; ++j) r[j] *= decay;
       return 0.0;
     });
   }
@@ -193,8 +283,13 @@ void DecayBatch(const BatchCoefficients<Real>& c, Real h_s, StateBatch<Real>& s)
 template <typename Real>
 void EmitBatch(const BatchCoefficients<Real>& c, const StateBatch<Real>& s, Real* Lp, std::size_t Lp_stride) {
   PHOS_CHECK(s.nc == c.nc);
-  ForEachChunk(s.n, [&](std::size_t j0, Eigen::Index m) {
-    EmitChunk(c, s, Lp, Lp_stride, j0, m);
+  ForEachChunk(s.n, [&](std::size_t j0, std::size_t j1) {
+    for (int b = 0; b < c.n_em; ++b)
+      for (std::size_t j = j0; j < j1; ++j) {
+        Real L = 0;
+        for (int i = 0; i < c.nc; ++i) L += c.emission[b * c.nc + i] * s.state(i)[j];  // Eq. 8.2
+        Lp[b * Lp_stride + j] = L;
+      }
     return 0.0;
   });
 }

@@ -85,6 +85,23 @@ struct Axis {
 
 }  // namespace
 
+std::string WavelengthColor(double nm) {
+  // Piecewise-linear hue ramp after Bruton's approximation of the visible
+  // spectrum, darkened a little so thin lines read on white.
+  double r = 0, g = 0, b = 0;
+  if (nm >= 380 && nm < 440) { r = (440 - nm) / 60; b = 1; }
+  else if (nm >= 440 && nm < 490) { g = (nm - 440) / 50; b = 1; }
+  else if (nm >= 490 && nm < 510) { g = 1; b = (510 - nm) / 20; }
+  else if (nm >= 510 && nm < 580) { r = (nm - 510) / 70; g = 1; }
+  else if (nm >= 580 && nm < 645) { r = 1; g = (645 - nm) / 65; }
+  else if (nm >= 645 && nm <= 780) { r = 1; }
+  else return "#888888";
+  char buffer[16];
+  std::snprintf(buffer, sizeof buffer, "#%02X%02X%02X", static_cast<int>(r * 210), static_cast<int>(g * 190),
+                static_cast<int>(b * 230));
+  return buffer;
+}
+
 const std::string& PaletteColor(int index) {
   static const std::vector<std::string> palette = {"#0072B2", "#D55E00", "#009E73", "#CC79A7",
                                                    "#E69F00", "#56B4E9", "#000000", "#F0E442",

@@ -32,6 +32,10 @@ struct PlotOptions {
 // Returns the SVG document. Series with no drawable point are listed in the legend only.
 std::string PlotSvg(const std::vector<PlotSeries>& series, const PlotOptions& options);
 
+// A CSS colour for light of this wavelength (approximate, for band curves:
+// violet at 400 nm, red at 650 nm; grey outside the visible range).
+std::string WavelengthColor(double wavelength_nm);
+
 // The palette used when a series names no colour (colour-blind-safe, after Okabe and Ito).
 const std::string& PaletteColor(int index);
 
