@@ -87,14 +87,18 @@ EIGEN_STRONG_INLINE Packet<Real> StepPacket(Packet<Real>& r, const Packet<Real>&
     // the series gives rise and decay = 1 - rise loses nothing (decay > 0.6):
     // no exp at all, the common case of frame-sized steps. Past that,
     // decay < 0.61 and rise = 1 - decay loses nothing.
-    P rise = OneMinusExpSeries<Real>(x), decay;
+    // Each packet pays only for the branch its lanes need.
+    P rise, decay;
     if (ei::predux_min(x) > Real(-0.5)) {
+      rise = OneMinusExpSeries<Real>(x);
       decay = ei::psub(one, rise);
-    } else {
+    } else if (ei::predux_max(x) <= Real(-0.5)) {
       decay = ExpNonPositive<Real>(x);
-      const P large = ei::pcmp_le(x, half);
-      rise = ei::pselect(large, ei::psub(one, decay), rise);
-      decay = ei::pselect(large, decay, ei::psub(one, rise));
+      rise = ei::psub(one, decay);
+    } else {
+      const P large = ei::pcmp_le(x, half), series = OneMinusExpSeries<Real>(x);
+      decay = ei::pselect(large, ExpNonPositive<Real>(x), ei::psub(one, series));
+      rise = ei::pselect(large, ei::psub(one, decay), series);
     }
     const P r_inf = ei::pdiv(a, ei::pmax(k, ei::pset1<P>(std::numeric_limits<Real>::min())));
     const P next = ei::pmadd(r, decay, ei::pmul(r_inf, rise));

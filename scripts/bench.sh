@@ -1,0 +1,14 @@
+#!/usr/bin/env bash
+# Runs the benchmarks (Release) and keeps their output, with the command and
+# the machine, in docs/bench/, where docs/ and the README quote them from.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+mkdir -p docs/bench
+out=docs/bench/model.txt
+{
+  echo "# command: build/bin/bench_model --benchmark_counters_tabular=true"
+  echo "# date: $(date -u +%Y-%m-%dT%H:%MZ)  commit: $(git rev-parse --short HEAD 2>/dev/null || echo none)"
+  echo "# machine: $(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | xargs), $(free -g | awk '/Mem:/{print $2}') GiB"
+  build/bin/bench_model --benchmark_counters_tabular=true 2>&1
+} | tee "$out"
+echo "wrote $out"
