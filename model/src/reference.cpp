@@ -20,7 +20,7 @@ long double ReferenceAdvance(long double r, double a_in, double kr_in, double h_
   if (min_steps > static_cast<long double>(options.max_steps))
     ThrowUserError("", "--integrator reference",
                    "this interval is too stiff for the explicit reference (k*h = " +
-                       FormatDouble(static_cast<double>(k * h_s)) + ", over " +
+                       FormatShort(static_cast<double>(k * h_s)) + ", over " +
                        std::to_string(options.max_steps) + " steps); use --integrator exact");
 
   auto f = [&](long double x) { return a * (1.0L - x) - kr * x; };  // Eq. 8.1

@@ -35,16 +35,16 @@ void CheckStability(const Material& material, const IrradianceSchedule& schedule
       const double hk = h * k;
       if (hk <= monotone) continue;
       const std::string what = std::string(IntegratorName(integrator)) + " with --dt " + FormatDouble(options.dt_s) +
-                               ": h*k = " + FormatDouble(hk) + " for state " + std::to_string(i + 1) + " during '" +
-                               phase.label + "' (k = " + FormatDouble(k) + "/s)";
-      const std::string fix = "use --integrator exact, or --dt <= " + FormatDouble(monotone / k);
+                               ": h*k = " + FormatShort(hk) + " for state " + std::to_string(i + 1) + " during '" +
+                               phase.label + "' (k = " + FormatShort(k) + "/s)";
+      const std::string fix = "use --integrator exact, or --dt <= " + FormatDouble(RoundDownSignificant(monotone / k));
       if (hk > stable) {
-        std::string message = what + " exceeds the stability limit " + FormatDouble(stable) +
+        std::string message = what + " exceeds the stability limit " + FormatShort(stable) +
                               ": the result diverges; " + fix;
         if (!options.allow_unstable) ThrowUserError("", "--dt", message);
         warnings->push_back("unstable: " + message);
       } else {
-        warnings->push_back("not monotone: " + what + " exceeds " + FormatDouble(monotone) +
+        warnings->push_back("not monotone: " + what + " exceeds " + FormatShort(monotone) +
                             ": the state oscillates around equilibrium and may leave [0, 1]; " + fix);
       }
     }

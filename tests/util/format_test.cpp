@@ -21,6 +21,15 @@ TEST(FormatDouble, ShortestFormReadsBackExactly) {
   }
 }
 
+TEST(FormatShort, RoundsForPeople) {
+  EXPECT_EQ(FormatShort(1.5056999999999998), "1.506");
+  EXPECT_EQ(FormatShort(2.0), "2");
+  EXPECT_EQ(RoundDownSignificant(0.4649000464900047), 0.46);
+  EXPECT_EQ(RoundDownSignificant(0.0099), 0.0099);
+  EXPECT_EQ(RoundDownSignificant(123456), 120000);
+  for (double v : {0.3, 0.7, 1.0, 2.5e-7, 9.99e5}) EXPECT_LE(RoundDownSignificant(v), v) << v;
+}
+
 TEST(ParseDouble, RejectsWhatIsNotOneFiniteNumber) {
   double v = 0;
   EXPECT_TRUE(ParseDouble("+2.5", &v));

@@ -2,6 +2,7 @@
 
 #include <charconv>
 #include <cmath>
+#include <cstdio>
 #include <system_error>
 
 namespace phos {
@@ -13,6 +14,20 @@ std::string FormatDouble(double value) {
   auto [end, ec] = std::to_chars(buffer, buffer + sizeof buffer, value);
   if (ec != std::errc()) return "nan";
   return std::string(buffer, end);
+}
+
+std::string FormatShort(double value, int digits) {
+  char buffer[64];
+  std::snprintf(buffer, sizeof buffer, "%.*g", digits, value);
+  return buffer;
+}
+
+double RoundDownSignificant(double value, int digits) {
+  if (!(value > 0) || !std::isfinite(value)) return value;
+  const double scale = std::pow(10.0, digits - 1 - static_cast<int>(std::floor(std::log10(value))));
+  double rounded = std::floor(value * scale) / scale;
+  if (rounded > value) rounded = std::nextafter(rounded, 0.0);  // guard against the division rounding up
+  return rounded;
 }
 
 bool ParseDouble(const std::string& text, double* value) {

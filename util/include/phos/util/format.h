@@ -8,6 +8,11 @@
 namespace phos {
 
 std::string FormatDouble(double value);
+// For messages a person reads: `digits` significant digits (%g), e.g. 1.506.
+std::string FormatShort(double value, int digits = 4);
+// The largest number with `digits` significant digits that is <= value (> 0),
+// e.g. 0.4649 -> 0.46: a limit to suggest that is safely inside the true one.
+double RoundDownSignificant(double value, int digits = 2);
 // Parses a whole string as a finite double; false if it is not one.
 bool ParseDouble(const std::string& text, double* value);
 // Parses "a" or "a,b,c" into numbers; false (and *bad = offending item) on error.
