@@ -24,6 +24,7 @@ int main(int argc, char** argv) {
   app.failure_message(CLI::FailureMessage::simple);
   phos::app::RegisterSimulate(app);
   phos::app::RegisterPlot(app);
+  phos::app::RegisterFit(app);
 
   // Name an unknown command rather than CLI11's "A subcommand is required".
   if (argc > 1 && argv[1][0] != '-') {
@@ -45,8 +46,12 @@ int main(int argc, char** argv) {
   } catch (const CLI::CallForAllHelp& e) {
     return app.exit(e);
   } catch (const CLI::ParseError& e) {
+    // Name the (possibly nested) command the mistake was made in: "phos fit decay-curve".
     std::string command;
-    for (const CLI::App* sub : app.get_subcommands()) command = " " + sub->get_name();
+    for (const CLI::App* level = &app; !level->get_subcommands().empty();) {
+      level = level->get_subcommands().front();
+      command += " " + level->get_name();
+    }
     std::fprintf(stderr, "phos%s: %s (see 'phos%s --help')\n", command.c_str(), e.what(), command.c_str());
     return 2;
   } catch (const phos::UserError& e) {
