@@ -367,10 +367,18 @@ DecayFitSummary FitDecay(const Curve& curve, const DecayFitOptions& options, con
     Fit fit = ScanNewComponent(d, rates, grid, grid_columns);
     if (fit.theta.empty()) break;  // no room for another rate
     if (nc == 1) {
-      double amplitude = 0;
-      for (const auto& a : fit.A) amplitude = std::max(amplitude, a[0]);
-      if (!(amplitude > 0))
-        ThrowUserError(where, "", "no decaying component: the values do not decrease over time");
+      // A decay must explain most of what the curve does: the best single
+      // exponential must leave at most half the (weighted) scatter about a
+      // constant. A rising, or flat and noisy, curve is met only by a nearly
+      // constant exponential, which explains next to nothing.
+      double about_constant = 0;
+      for (int c = 0; c < C; ++c) {
+        const Eigen::ArrayXd w2 = d.w[c].square();
+        const double level = (w2 * d.y[c]).sum() / w2.sum();
+        about_constant += (w2 * (d.y[c] - level).square()).sum();
+      }
+      if (!(fit.wrss <= 0.5 * about_constant))
+        ThrowUserError(where, "", "no decaying component: the values do not decrease over time (beyond their scatter)");
     }
     // With the count fixed, the stages before the last only place starting
     // rates (the grid scan already solves their amplitudes exactly); when
