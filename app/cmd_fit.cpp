@@ -59,7 +59,9 @@ void WritePlot(const std::string& path, const Curve& curve, Model model, const s
     data.markers = true;
     data.color = PaletteColor(c);
     PlotSeries fitted{curve.names[c] + " (fit)"};
-    fitted.color = PaletteColor(c);
+    // Drawn over the data: black for one channel, the channel's colour dashed for several.
+    fitted.color = curve.channel_count() == 1 ? "#000000" : PaletteColor(c);
+    fitted.dashed = curve.channel_count() > 1;
     for (int s = 0; s <= 400; ++s) {
       const double t = curve.t_s.front() + (curve.t_s.back() - curve.t_s.front()) * s / 400.0;
       fitted.x.push_back(t);

@@ -367,17 +367,20 @@ DecayFitSummary FitDecay(const Curve& curve, const DecayFitOptions& options, con
     Fit fit = ScanNewComponent(d, rates, grid, grid_columns);
     if (fit.theta.empty()) break;  // no room for another rate
     if (nc == 1) {
-      // A decay must explain most of what the curve does: the best single
-      // exponential must leave at most half the (weighted) scatter about a
-      // constant. A rising, or flat and noisy, curve is met only by a nearly
-      // constant exponential, which explains next to nothing.
+      // A decay must stand out of the noise: the best single exponential
+      // against a constant level, by an F statistic of at least 20. A rising,
+      // or flat and noisy, curve is met only by a nearly constant
+      // exponential, which explains next to nothing; a dim decay that is
+      // over after a few samples still passes.
       double about_constant = 0;
       for (int c = 0; c < C; ++c) {
         const Eigen::ArrayXd w2 = d.w[c].square();
         const double level = (w2 * d.y[c]).sum() / w2.sum();
         about_constant += (w2 * (d.y[c] - level).square()).sum();
       }
-      if (!(fit.wrss <= 0.5 * about_constant))
+      const double N = static_cast<double>(d.m) * C;
+      const double F = ((about_constant - fit.wrss) / C) / (fit.wrss / std::max(1.0, N - 2.0 * C));
+      if (!(F >= 20))
         ThrowUserError(where, "", "no decaying component: the values do not decrease over time (beyond their scatter)");
     }
     // With the count fixed, the stages before the last only place starting
