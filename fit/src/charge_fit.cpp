@@ -62,26 +62,32 @@ ChargeFitSummary FitCharge(const Curve& curve, const ChargeFitOptions& options, 
   const double k_lo = 0.02 / span, k_hi = std::max(3.0 / spacing, 10 * k_lo);
   double best_cost = std::numeric_limits<double>::infinity();
   double params[3] = {0, 0, 0};
+  // For each k, L0 and Linf from the 2 x 2 normal equations of the columns
+  // e^{-kt} and 1 - e^{-kt} (weighted): three dot products, no factorization.
+  const Eigen::ArrayXd w2 = w.square(), w2y = w2 * y;
+  const double sum_w2 = w2.sum(), sum_w2y = w2y.sum();
   for (int g = 0; g < options.rate_grid_size; ++g) {
     const double k = k_lo * std::pow(k_hi / k_lo, static_cast<double>(g) / (options.rate_grid_size - 1));
-    Eigen::MatrixXd X(m, 2);
-    X.col(0) = ((-k * t).exp() * w).matrix();
-    X.col(1) = ((1 - (-k * t).exp()) * w).matrix();
-    const Eigen::VectorXd wy = (w * y).matrix();
-    const Eigen::Vector2d x = X.colPivHouseholderQr().solve(wy);
-    const double cost = (X * x - wy).squaredNorm();
+    const Eigen::ArrayXd e = (-k * t).exp();
+    const double ee = (w2 * e * e).sum(), e1 = (w2 * e).sum(), ey = (w2y * e).sum();
+    // Columns u = e, v = 1 - e: u'u = ee, u'v = e1 - ee, v'v = sum_w2 - 2 e1 + ee.
+    const double uu = ee, uv = e1 - ee, vv = sum_w2 - 2 * e1 + ee, uy = ey, vy = sum_w2y - ey;
+    const double det = uu * vv - uv * uv;
+    if (!(std::fabs(det) > 1e-14 * uu * vv)) continue;
+    const double L0 = (vv * uy - uv * vy) / det, Linf = (uu * vy - uv * uy) / det;
+    const double cost = (w2 * (y - L0 * e - Linf * (1 - e)).square()).sum();
     if (cost < best_cost) {
       best_cost = cost;
       params[0] = std::log(k);
-      params[1] = x[0];
-      params[2] = x[1];
+      params[1] = L0;
+      params[2] = Linf;
     }
   }
 
   ceres::Problem problem;
   problem.AddResidualBlock(new ChargeCost(t, y, w), nullptr, params);
-  problem.SetParameterLowerBound(params, 0, std::log(k_lo / 10));
-  problem.SetParameterUpperBound(params, 0, std::log(k_hi * 10));
+  // No bounds on log k (they would make Ceres project every step with a
+  // line search); a rate at the edge of what the samples resolve is caught below.
   ceres::Solver::Options solver_options;
   solver_options.linear_solver_type = ceres::DENSE_QR;
   solver_options.max_num_iterations = options.max_iterations;
