@@ -8,5 +8,6 @@ namespace phos::app {
 void RegisterSimulate(CLI::App& app);
 void RegisterPlot(CLI::App& app);
 void RegisterFit(CLI::App& app);
+void RegisterCapture(CLI::App& app);
 
 }  // namespace phos::app

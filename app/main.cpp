@@ -25,6 +25,7 @@ int main(int argc, char** argv) {
   phos::app::RegisterSimulate(app);
   phos::app::RegisterPlot(app);
   phos::app::RegisterFit(app);
+  phos::app::RegisterCapture(app);
 
   // Name an unknown command rather than CLI11's "A subcommand is required".
   if (argc > 1 && argv[1][0] != '-') {

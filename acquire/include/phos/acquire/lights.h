@@ -1,0 +1,65 @@
+#pragma once
+// Lights: named channels (LED 365 nm, LED 405 nm, white LED, lamp, shutter)
+// that a protocol switches. Every switch is recorded with its time on the
+// protocol's clock, and lights are left off on every way out: LightsOffGuard
+// switches them off when it goes out of scope (normal end, error, exception),
+// and the signal handler (InstallLightsOffOnSignal) does it on SIGINT and
+// SIGTERM before the process ends.
+
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "phos/acquire/clock.h"
+
+namespace phos {
+
+struct LightEvent {
+  double t_s;  // on the protocol's clock
+  std::string channel;
+  bool on;
+};
+
+class Lights {
+ public:
+  virtual ~Lights() = default;
+  virtual std::vector<std::string> channels() const = 0;
+  // Throws UserError for an unknown channel.
+  virtual void Set(const std::string& channel, bool on) = 0;
+  virtual bool IsOn(const std::string& channel) const = 0;
+  void AllOff();
+};
+
+// Lights that only record (the simulated lab reads their state; tests assert
+// the timing). `before_change` runs just before every switch, while the old
+// state still holds (the simulated sample advances to that moment).
+class RecordingLights final : public Lights {
+ public:
+  RecordingLights(std::vector<std::string> channels, const Clock& clock);
+  std::vector<std::string> channels() const override { return channels_; }
+  void Set(const std::string& channel, bool on) override;
+  bool IsOn(const std::string& channel) const override;
+  const std::vector<LightEvent>& events() const { return events_; }
+  std::function<void()> before_change;
+
+ private:
+  std::vector<std::string> channels_;
+  std::vector<bool> state_;
+  const Clock& clock_;
+  std::vector<LightEvent> events_;
+};
+
+// Switches every light off when destroyed, and while it lives, on SIGINT or
+// SIGTERM too (then the process exits with 128 + signal, as a shell expects).
+class LightsOffGuard {
+ public:
+  explicit LightsOffGuard(Lights& lights);
+  ~LightsOffGuard();
+  LightsOffGuard(const LightsOffGuard&) = delete;
+  LightsOffGuard& operator=(const LightsOffGuard&) = delete;
+
+ private:
+  Lights& lights_;
+};
+
+}  // namespace phos

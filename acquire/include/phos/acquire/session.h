@@ -1,0 +1,51 @@
+#pragma once
+// Capture sessions: directories written as they go (DESIGN.md), so a crash,
+// a kill -9 or a full disk loses nothing already recorded.
+//
+//   session.json   start record: protocol, sample, devices, settings, versions, uid
+//   frames.jsonl   one line per frame: file, seq, times, exposure, gain, black level
+//   events.jsonl   light switches and other events, with monotonic times
+//   frames/        raw frames, lossless 16-bit TIFF
+//   stop.json      how it ended: complete, aborted (signal), failed (why)
+//
+// Every line is appended and fsync'ed before the call returns; every frame
+// and JSON file is written to a temporary name and renamed into place.
+
+#include <filesystem>
+#include <string>
+
+#include <nlohmann/json.hpp>
+
+#include "phos/acquire/camera.h"
+
+namespace phos {
+
+class SessionWriter {
+ public:
+  // Creates `dir` (which must not exist, or be empty) and writes session.json.
+  SessionWriter(std::filesystem::path dir, nlohmann::json start_record);
+  // Without a Stop, the session is marked failed ("ended without a stop record").
+  ~SessionWriter();
+  SessionWriter(const SessionWriter&) = delete;
+  SessionWriter& operator=(const SessionWriter&) = delete;
+
+  const std::filesystem::path& dir() const { return dir_; }
+  void Event(nlohmann::json event);
+  // Writes frames/NNNNNN.tif and its line in frames.jsonl (with `extra`
+  // fields merged in); returns the file's path relative to the session.
+  std::string WriteFrame(const Frame& frame, nlohmann::json extra);
+  // how: "complete", "aborted" or "failed".
+  void Stop(const std::string& how, const std::string& why = "");
+  int frame_count() const { return frames_; }
+
+ private:
+  void AppendLine(const std::string& file, const nlohmann::json& line);
+  std::filesystem::path dir_;
+  int frames_ = 0;
+  bool stopped_ = false;
+};
+
+// Reads a frame written by WriteFrame back (tests, fitting sessions).
+Frame ReadFrame(const std::filesystem::path& path);
+
+}  // namespace phos

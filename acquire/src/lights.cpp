@@ -1,0 +1,76 @@
+#include "phos/acquire/lights.h"
+
+#include <algorithm>
+#include <csignal>
+#include <cstdlib>
+#include <mutex>
+
+#include "phos/util/error.h"
+
+namespace phos {
+
+void Lights::AllOff() {
+  for (const std::string& channel : channels())
+    if (IsOn(channel)) Set(channel, false);
+}
+
+RecordingLights::RecordingLights(std::vector<std::string> channels, const Clock& clock)
+    : channels_(std::move(channels)), state_(channels_.size(), false), clock_(clock) {}
+
+void RecordingLights::Set(const std::string& channel, bool on) {
+  auto it = std::find(channels_.begin(), channels_.end(), channel);
+  if (it == channels_.end()) {
+    std::string known;
+    for (const std::string& c : channels_) known += (known.empty() ? "" : ", ") + c;
+    ThrowUserError("", "light", "unknown channel '" + channel + "' (this lab has: " + known + ")");
+  }
+  if (before_change) before_change();
+  state_[static_cast<std::size_t>(it - channels_.begin())] = on;
+  events_.push_back({clock_.now_s(), channel, on});
+}
+
+bool RecordingLights::IsOn(const std::string& channel) const {
+  auto it = std::find(channels_.begin(), channels_.end(), channel);
+  return it != channels_.end() && state_[static_cast<std::size_t>(it - channels_.begin())];
+}
+
+namespace {
+// The lights a signal must switch off. One guard at a time is enough for a
+// protocol; nested guards keep the outermost.
+Lights* g_guarded = nullptr;
+struct sigaction g_previous_int, g_previous_term;
+
+extern "C" void SwitchOffAndExit(int signal_number) {
+  // Not async-signal-safe in general, but the process ends right after, and
+  // a lab would rather the lights go off than the process end cleanly.
+  if (g_guarded != nullptr) g_guarded->AllOff();
+  std::_Exit(128 + signal_number);
+}
+}  // namespace
+
+LightsOffGuard::LightsOffGuard(Lights& lights) : lights_(lights) {
+  if (g_guarded == nullptr) {
+    g_guarded = &lights;
+    struct sigaction action {};
+    action.sa_handler = SwitchOffAndExit;
+    sigemptyset(&action.sa_mask);
+    sigaction(SIGINT, &action, &g_previous_int);
+    sigaction(SIGTERM, &action, &g_previous_term);
+  }
+}
+
+LightsOffGuard::~LightsOffGuard() {
+  try {
+    lights_.AllOff();
+  } catch (...) {
+    // Nothing more can be done from a destructor; the signal handler and the
+    // hardware's own watchdog are the next lines of defence.
+  }
+  if (g_guarded == &lights_) {
+    sigaction(SIGINT, &g_previous_int, nullptr);
+    sigaction(SIGTERM, &g_previous_term, nullptr);
+    g_guarded = nullptr;
+  }
+}
+
+}  // namespace phos

@@ -1,0 +1,129 @@
+#include "phos/acquire/session.h"
+
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdio>
+#include <random>
+
+#include <OpenImageIO/imageio.h>
+
+#include "phos/util/error.h"
+#include "phos/util/json.h"
+
+namespace phos {
+namespace {
+
+std::string NewUid() {
+  std::random_device device;
+  std::mt19937_64 rng((static_cast<std::uint64_t>(device()) << 32) ^ device() ^
+                      static_cast<std::uint64_t>(std::chrono::system_clock::now().time_since_epoch().count()));
+  char text[40];
+  std::snprintf(text, sizeof text, "%016llx%016llx", static_cast<unsigned long long>(rng()),
+                static_cast<unsigned long long>(rng()));
+  return text;
+}
+
+std::string UtcNow() {
+  const std::time_t now = std::time(nullptr);
+  char text[32];
+  std::strftime(text, sizeof text, "%Y-%m-%dT%H:%M:%SZ", std::gmtime(&now));
+  return text;
+}
+
+}  // namespace
+
+SessionWriter::SessionWriter(std::filesystem::path dir, nlohmann::json start_record) : dir_(std::move(dir)) {
+  std::error_code ec;
+  if (std::filesystem::exists(dir_, ec) && !std::filesystem::is_empty(dir_, ec))
+    ThrowUserError(dir_.string(), "", "already holds files: a new session needs a new or empty folder (to go on with an interrupted one, use resume)");
+  std::filesystem::create_directories(dir_ / "frames", ec);
+  if (ec) ThrowUserError(dir_.string(), "", "cannot create the session folder: " + ec.message());
+  start_record["uid"] = NewUid();
+  start_record["started_utc"] = UtcNow();
+  start_record["schema"] = "phos.session/1";
+  WriteFileAtomically(dir_ / "session.json", start_record.dump(2) + "\n");
+}
+
+SessionWriter::~SessionWriter() {
+  if (!stopped_) {
+    try {
+      Stop("failed", "ended without a stop record (an error or exception interrupted the protocol)");
+    } catch (...) {
+    }
+  }
+}
+
+void SessionWriter::AppendLine(const std::string& file, const nlohmann::json& line) {
+  const std::string text = line.dump() + "\n";
+  const std::string path = (dir_ / file).string();
+  const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_APPEND | O_CLOEXEC, 0644);
+  if (fd < 0) ThrowUserError(path, "", "cannot open for appending");
+  const ssize_t written = ::write(fd, text.data(), text.size());
+  const bool synced = ::fsync(fd) == 0;
+  ::close(fd);
+  if (written != static_cast<ssize_t>(text.size()) || !synced)
+    ThrowUserError(path, "", "could not record a line (disk full?): what was recorded before it is intact");
+}
+
+void SessionWriter::Event(nlohmann::json event) { AppendLine("events.jsonl", event); }
+
+std::string SessionWriter::WriteFrame(const Frame& frame, nlohmann::json extra) {
+  ++frames_;
+  char name[32];
+  std::snprintf(name, sizeof name, "frames/%06d.tif", frames_);
+  const std::filesystem::path final_path = dir_ / name;
+  const std::filesystem::path temporary = dir_ / (std::string(name) + ".tmp.tif");
+  auto out = OIIO::ImageOutput::create(temporary.string());
+  if (!out) ThrowUserError(temporary.string(), "", "no TIFF writer: " + OIIO::geterror());
+  OIIO::ImageSpec spec(frame.width, frame.height, frame.channels, OIIO::TypeDesc::UINT16);
+  spec.channelnames = frame.channel_names;
+  spec.attribute("compression", "zip");  // lossless
+  spec.attribute("oiio:BitsPerSample", 16);
+  spec.attribute("phos:exposure_s", static_cast<float>(frame.exposure_s));
+  if (!out->open(temporary.string(), spec) || !out->write_image(OIIO::TypeDesc::UINT16, frame.pixels.data()) ||
+      !out->close()) {
+    std::error_code ignored;
+    std::filesystem::remove(temporary, ignored);
+    ThrowUserError(final_path.string(), "", "could not write the frame (disk full?): " + out->geterror());
+  }
+  std::error_code ec;
+  std::filesystem::rename(temporary, final_path, ec);
+  if (ec) ThrowUserError(final_path.string(), "", "could not move the frame into place: " + ec.message());
+  extra["file"] = name;
+  extra["seq"] = frames_;
+  extra["t_start_s"] = frame.t_start_s;
+  extra["exposure_s"] = frame.exposure_s;
+  extra["gain"] = frame.gain;
+  extra["black_level_dn"] = frame.black_level_dn;
+  extra["adc_bits"] = frame.adc_bits;
+  extra["sensor_temperature_c"] = frame.sensor_temperature_c;
+  AppendLine("frames.jsonl", extra);
+  return name;
+}
+
+void SessionWriter::Stop(const std::string& how, const std::string& why) {
+  nlohmann::json stop = {{"how", how}, {"frames", frames_}, {"stopped_utc", UtcNow()}};
+  if (!why.empty()) stop["why"] = why;
+  stopped_ = true;
+  WriteFileAtomically(dir_ / "stop.json", stop.dump(2) + "\n");
+}
+
+Frame ReadFrame(const std::filesystem::path& path) {
+  auto in = OIIO::ImageInput::open(path.string());
+  if (!in) ThrowUserError(path.string(), "", "cannot read the frame: " + OIIO::geterror());
+  const OIIO::ImageSpec& spec = in->spec();
+  Frame frame;
+  frame.width = spec.width;
+  frame.height = spec.height;
+  frame.channels = spec.nchannels;
+  frame.channel_names = spec.channelnames;
+  frame.pixels.resize(static_cast<std::size_t>(spec.width) * spec.height * spec.nchannels);
+  if (!in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::UINT16, frame.pixels.data()))
+    ThrowUserError(path.string(), "", "cannot read the frame: " + in->geterror());
+  frame.exposure_s = spec.get_float_attribute("phos:exposure_s", 0.0f);
+  return frame;
+}
+
+}  // namespace phos

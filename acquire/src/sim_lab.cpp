@@ -1,0 +1,188 @@
+#include "phos/acquire/sim_lab.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "phos/model/rate_equation.h"
+#include "phos/model/schedule.h"
+#include "phos/util/error.h"
+#include "phos/util/format.h"
+
+namespace phos {
+namespace {
+
+SampledSpectrum Normalized(SampledSpectrum s) {
+  const double total = s.Integrate(s.wavelength_nm.front(), s.wavelength_nm.back());
+  for (double& v : s.value) v /= total;
+  return s;
+}
+
+SampledSpectrum Gaussian(double center_nm, double fwhm_nm, double weight = 1.0) {
+  SampledSpectrum s;
+  const double sigma = fwhm_nm / 2.3548;
+  for (double nm = center_nm - 4 * sigma; nm <= center_nm + 4 * sigma; nm += sigma / 8) {
+    s.wavelength_nm.push_back(nm);
+    s.value.push_back(weight * std::exp(-0.5 * std::pow((nm - center_nm) / sigma, 2)));
+  }
+  return s;
+}
+
+}  // namespace
+
+double Frame::MeanSignal(int channel) const {
+  double sum = 0;
+  const std::size_t pixels_count = static_cast<std::size_t>(width) * height;
+  for (std::size_t p = 0; p < pixels_count; ++p) sum += pixels[p * channels + channel];
+  return sum / static_cast<double>(pixels_count) - black_level_dn;
+}
+
+double Frame::SaturatedFraction() const {
+  const std::uint16_t top = static_cast<std::uint16_t>((1u << adc_bits) - 1);
+  std::size_t saturated = 0;
+  for (std::uint16_t v : pixels) saturated += v >= top;
+  return pixels.empty() ? 0.0 : static_cast<double>(saturated) / static_cast<double>(pixels.size());
+}
+
+LightSource LedLight(const std::string& name, double center_nm, double fwhm_nm, double irradiance) {
+  return {name, Normalized(Gaussian(center_nm, fwhm_nm)), irradiance};
+}
+
+LightSource WhiteLedLight(const std::string& name, double irradiance) {
+  SampledSpectrum s;
+  SampledSpectrum blue = Gaussian(450, 20), yellow = Gaussian(560, 110, 0.6);
+  for (double nm = 380; nm <= 780; nm += 2) {
+    s.wavelength_nm.push_back(nm);
+    s.value.push_back(blue.Evaluate(nm) + yellow.Evaluate(nm));
+  }
+  return {name, Normalized(s), irradiance};
+}
+
+LightSource HalogenLight(const std::string& name, double irradiance) {
+  SampledSpectrum s;
+  const double h = 6.62607015e-34, c = 2.99792458e8, k = 1.380649e-23, T = 3000;
+  for (double nm = 350; nm <= 800; nm += 5) {
+    const double lambda = nm * 1e-9;
+    s.wavelength_nm.push_back(nm);
+    s.value.push_back(1 / (std::pow(lambda, 5) * (std::exp(h * c / (lambda * k * T)) - 1)));  // Planck's law
+  }
+  return {name, Normalized(s), irradiance};
+}
+
+std::vector<LightSource> DefaultLights() {
+  return {LedLight("led365", 365, 10, 1.0), LedLight("led405", 405, 15, 1.0), WhiteLedLight("white", 1.0),
+          HalogenLight("lamp", 1.0)};
+}
+
+CameraModel DefaultCameraModel() {
+  CameraModel camera;
+  camera.sensitivity = {Gaussian(600, 90), Gaussian(540, 90), Gaussian(460, 90)};
+  return camera;
+}
+
+SimulatedLab::SimulatedLab(Material material, std::vector<double> albedo, std::vector<LightSource> lights,
+                           CameraModel camera, Clock& clock)
+    : material_(std::move(material)), albedo_(std::move(albedo)), sources_(std::move(lights)),
+      camera_(std::move(camera)), clock_(clock), rng_(camera_.seed) {
+  const int nb = material_.band_count();
+  PHOS_CHECK(static_cast<int>(albedo_.size()) == nb);
+  if (camera_.sensitivity.empty()) camera_.sensitivity = DefaultCameraModel().sensitivity;
+  PHOS_CHECK(camera_.sensitivity.size() == camera_.channel_names.size());
+  std::vector<std::string> names;
+  for (const LightSource& source : sources_) {
+    names.push_back(source.name);
+    std::vector<double> E = IntegrateOverBands(source.spectrum, material_.bands);
+    for (double& e : E) e *= source.irradiance;
+    source_E_.push_back(E);
+  }
+  // A channel's response to band b: its mean sensitivity over the band.
+  for (const SampledSpectrum& s : camera_.sensitivity) camera_weight_.push_back(AverageOverBands(s, material_.bands));
+  lights_ = std::make_unique<RecordingLights>(names, clock_);
+  // The state follows the lights: advance it to the moment of every switch
+  // under the irradiance that held until then.
+  lights_->before_change = [this] { AdvanceTo(clock_.now_s()); };
+  r_.assign(static_cast<std::size_t>(material_.state_count()), 0.0);
+  t_state_ = clock_.now_s();
+}
+
+std::string SimulatedLab::description() const {
+  return "simulated lab: sample '" + material_.name + "', " + std::to_string(camera_.width) + "x" +
+         std::to_string(camera_.height) + " " + std::to_string(camera_.channel_names.size()) + "-channel camera, " +
+         std::to_string(camera_.adc_bits) + "-bit";
+}
+
+std::vector<double> SimulatedLab::IrradianceNow() const {
+  std::vector<double> E(static_cast<std::size_t>(material_.band_count()), 0.0);
+  for (std::size_t s = 0; s < sources_.size(); ++s)
+    if (lights_->IsOn(sources_[s].name))
+      for (std::size_t b = 0; b < E.size(); ++b) E[b] += source_E_[s][b];
+  return E;
+}
+
+void SimulatedLab::AdvanceTo(double t_s) {
+  // The irradiance since the last advance is the one now: every switch
+  // advances the state first (before_change), so it held throughout.
+  if (t_s <= t_state_) return;
+  const std::vector<double> a = ExcitationRates(material_, IrradianceNow(), "simulated sample '" + material_.name + "'");
+  for (int i = 0; i < material_.state_count(); ++i) r_[i] = ExactStep(r_[i], a[i], material_.states[i].kr, t_s - t_state_);
+  t_state_ = t_s;
+}
+
+std::vector<double> SimulatedLab::StateNow() {
+  AdvanceTo(clock_.now_s());
+  return r_;
+}
+
+Frame SimulatedLab::Capture(double exposure_s, double gain) {
+  if (!(exposure_s > 0) || exposure_s > camera_.max_exposure_s)
+    ThrowUserError("", "exposure", "the camera cannot expose for " + FormatDouble(exposure_s) + " s (0 to " +
+                                       FormatDouble(camera_.max_exposure_s) + " s)");
+  if (!(gain >= 1) || gain > 64) ThrowUserError("", "gain", "the camera cannot apply gain " + FormatDouble(gain));
+  AdvanceTo(clock_.now_s());
+  Frame frame;
+  frame.width = camera_.width;
+  frame.height = camera_.height;
+  frame.channels = static_cast<int>(camera_.channel_names.size());
+  frame.channel_names = camera_.channel_names;
+  frame.adc_bits = camera_.adc_bits;
+  frame.black_level_dn = camera_.black_level_dn;
+  frame.exposure_s = exposure_s;
+  frame.gain = gain;
+  frame.t_start_s = clock_.now_s();
+  frame.sensor_temperature_c = 25.0;
+
+  // Radiance integrated over the exposure, per band: emission (Eq. 8.2 with
+  // r integrated in closed form under the constant irradiance) plus diffuse
+  // reflection of the lights that are on (albedo E / pi).
+  const std::vector<double> E = IrradianceNow();
+  const std::vector<double> a = ExcitationRates(material_, E, "simulated sample '" + material_.name + "'");
+  const int nb = material_.band_count();
+  std::vector<double> integral(static_cast<std::size_t>(nb), 0.0);
+  for (int i = 0; i < material_.state_count(); ++i) {
+    const ExcitedState& s = material_.states[i];
+    const double k = a[i] + s.kr, r_inf = k > 0 ? a[i] / k : 0;
+    const double r_integral = k > 0 ? r_inf * exposure_s + (r_[i] - r_inf) * -std::expm1(-k * exposure_s) / k
+                                    : r_[i] * exposure_s;
+    for (int b = 0; b < nb; ++b) integral[b] += s.Lambda[b] * s.kr * r_integral;
+  }
+  for (int b = 0; b < nb; ++b) integral[b] += albedo_[b] * E[b] / M_PI * exposure_s;
+
+  const double top = static_cast<double>((1u << camera_.adc_bits) - 1);
+  frame.pixels.resize(static_cast<std::size_t>(frame.width) * frame.height * frame.channels);
+  std::normal_distribution<double> read_noise(0.0, camera_.read_noise_e);
+  for (int c = 0; c < frame.channels; ++c) {
+    double mean_e = camera_.dark_current_e_per_s * exposure_s;
+    for (int b = 0; b < nb; ++b) mean_e += camera_.electrons_per_unit * camera_weight_[c][b] * integral[b];
+    std::poisson_distribution<long long> shot(mean_e);
+    for (int p = 0; p < frame.width * frame.height; ++p) {
+      double electrons = std::min(static_cast<double>(shot(rng_)), camera_.full_well_e) + read_noise(rng_);
+      double dn = std::round(electrons * camera_.gain_dn_per_e * gain + camera_.black_level_dn);
+      frame.pixels[static_cast<std::size_t>(p) * frame.channels + c] =
+          static_cast<std::uint16_t>(std::clamp(dn, 0.0, top));
+    }
+  }
+  clock_.SleepFor(exposure_s + camera_.readout_s);
+  AdvanceTo(clock_.now_s());
+  return frame;
+}
+
+}  // namespace phos

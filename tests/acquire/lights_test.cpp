@@ -1,0 +1,101 @@
+// Lights: recorded switches, unknown channels, and lights off on every way
+// out (scope end, exception, SIGTERM, SIGINT).
+
+#include "phos/acquire/lights.h"
+
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <csignal>
+#include <fstream>
+#include <gtest/gtest.h>
+
+#include "phos/util/error.h"
+#include "test_util.h"
+
+namespace phos {
+namespace {
+
+TEST(RecordingLights, RecordsEverySwitchOnTheClock) {
+  VirtualClock clock(10);
+  RecordingLights lights({"led405", "white"}, clock);
+  lights.Set("led405", true);
+  clock.Advance(90);
+  lights.Set("led405", false);
+  ASSERT_EQ(lights.events().size(), 2u);
+  EXPECT_EQ(lights.events()[0].t_s, 10);
+  EXPECT_EQ(lights.events()[1].t_s, 100);
+  EXPECT_FALSE(lights.IsOn("led405"));
+  try {
+    lights.Set("uv", true);
+    FAIL();
+  } catch (const UserError& e) {
+    EXPECT_EQ(std::string(e.what()), "light: unknown channel 'uv' (this lab has: led405, white)");
+  }
+}
+
+TEST(LightsOffGuard, SwitchesOffAtScopeEndAndOnException) {
+  VirtualClock clock;
+  RecordingLights lights({"a", "b"}, clock);
+  {
+    LightsOffGuard guard(lights);
+    lights.Set("a", true);
+    lights.Set("b", true);
+  }
+  EXPECT_FALSE(lights.IsOn("a"));
+  EXPECT_FALSE(lights.IsOn("b"));
+  try {
+    LightsOffGuard guard(lights);
+    lights.Set("a", true);
+    throw std::runtime_error("camera disappeared");
+  } catch (const std::runtime_error&) {
+  }
+  EXPECT_FALSE(lights.IsOn("a"));
+}
+
+// Lights whose state lives in a file, so a killed child process leaves evidence.
+class FileLights final : public Lights {
+ public:
+  explicit FileLights(std::string path) : path_(std::move(path)) { Write(false); }
+  std::vector<std::string> channels() const override { return {"lamp"}; }
+  void Set(const std::string&, bool on) override { Write(on); }
+  bool IsOn(const std::string&) const override {
+    std::ifstream in(path_);
+    std::string s;
+    in >> s;
+    return s == "on";
+  }
+
+ private:
+  void Write(bool on) { std::ofstream(path_, std::ios::trunc) << (on ? "on" : "off") << std::flush; }
+  std::string path_;
+};
+
+void ExpectSignalSwitchesOff(int signal_number) {
+  testing::TempDir dir;
+  const std::string state = (dir / "lamp").string();
+  const std::string ready = (dir / "ready").string();
+  pid_t child = fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    FileLights lights(state);
+    LightsOffGuard guard(lights);
+    lights.Set("lamp", true);
+    std::ofstream(ready) << "1";
+    for (;;) pause();  // a protocol charging for 90 minutes
+  }
+  for (int i = 0; i < 500 && !std::ifstream(ready); ++i) usleep(10000);
+  ASSERT_EQ(testing::ReadText(state), "on");
+  kill(child, signal_number);
+  int status = 0;
+  waitpid(child, &status, 0);
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 128 + signal_number);
+  EXPECT_EQ(testing::ReadText(state), "off");
+}
+
+TEST(LightsOffGuard, SwitchesOffOnSigterm) { ExpectSignalSwitchesOff(SIGTERM); }
+TEST(LightsOffGuard, SwitchesOffOnSigint) { ExpectSignalSwitchesOff(SIGINT); }
+
+}  // namespace
+}  // namespace phos
