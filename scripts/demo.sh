@@ -29,6 +29,13 @@ done
 "$PHOS" plot "${decay_only[@]}" --log-y --out "$OUT/decay-only.svg" \
   --title "Presets without measured ke: decay from saturation (r0 = 1)"
 
+# The lab, simulated: capture the decay of the orange preset after a 90-minute
+# charge under the 405 nm LED (virtual clock: it takes a second).
+rm -rf "$OUT/session-orange"
+"$PHOS" capture decay --device sim --sim-material fixtures/materials/orange.json --light led405 \
+  --out "$OUT/session-orange"
+
 echo "phos demo: simulated 11 Table 8.1 presets (60 s charge, 300 s dark, exact integrator)"
 echo "  curves (CSV: t,r_1,L_1..L_8):  $OUT/<material>.csv"
 echo "  plots (SVG):                   $OUT/charged.svg, $OUT/decay-only.svg, $OUT/<material>.svg"
+echo "  a captured decay session:      $OUT/session-orange (session.json, frames.jsonl, frames/*.tif, stop.json)"

@@ -24,7 +24,7 @@ void RecordingLights::Set(const std::string& channel, bool on) {
     for (const std::string& c : channels_) known += (known.empty() ? "" : ", ") + c;
     ThrowUserError("", "light", "unknown channel '" + channel + "' (this lab has: " + known + ")");
   }
-  if (before_change) before_change();
+  if (before_change) before_change(channel, on);
   state_[static_cast<std::size_t>(it - channels_.begin())] = on;
   events_.push_back({clock_.now_s(), channel, on});
 }

@@ -75,8 +75,12 @@ DecayProtocolResult RunDecayProtocol(Camera& camera, Lights& lights, Clock& cloc
     session.Event({{"t_s", clock.now_s()}, {"event", "protocol"}, {"protocol", "decay"}, {"phase", "end"}});
     session.Stop("complete");
   } catch (const std::exception& e) {
-    lights.AllOff();
+    // Record why first: switching off can fail too (the guard tries again).
     session.Stop("failed", e.what());
+    try {
+      lights.AllOff();
+    } catch (...) {
+    }
     throw;
   }
   return result;

@@ -99,7 +99,17 @@ SimulatedLab::SimulatedLab(Material material, std::vector<double> albedo, std::v
   lights_ = std::make_unique<RecordingLights>(names, clock_);
   // The state follows the lights: advance it to the moment of every switch
   // under the irradiance that held until then.
-  lights_->before_change = [this] { AdvanceTo(clock_.now_s()); };
+  lights_->before_change = [this](const std::string& channel, bool on) {
+    AdvanceTo(clock_.now_s());
+    if (!on) return;
+    // Refuse, before it happens, a light the sample's model cannot take (ke
+    // unknown in a band it reaches): the light stays off.
+    std::vector<double> E = IrradianceNow();
+    for (std::size_t s = 0; s < sources_.size(); ++s)
+      if (sources_[s].name == channel)
+        for (std::size_t b = 0; b < E.size(); ++b) E[b] += source_E_[s][b];
+    ExcitationRates(material_, E, "simulated sample '" + material_.name + "' under '" + channel + "'");
+  };
   r_.assign(static_cast<std::size_t>(material_.state_count()), 0.0);
   t_state_ = clock_.now_s();
 }

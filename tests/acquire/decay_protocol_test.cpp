@@ -51,9 +51,10 @@ TEST(SimulatedLab, ChargingFollowsTheModel) {
 
 TEST(SimulatedLab, UnmeasuredKeRefusesALightThatReachesThere) {
   Lab lab("green");
-  lab.lab.lights().Set("white", true);
-  lab.clock.Advance(1);
-  EXPECT_THROW(lab.lab.StateNow(), UserError);  // white light reaches bands 4-8, where ke is unknown
+  // White light reaches bands 4-8, where ke is unknown: the switch is refused
+  // and the light stays off.
+  EXPECT_THROW(lab.lab.lights().Set("white", true), UserError);
+  EXPECT_FALSE(lab.lab.lights().IsOn("white"));
 }
 
 TEST(DecayProtocol, RecordsTimingFramesAndTheSamplesDecayRate) {

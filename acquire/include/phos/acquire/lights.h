@@ -31,8 +31,9 @@ class Lights {
 };
 
 // Lights that only record (the simulated lab reads their state; tests assert
-// the timing). `before_change` runs just before every switch, while the old
-// state still holds (the simulated sample advances to that moment).
+// the timing). `before_change(channel, on)` runs just before every switch,
+// while the old state still holds (the simulated sample advances to that
+// moment); it may refuse a switch on by throwing, never a switch off.
 class RecordingLights final : public Lights {
  public:
   RecordingLights(std::vector<std::string> channels, const Clock& clock);
@@ -40,7 +41,7 @@ class RecordingLights final : public Lights {
   void Set(const std::string& channel, bool on) override;
   bool IsOn(const std::string& channel) const override;
   const std::vector<LightEvent>& events() const { return events_; }
-  std::function<void()> before_change;
+  std::function<void(const std::string& channel, bool on)> before_change;
 
  private:
   std::vector<std::string> channels_;
