@@ -1,0 +1,147 @@
+#include "phos/acquire/aravis_camera.h"
+
+#include <arv.h>
+
+#include <algorithm>
+#include <cstring>
+
+#include "phos/util/error.h"
+#include "phos/util/format.h"
+
+namespace phos {
+
+struct AravisCamera::Impl {
+  ArvCamera* camera = nullptr;
+  std::string id;
+};
+
+namespace {
+
+// Turns a GError into the one way phos reports a problem, naming the camera.
+void Check(GError* error, const std::string& camera, const std::string& what) {
+  if (error == nullptr) return;
+  std::string message = error->message;
+  g_error_free(error);
+  ThrowUserError("camera '" + camera + "'", what, message);
+}
+
+}  // namespace
+
+void AravisCamera::EnableFakeInterface() { arv_enable_interface("Fake"); }
+
+AravisCamera::AravisCamera(const std::string& device_id, const Clock& clock, double timeout_s)
+    : impl_(std::make_unique<Impl>()), clock_(clock), timeout_s_(timeout_s) {
+  impl_->id = device_id;
+  GError* error = nullptr;
+  impl_->camera = arv_camera_new(device_id.c_str(), &error);
+  Check(error, device_id, "open");
+  if (impl_->camera == nullptr) ThrowUserError("camera '" + device_id + "'", "open", "not found");
+  // Frames as raw as the camera gives them: Mono16 where it exists, else Mono8.
+  guint n = 0;
+  const char** formats = arv_camera_dup_available_pixel_formats_as_strings(impl_->camera, &n, &error);
+  Check(error, device_id, "pixel formats");
+  bool mono16 = false;
+  for (guint i = 0; i < n; ++i) mono16 = mono16 || std::strcmp(formats[i], "Mono16") == 0;
+  g_free(formats);
+  arv_camera_set_pixel_format(impl_->camera, mono16 ? ARV_PIXEL_FORMAT_MONO_16 : ARV_PIXEL_FORMAT_MONO_8, &error);
+  Check(error, device_id, "pixel format");
+}
+
+AravisCamera::~AravisCamera() {
+  if (impl_ && impl_->camera) g_object_unref(impl_->camera);
+}
+
+std::string AravisCamera::description() const {
+  GError* error = nullptr;
+  const char* vendor = arv_camera_get_vendor_name(impl_->camera, &error);
+  if (error) g_clear_error(&error);
+  const char* model = arv_camera_get_model_name(impl_->camera, &error);
+  if (error) g_clear_error(&error);
+  return std::string("Aravis camera '") + impl_->id + "' (" + (vendor ? vendor : "?") + " " + (model ? model : "?") + ")";
+}
+
+double AravisCamera::max_exposure_s() const {
+  GError* error = nullptr;
+  double lo = 0, hi = 0;
+  arv_camera_get_exposure_time_bounds(impl_->camera, &lo, &hi, &error);
+  Check(error, impl_->id, "exposure bounds");
+  return hi * 1e-6;
+}
+
+double AravisCamera::exposure_s() const {
+  GError* error = nullptr;
+  const double us = arv_camera_get_exposure_time(impl_->camera, &error);
+  Check(error, impl_->id, "exposure");
+  return us * 1e-6;
+}
+
+double AravisCamera::gain() const {
+  GError* error = nullptr;
+  const double g = arv_camera_get_gain(impl_->camera, &error);
+  Check(error, impl_->id, "gain");
+  return g;
+}
+
+Frame AravisCamera::Capture(double exposure_s, double gain) {
+  GError* error = nullptr;
+  double lo = 0, hi = 0;
+  arv_camera_get_exposure_time_bounds(impl_->camera, &lo, &hi, &error);
+  Check(error, impl_->id, "exposure bounds");
+  const double us = exposure_s * 1e6;
+  if (!(us >= lo && us <= hi))
+    ThrowUserError("camera '" + impl_->id + "'", "exposure",
+                   "refuses " + FormatDouble(exposure_s) + " s (it takes " + FormatShort(lo * 1e-6) + " to " +
+                       FormatShort(hi * 1e-6) + " s)");
+  arv_camera_set_exposure_time(impl_->camera, us, &error);
+  Check(error, impl_->id, "exposure");
+  arv_camera_get_gain_bounds(impl_->camera, &lo, &hi, &error);
+  Check(error, impl_->id, "gain bounds");
+  if (!(gain >= lo && gain <= hi))
+    ThrowUserError("camera '" + impl_->id + "'", "gain",
+                   "refuses " + FormatDouble(gain) + " (it takes " + FormatShort(lo) + " to " + FormatShort(hi) + ")");
+  arv_camera_set_gain(impl_->camera, gain, &error);
+  Check(error, impl_->id, "gain");
+
+  Frame frame;
+  frame.t_start_s = clock_.now_s();
+  frame.exposure_s = arv_camera_get_exposure_time(impl_->camera, &error) * 1e-6;  // what the camera set
+  Check(error, impl_->id, "exposure");
+  frame.gain = arv_camera_get_gain(impl_->camera, &error);
+  Check(error, impl_->id, "gain");
+  if (arv_camera_is_black_level_available(impl_->camera, nullptr))
+    frame.black_level_dn = arv_camera_get_black_level(impl_->camera, nullptr);
+
+  ArvBuffer* buffer =
+      arv_camera_acquisition(impl_->camera, static_cast<guint64>((exposure_s + timeout_s_) * 1e6), &error);
+  Check(error, impl_->id, "acquisition");
+  if (buffer == nullptr || arv_buffer_get_status(buffer) != ARV_BUFFER_STATUS_SUCCESS) {
+    if (buffer) g_object_unref(buffer);
+    ThrowUserError("camera '" + impl_->id + "'", "acquisition", "no frame arrived (disconnected?)");
+  }
+  gint x = 0, y = 0, width = 0, height = 0;
+  arv_buffer_get_image_region(buffer, &x, &y, &width, &height);
+  const ArvPixelFormat format = arv_buffer_get_image_pixel_format(buffer);
+  size_t size = 0;
+  const auto* data = static_cast<const unsigned char*>(arv_buffer_get_image_data(buffer, &size));
+  frame.width = width;
+  frame.height = height;
+  frame.channels = 1;
+  frame.channel_names = {"Y"};
+  frame.pixels.resize(static_cast<std::size_t>(width) * height);
+  if (format == ARV_PIXEL_FORMAT_MONO_16 && size >= frame.pixels.size() * 2) {
+    std::memcpy(frame.pixels.data(), data, frame.pixels.size() * 2);
+    frame.adc_bits = 16;
+  } else if (format == ARV_PIXEL_FORMAT_MONO_8 && size >= frame.pixels.size()) {
+    std::copy(data, data + frame.pixels.size(), frame.pixels.begin());
+    frame.adc_bits = 8;
+  } else {
+    g_object_unref(buffer);
+    ThrowUserError("camera '" + impl_->id + "'", "pixel format", "unsupported pixel format (Mono8 and Mono16 are)");
+  }
+  last_frame_id_ = arv_buffer_get_frame_id(buffer);
+  last_camera_timestamp_ns_ = arv_buffer_get_timestamp(buffer);
+  g_object_unref(buffer);
+  return frame;
+}
+
+}  // namespace phos

@@ -1,0 +1,84 @@
+// The Aravis back end against Aravis's own in-process fake camera ("Fake"
+// interface, device Fake_1). The fake fills Mono8 frames with a diagonal ramp
+// scaled by 1 + gain + log10(exposure_us / 10000) (arvfakecamera.c), so every
+// pixel can be predicted from the exposure, the gain and the frame id.
+
+#include "phos/acquire/aravis_camera.h"
+
+#include <cmath>
+#include <gtest/gtest.h>
+
+#include "phos/util/error.h"
+
+namespace phos {
+namespace {
+
+class AravisFake : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() { AravisCamera::EnableFakeInterface(); }
+  SystemClock clock;
+};
+
+// The fake's pixel at (x, y): the ramp value times the scale, clamped and
+// truncated, as arv_fake_camera_diagonal_ramp does for Mono8 and Mono16.
+int FakePixel(int x, int y, std::uint64_t frame_id, double exposure_s, double gain, int bits) {
+  const double scale = 1.0 + gain + std::log10(exposure_s * 1e6 / 10000.0);
+  if (bits == 16) {
+    const double value = static_cast<double>((256 * x + 256 * frame_id + 256 * y) % 65535) * scale;
+    return static_cast<int>(std::clamp(value, 0.0, 65535.0));
+  }
+  const double value = static_cast<double>((x + frame_id + y) % 255) * scale;
+  return static_cast<int>(std::clamp(value, 0.0, 255.0));
+}
+
+TEST_F(AravisFake, SetsAndReadsBackExposureAndGain) {
+  AravisCamera camera("Fake_1", clock);
+  EXPECT_NE(camera.description().find("Fake_1"), std::string::npos);
+  camera.Capture(0.02, 2);
+  EXPECT_NEAR(camera.exposure_s(), 0.02, 1e-9);
+  EXPECT_NEAR(camera.gain(), 2, 1e-9);
+  camera.Capture(0.005, 0);
+  EXPECT_NEAR(camera.exposure_s(), 0.005, 1e-9);
+  EXPECT_NEAR(camera.gain(), 0, 1e-9);
+}
+
+TEST_F(AravisFake, BrightnessFollowsExposureAndGainAsTheFakeDefines) {
+  AravisCamera camera("Fake_1", clock);
+  struct Setting {
+    double exposure_s, gain;
+  } settings[] = {{0.01, 0}, {0.01, 2}, {0.1, 0}, {0.001, 1}};
+  double previous_mean = -1;
+  for (const Setting& s : settings) {
+    Frame frame = camera.Capture(s.exposure_s, s.gain);
+    ASSERT_GT(frame.width, 0);
+    ASSERT_EQ(frame.channels, 1);
+    ASSERT_TRUE(frame.adc_bits == 8 || frame.adc_bits == 16);  // Mono16 where the fake offers it
+    EXPECT_NEAR(frame.exposure_s, s.exposure_s, 1e-9);
+    int mismatches = 0;
+    for (int y = 0; y < frame.height; ++y)
+      for (int x = 0; x < frame.width; ++x)
+        mismatches += frame.pixels[static_cast<std::size_t>(y) * frame.width + x] !=
+                      FakePixel(x, y, camera.last_frame_id(), s.exposure_s, s.gain, frame.adc_bits);
+    EXPECT_EQ(mismatches, 0) << "exposure " << s.exposure_s << " gain " << s.gain;
+    const double mean = frame.MeanSignal(0);
+    if (previous_mean >= 0 && s.gain == 2) {
+      EXPECT_GT(mean, previous_mean);  // scale 3 against 1 (much of it clips, hence only "brighter")
+    }
+    previous_mean = mean;
+  }
+}
+
+TEST_F(AravisFake, RefusedSettingsAndMissingCamerasAreClearErrors) {
+  AravisCamera camera("Fake_1", clock);
+  try {
+    camera.Capture(1e7, 0);
+    FAIL() << "an impossible exposure was accepted";
+  } catch (const UserError& e) {
+    EXPECT_NE(std::string(e.what()).find("camera 'Fake_1': exposure: refuses 1e+07 s"), std::string::npos)
+        << e.what();
+  }
+  EXPECT_THROW(AravisCamera("No_Such_Camera_42", clock), UserError);
+}
+
+}  // namespace
+}  // namespace phos
