@@ -4,8 +4,11 @@
 
 #include <sys/wait.h>
 
+#include <gtest/gtest.h>
+
 #include <cstdio>
 #include <filesystem>
+#include <functional>
 #include <fstream>
 #include <sstream>
 #include <string>
@@ -61,6 +64,28 @@ inline CommandResult RunPhos(const std::string& arguments) {
   result.out = ReadText(dir / "out");
   result.err = ReadText(dir / "err");
   return result;
+}
+
+// What a UserError thrown by f says, or "(no error)".
+template <typename UserErrorType>
+std::string ErrorOfType(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const UserErrorType& e) {
+    return e.what();
+  }
+  return "(no error)";
+}
+
+// A bad-input run of the command: exit code 2 and one line on stderr that
+// contains `expected`.
+inline ::testing::AssertionResult IsOneLineUserError(const CommandResult& result, const std::string& expected) {
+  int lines = 0;
+  for (char c : result.err) lines += c == '\n';
+  if (result.exit_code == 2 && lines == 1 && result.err.find(expected) != std::string::npos)
+    return ::testing::AssertionSuccess();
+  return ::testing::AssertionFailure() << "exit " << result.exit_code << ", stderr: " << result.err
+                                       << "(expected one line containing: " << expected << ")";
 }
 
 inline int LineCount(const std::string& text) {

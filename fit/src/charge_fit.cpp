@@ -8,6 +8,7 @@
 #include <Eigen/Dense>
 
 #include "phos/util/error.h"
+#include "solver_options.h"
 
 namespace phos {
 namespace {
@@ -88,13 +89,7 @@ ChargeFitSummary FitCharge(const Curve& curve, const ChargeFitOptions& options, 
   problem.AddResidualBlock(new ChargeCost(t, y, w), nullptr, params);
   // No bounds on log k (they would make Ceres project every step with a
   // line search); a rate at the edge of what the samples resolve is caught below.
-  ceres::Solver::Options solver_options;
-  solver_options.linear_solver_type = ceres::DENSE_QR;
-  solver_options.max_num_iterations = options.max_iterations;
-  solver_options.function_tolerance = 1e-14;
-  solver_options.gradient_tolerance = 1e-14;
-  solver_options.parameter_tolerance = 1e-12;
-  solver_options.logging_type = ceres::SILENT;
+  const ceres::Solver::Options solver_options = SmallDenseSolverOptions(options.max_iterations, 1e-14);
   ceres::Solver::Summary solver_summary;
   ceres::Solve(solver_options, &problem, &solver_summary);
 

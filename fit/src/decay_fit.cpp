@@ -14,6 +14,7 @@
 #include "phos/util/error.h"
 #include "phos/util/format.h"
 #include "small_nnls.h"
+#include "solver_options.h"
 
 namespace phos {
 
@@ -257,16 +258,7 @@ void Refine(const Data& d, int max_iterations, Fit* fit) {
   // No bounds on log k: Ceres would then project every step with a line
   // search that evaluates the Jacobian twice per iteration. A rate that
   // leaves [theta_lo, theta_hi] is caught after the solve instead.
-  ceres::Solver::Options options;
-  options.linear_solver_type = ceres::DENSE_QR;
-  options.max_num_iterations = max_iterations;
-  // Converged when the cost changes by less than 1e-10 of itself: far below
-  // what the noise of any measured curve can tell apart.
-  options.function_tolerance = 1e-10;
-  options.gradient_tolerance = 1e-12;
-  options.parameter_tolerance = 1e-10;
-  options.logging_type = ceres::SILENT;
-  options.num_threads = 1;
+  const ceres::Solver::Options options = SmallDenseSolverOptions(max_iterations, 1e-10);
   ceres::Solver::Summary summary;
   ceres::Solve(options, &problem, &summary);
   fit->iterations += static_cast<int>(summary.iterations.size());

@@ -8,6 +8,7 @@
 
 #include "phos/util/error.h"
 #include "phos/util/format.h"
+#include "solver_options.h"
 
 namespace phos {
 namespace {
@@ -66,13 +67,7 @@ Solved Solve(const std::vector<ExcitationSample>& samples, const ExcitationFitOp
                                  new ExcitationResidual(samples[j], options.kr, weights[j])),
                              nullptr, &log_a, &S);
   if (fix_S) problem.SetParameterBlockConstant(&S);
-  ceres::Solver::Options solver_options;
-  solver_options.linear_solver_type = ceres::DENSE_QR;
-  solver_options.max_num_iterations = options.max_iterations;
-  solver_options.function_tolerance = 1e-12;
-  solver_options.gradient_tolerance = 1e-14;
-  solver_options.parameter_tolerance = 1e-12;
-  solver_options.logging_type = ceres::SILENT;
+  const ceres::Solver::Options solver_options = SmallDenseSolverOptions(options.max_iterations, 1e-12);
   ceres::Solver::Summary summary;
   ceres::Solve(solver_options, &problem, &summary);
 
@@ -235,11 +230,7 @@ std::vector<std::optional<double>> KeFromExcitationRates(const std::vector<std::
     problem.AddResidualBlock(cost, nullptr, ke.data());
   }
   for (std::size_t b = 0; b < lit.size(); ++b) problem.SetParameterLowerBound(ke.data(), static_cast<int>(b), 0.0);
-  ceres::Solver::Options options;
-  options.linear_solver_type = ceres::DENSE_QR;
-  options.logging_type = ceres::SILENT;
-  options.max_num_iterations = 200;
-  options.function_tolerance = 1e-14;
+  ceres::Solver::Options options = SmallDenseSolverOptions(200, 1e-14);
   options.parameter_tolerance = 1e-14;
   ceres::Solver::Summary summary;
   ceres::Solve(options, &problem, &summary);

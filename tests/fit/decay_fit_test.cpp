@@ -9,6 +9,7 @@
 #include <random>
 
 #include "phos/util/error.h"
+#include "test_util.h"
 
 namespace phos {
 namespace {
@@ -39,14 +40,7 @@ Curve Synthesize(const Truth& truth, int points, double dt, double noise, unsign
   return curve;
 }
 
-std::string ErrorOf(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const UserError& e) {
-    return e.what();
-  }
-  return "(no error)";
-}
+std::string ErrorOf(const std::function<void()>& f) { return testing::ErrorOfType<UserError>(f); }
 
 TEST(DecayFit, ExactDataGiveExactParameters) {
   Truth truth{{2.0, 0.3, 0.02}, {{1000, 300, 50}}};

@@ -13,14 +13,7 @@
 namespace phos {
 namespace {
 
-std::string ErrorOf(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const UserError& e) {
-    return e.what();
-  }
-  return "(no error)";
-}
+std::string ErrorOf(const std::function<void()>& f) { return testing::ErrorOfType<UserError>(f); }
 
 const char* kPresets[] = {"blue", "green", "orange", "pink", "purple", "red",
                           "white", "yellow", "bottle", "gloves", "stickers"};

@@ -9,14 +9,7 @@
 namespace phos {
 namespace {
 
-std::string ErrorOf(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const UserError& e) {
-    return e.what();
-  }
-  return "(no error)";
-}
+std::string ErrorOf(const std::function<void()>& f) { return testing::ErrorOfType<UserError>(f); }
 
 TEST(JsonField, ErrorsNameTheSourceAndThePath) {
   nlohmann::json j = nlohmann::json::parse(R"({"a": {"b": [1, -2, "x"]}, "s": 3})");
