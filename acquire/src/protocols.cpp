@@ -86,4 +86,77 @@ DecayProtocolResult RunDecayProtocol(Camera& camera, Lights& lights, Clock& cloc
   return result;
 }
 
+bool ExcitationProtocolOptions::IsValid(std::string* error) const {
+  if (lights.empty()) return *error = "no light to measure", false;
+  if (!(reset_s >= 0) || !(delay_s >= 0)) return *error = "reset and delay must be >= 0", false;
+  if (!(first_charge_s > 0) || !(max_charge_s >= first_charge_s))
+    return *error = "need 0 < first charge <= max charge", false;
+  if (!(plateau_growth > 1)) return *error = "plateau growth must be > 1", false;
+  if (!(exposure_s > 0)) return *error = "exposure must be > 0", false;
+  return true;
+}
+
+ExcitationProtocolResult RunExcitationProtocol(Camera& camera, Lights& lights, Clock& clock, SessionWriter& session,
+                                               const ExcitationProtocolOptions& options) {
+  std::string error;
+  if (!options.IsValid(&error)) ThrowUserError("", "excitation protocol", error);
+  const auto channels = lights.channels();
+  for (const std::string& light : options.lights)
+    if (std::find(channels.begin(), channels.end(), light) == channels.end()) lights.Set(light, false);  // names them
+  LightsOffGuard guard(lights);
+  ExcitationProtocolResult result;
+  // One charge-then-measure experiment; returns the brightest channel's mean signal.
+  auto measure = [&](const std::string& light, double charge_s) {
+    lights.AllOff();
+    clock.SleepFor(options.reset_s);
+    RecordLight(session, lights, clock, light, true);
+    clock.SleepFor(charge_s);
+    RecordLight(session, lights, clock, light, false);
+    const double off = clock.now_s();
+    clock.SleepUntil(off + options.delay_s);
+    Frame frame = camera.Capture(options.exposure_s, options.gain);
+    nlohmann::json line = {{"light", light},
+                           {"charge_s", charge_s},
+                           {"delay_after_light_off_s", frame.t_start_s - off}};
+    std::vector<double> means;
+    double brightest = 0;
+    for (int c = 0; c < frame.channels; ++c) {
+      means.push_back(frame.MeanSignal(c));
+      brightest = std::max(brightest, means.back());
+    }
+    line["mean_signal_dn"] = means;
+    line["saturated_fraction"] = frame.SaturatedFraction();
+    session.WriteFrame(frame, line);
+    ++result.frames;
+    return brightest;
+  };
+  try {
+    session.Event({{"t_s", clock.now_s()}, {"event", "protocol"}, {"protocol", "excitation"}, {"phase", "start"}});
+    for (const std::string& light : options.lights) {
+      // Doubling until the response stops growing.
+      std::vector<double> times;
+      double previous = -1;
+      for (double t = options.first_charge_s; t <= options.max_charge_s * (1 + 1e-12); t *= 2) {
+        const double response = measure(light, t);
+        times.push_back(t);
+        if (previous > 0 && response < options.plateau_growth * previous) break;
+        previous = response;
+      }
+      // Then the midpoints of the rising part, where the charging speed shows.
+      for (std::size_t i = 1; i < times.size(); ++i) measure(light, std::sqrt(times[i - 1] * times[i]));
+    }
+    lights.AllOff();
+    session.Event({{"t_s", clock.now_s()}, {"event", "protocol"}, {"protocol", "excitation"}, {"phase", "end"}});
+    session.Stop("complete");
+  } catch (const std::exception& e) {
+    session.Stop("failed", e.what());
+    try {
+      lights.AllOff();
+    } catch (...) {
+    }
+    throw;
+  }
+  return result;
+}
+
 }  // namespace phos

@@ -179,7 +179,7 @@ Real AdvanceRange(const BatchCoefficients<Real>& c, const Real* E, std::size_t E
   return std::max(k_tail, ei::predux_max(k_max));
 }
 
-// Runs body(j0, m) -> double over all chunks, in parallel for large batches;
+// Runs body(j0, j1) -> double over the chunks [j0, j1), in parallel for large batches;
 // returns the max of the results.
 template <typename Body>
 double ForEachChunk(std::size_t n, Body body) {

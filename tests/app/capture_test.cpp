@@ -25,6 +25,19 @@ TEST(CaptureDecayCommand, WritesACompleteSession) {
   EXPECT_EQ(ReadJsonFile(dir / "s" / "stop.json")["how"], "complete");
 }
 
+TEST(CaptureExcitationCommand, WritesACompleteSession) {
+  testing::TempDir dir;
+  auto result = RunPhos("capture excitation --sim-material " + testing::Fixture("materials/orange.json").string() +
+                        " --out " + (dir / "s").string() + " --light led405 --exposure-s 0.2");
+  ASSERT_EQ(result.exit_code, 0) << result.err;
+  EXPECT_NE(result.out.find("for 1 light(s)"), std::string::npos) << result.out;
+  EXPECT_EQ(ReadJsonFile(dir / "s" / "session.json")["protocol"], "excitation");
+  EXPECT_EQ(ReadJsonFile(dir / "s" / "stop.json")["how"], "complete");
+  auto bad = RunPhos("capture excitation --sim-material " + testing::Fixture("materials/orange.json").string() +
+                     " --out " + (dir / "t").string() + " --first-charge-s 0");
+  EXPECT_TRUE(testing::IsOneLineUserError(bad, "need 0 < first charge <= max charge"));
+}
+
 TEST(CaptureDecayCommand, BadInputGivesOneLineAndExitCode2) {
   testing::TempDir dir;
   std::filesystem::create_directories(dir / "full");

@@ -2,10 +2,11 @@
 // Capture protocols (Sec. 8.4). Each runs on any Camera, Lights and Clock
 // (real hardware or the simulated lab), records every light switch and every
 // exposure on the clock, leaves the lights off on every way out, and writes
-// the session as it goes. So far: the decay protocol; emission spectrum,
-// excitation and LVF calibration are to come.
+// the session as it goes. So far: decay and excitation; emission spectrum
+// and LVF calibration are to come.
 
 #include <string>
+#include <vector>
 
 #include "phos/acquire/camera.h"
 #include "phos/acquire/clock.h"
@@ -42,5 +43,31 @@ struct DecayProtocolResult {
 
 DecayProtocolResult RunDecayProtocol(Camera& camera, Lights& lights, Clock& clock, SessionWriter& session,
                                      const DecayProtocolOptions& options);
+
+// Excitation per light (Sec. 8.4.6): for each light, reset in darkness,
+// charge for t, switch off, wait a fixed short delay, expose; charge times
+// double from first_charge_s until the response grows by less than
+// `plateau_growth` (or max_charge_s), then the geometric midpoints of the
+// rising part are measured too. Every frame records its light, charge time
+// and measured delay, for the excitation fit.
+struct ExcitationProtocolOptions {
+  std::vector<std::string> lights;  // channels to measure, one after the other
+  double reset_s = 900;             // darkness before each charge (several 1/kr)
+  double first_charge_s = 1;
+  double max_charge_s = 4096;
+  double plateau_growth = 1.03;     // stop doubling when a doubling adds < 3%
+  double delay_s = 0.05;            // light-off to exposure
+  double exposure_s = 1;
+  double gain = 1;
+
+  bool IsValid(std::string* error) const;
+};
+
+struct ExcitationProtocolResult {
+  int frames = 0;
+};
+
+ExcitationProtocolResult RunExcitationProtocol(Camera& camera, Lights& lights, Clock& clock, SessionWriter& session,
+                                               const ExcitationProtocolOptions& options);
 
 }  // namespace phos
