@@ -12,6 +12,7 @@ namespace phos {
 
 struct AravisCamera::Impl {
   ArvCamera* camera = nullptr;
+  ArvStream* stream = nullptr;
   std::string id;
 };
 
@@ -45,10 +46,40 @@ AravisCamera::AravisCamera(const std::string& device_id, const Clock& clock, dou
   g_free(formats);
   arv_camera_set_pixel_format(impl_->camera, mono16 ? ARV_PIXEL_FORMAT_MONO_16 : ARV_PIXEL_FORMAT_MONO_8, &error);
   Check(error, device_id, "pixel format");
+  // GigE Vision: plain UDP sockets, with a fixed receive buffer. The packet
+  // socket needs CAP_NET_RAW and, as root on loopback, receives nothing.
+  if (arv_camera_is_gv_device(impl_->camera))
+    arv_camera_gv_set_stream_options(impl_->camera, ARV_GV_STREAM_OPTION_PACKET_SOCKET_DISABLED);
+  if (arv_camera_is_feature_available(impl_->camera, "AcquisitionMode", nullptr))
+    arv_camera_set_acquisition_mode(impl_->camera, ARV_ACQUISITION_MODE_SINGLE_FRAME, nullptr);
+  impl_->stream = arv_camera_create_stream(impl_->camera, nullptr, nullptr, &error);
+  Check(error, device_id, "stream");
+  if (ARV_IS_GV_STREAM(impl_->stream))
+    g_object_set(impl_->stream, "socket-buffer", ARV_GV_STREAM_SOCKET_BUFFER_FIXED, "socket-buffer-size",
+                 8 * 1024 * 1024, nullptr);
+  AllocateBuffers();
+}
+
+void AravisCamera::AllocateBuffers() {
+  // Drop the buffers of the old payload size, then queue two of the new one.
+  while (ArvBuffer* old = arv_stream_try_pop_buffer(impl_->stream)) g_object_unref(old);
+  GError* error = nullptr;
+  const guint payload = arv_camera_get_payload(impl_->camera, &error);
+  Check(error, impl_->id, "payload");
+  for (int i = 0; i < 2; ++i) arv_stream_push_buffer(impl_->stream, arv_buffer_new_allocate(payload));
+}
+
+void AravisCamera::SetRegion(int x, int y, int width, int height) {
+  GError* error = nullptr;
+  arv_camera_set_region(impl_->camera, x, y, width, height, &error);
+  Check(error, impl_->id, "region");
+  AllocateBuffers();
 }
 
 AravisCamera::~AravisCamera() {
-  if (impl_ && impl_->camera) g_object_unref(impl_->camera);
+  if (!impl_) return;
+  if (impl_->stream) g_object_unref(impl_->stream);
+  if (impl_->camera) g_object_unref(impl_->camera);
 }
 
 std::string AravisCamera::description() const {
@@ -111,13 +142,30 @@ Frame AravisCamera::Capture(double exposure_s, double gain) {
   if (arv_camera_is_black_level_available(impl_->camera, nullptr))
     frame.black_level_dn = arv_camera_get_black_level(impl_->camera, nullptr);
 
-  ArvBuffer* buffer =
-      arv_camera_acquisition(impl_->camera, static_cast<guint64>((exposure_s + timeout_s_) * 1e6), &error);
-  Check(error, impl_->id, "acquisition");
-  if (buffer == nullptr || arv_buffer_get_status(buffer) != ARV_BUFFER_STATUS_SUCCESS) {
-    if (buffer) g_object_unref(buffer);
-    ThrowUserError("camera '" + impl_->id + "'", "acquisition", "no frame arrived (disconnected?)");
+  // A frame left from an earlier acquisition was exposed with other settings.
+  while (ArvBuffer* stale = arv_stream_try_pop_buffer(impl_->stream)) arv_stream_push_buffer(impl_->stream, stale);
+  ArvBuffer* buffer = nullptr;
+  for (int attempt = 1;; ++attempt) {
+    frame.t_start_s = clock_.now_s();
+    arv_camera_start_acquisition(impl_->camera, &error);
+    Check(error, impl_->id, "acquisition");
+    buffer = arv_stream_timeout_pop_buffer(impl_->stream, static_cast<guint64>((exposure_s + timeout_s_) * 1e6));
+    arv_camera_stop_acquisition(impl_->camera, nullptr);
+    if (buffer == nullptr)
+      ThrowUserError("camera '" + impl_->id + "'", "acquisition", "no frame arrived in time (disconnected?)");
+    if (arv_buffer_get_status(buffer) == ARV_BUFFER_STATUS_SUCCESS) break;
+    const int status = arv_buffer_get_status(buffer);
+    arv_stream_push_buffer(impl_->stream, buffer);
+    if (attempt == 3)
+      ThrowUserError("camera '" + impl_->id + "'", "acquisition",
+                     "3 frames in a row arrived incomplete (status " + std::to_string(status) + "): check the link");
   }
+  // The buffer goes back to the stream on every way out.
+  struct Requeue {
+    ArvStream* stream;
+    ArvBuffer* buffer;
+    ~Requeue() { arv_stream_push_buffer(stream, buffer); }
+  } requeue{impl_->stream, buffer};
   gint x = 0, y = 0, width = 0, height = 0;
   arv_buffer_get_image_region(buffer, &x, &y, &width, &height);
   const ArvPixelFormat format = arv_buffer_get_image_pixel_format(buffer);
@@ -135,12 +183,10 @@ Frame AravisCamera::Capture(double exposure_s, double gain) {
     std::copy(data, data + frame.pixels.size(), frame.pixels.begin());
     frame.adc_bits = 8;
   } else {
-    g_object_unref(buffer);
     ThrowUserError("camera '" + impl_->id + "'", "pixel format", "unsupported pixel format (Mono8 and Mono16 are)");
   }
   last_frame_id_ = arv_buffer_get_frame_id(buffer);
   last_camera_timestamp_ns_ = arv_buffer_get_timestamp(buffer);
-  g_object_unref(buffer);
   return frame;
 }
 

@@ -5,6 +5,8 @@
 
 #include "phos/acquire/aravis_camera.h"
 
+#include <arv.h>
+
 #include <cmath>
 #include <gtest/gtest.h>
 
@@ -17,6 +19,21 @@ class AravisFake : public ::testing::Test {
  protected:
   static void SetUpTestSuite() { AravisCamera::EnableFakeInterface(); }
   SystemClock clock;
+};
+
+// The GigE Vision fake camera, served on 127.0.0.1 by this process; a new
+// one per test (it keeps register state).
+class AravisGvFake : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    fake_ = arv_gv_fake_camera_new("lo", "GV01");
+    ASSERT_TRUE(fake_ != nullptr && arv_gv_fake_camera_is_running(fake_));
+  }
+  void TearDown() override {
+    if (fake_) g_object_unref(fake_);
+  }
+  SystemClock clock;
+  ArvGvFakeCamera* fake_ = nullptr;
 };
 
 // The fake's pixel at (x, y): the ramp value times the scale, clamped and
@@ -42,8 +59,7 @@ TEST_F(AravisFake, SetsAndReadsBackExposureAndGain) {
   EXPECT_NEAR(camera.gain(), 0, 1e-9);
 }
 
-TEST_F(AravisFake, BrightnessFollowsExposureAndGainAsTheFakeDefines) {
-  AravisCamera camera("Fake_1", clock);
+void ExpectBrightnessAsTheFakeDefines(AravisCamera& camera) {
   struct Setting {
     double exposure_s, gain;
   } settings[] = {{0.01, 0}, {0.01, 2}, {0.1, 0}, {0.001, 1}};
@@ -51,6 +67,7 @@ TEST_F(AravisFake, BrightnessFollowsExposureAndGainAsTheFakeDefines) {
   for (const Setting& s : settings) {
     Frame frame = camera.Capture(s.exposure_s, s.gain);
     ASSERT_GT(frame.width, 0);
+    ASSERT_EQ(frame.pixels.size(), static_cast<std::size_t>(frame.width) * frame.height);
     ASSERT_EQ(frame.channels, 1);
     ASSERT_TRUE(frame.adc_bits == 8 || frame.adc_bits == 16);  // Mono16 where the fake offers it
     EXPECT_NEAR(frame.exposure_s, s.exposure_s, 1e-9);
@@ -66,6 +83,21 @@ TEST_F(AravisFake, BrightnessFollowsExposureAndGainAsTheFakeDefines) {
     }
     previous_mean = mean;
   }
+}
+
+TEST_F(AravisFake, BrightnessFollowsExposureAndGainAsTheFakeDefines) {
+  AravisCamera camera("Fake_1", clock);
+  ExpectBrightnessAsTheFakeDefines(camera);
+}
+
+TEST_F(AravisGvFake, OverLoopbackBrightnessFollowsExposureAndGain) {
+  AravisCamera camera("127.0.0.1", clock);
+  EXPECT_NE(camera.description().find("127.0.0.1"), std::string::npos);
+  camera.SetRegion(0, 0, 128, 128);  // fewer packets on loopback
+  camera.Capture(0.02, 1);
+  EXPECT_NEAR(camera.exposure_s(), 0.02, 1e-9);
+  EXPECT_NEAR(camera.gain(), 1, 1e-9);
+  ExpectBrightnessAsTheFakeDefines(camera);
 }
 
 TEST_F(AravisFake, RefusedSettingsAndMissingCamerasAreClearErrors) {

@@ -21,9 +21,14 @@ class AravisCamera final : public Camera {
 
   std::string description() const override;
   // Sets exposure and gain (refused values are UserErrors naming the
-  // camera's bounds), acquires one frame, and reads it as 16-bit.
+  // camera's bounds), acquires one frame, and reads it as 16-bit. A frame
+  // that arrives incomplete (lost packets) is retaken, up to 3 tries.
   Frame Capture(double exposure_s, double gain) override;
   double max_exposure_s() const override;
+
+  // Region of interest in sensor pixels (the payload, and so the stream's
+  // buffers, follow it).
+  void SetRegion(int x, int y, int width, int height);
 
   // What the camera reports now (for tests and the start record).
   double exposure_s() const;
@@ -35,6 +40,7 @@ class AravisCamera final : public Camera {
   static void EnableFakeInterface();
 
  private:
+  void AllocateBuffers();
   struct Impl;
   std::unique_ptr<Impl> impl_;
   const Clock& clock_;
