@@ -21,10 +21,50 @@ bool DecayProtocolOptions::IsValid(std::string* error) const {
 }
 
 namespace {
+
 void RecordLight(SessionWriter& session, Lights& lights, const Clock& clock, const std::string& channel, bool on) {
   lights.Set(channel, on);
   session.Event({{"t_s", clock.now_s()}, {"event", "light"}, {"channel", channel}, {"on", on}});
 }
+
+// Writes the frame with its per-channel mean signal and saturated fraction
+// added to `line`; returns the brightest channel's mean as a fraction of the
+// ADC range above black.
+double RecordFrame(SessionWriter& session, const Frame& frame, nlohmann::json line) {
+  const double range = std::pow(2.0, frame.adc_bits) - 1 - frame.black_level_dn;
+  std::vector<double> means;
+  double brightest = 0;
+  for (int c = 0; c < frame.channels; ++c) {
+    means.push_back(frame.MeanSignal(c));
+    brightest = std::max(brightest, means.back() / range);
+  }
+  line["mean_signal_dn"] = means;
+  line["saturated_fraction"] = frame.SaturatedFraction();
+  session.WriteFrame(frame, line);
+  return brightest;
+}
+
+// Runs a protocol's body; on any error the session is marked failed with the
+// reason first (switching off can fail too, and the guard tries again), then
+// the lights go off and the error goes on to the caller.
+template <typename Body>
+void RunRecorded(SessionWriter& session, Lights& lights, const Clock& clock, const std::string& protocol, Body body) {
+  try {
+    session.Event({{"t_s", clock.now_s()}, {"event", "protocol"}, {"protocol", protocol}, {"phase", "start"}});
+    body();
+    lights.AllOff();
+    session.Event({{"t_s", clock.now_s()}, {"event", "protocol"}, {"protocol", protocol}, {"phase", "end"}});
+    session.Stop("complete");
+  } catch (const std::exception& e) {
+    session.Stop("failed", e.what());
+    try {
+      lights.AllOff();
+    } catch (...) {
+    }
+    throw;
+  }
+}
+
 }  // namespace
 
 DecayProtocolResult RunDecayProtocol(Camera& camera, Lights& lights, Clock& clock, SessionWriter& session,
@@ -36,9 +76,8 @@ DecayProtocolResult RunDecayProtocol(Camera& camera, Lights& lights, Clock& cloc
     lights.Set(options.charge_light, false);  // names the known channels in its error
   LightsOffGuard guard(lights);
   DecayProtocolResult result;
-  try {
+  RunRecorded(session, lights, clock, "decay", [&] {
     lights.AllOff();
-    session.Event({{"t_s", clock.now_s()}, {"event", "protocol"}, {"protocol", "decay"}, {"phase", "start"}});
     RecordLight(session, lights, clock, options.charge_light, true);
     clock.SleepFor(options.charge_s);
     RecordLight(session, lights, clock, options.charge_light, false);
@@ -52,18 +91,8 @@ DecayProtocolResult RunDecayProtocol(Camera& camera, Lights& lights, Clock& cloc
       // Never expose past the next frame's start.
       const double exposure_now = std::min(exposure, std::max(1e-6, 0.9 * options.interval_s));
       Frame frame = camera.Capture(exposure_now, options.gain);
-      const double range = std::pow(2.0, frame.adc_bits) - 1 - frame.black_level_dn;
-      nlohmann::json line;
-      line["delay_after_light_off_s"] = frame.t_start_s - result.light_off_s;
-      std::vector<double> means;
-      double brightest = 0;
-      for (int c = 0; c < frame.channels; ++c) {
-        means.push_back(frame.MeanSignal(c));
-        brightest = std::max(brightest, means.back() / range);
-      }
-      line["mean_signal_dn"] = means;
-      line["saturated_fraction"] = frame.SaturatedFraction();
-      session.WriteFrame(frame, line);
+      const double brightest =
+          RecordFrame(session, frame, {{"delay_after_light_off_s", frame.t_start_s - result.light_off_s}});
       ++result.frames;
       // Auto-exposure for the next frame.
       if (brightest > options.high_fraction || frame.SaturatedFraction() > 0)
@@ -71,18 +100,7 @@ DecayProtocolResult RunDecayProtocol(Camera& camera, Lights& lights, Clock& cloc
       else if (brightest < options.low_fraction)
         exposure = std::min(exposure * 2, options.max_exposure_s);
     }
-    lights.AllOff();
-    session.Event({{"t_s", clock.now_s()}, {"event", "protocol"}, {"protocol", "decay"}, {"phase", "end"}});
-    session.Stop("complete");
-  } catch (const std::exception& e) {
-    // Record why first: switching off can fail too (the guard tries again).
-    session.Stop("failed", e.what());
-    try {
-      lights.AllOff();
-    } catch (...) {
-    }
-    throw;
-  }
+  });
   return result;
 }
 
@@ -105,7 +123,7 @@ ExcitationProtocolResult RunExcitationProtocol(Camera& camera, Lights& lights, C
     if (std::find(channels.begin(), channels.end(), light) == channels.end()) lights.Set(light, false);  // names them
   LightsOffGuard guard(lights);
   ExcitationProtocolResult result;
-  // One charge-then-measure experiment; returns the brightest channel's mean signal.
+  // One charge-then-measure experiment; returns the brightest channel's signal.
   auto measure = [&](const std::string& light, double charge_s) {
     lights.AllOff();
     clock.SleepFor(options.reset_s);
@@ -115,23 +133,11 @@ ExcitationProtocolResult RunExcitationProtocol(Camera& camera, Lights& lights, C
     const double off = clock.now_s();
     clock.SleepUntil(off + options.delay_s);
     Frame frame = camera.Capture(options.exposure_s, options.gain);
-    nlohmann::json line = {{"light", light},
-                           {"charge_s", charge_s},
-                           {"delay_after_light_off_s", frame.t_start_s - off}};
-    std::vector<double> means;
-    double brightest = 0;
-    for (int c = 0; c < frame.channels; ++c) {
-      means.push_back(frame.MeanSignal(c));
-      brightest = std::max(brightest, means.back());
-    }
-    line["mean_signal_dn"] = means;
-    line["saturated_fraction"] = frame.SaturatedFraction();
-    session.WriteFrame(frame, line);
     ++result.frames;
-    return brightest;
+    return RecordFrame(session, frame,
+                       {{"light", light}, {"charge_s", charge_s}, {"delay_after_light_off_s", frame.t_start_s - off}});
   };
-  try {
-    session.Event({{"t_s", clock.now_s()}, {"event", "protocol"}, {"protocol", "excitation"}, {"phase", "start"}});
+  RunRecorded(session, lights, clock, "excitation", [&] {
     for (const std::string& light : options.lights) {
       // Doubling until the response stops growing.
       std::vector<double> times;
@@ -145,17 +151,7 @@ ExcitationProtocolResult RunExcitationProtocol(Camera& camera, Lights& lights, C
       // Then the midpoints of the rising part, where the charging speed shows.
       for (std::size_t i = 1; i < times.size(); ++i) measure(light, std::sqrt(times[i - 1] * times[i]));
     }
-    lights.AllOff();
-    session.Event({{"t_s", clock.now_s()}, {"event", "protocol"}, {"protocol", "excitation"}, {"phase", "end"}});
-    session.Stop("complete");
-  } catch (const std::exception& e) {
-    session.Stop("failed", e.what());
-    try {
-      lights.AllOff();
-    } catch (...) {
-    }
-    throw;
-  }
+  });
   return result;
 }
 
