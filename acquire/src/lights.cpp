@@ -1,6 +1,7 @@
 #include "phos/acquire/lights.h"
 
 #include <algorithm>
+#include <atomic>
 #include <csignal>
 #include <cstdlib>
 #include <mutex>
@@ -40,13 +41,18 @@ namespace {
 Lights* g_guarded = nullptr;
 struct sigaction g_previous_int, g_previous_term;
 
+std::atomic<SignalCleanup> g_cleanup{nullptr};
+
 extern "C" void SwitchOffAndExit(int signal_number) {
   // Not async-signal-safe in general, but the process ends right after, and
   // a lab would rather the lights go off than the process end cleanly.
   if (g_guarded != nullptr) g_guarded->AllOff();
+  if (SignalCleanup cleanup = g_cleanup.load()) cleanup(signal_number);
   std::_Exit(128 + signal_number);
 }
 }  // namespace
+
+void SetSignalCleanup(SignalCleanup cleanup) { g_cleanup.store(cleanup); }
 
 LightsOffGuard::LightsOffGuard(Lights& lights) : lights_(lights) {
   if (g_guarded == nullptr) {

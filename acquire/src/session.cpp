@@ -4,11 +4,15 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <atomic>
+#include <csignal>
+#include <cstring>
 #include <cstdio>
 #include <random>
 
 #include <OpenImageIO/imageio.h>
 
+#include "phos/acquire/lights.h"
 #include "phos/util/error.h"
 #include "phos/util/json.h"
 
@@ -32,6 +36,44 @@ std::string UtcNow() {
   return text;
 }
 
+// The session a signal would abort: its stop.json path and the records to
+// write there, prepared in advance because a signal handler may only make
+// system calls (open, write, fsync, rename).
+struct AbortRecord {
+  char temporary[4096];
+  char final_path[4096];
+  char sigint[512];
+  char sigterm[512];
+};
+AbortRecord g_abort_record;
+std::atomic<bool> g_abort_armed{false};
+
+void WriteAbortRecord(int signal_number) {
+  if (!g_abort_armed.load()) return;
+  const char* text = signal_number == SIGINT ? g_abort_record.sigint : g_abort_record.sigterm;
+  const int fd = ::open(g_abort_record.temporary, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd < 0) return;
+  const ssize_t ignored = ::write(fd, text, std::strlen(text));
+  (void)ignored;
+  ::fsync(fd);
+  ::close(fd);
+  ::rename(g_abort_record.temporary, g_abort_record.final_path);
+}
+
+void ArmAbortRecord(const std::filesystem::path& dir) {
+  const std::string final_path = (dir / "stop.json").string();
+  const std::string temporary = final_path + ".tmp.signal";
+  if (final_path.size() >= sizeof g_abort_record.final_path) return;  // too long to prepare: no record
+  std::snprintf(g_abort_record.final_path, sizeof g_abort_record.final_path, "%s", final_path.c_str());
+  std::snprintf(g_abort_record.temporary, sizeof g_abort_record.temporary, "%s", temporary.c_str());
+  std::snprintf(g_abort_record.sigint, sizeof g_abort_record.sigint,
+                "{\n  \"how\": \"aborted\",\n  \"why\": \"SIGINT (interrupted); lights switched off; frames.jsonl lists every frame kept\"\n}\n");
+  std::snprintf(g_abort_record.sigterm, sizeof g_abort_record.sigterm,
+                "{\n  \"how\": \"aborted\",\n  \"why\": \"SIGTERM (terminated); lights switched off; frames.jsonl lists every frame kept\"\n}\n");
+  g_abort_armed.store(true);
+  SetSignalCleanup(WriteAbortRecord);
+}
+
 }  // namespace
 
 SessionWriter::SessionWriter(std::filesystem::path dir, nlohmann::json start_record) : dir_(std::move(dir)) {
@@ -44,6 +86,7 @@ SessionWriter::SessionWriter(std::filesystem::path dir, nlohmann::json start_rec
   start_record["started_utc"] = UtcNow();
   start_record["schema"] = "phos.session/1";
   WriteFileAtomically(dir_ / "session.json", start_record.dump(2) + "\n");
+  ArmAbortRecord(dir_);
 }
 
 SessionWriter::~SessionWriter() {
@@ -104,6 +147,7 @@ std::string SessionWriter::WriteFrame(const Frame& frame, nlohmann::json extra) 
 }
 
 void SessionWriter::Stop(const std::string& how, const std::string& why) {
+  g_abort_armed.store(false);  // from here on, a signal finds the session already ended
   nlohmann::json stop = {{"how", how}, {"frames", frames_}, {"stopped_utc", UtcNow()}};
   if (!why.empty()) stop["why"] = why;
   stopped_ = true;

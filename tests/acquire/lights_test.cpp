@@ -2,6 +2,8 @@
 // out (scope end, exception, SIGTERM, SIGINT).
 
 #include "phos/acquire/lights.h"
+#include "phos/acquire/session.h"
+#include "phos/util/json.h"
 
 #include <sys/wait.h>
 #include <unistd.h>
@@ -71,13 +73,14 @@ class FileLights final : public Lights {
   std::string path_;
 };
 
-void ExpectSignalSwitchesOff(int signal_number) {
+void ExpectSignalSwitchesOff(int signal_number, const std::string& name) {
   testing::TempDir dir;
   const std::string state = (dir / "lamp").string();
   const std::string ready = (dir / "ready").string();
   pid_t child = fork();
   ASSERT_GE(child, 0);
   if (child == 0) {
+    SessionWriter session(dir / "session", {{"protocol", "test"}});
     FileLights lights(state);
     LightsOffGuard guard(lights);
     lights.Set("lamp", true);
@@ -92,10 +95,34 @@ void ExpectSignalSwitchesOff(int signal_number) {
   ASSERT_TRUE(WIFEXITED(status));
   EXPECT_EQ(WEXITSTATUS(status), 128 + signal_number);
   EXPECT_EQ(testing::ReadText(state), "off");
+  // The open session says it was aborted, and by which signal.
+  nlohmann::json stop = ReadJsonFile(dir / "session" / "stop.json");
+  EXPECT_EQ(stop["how"], "aborted");
+  EXPECT_NE(stop["why"].get<std::string>().find(name), std::string::npos) << stop.dump();
 }
 
-TEST(LightsOffGuard, SwitchesOffOnSigterm) { ExpectSignalSwitchesOff(SIGTERM); }
-TEST(LightsOffGuard, SwitchesOffOnSigint) { ExpectSignalSwitchesOff(SIGINT); }
+TEST(LightsOffGuard, ASignalAfterTheSessionEndedLeavesItsRecord) {
+  testing::TempDir dir;
+  const std::string ready = (dir / "ready").string();
+  pid_t child = fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    SessionWriter session(dir / "session", {{"protocol", "test"}});
+    session.Stop("complete");
+    FileLights lights((dir / "lamp").string());
+    LightsOffGuard guard(lights);
+    std::ofstream(ready) << "1";
+    for (;;) pause();
+  }
+  for (int i = 0; i < 500 && !std::ifstream(ready); ++i) usleep(10000);
+  kill(child, SIGTERM);
+  int status = 0;
+  waitpid(child, &status, 0);
+  EXPECT_EQ(ReadJsonFile(dir / "session" / "stop.json")["how"], "complete");
+}
+
+TEST(LightsOffGuard, SwitchesOffOnSigtermAndTheSessionSaysAborted) { ExpectSignalSwitchesOff(SIGTERM, "SIGTERM"); }
+TEST(LightsOffGuard, SwitchesOffOnSigintAndTheSessionSaysAborted) { ExpectSignalSwitchesOff(SIGINT, "SIGINT"); }
 
 }  // namespace
 }  // namespace phos

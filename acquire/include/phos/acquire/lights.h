@@ -52,6 +52,8 @@ class RecordingLights final : public Lights {
 
 // Switches every light off when destroyed, and while it lives, on SIGINT or
 // SIGTERM too (then the process exits with 128 + signal, as a shell expects).
+// After the lights, the signal handler runs the cleanup registered with
+// SetSignalCleanup (the open session records that it was aborted).
 class LightsOffGuard {
  public:
   explicit LightsOffGuard(Lights& lights);
@@ -62,5 +64,10 @@ class LightsOffGuard {
  private:
   Lights& lights_;
 };
+
+// A function the SIGINT/SIGTERM handler calls after switching the lights off
+// and before the process ends; it must be async-signal-safe (nullptr: none).
+using SignalCleanup = void (*)(int signal_number);
+void SetSignalCleanup(SignalCleanup cleanup);
 
 }  // namespace phos

@@ -6,7 +6,9 @@
 //   frames.jsonl   one line per frame: file, seq, times, exposure, gain, black level
 //   events.jsonl   light switches and other events, with monotonic times
 //   frames/        raw frames, lossless 16-bit TIFF
-//   stop.json      how it ended: complete, aborted (signal), failed (why)
+//   stop.json      how it ended: complete, aborted (signal), failed (why);
+//                  on SIGINT/SIGTERM (with a LightsOffGuard alive) the
+//                  handler writes "aborted" after switching the lights off
 //
 // Every line is appended and fsync'ed before the call returns; every frame
 // and JSON file is written to a temporary name and renamed into place.
