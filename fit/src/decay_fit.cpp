@@ -9,7 +9,6 @@
 
 #include <ceres/ceres.h>
 #include <Eigen/Core>
-#include <Eigen/QR>
 
 #include "phos/util/error.h"
 #include "phos/util/format.h"
@@ -104,26 +103,33 @@ SmallMatrix Gram(const Eigen::MatrixXd& A) {
     for (Eigen::Index j = 0; j <= i; ++j) G(i, j) = G(j, i) = A.col(i).dot(A.col(j));
   return G;
 }
-SmallVector Project(const Eigen::MatrixXd& A, const Eigen::VectorXd& v) {
+SmallVector InnerProducts(const Eigen::MatrixXd& A, const Eigen::VectorXd& v) {
   SmallVector b(A.cols());
   for (Eigen::Index i = 0; i < A.cols(); ++i) b[i] = A.col(i).dot(v);
   return b;
 }
 
+// The model's columns for given rates: e^{-k_i t} per component, then a
+// column of ones for the background when it is fitted.
+Eigen::MatrixXd DesignMatrix(const Data& d, const double* rates, int count) {
+  Eigen::MatrixXd Phi(d.m, count + (d.background ? 1 : 0));
+  for (int i = 0; i < count; ++i) Phi.col(i) = (-rates[i] * d.t).exp().matrix();
+  if (d.background) Phi.col(count).setOnes();
+  return Phi;
+}
+
 // Variable projection for fixed rates: amplitudes (>= 0) and background
 // (free) solved exactly per channel. Fills A, B and wrss.
 void Project(const Data& d, const std::vector<double>& rates, Fit* fit) {
-  const int p = static_cast<int>(rates.size()), q = p + (d.background ? 1 : 0);
-  Eigen::MatrixXd Phi(d.m, q);
-  for (int i = 0; i < p; ++i) Phi.col(i) = (-rates[i] * d.t).exp().matrix();
-  if (d.background) Phi.col(p).setOnes();
+  const int p = static_cast<int>(rates.size());
+  const Eigen::MatrixXd Phi = DesignMatrix(d, rates.data(), p);
   fit->A.assign(d.C, std::vector<double>(p, 0.0));
   fit->B.assign(d.C, 0.0);
   fit->wrss = 0;
   for (int c = 0; c < d.C; ++c) {
     Eigen::MatrixXd WPhi = d.w[c].matrix().asDiagonal() * Phi;
     Eigen::VectorXd wy = (d.w[c] * d.y[c]).matrix();
-    SmallNnlsResult r = SolveSmallNnls(Gram(WPhi), Project(WPhi, wy), p);
+    SmallNnlsResult r = SolveSmallNnls(Gram(WPhi), InnerProducts(WPhi, wy), p);
     fit->wrss += std::max(0.0, wy.squaredNorm() + 2 * r.cost);
     for (int i = 0; i < p; ++i) fit->A[c][i] = r.x[i];
     if (d.background) fit->B[c] = r.x[p];
@@ -141,9 +147,7 @@ Fit ScanNewComponent(const Data& d, const std::vector<double>& rates, const Eige
   trial.push_back(0);
   // Columns of the components already present (and the background).
   const int q = p + (d.background ? 1 : 0);
-  Eigen::MatrixXd Phi(d.m, q);
-  for (int i = 0; i < p; ++i) Phi.col(i) = (-rates[i] * d.t).exp().matrix();
-  if (d.background) Phi.col(p).setOnes();
+  const Eigen::MatrixXd Phi = DesignMatrix(d, rates.data(), p);
   std::vector<double> cost(grid.size(), 0.0);
   std::vector<bool> usable(grid.size(), true);
   for (int g = 0; g < grid.size(); ++g)
@@ -155,7 +159,7 @@ Fit ScanNewComponent(const Data& d, const std::vector<double>& rates, const Eige
     const Eigen::VectorXd w2y = (d.w[c].square() * d.y[c]).matrix();
     const Eigen::MatrixXd WPhi = d.w[c].matrix().asDiagonal() * Phi;
     const SmallMatrix G_old = Gram(WPhi);
-    const SmallVector b_old = Project(Phi, w2y);
+    const SmallVector b_old = InnerProducts(Phi, w2y);
     const double yy = (d.w[c] * d.y[c]).matrix().squaredNorm();
     // New component first among the constrained ones: order [A_new, A_old..., B].
     SmallMatrix G(q + 1, q + 1);
@@ -202,16 +206,12 @@ class VarProCost final : public ceres::CostFunction {
   bool Evaluate(double const* const* p, double* residuals, double** jacobians) const override {
     const int m = d_.m, q = nc_ + (d_.background ? 1 : 0);
     double k[4];
-    Eigen::MatrixXd Phi(m, q);
-    for (int i = 0; i < nc_; ++i) {
-      k[i] = std::exp(p[0][i]);
-      Phi.col(i) = (-k[i] * d_.t).exp().matrix();
-    }
-    if (d_.background) Phi.col(nc_).setOnes();
+    for (int i = 0; i < nc_; ++i) k[i] = std::exp(p[0][i]);
+    const Eigen::MatrixXd Phi = DesignMatrix(d_, k, nc_);
     for (int c = 0; c < d_.C; ++c) {
       const Eigen::MatrixXd WPhi = d_.w[c].matrix().asDiagonal() * Phi;
       const Eigen::VectorXd wy = (d_.w[c] * d_.y[c]).matrix();
-      const SmallNnlsResult x = SolveSmallNnls(Gram(WPhi), Project(WPhi, wy), nc_);
+      const SmallNnlsResult x = SolveSmallNnls(Gram(WPhi), InnerProducts(WPhi, wy), nc_);
       Eigen::Map<Eigen::VectorXd> r(residuals + c * m, m);
       r = wy - WPhi * x.x;
       if (jacobians == nullptr || jacobians[0] == nullptr) continue;
