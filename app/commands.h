@@ -9,5 +9,6 @@ void RegisterSimulate(CLI::App& app);
 void RegisterPlot(CLI::App& app);
 void RegisterFit(CLI::App& app);
 void RegisterCapture(CLI::App& app);
+void RegisterRender(CLI::App& app);
 
 }  // namespace phos::app

@@ -26,6 +26,7 @@ int main(int argc, char** argv) {
   phos::app::RegisterPlot(app);
   phos::app::RegisterFit(app);
   phos::app::RegisterCapture(app);
+  phos::app::RegisterRender(app);
 
   // Name an unknown command rather than CLI11's "A subcommand is required".
   if (argc > 1 && argv[1][0] != '-') {

@@ -13,6 +13,8 @@ PACKAGES=(
   libaravis-dev aravis-tools libusb-1.0-0-dev zlib1g-dev libgpiod-dev
   # render: Embree 3, OpenImageIO (+ OpenEXR), TBB
   libembree-dev libopenimageio-dev openimageio-tools libopenexr-dev libtbb-dev
+  # render: mesh loaders (OBJ, glTF 2.0)
+  libtinyobjloader-dev libtinygltf-dev libstb-dev
   # tests and benchmarks
   libgtest-dev libgmock-dev libbenchmark-dev
   # JSON, command line, HTTP (editor)

@@ -9,26 +9,6 @@
 #include "phos/util/format.h"
 
 namespace phos {
-namespace {
-
-SampledSpectrum Normalized(SampledSpectrum s) {
-  const double total = s.Integrate(s.wavelength_nm.front(), s.wavelength_nm.back());
-  for (double& v : s.value) v /= total;
-  return s;
-}
-
-SampledSpectrum Gaussian(double center_nm, double fwhm_nm, double weight = 1.0) {
-  SampledSpectrum s;
-  const double sigma = fwhm_nm / 2.3548;
-  for (double nm = center_nm - 4 * sigma; nm <= center_nm + 4 * sigma; nm += sigma / 8) {
-    s.wavelength_nm.push_back(nm);
-    s.value.push_back(weight * std::exp(-0.5 * std::pow((nm - center_nm) / sigma, 2)));
-  }
-  return s;
-}
-
-}  // namespace
-
 double Frame::MeanSignal(int channel) const {
   double sum = 0;
   const std::size_t pixels_count = static_cast<std::size_t>(width) * height;
@@ -44,28 +24,15 @@ double Frame::SaturatedFraction() const {
 }
 
 LightSource LedLight(const std::string& name, double center_nm, double fwhm_nm, double irradiance) {
-  return {name, Normalized(Gaussian(center_nm, fwhm_nm)), irradiance};
+  return {name, LedSpectrum(center_nm, fwhm_nm), irradiance};
 }
 
 LightSource WhiteLedLight(const std::string& name, double irradiance) {
-  SampledSpectrum s;
-  SampledSpectrum blue = Gaussian(450, 20), yellow = Gaussian(560, 110, 0.6);
-  for (double nm = 380; nm <= 780; nm += 2) {
-    s.wavelength_nm.push_back(nm);
-    s.value.push_back(blue.Evaluate(nm) + yellow.Evaluate(nm));
-  }
-  return {name, Normalized(s), irradiance};
+  return {name, WhiteLedSpectrum(), irradiance};
 }
 
 LightSource HalogenLight(const std::string& name, double irradiance) {
-  SampledSpectrum s;
-  const double h = 6.62607015e-34, c = 2.99792458e8, k = 1.380649e-23, T = 3000;
-  for (double nm = 350; nm <= 800; nm += 5) {
-    const double lambda = nm * 1e-9;
-    s.wavelength_nm.push_back(nm);
-    s.value.push_back(1 / (std::pow(lambda, 5) * (std::exp(h * c / (lambda * k * T)) - 1)));  // Planck's law
-  }
-  return {name, Normalized(s), irradiance};
+  return {name, BlackbodySpectrum(3000, 350, 800), irradiance};
 }
 
 std::vector<LightSource> DefaultLights() {
@@ -75,7 +42,7 @@ std::vector<LightSource> DefaultLights() {
 
 CameraModel DefaultCameraModel() {
   CameraModel camera;
-  camera.sensitivity = {Gaussian(600, 90), Gaussian(540, 90), Gaussian(460, 90)};
+  camera.sensitivity = {GaussianSpectrum(600, 90), GaussianSpectrum(540, 90), GaussianSpectrum(460, 90)};
   return camera;
 }
 

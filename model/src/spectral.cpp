@@ -1,6 +1,7 @@
 #include "phos/model/spectral.h"
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 
 #include "phos/util/error.h"
@@ -67,6 +68,49 @@ std::vector<double> RebinIntegrated(const std::vector<double>& values, const Spe
       if (overlap > 0) out[j] += values[i] * overlap / from.width_nm(i);
     }
   return out;
+}
+
+namespace {
+
+SampledSpectrum Normalized(SampledSpectrum s) {
+  const double total = s.Integrate(s.wavelength_nm.front(), s.wavelength_nm.back());
+  for (double& v : s.value) v /= total;
+  return s;
+}
+
+}  // namespace
+
+SampledSpectrum GaussianSpectrum(double center_nm, double fwhm_nm, double weight) {
+  SampledSpectrum s;
+  const double sigma = fwhm_nm / 2.3548;  // FWHM = 2 sqrt(2 ln 2) sigma
+  for (double nm = center_nm - 4 * sigma; nm <= center_nm + 4 * sigma; nm += sigma / 8) {
+    s.wavelength_nm.push_back(nm);
+    s.value.push_back(weight * std::exp(-0.5 * std::pow((nm - center_nm) / sigma, 2)));
+  }
+  return s;
+}
+
+SampledSpectrum LedSpectrum(double center_nm, double fwhm_nm) { return Normalized(GaussianSpectrum(center_nm, fwhm_nm)); }
+
+SampledSpectrum WhiteLedSpectrum() {
+  SampledSpectrum s;
+  const SampledSpectrum blue = GaussianSpectrum(450, 20), yellow = GaussianSpectrum(560, 110, 0.6);
+  for (double nm = 380; nm <= 780; nm += 2) {
+    s.wavelength_nm.push_back(nm);
+    s.value.push_back(blue.Evaluate(nm) + yellow.Evaluate(nm));
+  }
+  return Normalized(s);
+}
+
+SampledSpectrum BlackbodySpectrum(double temperature_k, double lower_nm, double upper_nm) {
+  SampledSpectrum s;
+  const double h = 6.62607015e-34, c = 2.99792458e8, k = 1.380649e-23;
+  for (double nm = lower_nm; nm <= upper_nm + 1e-9; nm += 5) {
+    const double lambda = nm * 1e-9;
+    s.wavelength_nm.push_back(nm);
+    s.value.push_back(1 / (std::pow(lambda, 5) * std::expm1(h * c / (lambda * k * temperature_k))));  // Planck's law
+  }
+  return Normalized(s);
 }
 
 }  // namespace phos

@@ -38,6 +38,18 @@ struct SampledSpectrum {
   double Integrate(double lower_nm, double upper_nm) const;
 };
 
+// Light and sensor spectra shared by the simulated lab and the renderer.
+// Gaussian of peak `weight` (not normalized): camera sensitivities.
+SampledSpectrum GaussianSpectrum(double center_nm, double fwhm_nm, double weight = 1.0);
+// The following are normalized to unit integral, so a light's scale is its
+// total irradiance (or intensity) alone.
+SampledSpectrum LedSpectrum(double center_nm, double fwhm_nm);
+// A phosphor-converted white LED: blue pump at 450 nm plus a broad yellow band.
+SampledSpectrum WhiteLedSpectrum();
+// Planck's law at temperature_k between lower_nm and upper_nm (a halogen lamp
+// is 3000 K, the sun about 5778 K).
+SampledSpectrum BlackbodySpectrum(double temperature_k, double lower_nm, double upper_nm);
+
 // Band-integrated values of a spectral density (e.g. irradiance per nm ->
 // irradiance per band, the E[b] of Eq. 8.1).
 std::vector<double> IntegrateOverBands(const SampledSpectrum& spectrum, const SpectralGrid& grid);

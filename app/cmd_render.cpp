@@ -1,0 +1,138 @@
+// phos render: a scene's frames with the coupled solver (DESIGN.md contract):
+//   phos render SCENE.json --out DIR [--times t1,t2,...] [--transport direct|path]
+//       [--no-phosphorescence] [--json]
+//   JSON: {"frames":[{"t":..,"exr":path,"png":path,"seconds":..}], ...}
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+#include <memory>
+#include <string>
+
+#include <nlohmann/json.hpp>
+
+#include "commands.h"
+#include "phos/render/renderer.h"
+#include "phos/render/scene.h"
+#include "phos/render/solver.h"
+#include "phos/util/error.h"
+#include "phos/util/format.h"
+#include "phos/util/progress.h"
+
+namespace phos::app {
+namespace {
+
+struct RenderArgs {
+  std::string scene, out, times, transport = "direct";
+  bool no_phosphorescence = false, json = false;
+  int spp = 0, width = 0, height = 0;
+};
+
+double Seconds(std::chrono::steady_clock::time_point since) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
+}
+
+void Run(const RenderArgs& args) {
+  using namespace phos::render;
+  const Transport transport = ParseTransport(args.transport);
+  Scene scene = LoadScene(args.scene);
+  if (args.width > 0) scene.camera.width = args.width;
+  if (args.height > 0) scene.camera.height = args.height;
+
+  std::vector<double> times = scene.FrameTimes();
+  if (!args.times.empty()) {
+    std::string bad;
+    if (!ParseDoubleList(args.times, &times, &bad))
+      ThrowUserError("", "--times", "expected a comma-separated list of seconds, got \"" + bad + "\"");
+    for (double t : times)
+      if (t < scene.start_s)
+        ThrowUserError("", "--times", FormatDouble(t) + " s is before the scene's start (" +
+                                          FormatDouble(scene.start_s) + " s): states are only known from there on");
+    std::sort(times.begin(), times.end());
+  }
+  std::error_code ec;
+  std::filesystem::create_directories(args.out, ec);
+  if (ec) ThrowUserError("", "--out", "cannot create '" + args.out + "': " + ec.message());
+
+  SceneGeometry geometry(scene);
+  std::unique_ptr<CoupledSolver> solver;
+  if (!args.no_phosphorescence && scene.HasPhosphors()) solver = std::make_unique<CoupledSolver>(scene, geometry);
+  FrameOptions options = DefaultFrameOptions(scene, transport);
+  if (args.spp > 0) options.spp = options.direct_spp = args.spp;
+
+  nlohmann::json frames = nlohmann::json::array();
+  ProgressBar progress("render " + scene.name, times.size());
+  for (std::size_t f = 0; f < times.size(); ++f) {
+    const double t = times[f];
+    const auto start = std::chrono::steady_clock::now();
+    if (solver) solver->AdvanceTo(t);
+    else geometry.SetTime(t);
+    const double solver_s = Seconds(start);
+    const auto render_start = std::chrono::steady_clock::now();
+    FrameStats stats;
+    const Image bands = RenderBands(geometry, solver.get(), options, &stats);
+    const Image rgb = BandsToLinearSrgb(bands, scene.bands);
+    const double render_s = Seconds(render_start);
+    const double seconds = Seconds(start);
+
+    char name[64];
+    std::snprintf(name, sizeof name, "frame-%04zu", f);
+    const std::filesystem::path exr = std::filesystem::path(args.out) / (std::string(name) + ".exr");
+    const std::filesystem::path png = std::filesystem::path(args.out) / (std::string(name) + ".png");
+    WriteExr(exr, rgb, bands, scene.bands);
+    WritePng(png, rgb, scene.camera.exposure);
+    frames.push_back({{"t", t}, {"exr", exr.string()}, {"png", png.string()}, {"seconds", seconds},
+                      {"solver_seconds", solver_s}, {"render_seconds", render_s}, {"rays", stats.rays}});
+    progress.Advance();
+  }
+  progress.Finish();
+
+  nlohmann::json result = {{"scene", args.scene}, {"transport", TransportName(transport)},
+                           {"phosphorescence", solver != nullptr}, {"width", scene.camera.width},
+                           {"height", scene.camera.height}, {"frames", frames}};
+  if (solver) {
+    const SolverStats& s = solver->stats();
+    result["solver"] = {{"texels", s.texels}, {"lit_steps", s.steps}, {"dark_jumps", s.dark_jumps},
+                        {"irradiance_updates", s.irradiance_updates}, {"shadow_rays", s.shadow_rays}};
+  }
+  if (args.json) {
+    std::cout << result.dump() << "\n";
+    return;
+  }
+  std::printf("%s: %zu frame(s), %dx%d, transport %s, %s\n", scene.name.c_str(), times.size(), scene.camera.width,
+              scene.camera.height, TransportName(transport),
+              solver ? (std::to_string(solver->stats().texels) + " phosphor texels").c_str() : "no phosphorescence");
+  for (const auto& frame : frames)
+    std::printf("  t = %8s s  %7.3f s  %s\n", FormatDouble(frame["t"].get<double>()).c_str(),
+                frame["seconds"].get<double>(), frame["png"].get<std::string>().c_str());
+}
+
+}  // namespace
+
+void RegisterRender(CLI::App& app) {
+  auto args = std::make_shared<RenderArgs>();
+  CLI::App* cmd = app.add_subcommand(
+      "render",
+      "Render a scene's frames: the coupled solver charges and drains every phosphorescent\n"
+      "texel through the scene's light schedule, then each frame is rendered per band and\n"
+      "written as linear EXR (R,G,B and one channel per band) and tone-mapped PNG.\n"
+      "Transports: direct (lights + glow, fast) or path (spectral path tracer, the reference:\n"
+      "glowing surfaces light the others). Scenes: phos.scene/1, see docs/render.md.");
+  cmd->add_option("scene", args->scene, "Scene file (phos.scene/1)")->required();
+  cmd->add_option("--out", args->out, "Folder for frame-NNNN.exr and frame-NNNN.png")->required();
+  cmd->add_option("--times", args->times,
+                  "Comma-separated frame times in seconds (default: the scene's time range at its fps)");
+  cmd->add_option("--transport", args->transport, "direct or path")->default_str("direct");
+  cmd->add_flag("--no-phosphorescence", args->no_phosphorescence,
+                "Render phosphors as plain diffuse surfaces (no states, no glow)");
+  cmd->add_option("--spp", args->spp, "Samples per pixel (default: the scene's render.spp or direct_spp)")
+      ->check(CLI::Range(1, 1 << 20));
+  cmd->add_option("--width", args->width, "Override the camera's width in pixels")->check(CLI::Range(1, 16384));
+  cmd->add_option("--height", args->height, "Override the camera's height in pixels")->check(CLI::Range(1, 16384));
+  cmd->add_flag("--json", args->json, "Print one JSON object: frames with t, exr, png and seconds");
+  cmd->callback([args] { Run(*args); });
+}
+
+}  // namespace phos::app

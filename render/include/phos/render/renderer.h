@@ -1,0 +1,73 @@
+#pragma once
+// Frames: light transport from the lights and the glowing texels to the
+// camera, per band of the scene's grid, then colour, EXR and PNG.
+//
+// Transports (DESIGN.md render/):
+//  - direct: primary rays; reflected light from the lights (shadow rays) plus
+//    the phosphors' own emission Lp (Eq. 8.2). No interreflection: the glow
+//    lights nothing else. Fast; the interactive and animation path.
+//  - path: a spectral path tracer, the reference. All bands travel together
+//    (diffuse materials scatter no light between bands); next-event
+//    estimation for the lights and for the glowing triangles, combined with
+//    BSDF sampling by multiple importance sampling (power heuristic), so the
+//    glow of one surface lights the others (Fig. 8.15).
+
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "phos/render/geometry.h"
+#include "phos/render/scene.h"
+#include "phos/render/solver.h"
+
+namespace phos::render {
+
+enum class Transport { kDirect, kPath };
+Transport ParseTransport(const std::string& name);  // UserError on an unknown name
+const char* TransportName(Transport transport);
+
+// Pixels with `channels` floats each, row-major from the top-left.
+struct Image {
+  int width = 0, height = 0, channels = 0;
+  std::vector<float> pixels;
+  Image() = default;
+  Image(int w, int h, int c) : width(w), height(h), channels(c), pixels(std::size_t(w) * h * c, 0.0f) {}
+  float* at(int x, int y) { return pixels.data() + (std::size_t(y) * width + x) * channels; }
+  const float* at(int x, int y) const { return pixels.data() + (std::size_t(y) * width + x) * channels; }
+};
+
+struct FrameOptions {
+  Transport transport = Transport::kDirect;
+  int spp = 16;        // path: samples per pixel
+  int direct_spp = 1;  // direct: jittered samples per pixel
+  int max_depth = 8;   // path: bounces
+  unsigned seed = 1;
+};
+FrameOptions DefaultFrameOptions(const Scene& scene, Transport transport);
+
+struct FrameStats {
+  std::uint64_t rays = 0;  // every ray cast (primary, shadow, bounce)
+};
+
+// Radiance per band at every pixel at the geometry's and solver's current
+// time (the caller advances the solver first). solver may be null: no phosphorescence.
+Image RenderBands(const SceneGeometry& geometry, const CoupledSolver* solver, const FrameOptions& options,
+                  FrameStats* stats = nullptr);
+
+// Band radiance to linear sRGB (D65): band averages of the CIE 1931 colour
+// matching functions (the analytic fit of Wyman, Sloan and Shirley 2013),
+// normalized so that radiance 1 in every band has luminance Y = 1.
+Image BandsToLinearSrgb(const Image& bands, const SpectralGrid& grid);
+// Weights [3 x n]: row 0 X, 1 Y, 2 Z per band.
+std::vector<double> BandToXyzWeights(const SpectralGrid& grid);
+
+// Linear EXR (half-float) with R, G, B and one channel per band ("band<b>"),
+// the band edges in the header attribute "phos:bands_nm". Atomic write.
+void WriteExr(const std::filesystem::path& path, const Image& rgb, const Image& bands, const SpectralGrid& grid);
+// 8-bit sRGB PNG for viewing: rgb * exposure, clamped, sRGB transfer. Atomic write.
+void WritePng(const std::filesystem::path& path, const Image& rgb, double exposure);
+// Reads any image OpenImageIO reads, as float (tests, regression references).
+Image ReadImage(const std::filesystem::path& path);
+
+}  // namespace phos::render

@@ -1,0 +1,147 @@
+#pragma once
+// A scene (`phos.scene/1`, DESIGN.md render/): meshes with materials, lights
+// with spectra and time schedules, rigid animation, a camera and a time range.
+// Everything spectral lives on one band grid, the scene's, which every
+// phosphor material must share: the coupled solver then needs no resampling.
+//
+// Units: metres, seconds, nanometres. Irradiance is in the units the
+// materials' ke were fitted in (Table 8.1: normalized irradiance), so a
+// point light's intensity is irradiance * m^2 at normal incidence, and a
+// directional light's is irradiance at normal incidence.
+
+#include <filesystem>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Geometry>
+#include <nlohmann/json_fwd.hpp>
+
+#include "phos/model/material.h"
+#include "phos/model/spectral.h"
+
+namespace phos::render {
+
+using Vec3 = Eigen::Vector3d;
+
+// A triangle mesh in object space.
+struct Mesh {
+  std::vector<Eigen::Vector3f> positions;
+  std::vector<Eigen::Vector3i> triangles;
+  std::string source;  // file it came from, or the built-in shape
+};
+
+// Rigid motion: keyframes of translation and rotation, linear in translation
+// and spherical-linear in rotation, held constant outside the keyframes.
+struct RigidKey {
+  double t_s = 0.0;
+  Vec3 translate = Vec3::Zero();
+  Eigen::Quaterniond rotate = Eigen::Quaterniond::Identity();
+  double scale = 1.0;
+};
+struct RigidMotion {
+  std::vector<RigidKey> keys;  // sorted by t_s; empty = identity
+  Eigen::Affine3d At(double t_s) const;
+  bool Moves() const;  // more than one distinct key
+  // Times in [t0, t1] where the motion changes (keyframes): the solver does not
+  // step across a change of velocity.
+  bool MovesBetween(double t0_s, double t1_s) const;
+};
+
+// Initial state of a phosphor's texels at the scene's start time.
+struct InitialState {
+  enum class Kind { kZero, kEquilibrium, kUniform } kind = Kind::kZero;
+  double r0 = 0.0;  // kUniform: every state of every texel
+};
+
+struct Object {
+  std::string name;
+  std::shared_ptr<const Mesh> mesh;
+  RigidMotion motion;
+  std::vector<double> albedo;                 // per band, diffuse reflectance in [0, 1]
+  std::shared_ptr<const Material> phosphor;   // null: not phosphorescent (carries no state)
+  std::string phosphor_path;
+  bool unknown_ke_as_zero = false;            // the scene's explicit assumption, never phos's guess
+  InitialState initial;
+  double texel_size_m = 0.0;                  // edge of the automatic atlas's texels (0: scene default)
+};
+
+// Piecewise-constant level of a light: level of the last key at or before t.
+struct LightSchedule {
+  struct Key {
+    double t_s;
+    double level;
+  };
+  std::vector<Key> keys;  // sorted; empty = always on at 1
+  double LevelAt(double t_s) const;
+  // The switch times strictly inside (t0, t1).
+  std::vector<double> ChangesBetween(double t0_s, double t1_s) const;
+};
+
+struct Light {
+  enum class Kind { kPoint, kDirectional } kind = Kind::kPoint;
+  std::string name;
+  std::vector<double> E_per_band;  // spectrum * intensity integrated over the scene's bands
+  double intensity = 1.0;
+  LightSchedule schedule;
+  RigidMotion motion;    // a point light moves with the translation of its keys
+  Vec3 position = Vec3::Zero();  // point: object space of `motion`
+  Vec3 direction = Vec3(0, -1, 0);  // directional: the direction light travels
+  Vec3 PositionAt(double t_s) const { return motion.At(t_s) * position; }
+  Vec3 DirectionAt(double t_s) const { return (motion.At(t_s).linear() * direction).normalized(); }
+};
+
+struct CameraKey {
+  double t_s = 0.0;
+  Vec3 position = Vec3(0, 0, 5);
+  Vec3 look_at = Vec3::Zero();
+};
+struct Camera {
+  std::vector<CameraKey> keys;  // at least one
+  Vec3 up = Vec3(0, 1, 0);
+  double fov_deg = 45.0;        // vertical
+  int width = 320, height = 240;
+  double exposure = 1.0;        // scale applied before tone mapping (PNG only)
+  CameraKey At(double t_s) const;
+};
+
+struct RenderSettings {
+  int spp = 16;          // path tracer samples per pixel
+  int max_depth = 8;     // path tracer bounces
+  int direct_spp = 1;    // direct transport: jittered samples per pixel
+  unsigned seed = 1;
+  double max_step_s = 0.0;  // coupled solver's longest step while something moves (0: 1/fps)
+};
+
+struct Scene {
+  std::string source;  // the file
+  std::string name;
+  SpectralGrid bands;
+  std::vector<Object> objects;
+  std::vector<Light> lights;
+  Camera camera;
+  double start_s = 0.0, end_s = 10.0, fps = 1.0;
+  double texel_size_m = 0.0;  // default texel edge (0: scene diagonal / 200)
+  RenderSettings settings;
+
+  // The frame times from start_s to end_s at fps.
+  std::vector<double> FrameTimes() const;
+  bool HasPhosphors() const;
+};
+
+// Loads and validates a scene. Paths inside it are relative to its folder.
+// Any problem is a UserError naming the file and the field.
+Scene LoadScene(const std::filesystem::path& path);
+Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& base_dir, const std::string& source);
+
+// Built-in shapes (also usable from scene files as {"shape": ...}).
+Mesh MakeQuad(double size_x, double size_z);            // in the y = 0 plane, normal +y
+Mesh MakeBox(const Vec3& size, bool inward);            // centred at the origin
+Mesh MakeSphere(double radius, int subdivisions, bool inward);  // icosphere
+// Loads OBJ (tinyobjloader) or glTF 2.0 (.gltf/.glb, tinygltf), triangulated,
+// with node transforms applied (glTF). A non-empty `group` keeps only the OBJ
+// group (o/g) or glTF mesh of that name. Problems are UserErrors naming `where`.
+Mesh LoadMesh(const std::filesystem::path& path, const std::string& group, const std::string& where);
+
+}  // namespace phos::render

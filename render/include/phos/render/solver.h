@@ -1,0 +1,98 @@
+#pragma once
+// The coupled solver (Sec. 8.5): the rate-equation state of every
+// phosphorescent texel, advanced through the scene's time while lights switch
+// and objects move.
+//
+// Model only what the scene requires (DESIGN.md render/):
+//  - only phosphorescent objects have texels and states;
+//  - a material's batch coefficients keep only the bands the scene's lights
+//    reach (excitation) and the bands it emits (Lambda > 0);
+//  - the geometric part of each light's irradiance at each texel (cosine,
+//    distance, shadow ray) is cached and recomputed only when that light or
+//    the geometry moved; a light switching or dimming only rescales it;
+//  - while every light is off the state jumps in closed form (DecayBatch), at
+//    no cost in the length of the interval: a frame an hour after lights-out
+//    costs what the first did.
+
+#include <cstddef>
+#include <string>
+#include <vector>
+
+#include "phos/model/batch.h"
+#include "phos/render/geometry.h"
+#include "phos/render/scene.h"
+
+namespace phos::render {
+
+struct SolverStats {
+  std::size_t texels = 0;
+  std::size_t steps = 0;             // lit steps (AdvanceBatch)
+  std::size_t dark_jumps = 0;        // closed-form dark steps (DecayBatch)
+  std::size_t irradiance_updates = 0;  // per-light geometry recomputations (each: one shadow ray per texel)
+  std::size_t shadow_rays = 0;
+};
+
+class CoupledSolver {
+ public:
+  // Places the geometry at scene.start_s and sets the initial states.
+  CoupledSolver(const Scene& scene, SceneGeometry& geometry);
+
+  // Advances every state from time_s() to t_s (>= time_s()), splitting steps at
+  // light switches and, while something moves, at the scene's max_step_s.
+  void AdvanceTo(double t_s);
+  double time_s() const { return time_s_; }
+
+  const TexelAtlas& atlas() const { return atlas_; }
+  int band_count() const { return band_count_; }
+  // Emitted radiance Lp (Eq. 8.2) of texel j of object slot s in scene band b;
+  // 0 for bands the material does not emit.
+  float Lp(int slot, int band, std::size_t texel) const {
+    const Group& g = groups_[slot];
+    const int e = g.emission_index[band];
+    return e < 0 ? 0.0f : g.Lp[static_cast<std::size_t>(e) * g.states.n + texel];
+  }
+  // State i of texel j of object slot s.
+  float State(int slot, int i, std::size_t texel) const { return groups_[slot].states.state(i)[texel]; }
+  const std::vector<int>& excitation_bands(int slot) const { return groups_[slot].excitation_bands; }
+  const std::vector<int>& emission_bands(int slot) const { return groups_[slot].emission_bands; }
+  const SolverStats& stats() const { return stats_; }
+
+  // The irradiance (per scene band) that the lights put on texel j of slot s now.
+  std::vector<double> TexelIrradiance(int slot, std::size_t texel);
+
+ private:
+  struct Group {
+    int object = -1;
+    std::vector<int> excitation_bands, emission_bands;
+    std::vector<int> emission_index;  // per scene band: index into emission_bands or -1
+    BatchCoefficients<float> coefficients;
+    StateBatch<float> states;
+    std::vector<float> Lp;  // [n_em * n]
+    std::vector<float> E;   // [n_exc * n], scratch
+    // Per light: irradiance per unit of the light's band irradiance (geometry
+    // only: cos / d^2 and visibility), and where it was computed.
+    std::vector<std::vector<float>> unit_E;
+    std::vector<Eigen::Vector3d> unit_E_light_at;
+    std::vector<double> unit_E_geometry_time;
+    std::vector<Eigen::Vector3f> texel_position, texel_normal;  // at texel_time
+    double texel_time = -1e300;
+  };
+
+  void Step(double t0_s, double t1_s, bool moving);
+  void UpdateTexelFrames(Group& group);
+  const std::vector<float>& UnitIrradiance(Group& group, int light);
+  // Fills group.E for the lights' levels at time t; returns false if no light reaches the group.
+  bool GatherIrradiance(Group& group, double t_s);
+  void InitialStates();
+
+  const Scene& scene_;
+  SceneGeometry& geometry_;
+  TexelAtlas atlas_;
+  std::vector<Group> groups_;
+  int band_count_ = 0;
+  double time_s_ = 0;
+  double geometry_stamp_ = 0;  // time of the last geometry change seen
+  SolverStats stats_;
+};
+
+}  // namespace phos::render

@@ -1,0 +1,197 @@
+#include "phos/render/geometry.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include <embree3/rtcore.h>
+
+#include "phos/util/error.h"
+
+namespace phos::render {
+
+void SubTriangleCenter(int m, int index, float& b1, float& b2) {
+  int i = 0;
+  while (i + 1 < m && (i + 1) * (2 * m - (i + 1)) <= index) ++i;
+  const int within = index - i * (2 * m - i);
+  const int j = within / 2;
+  const float third = (within % 2 == 1) ? 2.0f / 3.0f : 1.0f / 3.0f;
+  b1 = (static_cast<float>(i) + third) / static_cast<float>(m);
+  b2 = (static_cast<float>(j) + third) / static_cast<float>(m);
+}
+
+struct SceneGeometry::Embree {
+  RTCDevice device = nullptr;
+  RTCScene scene = nullptr;
+  std::vector<RTCGeometry> geometries;
+  ~Embree() {
+    for (RTCGeometry g : geometries) rtcReleaseGeometry(g);
+    if (scene) rtcReleaseScene(scene);
+    if (device) rtcReleaseDevice(device);
+  }
+};
+
+SceneGeometry::SceneGeometry(const Scene& scene) : scene_(scene), embree_(std::make_unique<Embree>()) {
+  embree_->device = rtcNewDevice(nullptr);
+  PHOS_CHECK(embree_->device != nullptr);
+  embree_->scene = rtcNewScene(embree_->device);
+  rtcSetSceneBuildQuality(embree_->scene, RTC_BUILD_QUALITY_HIGH);
+  world_.resize(scene.objects.size());
+  time_s_ = scene.start_s;
+  for (std::size_t o = 0; o < scene.objects.size(); ++o) {
+    const Mesh& mesh = *scene.objects[o].mesh;
+    RTCGeometry geometry = rtcNewGeometry(embree_->device, RTC_GEOMETRY_TYPE_TRIANGLE);
+    // Embree reads vertex buffers with 16-byte loads: one float of padding.
+    rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 4 * sizeof(float),
+                            mesh.positions.size());
+    auto* index = static_cast<unsigned*>(rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
+                                                                  3 * sizeof(unsigned), mesh.triangles.size()));
+    for (std::size_t t = 0; t < mesh.triangles.size(); ++t)
+      for (int c = 0; c < 3; ++c) index[3 * t + c] = static_cast<unsigned>(mesh.triangles[t][c]);
+    // Moving objects are refit rather than rebuilt.
+    if (scene.objects[o].motion.Moves()) rtcSetGeometryBuildQuality(geometry, RTC_BUILD_QUALITY_REFIT);
+    embree_->geometries.push_back(geometry);
+    Upload(static_cast<int>(o));
+    rtcAttachGeometryByID(embree_->scene, geometry, static_cast<unsigned>(o));
+  }
+  rtcCommitScene(embree_->scene);
+  Eigen::AlignedBox3f box;
+  for (const auto& vertices : world_)
+    for (const Vec3f& v : vertices) box.extend(v);
+  diagonal_ = std::max(box.diagonal().norm(), 1e-6f);
+  ray_epsilon_ = 1e-5f * diagonal_;
+}
+
+SceneGeometry::~SceneGeometry() = default;
+
+void SceneGeometry::Upload(int object) {
+  const Object& o = scene_.objects[object];
+  const Eigen::Affine3f transform = o.motion.At(time_s_).cast<float>();
+  std::vector<Vec3f>& world = world_[object];
+  world.resize(o.mesh->positions.size());
+  auto* vertex = static_cast<float*>(rtcGetGeometryBufferData(embree_->geometries[object], RTC_BUFFER_TYPE_VERTEX, 0));
+  for (std::size_t v = 0; v < world.size(); ++v) {
+    world[v] = transform * o.mesh->positions[v];
+    vertex[4 * v + 0] = world[v].x();
+    vertex[4 * v + 1] = world[v].y();
+    vertex[4 * v + 2] = world[v].z();
+    vertex[4 * v + 3] = 0.0f;
+  }
+  rtcUpdateGeometryBuffer(embree_->geometries[object], RTC_BUFFER_TYPE_VERTEX, 0);
+  rtcCommitGeometry(embree_->geometries[object]);
+}
+
+bool SceneGeometry::SetTime(double t_s) {
+  bool moved = false;
+  const double before = time_s_;
+  time_s_ = t_s;
+  for (std::size_t o = 0; o < scene_.objects.size(); ++o) {
+    const RigidMotion& motion = scene_.objects[o].motion;
+    if (!motion.Moves() || motion.At(before).isApprox(motion.At(t_s), 0)) continue;
+    Upload(static_cast<int>(o));
+    moved = true;
+  }
+  if (moved) {
+    rtcCommitScene(embree_->scene);
+    ++version_;
+  }
+  return moved;
+}
+
+Hit SceneGeometry::Intersect(const Vec3f& origin, const Vec3f& direction, float t_far) const {
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  RTCRayHit ray{};
+  ray.ray.org_x = origin.x();
+  ray.ray.org_y = origin.y();
+  ray.ray.org_z = origin.z();
+  ray.ray.dir_x = direction.x();
+  ray.ray.dir_y = direction.y();
+  ray.ray.dir_z = direction.z();
+  ray.ray.tnear = 0.0f;
+  ray.ray.tfar = t_far;
+  ray.ray.mask = 0xFFFFFFFFu;
+  ray.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+  ray.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+  rtcIntersect1(embree_->scene, &context, &ray);
+  Hit hit;
+  if (ray.hit.geomID == RTC_INVALID_GEOMETRY_ID) return hit;
+  hit.object = static_cast<int>(ray.hit.geomID);
+  hit.triangle = static_cast<int>(ray.hit.primID);
+  hit.b1 = ray.hit.u;
+  hit.b2 = ray.hit.v;
+  hit.distance = ray.ray.tfar;
+  hit.position = Point(hit.object, hit.triangle, hit.b1, hit.b2);
+  hit.normal = FrontNormal(hit.object, hit.triangle);
+  hit.front = hit.normal.dot(direction) < 0;
+  return hit;
+}
+
+bool SceneGeometry::Occluded(const Vec3f& origin, const Vec3f& direction, float t_far) const {
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  RTCRay ray{};
+  ray.org_x = origin.x();
+  ray.org_y = origin.y();
+  ray.org_z = origin.z();
+  ray.dir_x = direction.x();
+  ray.dir_y = direction.y();
+  ray.dir_z = direction.z();
+  ray.tnear = 0.0f;
+  ray.tfar = t_far;
+  ray.mask = 0xFFFFFFFFu;
+  rtcOccluded1(embree_->scene, &context, &ray);
+  return ray.tfar < 0.0f;  // Embree sets tfar to -inf on a hit
+}
+
+Vec3f SceneGeometry::Point(int object, int triangle, float b1, float b2) const {
+  return (1 - b1 - b2) * Vertex(object, triangle, 0) + b1 * Vertex(object, triangle, 1) + b2 * Vertex(object, triangle, 2);
+}
+
+Vec3f SceneGeometry::FrontNormal(int object, int triangle) const {
+  const Vec3f v0 = Vertex(object, triangle, 0);
+  const Vec3f n = (Vertex(object, triangle, 1) - v0).cross(Vertex(object, triangle, 2) - v0);
+  const float length = n.norm();
+  return length > 0 ? Vec3f(n / length) : Vec3f(0, 0, 1);
+}
+
+float SceneGeometry::Area(int object, int triangle) const {
+  const Vec3f v0 = Vertex(object, triangle, 0);
+  return 0.5f * (Vertex(object, triangle, 1) - v0).cross(Vertex(object, triangle, 2) - v0).norm();
+}
+
+TexelAtlas::TexelAtlas(const Scene& scene, const SceneGeometry& geometry) : slot_(scene.objects.size(), -1) {
+  const double default_size = scene.texel_size_m > 0 ? scene.texel_size_m : geometry.diagonal_m() / 200.0;
+  for (std::size_t o = 0; o < scene.objects.size(); ++o) {
+    const Object& object = scene.objects[o];
+    if (!object.phosphor) continue;
+    const double size = object.texel_size_m > 0 ? object.texel_size_m : default_size;
+    ObjectTexels texels;
+    texels.object = static_cast<int>(o);
+    const int triangles = geometry.triangle_count(static_cast<int>(o));
+    for (int t = 0; t < triangles; ++t) {
+      // Longest edge over the texel size: texels never longer than asked.
+      float longest = 0;
+      for (int c = 0; c < 3; ++c)
+        longest = std::max(longest, (geometry.Vertex(static_cast<int>(o), t, (c + 1) % 3) -
+                                     geometry.Vertex(static_cast<int>(o), t, c)).norm());
+      const int m = std::clamp(static_cast<int>(std::ceil(longest / size)), 1, 4096);
+      texels.first.push_back(static_cast<std::uint32_t>(texels.count));
+      texels.m.push_back(static_cast<std::uint16_t>(m));
+      texels.count += static_cast<std::size_t>(m) * static_cast<std::size_t>(m);
+      if (texels.count > (std::size_t{1} << 31))
+        ThrowUserError(scene.source, "objects[" + std::to_string(o) + "].texel_size_m",
+                       "more than 2^31 texels on '" + object.name + "'; choose a larger texel size");
+    }
+    slot_[o] = static_cast<int>(objects_.size());
+    objects_.push_back(std::move(texels));
+  }
+}
+
+std::size_t TexelAtlas::total_texels() const {
+  std::size_t total = 0;
+  for (const ObjectTexels& o : objects_) total += o.count;
+  return total;
+}
+
+}  // namespace phos::render

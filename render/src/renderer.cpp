@@ -1,0 +1,435 @@
+#include "phos/render/renderer.h"
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+
+#include <OpenImageIO/imageio.h>
+#include <tbb/parallel_for.h>
+
+#include "phos/util/error.h"
+#include "phos/util/format.h"
+
+namespace phos::render {
+namespace {
+
+constexpr float kPi = 3.14159265358979323846f;
+constexpr int kMaxBands = 64;
+
+// SplitMix64 (Steele, Lea and Flood 2014): a tiny, well-mixed generator whose
+// state is one word, so every pixel sample can have its own stream.
+struct Random {
+  std::uint64_t state;
+  explicit Random(std::uint64_t seed) : state(seed) {}
+  std::uint64_t Next() {
+    std::uint64_t z = (state += 0x9E3779B97F4A7C15ull);
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+    return z ^ (z >> 31);
+  }
+  float Uniform() { return static_cast<float>(Next() >> 40) * (1.0f / 16777216.0f); }  // [0, 1)
+};
+
+// Radiance or throughput per band, without allocation.
+using Bands = Eigen::Array<float, Eigen::Dynamic, 1, 0, kMaxBands, 1>;
+
+struct CameraFrame {
+  Vec3f origin, forward, right, up;
+  float tan_half_y, aspect;
+};
+
+CameraFrame MakeCameraFrame(const Scene& scene, double t_s) {
+  const CameraKey key = scene.camera.At(t_s);
+  CameraFrame c;
+  c.origin = key.position.cast<float>();
+  c.forward = (key.look_at - key.position).normalized().cast<float>();
+  c.right = c.forward.cross(scene.camera.up.cast<float>()).normalized();
+  if (!c.right.allFinite()) c.right = c.forward.unitOrthogonal();  // looking along `up`
+  c.up = c.right.cross(c.forward);
+  c.tan_half_y = std::tan(static_cast<float>(scene.camera.fov_deg) * kPi / 360.0f);
+  c.aspect = static_cast<float>(scene.camera.width) / static_cast<float>(scene.camera.height);
+  return c;
+}
+
+Vec3f CameraRay(const CameraFrame& c, const Scene& scene, float x, float y) {
+  const float sx = (2 * x / static_cast<float>(scene.camera.width) - 1) * c.tan_half_y * c.aspect;
+  const float sy = (1 - 2 * y / static_cast<float>(scene.camera.height)) * c.tan_half_y;
+  return (c.forward + sx * c.right + sy * c.up).normalized();
+}
+
+// Cosine-weighted direction about n (Malley's method).
+Vec3f SampleCosine(const Vec3f& n, float u1, float u2) {
+  const float r = std::sqrt(u1), phi = 2 * kPi * u2;
+  const Vec3f t = n.unitOrthogonal(), b = n.cross(t);
+  return (r * std::cos(phi) * t + r * std::sin(phi) * b + std::sqrt(std::max(0.0f, 1 - u1)) * n).normalized();
+}
+
+// The glowing triangles of this moment, for next-event estimation: chosen in
+// proportion to their emitted power (texel Lp summed over bands, times area).
+struct EmitterDistribution {
+  struct Entry {
+    int object, triangle;
+    float area;
+  };
+  std::vector<Entry> entries;
+  std::vector<double> cdf;                 // cumulative power, normalized
+  std::vector<std::vector<float>> pdf;     // per object, per triangle: probability of choosing it
+  bool empty() const { return entries.empty(); }
+
+  EmitterDistribution(const SceneGeometry& geometry, const CoupledSolver* solver) {
+    pdf.resize(geometry.object_count());
+    if (!solver) return;
+    const TexelAtlas& atlas = solver->atlas();
+    std::vector<double> power;
+    double total = 0;
+    for (std::size_t s = 0; s < atlas.objects().size(); ++s) {
+      const TexelAtlas::ObjectTexels& texels = atlas.objects()[s];
+      for (int t = 0; t < geometry.triangle_count(texels.object); ++t) {
+        const std::size_t count = std::size_t(texels.m[t]) * texels.m[t];
+        double sum = 0;
+        for (int b : solver->emission_bands(static_cast<int>(s)))
+          for (std::size_t k = 0; k < count; ++k) sum += solver->Lp(static_cast<int>(s), b, texels.first[t] + k);
+        const float area = geometry.Area(texels.object, t);
+        const double p = sum / static_cast<double>(count) * area;
+        if (!(p > 0)) continue;
+        entries.push_back({texels.object, t, area});
+        power.push_back(p);
+        total += p;
+      }
+    }
+    if (entries.empty()) return;
+    double running = 0;
+    for (std::size_t e = 0; e < entries.size(); ++e) {
+      running += power[e] / total;
+      cdf.push_back(running);
+      auto& object_pdf = pdf[entries[e].object];
+      if (object_pdf.empty()) object_pdf.assign(geometry.triangle_count(entries[e].object), 0.0f);
+      object_pdf[entries[e].triangle] = static_cast<float>(power[e] / total);
+    }
+    cdf.back() = 1.0;
+  }
+  // Probability per unit area of sampling a point of (object, triangle).
+  float AreaPdf(int object, int triangle, float area) const {
+    const auto& p = pdf[object];
+    return p.empty() ? 0.0f : p[triangle] / area;
+  }
+  const Entry& Pick(float u) const {
+    const auto it = std::lower_bound(cdf.begin(), cdf.end(), static_cast<double>(u));
+    return entries[std::min<std::size_t>(it - cdf.begin(), entries.size() - 1)];
+  }
+};
+
+class Tracer {
+ public:
+  Tracer(const SceneGeometry& geometry, const CoupledSolver* solver, const FrameOptions& options)
+      : geometry_(geometry), scene_(geometry.scene()), solver_(solver), options_(options),
+        nb_(scene_.bands.band_count()), emitters_(geometry, options.transport == Transport::kPath ? solver : nullptr) {
+    const double t = geometry.time_s();
+    for (const Light& light : scene_.lights) {
+      const double level = light.schedule.LevelAt(t);
+      if (level <= 0) continue;
+      LitLight lit;
+      lit.point = light.kind == Light::Kind::kPoint;
+      lit.at = (lit.point ? light.PositionAt(t) : light.DirectionAt(t)).cast<float>();
+      lit.E = Bands(nb_);
+      for (int b = 0; b < nb_; ++b) lit.E[b] = static_cast<float>(level * light.E_per_band[b]);
+      lights_.push_back(lit);
+    }
+  }
+
+  // Lp at a surface point seen from its front; zero elsewhere.
+  bool Emission(const Hit& hit, Bands& Le) const {
+    if (!solver_ || !hit.front) return false;
+    const int slot = solver_->atlas().SlotOf(hit.object);
+    if (slot < 0) return false;
+    const std::size_t texel = solver_->atlas().TexelOf(slot, hit.triangle, hit.b1, hit.b2);
+    Le.setZero(nb_);
+    for (int b : solver_->emission_bands(slot)) Le[b] = solver_->Lp(slot, b, texel);
+    return true;
+  }
+
+  // Irradiance from the scene's lights at p on the side of n_s (shadow rays).
+  void DirectIrradiance(const Vec3f& p, const Vec3f& n_s, Bands& E, std::uint64_t& rays) const {
+    E.setZero(nb_);
+    const Vec3f origin = p + geometry_.ray_epsilon() * n_s;
+    for (const LitLight& light : lights_) {
+      if (light.point) {
+        const Vec3f d = light.at - p;
+        const float distance2 = d.squaredNorm(), distance = std::sqrt(distance2);
+        const float cosine = n_s.dot(d) / distance;
+        if (!(cosine > 0)) continue;
+        ++rays;
+        if (geometry_.Occluded(origin, d / distance, distance * (1 - 1e-4f) - geometry_.ray_epsilon())) continue;
+        E += light.E * (cosine / distance2);
+      } else {
+        const Vec3f to_light = -light.at;
+        const float cosine = n_s.dot(to_light);
+        if (!(cosine > 0)) continue;
+        ++rays;
+        if (geometry_.Occluded(origin, to_light, 1e30f)) continue;
+        E += light.E * cosine;
+      }
+    }
+  }
+
+  Bands Albedo(int object) const {
+    Bands a(nb_);
+    for (int b = 0; b < nb_; ++b) a[b] = static_cast<float>(scene_.objects[object].albedo[b]);
+    return a;
+  }
+
+  Bands Direct(const Vec3f& origin, const Vec3f& direction, std::uint64_t& rays) const {
+    Bands L = Bands::Zero(nb_);
+    ++rays;
+    const Hit hit = geometry_.Intersect(origin, direction);
+    if (!hit) return L;
+    Bands Le;
+    if (Emission(hit, Le)) L += Le;
+    Bands E;
+    DirectIrradiance(hit.position, hit.front ? hit.normal : Vec3f(-hit.normal), E, rays);
+    L += Albedo(hit.object) * E / kPi;  // Lambertian reflection (Eq. 8.2's reflected term)
+    return L;
+  }
+
+  Bands Path(Vec3f origin, Vec3f direction, Random& random, std::uint64_t& rays) const {
+    Bands L = Bands::Zero(nb_), beta = Bands::Ones(nb_), Le, E;
+    float bsdf_pdf = 0;  // solid-angle pdf of the direction that led here (0: camera ray)
+    for (int depth = 0; depth < options_.max_depth; ++depth) {
+      ++rays;
+      const Hit hit = geometry_.Intersect(origin, direction);
+      if (!hit) break;
+      const Vec3f n_s = hit.front ? hit.normal : Vec3f(-hit.normal);
+      // Emission found by the BSDF sample, weighted against light sampling.
+      if (Emission(hit, Le)) {
+        if (depth == 0) {
+          L += beta * Le;
+        } else {
+          const float cos_light = -hit.normal.dot(direction);
+          const float light_pdf =
+              emitters_.AreaPdf(hit.object, hit.triangle, geometry_.Area(hit.object, hit.triangle)) *
+              hit.distance * hit.distance / cos_light;
+          L += beta * Le * (bsdf_pdf * bsdf_pdf / (bsdf_pdf * bsdf_pdf + light_pdf * light_pdf));
+        }
+      }
+      const Bands albedo = Albedo(hit.object);
+      if (albedo.maxCoeff() <= 0) break;
+      // Next-event estimation: the lights (delta: no MIS) ...
+      DirectIrradiance(hit.position, n_s, E, rays);
+      L += beta * albedo * E / kPi;
+      // ... and one point on a glowing triangle.
+      const Vec3f origin_s = hit.position + geometry_.ray_epsilon() * n_s;
+      if (!emitters_.empty()) {
+        const auto& entry = emitters_.Pick(random.Uniform());
+        const float su = std::sqrt(random.Uniform()), u2 = random.Uniform();
+        const float b1 = su * (1 - u2), b2 = su * u2;  // uniform on the triangle
+        const Vec3f q = geometry_.Point(entry.object, entry.triangle, b1, b2);
+        const Vec3f nq = geometry_.FrontNormal(entry.object, entry.triangle);
+        Vec3f wi = q - hit.position;
+        const float distance2 = wi.squaredNorm(), distance = std::sqrt(distance2);
+        wi /= distance;
+        const float cos_s = n_s.dot(wi), cos_l = -nq.dot(wi);
+        if (cos_s > 0 && cos_l > 0) {
+          ++rays;
+          if (!geometry_.Occluded(origin_s, wi, distance * (1 - 1e-4f) - 2 * geometry_.ray_epsilon())) {
+            Hit at;
+            at.object = entry.object;
+            at.triangle = entry.triangle;
+            at.b1 = b1;
+            at.b2 = b2;
+            at.front = true;
+            Emission(at, Le);
+            const float light_pdf = emitters_.AreaPdf(entry.object, entry.triangle, entry.area) * distance2 / cos_l;
+            const float p_bsdf = cos_s / kPi;
+            const float weight = light_pdf * light_pdf / (light_pdf * light_pdf + p_bsdf * p_bsdf);
+            L += beta * albedo / kPi * Le * (cos_s * weight / light_pdf);
+          }
+        }
+      }
+      // Continue the path: cosine sampling of the diffuse BSDF, f cos / pdf = albedo.
+      direction = SampleCosine(n_s, random.Uniform(), random.Uniform());
+      bsdf_pdf = n_s.dot(direction) / kPi;
+      origin = origin_s;
+      beta *= albedo;
+      if (depth >= 3) {  // Russian roulette keeps the estimate unbiased
+        const float survive = std::min(1.0f, beta.maxCoeff());
+        if (random.Uniform() >= survive) break;
+        beta /= survive;
+      }
+    }
+    return L;
+  }
+
+ private:
+  struct LitLight {
+    bool point;
+    Vec3f at;
+    Bands E;
+  };
+  const SceneGeometry& geometry_;
+  const Scene& scene_;
+  const CoupledSolver* solver_;
+  FrameOptions options_;
+  int nb_;
+  EmitterDistribution emitters_;
+  std::vector<LitLight> lights_;
+};
+
+// CIE 1931 2-degree colour matching functions: the multi-lobe fit of Wyman,
+// Sloan and Shirley (JCGT 2013), within a few percent of the tables.
+double Lobe(double nm, double mu, double sigma_low, double sigma_high) {
+  const double s = (nm - mu) / (nm < mu ? sigma_low : sigma_high);
+  return std::exp(-0.5 * s * s);
+}
+double Xbar(double nm) {
+  return 1.056 * Lobe(nm, 599.8, 37.9, 31.0) + 0.362 * Lobe(nm, 442.0, 16.0, 26.7) - 0.065 * Lobe(nm, 501.1, 20.4, 26.2);
+}
+double Ybar(double nm) { return 0.821 * Lobe(nm, 568.8, 46.9, 40.5) + 0.286 * Lobe(nm, 530.9, 16.3, 31.1); }
+double Zbar(double nm) { return 1.217 * Lobe(nm, 437.0, 11.8, 36.0) + 0.681 * Lobe(nm, 459.0, 26.0, 13.8); }
+
+}  // namespace
+
+Transport ParseTransport(const std::string& name) {
+  if (name == "direct") return Transport::kDirect;
+  if (name == "path") return Transport::kPath;
+  ThrowUserError("--transport", "", "unknown transport '" + name + "' (direct, path)");
+}
+
+const char* TransportName(Transport transport) { return transport == Transport::kPath ? "path" : "direct"; }
+
+FrameOptions DefaultFrameOptions(const Scene& scene, Transport transport) {
+  FrameOptions options;
+  options.transport = transport;
+  options.spp = scene.settings.spp;
+  options.direct_spp = scene.settings.direct_spp;
+  options.max_depth = scene.settings.max_depth;
+  options.seed = scene.settings.seed;
+  return options;
+}
+
+Image RenderBands(const SceneGeometry& geometry, const CoupledSolver* solver, const FrameOptions& options,
+                  FrameStats* stats) {
+  const Scene& scene = geometry.scene();
+  const int nb = scene.bands.band_count();
+  if (nb > kMaxBands) ThrowUserError(scene.source, "bands_nm", "more than " + std::to_string(kMaxBands) + " bands");
+  const int width = scene.camera.width, height = scene.camera.height;
+  Image image(width, height, nb);
+  const Tracer tracer(geometry, solver, options);
+  const CameraFrame camera = MakeCameraFrame(scene, geometry.time_s());
+  std::atomic<std::uint64_t> total_rays{0};
+  const int spp = options.transport == Transport::kPath ? options.spp : options.direct_spp;
+  tbb::parallel_for(0, height, [&](int y) {
+    std::uint64_t rays = 0;
+    for (int x = 0; x < width; ++x) {
+      Random random((std::uint64_t(options.seed) << 40) ^ (std::uint64_t(y) * std::uint64_t(width) + x) * 0x2545F4914F6CDD1Dull);
+      Bands sum = Bands::Zero(nb);
+      for (int s = 0; s < spp; ++s) {
+        // One centred sample when there is one; jittered otherwise.
+        const float jx = spp == 1 ? 0.5f : random.Uniform(), jy = spp == 1 ? 0.5f : random.Uniform();
+        const Vec3f direction = CameraRay(camera, scene, static_cast<float>(x) + jx, static_cast<float>(y) + jy);
+        sum += options.transport == Transport::kPath ? tracer.Path(camera.origin, direction, random, rays)
+                                                     : tracer.Direct(camera.origin, direction, rays);
+      }
+      sum /= static_cast<float>(spp);
+      std::copy(sum.data(), sum.data() + nb, image.at(x, y));
+    }
+    total_rays += rays;
+  });
+  if (stats) stats->rays = total_rays.load();
+  return image;
+}
+
+std::vector<double> BandToXyzWeights(const SpectralGrid& grid) {
+  const int nb = grid.band_count();
+  std::vector<double> w(3 * static_cast<std::size_t>(nb), 0.0);
+  double y_total = 0;
+  for (int b = 0; b < nb; ++b) {
+    // Band averages of the matching functions (radiance is uniform inside a band).
+    const int steps = std::max(8, static_cast<int>(grid.width_nm(b)));
+    for (int k = 0; k < steps; ++k) {
+      const double nm = grid.lower_nm(b) + (k + 0.5) * grid.width_nm(b) / steps;
+      w[b] += Xbar(nm) / steps;
+      w[nb + b] += Ybar(nm) / steps;
+      w[2 * nb + b] += Zbar(nm) / steps;
+    }
+    y_total += w[nb + b];
+  }
+  for (double& v : w) v /= y_total;
+  return w;
+}
+
+Image BandsToLinearSrgb(const Image& bands, const SpectralGrid& grid) {
+  const int nb = grid.band_count();
+  PHOS_CHECK(bands.channels == nb);
+  const std::vector<double> w = BandToXyzWeights(grid);
+  Image rgb(bands.width, bands.height, 3);
+  const std::size_t pixels = std::size_t(bands.width) * bands.height;
+  for (std::size_t p = 0; p < pixels; ++p) {
+    double xyz[3] = {0, 0, 0};
+    for (int c = 0; c < 3; ++c)
+      for (int b = 0; b < nb; ++b) xyz[c] += w[c * nb + b] * bands.pixels[p * nb + b];
+    // XYZ to linear sRGB (IEC 61966-2-1, D65).
+    rgb.pixels[3 * p + 0] = static_cast<float>(3.2404542 * xyz[0] - 1.5371385 * xyz[1] - 0.4985314 * xyz[2]);
+    rgb.pixels[3 * p + 1] = static_cast<float>(-0.9692660 * xyz[0] + 1.8760108 * xyz[1] + 0.0415560 * xyz[2]);
+    rgb.pixels[3 * p + 2] = static_cast<float>(0.0556434 * xyz[0] - 0.2040259 * xyz[1] + 1.0572252 * xyz[2]);
+  }
+  return rgb;
+}
+
+namespace {
+
+void WriteImageAtomically(const std::filesystem::path& path, const OIIO::ImageSpec& spec, OIIO::TypeDesc type,
+                          const void* data) {
+  const std::filesystem::path temporary = path.parent_path() / ("." + path.filename().string() + ".tmp" + path.extension().string());
+  auto out = OIIO::ImageOutput::create(temporary.string());
+  if (!out) ThrowUserError(path.string(), "", "no image writer for this format: " + OIIO::geterror());
+  if (!out->open(temporary.string(), spec) || !out->write_image(type, data) || !out->close()) {
+    std::error_code ignored;
+    std::filesystem::remove(temporary, ignored);
+    ThrowUserError(path.string(), "", "could not write the image: " + out->geterror());
+  }
+  std::error_code ec;
+  std::filesystem::rename(temporary, path, ec);
+  if (ec) ThrowUserError(path.string(), "", "could not move the image into place: " + ec.message());
+}
+
+}  // namespace
+
+void WriteExr(const std::filesystem::path& path, const Image& rgb, const Image& bands, const SpectralGrid& grid) {
+  const int nb = bands.channels;
+  OIIO::ImageSpec spec(rgb.width, rgb.height, 3 + nb, OIIO::TypeDesc::FLOAT);
+  spec.channelnames = {"R", "G", "B"};
+  for (int b = 0; b < nb; ++b) spec.channelnames.push_back("band" + std::to_string(b));
+  spec.attribute("compression", "zip");
+  std::string edges;
+  for (double e : grid.edges_nm) edges += (edges.empty() ? "" : ",") + FormatDouble(e);
+  spec.attribute("phos:bands_nm", edges);
+  std::vector<float> data(std::size_t(rgb.width) * rgb.height * (3 + nb));
+  for (std::size_t p = 0; p < std::size_t(rgb.width) * rgb.height; ++p) {
+    std::copy_n(&rgb.pixels[3 * p], 3, &data[p * (3 + nb)]);
+    std::copy_n(&bands.pixels[p * nb], nb, &data[p * (3 + nb) + 3]);
+  }
+  WriteImageAtomically(path, spec, OIIO::TypeDesc::FLOAT, data.data());
+}
+
+void WritePng(const std::filesystem::path& path, const Image& rgb, double exposure) {
+  std::vector<std::uint8_t> data(rgb.pixels.size());
+  for (std::size_t i = 0; i < data.size(); ++i) {
+    const double v = std::clamp(rgb.pixels[i] * exposure, 0.0, 1.0);
+    const double encoded = v <= 0.0031308 ? 12.92 * v : 1.055 * std::pow(v, 1 / 2.4) - 0.055;  // sRGB transfer
+    data[i] = static_cast<std::uint8_t>(std::lround(encoded * 255));
+  }
+  OIIO::ImageSpec spec(rgb.width, rgb.height, rgb.channels, OIIO::TypeDesc::UINT8);
+  WriteImageAtomically(path, spec, OIIO::TypeDesc::UINT8, data.data());
+}
+
+Image ReadImage(const std::filesystem::path& path) {
+  auto in = OIIO::ImageInput::open(path.string());
+  if (!in) ThrowUserError(path.string(), "", "cannot read the image: " + OIIO::geterror());
+  const OIIO::ImageSpec& spec = in->spec();
+  Image image(spec.width, spec.height, spec.nchannels);
+  if (!in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, image.pixels.data()))
+    ThrowUserError(path.string(), "", "cannot read the image: " + in->geterror());
+  return image;
+}
+
+}  // namespace phos::render
