@@ -28,6 +28,7 @@ struct RenderArgs {
   std::string scene, out, times, transport = "direct";
   bool no_phosphorescence = false, json = false;
   int spp = 0, width = 0, height = 0;
+  double exposure = 0;
 };
 
 double Seconds(std::chrono::steady_clock::time_point since) {
@@ -40,6 +41,7 @@ void Run(const RenderArgs& args) {
   Scene scene = LoadScene(args.scene);
   if (args.width > 0) scene.camera.width = args.width;
   if (args.height > 0) scene.camera.height = args.height;
+  if (args.exposure > 0) scene.camera.exposure = args.exposure;
 
   std::vector<double> times = scene.FrameTimes();
   if (!args.times.empty()) {
@@ -131,6 +133,8 @@ void RegisterRender(CLI::App& app) {
       ->check(CLI::Range(1, 1 << 20));
   cmd->add_option("--width", args->width, "Override the camera's width in pixels")->check(CLI::Range(1, 16384));
   cmd->add_option("--height", args->height, "Override the camera's height in pixels")->check(CLI::Range(1, 16384));
+  cmd->add_option("--exposure", args->exposure, "PNG exposure (default: the camera's); EXR files are never scaled")
+      ->check(CLI::PositiveNumber);
   cmd->add_flag("--json", args->json, "Print one JSON object: frames with t, exr, png and seconds");
   cmd->callback([args] { Run(*args); });
 }

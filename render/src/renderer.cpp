@@ -412,13 +412,22 @@ void WriteExr(const std::filesystem::path& path, const Image& rgb, const Image& 
 }
 
 void WritePng(const std::filesystem::path& path, const Image& rgb, double exposure) {
+  PHOS_CHECK(rgb.channels == 3);
   std::vector<std::uint8_t> data(rgb.pixels.size());
-  for (std::size_t i = 0; i < data.size(); ++i) {
-    const double v = std::clamp(rgb.pixels[i] * exposure, 0.0, 1.0);
-    const double encoded = v <= 0.0031308 ? 12.92 * v : 1.055 * std::pow(v, 1 / 2.4) - 0.055;  // sRGB transfer
-    data[i] = static_cast<std::uint8_t>(std::lround(encoded * 255));
+  for (std::size_t p = 0; p < data.size() / 3; ++p) {
+    // Reinhard's global operator on luminance (Reinhard et al. 2002): a glow
+    // a hundred times dimmer than the lit scene stays visible, and lit
+    // highlights roll off instead of clipping. Hue is kept.
+    const float* c = &rgb.pixels[3 * p];
+    const double Y = std::max(0.0, exposure * (0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]));
+    const double scale = exposure / (1 + Y);
+    for (int k = 0; k < 3; ++k) {
+      const double v = std::clamp(c[k] * scale, 0.0, 1.0);
+      const double encoded = v <= 0.0031308 ? 12.92 * v : 1.055 * std::pow(v, 1 / 2.4) - 0.055;  // sRGB transfer
+      data[3 * p + k] = static_cast<std::uint8_t>(std::lround(encoded * 255));
+    }
   }
-  OIIO::ImageSpec spec(rgb.width, rgb.height, rgb.channels, OIIO::TypeDesc::UINT8);
+  OIIO::ImageSpec spec(rgb.width, rgb.height, 3, OIIO::TypeDesc::UINT8);
   WriteImageAtomically(path, spec, OIIO::TypeDesc::UINT8, data.data());
 }
 

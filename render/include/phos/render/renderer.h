@@ -62,10 +62,11 @@ Image BandsToLinearSrgb(const Image& bands, const SpectralGrid& grid);
 // Weights [3 x n]: row 0 X, 1 Y, 2 Z per band.
 std::vector<double> BandToXyzWeights(const SpectralGrid& grid);
 
-// Linear EXR (half-float) with R, G, B and one channel per band ("band<b>"),
+// Linear EXR (32-bit float: glows are dim, half floats would lose them) with R, G, B and one channel per band ("band<b>"),
 // the band edges in the header attribute "phos:bands_nm". Atomic write.
 void WriteExr(const std::filesystem::path& path, const Image& rgb, const Image& bands, const SpectralGrid& grid);
-// 8-bit sRGB PNG for viewing: rgb * exposure, clamped, sRGB transfer. Atomic write.
+// 8-bit sRGB PNG for viewing: rgb * exposure through Reinhard's global
+// operator (L / (1 + L) on luminance), sRGB transfer. Atomic write.
 void WritePng(const std::filesystem::path& path, const Image& rgb, double exposure);
 // Reads any image OpenImageIO reads, as float (tests, regression references).
 Image ReadImage(const std::filesystem::path& path);

@@ -1,0 +1,83 @@
+// `phos render` as users and checks call it (DESIGN.md contract): the JSON
+// keys, the files it writes, --no-phosphorescence, and one-line errors with
+// exit code 2 for bad scenes and options.
+
+#include <gtest/gtest.h>
+
+#include <nlohmann/json.hpp>
+
+#include "phos/render/renderer.h"
+#include "test_util.h"
+
+namespace phos::testing {
+namespace {
+
+const std::string kCornell = Fixture("scenes/cornell-phosphor.json").string();
+
+TEST(RenderCommand, JsonFramesFollowTheContract) {
+  TempDir dir;
+  const CommandResult r = RunPhos("render " + kCornell + " --out " + dir.path().string() +
+                                  " --times 40,20 --width 40 --height 30 --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const nlohmann::json json = nlohmann::json::parse(r.out);
+  ASSERT_EQ(json["frames"].size(), 2u);
+  EXPECT_EQ(json["frames"][0]["t"].get<double>(), 20.0);  // rendered in time order
+  for (const auto& frame : json["frames"]) {
+    EXPECT_GT(frame["seconds"].get<double>(), 0.0);
+    const render::Image exr = render::ReadImage(frame["exr"].get<std::string>());
+    EXPECT_EQ(exr.width, 40);
+    EXPECT_EQ(exr.height, 30);
+    EXPECT_EQ(exr.channels, 3 + 8);  // R, G, B and the 8 bands
+    EXPECT_EQ(render::ReadImage(frame["png"].get<std::string>()).channels, 3);
+  }
+  EXPECT_EQ(json["transport"], "direct");
+  EXPECT_GT(json["solver"]["texels"].get<int>(), 1000);
+}
+
+double ImageSum(const std::string& path) {
+  const render::Image image = render::ReadImage(path);
+  double sum = 0;
+  for (float v : image.pixels) sum += v;
+  return sum;
+}
+
+TEST(RenderCommand, NoPhosphorescenceLeavesTheDarkBoxBlack) {
+  TempDir with, without;
+  const std::string common = " --times 40 --width 24 --height 24 --json --out ";
+  const CommandResult a = RunPhos("render " + kCornell + common + with.path().string());
+  const CommandResult b = RunPhos("render " + kCornell + common + without.path().string() + " --no-phosphorescence");
+  ASSERT_EQ(a.exit_code, 0) << a.err;
+  ASSERT_EQ(b.exit_code, 0) << b.err;
+  EXPECT_GT(ImageSum((with / "frame-0000.exr").string()), 0.0);
+  EXPECT_EQ(ImageSum((without / "frame-0000.exr").string()), 0.0);  // lights off, nothing glows
+  EXPECT_FALSE(nlohmann::json::parse(b.out)["phosphorescence"].get<bool>());
+}
+
+TEST(RenderCommand, PathTransportRenders) {
+  TempDir dir;
+  const CommandResult r = RunPhos("render " + kCornell + " --out " + dir.path().string() +
+                                  " --times 40 --width 16 --height 16 --spp 4 --transport path --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(nlohmann::json::parse(r.out)["transport"], "path");
+  EXPECT_GT(ImageSum((dir / "frame-0000.exr").string()), 0.0);
+}
+
+TEST(RenderCommand, BadInputIsOneLineAndExitTwo) {
+  TempDir dir;
+  const std::string out = " --out " + dir.path().string();
+  EXPECT_TRUE(IsOneLineUserError(RunPhos("render /nonexistent/scene.json" + out), "scene.json"));
+  EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + kCornell + out + " --transport magic"), "unknown transport 'magic'"));
+  EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + kCornell + out + " --times 5,x"), "--times"));
+  EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + kCornell + out + " --times -1"), "before the scene's start"));
+  EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + kCornell + out + " --spp 0"), "--spp"));
+  WriteText(dir / "bad.json", R"({"schema": "phos.scene/1", "camera": {"position": [0,0,0], "look_at": [0,0,1]},
+    "objects": [{"shape": {"type": "cone"}, "albedo": 0.5}], "lights": []})");
+  EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + (dir / "bad.json").string() + out), "objects[0].shape.type"));
+  WriteText(dir / "broken.json", "{\"schema\": ");
+  EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + (dir / "broken.json").string() + out), "broken.json"));
+  // Nothing was written by the failed runs.
+  EXPECT_FALSE(std::filesystem::exists(dir / "frame-0000.exr"));
+}
+
+}  // namespace
+}  // namespace phos::testing

@@ -1,0 +1,195 @@
+// Scenes, meshes and the texel atlas: loading, validation with clear errors,
+// and the atlas's addressing (a bijection that partitions each triangle).
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+#include <set>
+
+#include <nlohmann/json.hpp>
+
+#include "phos/render/geometry.h"
+#include "phos/render/scene.h"
+#include "phos/util/error.h"
+#include "phos/util/json.h"
+#include "render/scene_util.h"
+#include "test_util.h"
+
+namespace phos::render {
+namespace {
+
+using phos::testing::ErrorOfType;
+using phos::testing::Fixture;
+
+TEST(SubTriangles, IndexAndCentreAreInverse) {
+  for (int m = 1; m <= 24; ++m) {
+    std::set<int> seen;
+    for (int k = 0; k < m * m; ++k) {
+      float b1, b2;
+      SubTriangleCenter(m, k, b1, b2);
+      ASSERT_GT(b1, 0);
+      ASSERT_GT(b2, 0);
+      ASSERT_LT(b1 + b2, 1);
+      ASSERT_EQ(SubTriangleIndex(m, b1, b2), k) << "m " << m;
+      seen.insert(k);
+    }
+    EXPECT_EQ(static_cast<int>(seen.size()), m * m);
+  }
+}
+
+TEST(SubTriangles, PartitionTheTriangleIntoEqualAreas) {
+  // Uniform points on the triangle fall into each of the m^2 texels equally often.
+  const int m = 5, samples = 200000;
+  std::vector<int> count(m * m, 0);
+  std::mt19937 random(3);
+  std::uniform_real_distribution<float> u(0, 1);
+  for (int s = 0; s < samples; ++s) {
+    float b1 = u(random), b2 = u(random);
+    if (b1 + b2 > 1) b1 = 1 - b1, b2 = 1 - b2;
+    const int k = SubTriangleIndex(m, b1, b2);
+    ASSERT_GE(k, 0);
+    ASSERT_LT(k, m * m);
+    ++count[k];
+  }
+  const double expected = double(samples) / (m * m);
+  for (int k = 0; k < m * m; ++k) EXPECT_NEAR(count[k], expected, 5 * std::sqrt(expected)) << "texel " << k;
+  // Corners and edges stay in range.
+  EXPECT_EQ(SubTriangleIndex(m, 0, 0), 0);
+  EXPECT_LT(SubTriangleIndex(m, 1, 0), m * m);
+  EXPECT_LT(SubTriangleIndex(m, 0, 1), m * m);
+  EXPECT_LT(SubTriangleIndex(m, 0.5f, 0.5f), m * m);
+}
+
+TEST(Shapes, FrontsFaceOutwardOrInwardAsAsked) {
+  for (bool inward : {false, true}) {
+    for (const Mesh& mesh : {MakeBox(Vec3(1, 2, 3), inward), MakeSphere(2.0, 2, inward)}) {
+      for (const Eigen::Vector3i& t : mesh.triangles) {
+        const Eigen::Vector3f a = mesh.positions[t[0]], b = mesh.positions[t[1]], c = mesh.positions[t[2]];
+        const float outward = (b - a).cross(c - a).dot((a + b + c) / 3);
+        EXPECT_EQ(outward < 0, inward) << mesh.source;
+      }
+    }
+  }
+  const Mesh quad = MakeQuad(2, 3);
+  const Eigen::Vector3f n = (quad.positions[2] - quad.positions[0]).cross(quad.positions[1] - quad.positions[0]);
+  EXPECT_GT(n.y(), 0);
+}
+
+TEST(Meshes, CornellWallsFaceIntoTheBox) {
+  const Eigen::Vector3f centre(0.278f, 0.274f, 0.28f);
+  for (const std::string group : {"floor", "ceiling", "back", "left", "right"}) {
+    const Mesh mesh = LoadMesh(Fixture("scenes/meshes/cornell.obj"), group, "test");
+    ASSERT_EQ(mesh.triangles.size(), 2u) << group;
+    for (const Eigen::Vector3i& t : mesh.triangles) {
+      const Eigen::Vector3f a = mesh.positions[t[0]];
+      const Eigen::Vector3f n = (mesh.positions[t[1]] - a).cross(mesh.positions[t[2]] - a);
+      EXPECT_GT(n.dot(centre - a), 0) << group;
+    }
+  }
+  EXPECT_EQ(LoadMesh(Fixture("scenes/meshes/cornell.obj"), "tall_block", "test").triangles.size(), 10u);
+  EXPECT_NE(ErrorOfType<UserError>([] { LoadMesh(Fixture("scenes/meshes/cornell.obj"), "sofa", "scene.json"); })
+                .find("no group 'sofa'"),
+            std::string::npos);
+}
+
+TEST(Meshes, GltfNodeTransformsAreApplied) {
+  const Mesh mesh = LoadMesh(Fixture("scenes/meshes/pedestal.gltf"), "", "test");
+  ASSERT_EQ(mesh.triangles.size(), 12u);
+  Eigen::AlignedBox3f box;
+  for (const auto& p : mesh.positions) box.extend(p);
+  // A unit cube, translated by 0.5 in y and scaled 2x in y: y spans [-0.5, 1.5].
+  EXPECT_NEAR(box.min().y(), -0.5f, 1e-6);
+  EXPECT_NEAR(box.max().y(), 1.5f, 1e-6);
+  EXPECT_NEAR(box.max().x(), 0.5f, 1e-6);
+  for (const Eigen::Vector3i& t : mesh.triangles) {  // still outward after the transform
+    const Eigen::Vector3f a = mesh.positions[t[0]], b = mesh.positions[t[1]], c = mesh.positions[t[2]];
+    EXPECT_GT((b - a).cross(c - a).dot((a + b + c) / 3 - Eigen::Vector3f(0, 0.5f, 0)), 0);
+  }
+}
+
+TEST(Scenes, EveryFixtureLoads) {
+  int count = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(Fixture("scenes"))) {
+    if (entry.path().extension() != ".json") continue;
+    const Scene scene = LoadScene(entry.path());
+    EXPECT_FALSE(scene.objects.empty()) << entry.path();
+    EXPECT_TRUE(scene.HasPhosphors()) << entry.path();
+    ++count;
+  }
+  EXPECT_GE(count, 3);
+}
+
+// Loads the Cornell fixture with one change and returns the error it gives.
+std::string ErrorAfterEdit(const std::function<void(nlohmann::json&)>& edit) {
+  nlohmann::json json = ReadJsonFile(Fixture("scenes/cornell-phosphor.json"));
+  edit(json);
+  return ErrorOfType<UserError>(
+      [&] { SceneFromJson(json, Fixture("scenes"), "cornell-phosphor.json"); });
+}
+
+TEST(Scenes, BadInputNamesTheFileAndField) {
+  EXPECT_EQ(ErrorAfterEdit([](nlohmann::json&) {}), "(no error)");
+  EXPECT_NE(ErrorAfterEdit([](nlohmann::json& j) { j["lights"][0]["colour"] = 1; }).find("lights[0]"), std::string::npos);
+  EXPECT_NE(ErrorAfterEdit([](nlohmann::json& j) { j["objects"][2]["mesh"] = "missing.obj"; })
+                .find("does not exist"),
+            std::string::npos);
+  EXPECT_NE(ErrorAfterEdit([](nlohmann::json& j) { j["objects"][0]["albedo"] = 1.5; }).find("objects[0].albedo"),
+            std::string::npos);
+  EXPECT_NE(ErrorAfterEdit([](nlohmann::json& j) { j["objects"][0]["albedo"] = {0.5, 0.5}; }).find("objects[0].albedo"),
+            std::string::npos);
+  EXPECT_NE(ErrorAfterEdit([](nlohmann::json& j) { j["lights"][0]["spectrum"]["type"] = "laser"; })
+                .find("unknown spectrum type 'laser'"),
+            std::string::npos);
+  EXPECT_NE(ErrorAfterEdit([](nlohmann::json& j) {
+              j["lights"][0]["schedule"] = {{{"t_s", 5}, {"level", 1}}, {{"t_s", 2}, {"level", 0}}};
+            }).find("keyframe times must increase"),
+            std::string::npos);
+  EXPECT_NE(ErrorAfterEdit([](nlohmann::json& j) { j["objects"][0]["initial"] = "equilibrium"; })
+                .find("only a phosphorescent object"),
+            std::string::npos);
+  EXPECT_NE(ErrorAfterEdit([](nlohmann::json& j) { j["schema"] = "phos.scene/2"; }).find("schema"), std::string::npos);
+  EXPECT_NE(ErrorAfterEdit([](nlohmann::json& j) { j["camera"]["look_at"] = j["camera"]["position"]; })
+                .find("must differ"),
+            std::string::npos);
+  EXPECT_NE(ErrorAfterEdit([](nlohmann::json& j) { j["bands_nm"] = {400, 500, 600, 700}; })
+                .find("bands_nm differ from the scene's"),
+            std::string::npos);
+  EXPECT_NE(ErrorAfterEdit([](nlohmann::json& j) { j["objects"][2]["phosphor"] = "../materials/none.json"; })
+                .find("none.json"),
+            std::string::npos);
+}
+
+TEST(Scenes, RigidMotionInterpolatesAndHolds) {
+  RigidMotion motion;
+  RigidKey a, b;
+  a.t_s = 0;
+  b.t_s = 10;
+  b.translate = Vec3(10, 0, 0);
+  b.rotate = Eigen::Quaterniond(Eigen::AngleAxisd(M_PI / 2, Vec3::UnitY()));
+  motion.keys = {a, b};
+  EXPECT_TRUE(motion.Moves());
+  EXPECT_TRUE((motion.At(5) * Vec3(0, 0, 0)).isApprox(Vec3(5, 0, 0)));
+  EXPECT_TRUE((motion.At(-3) * Vec3(1, 0, 0)).isApprox(Vec3(1, 0, 0)));
+  EXPECT_TRUE((motion.At(30) * Vec3(1, 0, 0)).isApprox(Vec3(10, 0, -1), 1e-12));
+  EXPECT_FALSE(motion.MovesBetween(10, 20));
+  EXPECT_TRUE(motion.MovesBetween(9, 20));
+}
+
+TEST(Atlas, OnlyPhosphorsCarryTexelsOfTheAskedSize) {
+  Scene scene = phos::testing::EmptyScene();
+  scene.objects.push_back(phos::testing::MakeObject("plain", MakeQuad(1, 1), 0.5));
+  scene.objects.push_back(phos::testing::MakeObject(
+      "glowing", MakeQuad(1, 1), 0.5, phos::testing::UniformPhosphor(0.1, std::vector<double>(8, 0.1), std::vector<double>(8, 1))));
+  scene.objects[1].texel_size_m = 0.1;
+  SceneGeometry geometry(scene);
+  TexelAtlas atlas(scene, geometry);
+  EXPECT_EQ(atlas.SlotOf(0), -1);
+  ASSERT_EQ(atlas.SlotOf(1), 0);
+  // Two triangles whose longest edge is the diagonal sqrt(2): m = ceil(14.14) = 15.
+  EXPECT_EQ(atlas.objects()[0].m[0], 15);
+  EXPECT_EQ(atlas.total_texels(), 2u * 15 * 15);
+}
+
+}  // namespace
+}  // namespace phos::render

@@ -1,0 +1,59 @@
+#pragma once
+// Small scenes built in code for the renderer's analytic tests.
+
+#include <memory>
+#include <vector>
+
+#include "phos/model/material.h"
+#include "phos/render/scene.h"
+
+namespace phos::testing {
+
+// nc = 1 on the paper's grid, every ke known (zero outside the given bands).
+inline std::shared_ptr<Material> UniformPhosphor(double kr, std::vector<double> ke, std::vector<double> Lambda) {
+  auto material = std::make_shared<Material>();
+  material->name = "test phosphor";
+  material->bands = SpectralGrid::Paper();
+  ExcitedState state;
+  state.kr = kr;
+  for (double k : ke) state.ke.emplace_back(k);
+  state.Lambda = std::move(Lambda);
+  material->states.push_back(state);
+  return material;
+}
+
+inline render::Scene EmptyScene(int width = 16, int height = 16) {
+  render::Scene scene;
+  scene.source = "test scene";
+  scene.name = "test";
+  scene.bands = SpectralGrid::Paper();
+  scene.camera.keys = {{0.0, render::Vec3(0, 0, 0), render::Vec3(0, 0, 1)}};
+  scene.camera.width = width;
+  scene.camera.height = height;
+  scene.camera.fov_deg = 60;
+  return scene;
+}
+
+inline render::Object MakeObject(const std::string& name, render::Mesh mesh, double albedo,
+                                 std::shared_ptr<const Material> phosphor = nullptr) {
+  render::Object object;
+  object.name = name;
+  object.mesh = std::make_shared<render::Mesh>(std::move(mesh));
+  object.albedo.assign(8, albedo);
+  object.phosphor = std::move(phosphor);
+  object.phosphor_path = "in-memory material";
+  return object;
+}
+
+// A point light with the given band irradiance at 1 m, optionally switched off at off_s.
+inline render::Light PointLight(const render::Vec3& position, std::vector<double> E_per_band, double off_s = -1) {
+  render::Light light;
+  light.name = "test light";
+  light.kind = render::Light::Kind::kPoint;
+  light.position = position;
+  light.E_per_band = std::move(E_per_band);
+  if (off_s >= 0) light.schedule.keys = {{0.0, 1.0}, {off_s, 0.0}};
+  return light;
+}
+
+}  // namespace phos::testing
