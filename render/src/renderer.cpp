@@ -379,7 +379,10 @@ namespace {
 
 void WriteImageAtomically(const std::filesystem::path& path, const OIIO::ImageSpec& spec, OIIO::TypeDesc type,
                           const void* data) {
-  const std::filesystem::path temporary = path.parent_path() / ("." + path.filename().string() + ".tmp" + path.extension().string());
+  // ".name.tmp.ext": hidden, and the extension still tells OpenImageIO the format.
+  std::string name = ".";
+  name.append(path.filename().string()).append(".tmp").append(path.extension().string());
+  const std::filesystem::path temporary = path.parent_path() / name;
   auto out = OIIO::ImageOutput::create(temporary.string());
   if (!out) ThrowUserError(path.string(), "", "no image writer for this format: " + OIIO::geterror());
   if (!out->open(temporary.string(), spec) || !out->write_image(type, data) || !out->close()) {

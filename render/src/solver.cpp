@@ -97,12 +97,19 @@ void CoupledSolver::UpdateTexelFrames(Group& g) {
   tbb::parallel_for(0, geometry_.triangle_count(g.object), [&](int t) {
     const int m = texels.m[t];
     const Vec3f normal = geometry_.FrontNormal(g.object, t);
-    for (int k = 0; k < m * m; ++k) {
-      float b1, b2;
-      SubTriangleCenter(m, k, b1, b2);
-      g.texel_position[texels.first[t] + k] = geometry_.Point(g.object, t, b1, b2);
-      g.texel_normal[texels.first[t] + k] = normal;
-    }
+    const Vec3f v0 = geometry_.Vertex(g.object, t, 0), e1 = geometry_.Vertex(g.object, t, 1) - v0,
+                e2 = geometry_.Vertex(g.object, t, 2) - v0;
+    // Texel k in SubTriangleIndex's order: row i, then upright and inverted alternately.
+    std::size_t k = texels.first[t];
+    for (int i = 0; i < m; ++i)
+      for (int j = 0; j < m - i; ++j)
+        for (int inverted = 0; inverted < (i + j < m - 1 ? 2 : 1); ++inverted) {
+          const float third = inverted ? 2.0f / 3.0f : 1.0f / 3.0f;
+          const float b1 = (static_cast<float>(i) + third) / static_cast<float>(m);
+          const float b2 = (static_cast<float>(j) + third) / static_cast<float>(m);
+          g.texel_position[k] = v0 + b1 * e1 + b2 * e2;
+          g.texel_normal[k++] = normal;
+        }
   });
   g.texel_time = static_cast<double>(geometry_.version());
 }
@@ -150,7 +157,6 @@ const std::vector<float>& CoupledSolver::UnitIrradiance(Group& g, int l) {
 bool CoupledSolver::GatherIrradiance(Group& g, double t_s) {
   const std::size_t n = g.states.n;
   const int n_exc = static_cast<int>(g.excitation_bands.size());
-  std::fill(g.E.begin(), g.E.end(), 0.0f);
   bool any = false;
   for (std::size_t l = 0; l < scene_.lights.size(); ++l) {
     const Light& light = scene_.lights[l];
@@ -160,13 +166,19 @@ bool CoupledSolver::GatherIrradiance(Group& g, double t_s) {
     for (int b : g.excitation_bands) reaches = reaches || light.E_per_band[b] > 0;
     if (!reaches) continue;
     const std::vector<float>& unit = UnitIrradiance(g, static_cast<int>(l));
-    any = true;
+    // E[b] = sum over lights of level * E_light[b] * (cos / d^2, shadowed): the
+    // first light writes, the others add.
     for (int bi = 0; bi < n_exc; ++bi) {
       const float scale = static_cast<float>(level * light.E_per_band[g.excitation_bands[bi]]);
-      if (scale == 0) continue;
-      float* E = g.E.data() + static_cast<std::size_t>(bi) * n;
-      for (std::size_t j = 0; j < n; ++j) E[j] += scale * unit[j];
+      float* __restrict E = g.E.data() + static_cast<std::size_t>(bi) * n;
+      const float* __restrict u = unit.data();
+      if (!any) {
+        for (std::size_t j = 0; j < n; ++j) E[j] = scale * u[j];
+      } else {
+        for (std::size_t j = 0; j < n; ++j) E[j] += scale * u[j];
+      }
     }
+    any = true;
   }
   return any;
 }
@@ -198,8 +210,7 @@ void CoupledSolver::Step(double t0_s, double t1_s, bool moving) {
       AdvanceBatch(Integrator::kExact, g.coefficients, g.E.data(), n, static_cast<float>(h), g.states, g.Lp.data(), n);
       ++stats_.steps;
     } else {
-      DecayBatch(g.coefficients, static_cast<float>(h), g.states);  // closed-form jump, any length
-      EmitBatch(g.coefficients, g.states, g.Lp.data(), n);
+      DecayBatch(g.coefficients, static_cast<float>(h), g.states, g.Lp.data(), n);  // closed-form jump, any length
       ++stats_.dark_jumps;
     }
   }

@@ -64,9 +64,11 @@ BatchStepInfo AdvanceBatch(Integrator integrator, const BatchCoefficients<Real>&
                            std::size_t Lp_stride = 0);
 
 // A step in darkness: r *= exp(-kr h), exact for any h (the closed-form jump
-// across dark intervals). Needs no irradiance.
+// across dark intervals). Needs no irradiance. If Lp is not null, also writes
+// the emitted radiance after the step, in the same pass (as AdvanceBatch).
 template <typename Real>
-void DecayBatch(const BatchCoefficients<Real>& coefficients, Real h_s, StateBatch<Real>& states);
+void DecayBatch(const BatchCoefficients<Real>& coefficients, Real h_s, StateBatch<Real>& states,
+                Real* Lp = nullptr, std::size_t Lp_stride = 0);
 
 // Emitted radiance of every point (Eq. 8.2).
 template <typename Real>

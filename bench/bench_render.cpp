@@ -1,0 +1,216 @@
+// The renderer on the Cornell fixture (fixtures/scenes/cornell-phosphor.json)
+// at 512 x 512: the coupled step for its phosphorescent texels, the
+// direct-light frame and the path-traced frame timed separately, with
+// throughput in rays per second next to the machine's Embree ceiling measured
+// in the same run (primary rays that only intersect, and incoherent rays
+// between random points of the box: the two ends of what a renderer casts).
+//
+// Two ratios are measured by alternating the two sides inside one benchmark,
+// so the machine's noise hits both alike (DESIGN.md's "model only what the
+// scene requires", Sec. 8.5's 454 vs 448 ms):
+//   BM_PhosphorescenceOverhead: a frame (coupled step + direct render) with
+//     phosphorescence over one without; counter `ratio`.
+//   BM_FrameAfterLightsOut: a frame an hour after lights-out over one a second
+//     after; counter `ratio` (the goal: within 20% of 1).
+//
+// Run: build/bin/bench_render (make bench saves the output in docs/bench/).
+
+#include <benchmark/benchmark.h>
+
+#include <atomic>
+#include <chrono>
+#include <memory>
+#include <random>
+
+#include <tbb/parallel_for.h>
+
+#include "phos/render/geometry.h"
+#include "phos/render/renderer.h"
+#include "phos/render/scene.h"
+#include "phos/render/solver.h"
+
+namespace phos::render {
+namespace {
+
+constexpr int kSize = 512;
+constexpr double kLightsOff = 30;  // the fixture's LED goes off at 30 s
+
+struct Cornell {
+  Scene scene;
+  std::unique_ptr<SceneGeometry> geometry;
+  std::unique_ptr<CoupledSolver> solver;
+  explicit Cornell(double texel_size_m = 0.0) {
+    scene = LoadScene(PHOS_FIXTURES_DIR "/scenes/cornell-phosphor.json");
+    scene.camera.width = scene.camera.height = kSize;
+    if (texel_size_m > 0) scene.texel_size_m = texel_size_m;
+    geometry = std::make_unique<SceneGeometry>(scene);
+    solver = std::make_unique<CoupledSolver>(scene, *geometry);
+  }
+};
+
+double Now() { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
+
+// The coupled step alone, lit (cached irradiance, AdvanceBatch) and dark (DecayBatch).
+// Arg: texel size in mm (10: the fixture's 37k texels; 1: 3.7 M texels, the paper's scale).
+void BM_CoupledStepLit(benchmark::State& state) {
+  Cornell c(state.range(0) * 1e-3);
+  double t = 0;
+  c.solver->AdvanceTo(t += 1e-3);  // irradiance computed once here
+  for (auto _ : state) {
+    c.solver->AdvanceTo(t += 1e-3);  // stays inside the lit interval
+    benchmark::ClobberMemory();
+  }
+  state.counters["texels"] = static_cast<double>(c.solver->stats().texels);
+  state.counters["texel_steps/s"] = benchmark::Counter(static_cast<double>(c.solver->stats().texels),
+                                                       benchmark::Counter::kIsIterationInvariantRate);
+}
+BENCHMARK(BM_CoupledStepLit)->Arg(10)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+void BM_CoupledStepDark(benchmark::State& state) {
+  Cornell c(state.range(0) * 1e-3);
+  double t = kLightsOff;
+  c.solver->AdvanceTo(t);
+  for (auto _ : state) {
+    c.solver->AdvanceTo(t += 1.0 / 30);
+    benchmark::ClobberMemory();
+  }
+  state.counters["texels"] = static_cast<double>(c.solver->stats().texels);
+  state.counters["texel_steps/s"] = benchmark::Counter(static_cast<double>(c.solver->stats().texels),
+                                                       benchmark::Counter::kIsIterationInvariantRate);
+}
+BENCHMARK(BM_CoupledStepDark)->Arg(10)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+void RenderBenchmark(benchmark::State& state, Transport transport, double t_s) {
+  Cornell c;
+  c.solver->AdvanceTo(t_s);
+  FrameOptions options = DefaultFrameOptions(c.scene, transport);
+  options.spp = 1;
+  std::uint64_t rays = 0;
+  for (auto _ : state) {
+    FrameStats stats;
+    Image image = RenderBands(*c.geometry, c.solver.get(), options, &stats);
+    benchmark::DoNotOptimize(image.pixels.data());
+    rays += stats.rays;
+  }
+  state.counters["Mrays/s"] = benchmark::Counter(static_cast<double>(rays) * 1e-6, benchmark::Counter::kIsRate);
+}
+
+void BM_DirectFrameLit(benchmark::State& state) { RenderBenchmark(state, Transport::kDirect, 20); }
+BENCHMARK(BM_DirectFrameLit)->Unit(benchmark::kMillisecond)->UseRealTime();
+void BM_DirectFrameDark(benchmark::State& state) { RenderBenchmark(state, Transport::kDirect, 40); }
+BENCHMARK(BM_DirectFrameDark)->Unit(benchmark::kMillisecond)->UseRealTime();
+// One path per pixel: multiply by spp for a frame.
+void BM_PathFrameLit1spp(benchmark::State& state) { RenderBenchmark(state, Transport::kPath, 20); }
+BENCHMARK(BM_PathFrameLit1spp)->Unit(benchmark::kMillisecond)->UseRealTime();
+void BM_PathFrameDark1spp(benchmark::State& state) { RenderBenchmark(state, Transport::kPath, 40); }
+BENCHMARK(BM_PathFrameDark1spp)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// Embree's ceiling on this machine and scene: rays that only find their hit.
+void BM_EmbreeCeilingPrimary(benchmark::State& state) {
+  Cornell c;
+  const Vec3f origin(0.278f, 0.273f, -0.8f);
+  const float tan_half = std::tan(39.3f * 3.14159265f / 360);
+  std::uint64_t rays = 0;
+  for (auto _ : state) {
+    std::atomic<int> hits{0};
+    tbb::parallel_for(0, kSize, [&](int y) {
+      int h = 0;
+      for (int x = 0; x < kSize; ++x) {
+        const Vec3f d = Vec3f((1 - 2 * (x + 0.5f) / kSize) * tan_half, (1 - 2 * (y + 0.5f) / kSize) * tan_half, 1).normalized();
+        h += static_cast<bool>(c.geometry->Intersect(origin, d));
+      }
+      hits += h;
+    });
+    benchmark::DoNotOptimize(hits.load());
+    rays += std::uint64_t(kSize) * kSize;
+  }
+  state.counters["Mrays/s"] = benchmark::Counter(static_cast<double>(rays) * 1e-6, benchmark::Counter::kIsRate);
+}
+BENCHMARK(BM_EmbreeCeilingPrimary)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+void BM_EmbreeCeilingIncoherent(benchmark::State& state) {
+  Cornell c;
+  constexpr int kRays = kSize * kSize;
+  std::vector<Vec3f> origins(kRays), directions(kRays);
+  std::mt19937 random(1);
+  std::uniform_real_distribution<float> u(0.01f, 0.54f);
+  for (int i = 0; i < kRays; ++i) {
+    origins[i] = Vec3f(u(random), u(random), u(random));
+    directions[i] = (Vec3f(u(random), u(random), u(random)) - Vec3f::Constant(0.275f)).normalized();
+  }
+  std::uint64_t rays = 0;
+  for (auto _ : state) {
+    std::atomic<int> hits{0};
+    tbb::parallel_for(tbb::blocked_range<int>(0, kRays, 4096), [&](const tbb::blocked_range<int>& r) {
+      int h = 0;
+      for (int i = r.begin(); i < r.end(); ++i) h += static_cast<bool>(c.geometry->Intersect(origins[i], directions[i]));
+      hits += h;
+    });
+    benchmark::DoNotOptimize(hits.load());
+    rays += kRays;
+  }
+  state.counters["Mrays/s"] = benchmark::Counter(static_cast<double>(rays) * 1e-6, benchmark::Counter::kIsRate);
+}
+BENCHMARK(BM_EmbreeCeilingIncoherent)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// A frame of an animation at 30 fps while the LED is on: the coupled step for
+// 1/30 s and the direct render, against the render alone of the same scene
+// without phosphorescence (no solver). Alternated; best of each side.
+void BM_PhosphorescenceOverhead(benchmark::State& state) {
+  Cornell with;
+  Cornell without;
+  FrameOptions options = DefaultFrameOptions(with.scene, Transport::kDirect);
+  double t = 1, best_with = 1e9, best_without = 1e9;
+  with.solver->AdvanceTo(t);
+  without.geometry->SetTime(t);
+  for (auto _ : state) {
+    double start = Now();
+    with.solver->AdvanceTo(t += 1.0 / 30);
+    Image a = RenderBands(*with.geometry, with.solver.get(), options);
+    best_with = std::min(best_with, Now() - start);
+    start = Now();
+    Image b = RenderBands(*without.geometry, nullptr, options);
+    best_without = std::min(best_without, Now() - start);
+    benchmark::DoNotOptimize(a.pixels.data());
+    benchmark::DoNotOptimize(b.pixels.data());
+    if (t > kLightsOff - 1) t = 1;  // stay lit (the solver only moves forward: restart it)
+    if (t == 1) {
+      with.solver = std::make_unique<CoupledSolver>(with.scene, *with.geometry);
+      with.solver->AdvanceTo(t);
+    }
+  }
+  state.counters["with_ms"] = best_with * 1e3;
+  state.counters["without_ms"] = best_without * 1e3;
+  state.counters["ratio"] = best_with / best_without;
+}
+BENCHMARK(BM_PhosphorescenceOverhead)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(3.0);
+
+// A frame (coupled step + direct render) 1 s and 3600 s after lights-out, each
+// from a freshly charged state: both are one closed-form jump. Alternated.
+void BM_FrameAfterLightsOut(benchmark::State& state) {
+  Cornell c(state.range(0) * 1e-3);
+  FrameOptions options = DefaultFrameOptions(c.scene, Transport::kDirect);
+  double best_second = 1e9, best_hour = 1e9;
+  for (auto _ : state) {
+    for (double after : {1.0, 3600.0}) {
+      c.solver = std::make_unique<CoupledSolver>(c.scene, *c.geometry);
+      c.solver->AdvanceTo(kLightsOff);
+      const double start = Now();
+      c.solver->AdvanceTo(kLightsOff + after);
+      Image image = RenderBands(*c.geometry, c.solver.get(), options);
+      benchmark::DoNotOptimize(image.pixels.data());
+      double& best = after == 1.0 ? best_second : best_hour;
+      best = std::min(best, Now() - start);
+    }
+  }
+  state.counters["texels"] = static_cast<double>(c.solver->stats().texels);
+  state.counters["1s_ms"] = best_second * 1e3;
+  state.counters["3600s_ms"] = best_hour * 1e3;
+  state.counters["ratio"] = best_hour / best_second;
+}
+BENCHMARK(BM_FrameAfterLightsOut)->Arg(10)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(2.0);
+
+}  // namespace
+}  // namespace phos::render
+
+BENCHMARK_MAIN();
