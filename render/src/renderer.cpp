@@ -404,7 +404,10 @@ void WriteExr(const std::filesystem::path& path, const Image& rgb, const Image& 
   for (int b = 0; b < nb; ++b) spec.channelnames.push_back("band" + std::to_string(b));
   spec.attribute("compression", "zip");
   std::string edges;
-  for (double e : grid.edges_nm) edges += (edges.empty() ? "" : ",") + FormatDouble(e);
+  for (double e : grid.edges_nm) {
+    if (!edges.empty()) edges += ',';
+    edges += FormatDouble(e);
+  }
   spec.attribute("phos:bands_nm", edges);
   std::vector<float> data(std::size_t(rgb.width) * rgb.height * (3 + nb));
   for (std::size_t p = 0; p < std::size_t(rgb.width) * rgb.height; ++p) {
