@@ -30,6 +30,7 @@ bench: build
 
 study: build
 	@build/bin/phos-integrator-study --out docs
+	@build/bin/phos-glassner-study --out docs
 
 clean:
 	rm -rf build build-asan results

@@ -1,0 +1,187 @@
+#include "phos/render/glassner.h"
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <set>
+
+#include <tbb/parallel_for.h>
+
+#include "phos/model/rate_equation.h"
+#include "phos/util/error.h"
+
+namespace phos::render {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+void RequireStatic(const Scene& scene) {
+  for (const Object& o : scene.objects)
+    if (o.motion.Moves()) ThrowUserError(scene.source, "objects", "the comparison needs static objects ('" + o.name + "' moves)");
+  for (const Light& l : scene.lights)
+    if (l.motion.Moves()) ThrowUserError(scene.source, "lights", "the comparison needs static lights ('" + l.name + "' moves)");
+}
+
+// ke of state i in band b as the solver uses it (unknown: zero if the scene says so).
+double Ke(const Object& object, int i, int b) {
+  const auto& ke = object.phosphor->states[i].ke[b];
+  if (ke) return *ke;
+  if (object.unknown_ke_as_zero) return 0.0;
+  ThrowUserError(object.phosphor_path, "states[" + std::to_string(i) + "].ke[" + std::to_string(b) + "]",
+                 "unknown, and object '" + object.name + "' does not assume zero (unknown_ke)");
+}
+
+// Per pixel: the visible phosphor point and, per light, its geometric
+// irradiance factor there (cos / d^2 or cos, shadowed).
+struct VisiblePoint {
+  int object = -1;
+  std::vector<double> unit;  // per light
+};
+
+template <typename PerPixel>
+Image ForEachPixel(const SceneGeometry& geometry, PerPixel per_pixel) {
+  const Scene& scene = geometry.scene();
+  const int nb = scene.bands.band_count(), width = scene.camera.width, height = scene.camera.height;
+  Image image(width, height, nb);
+  const CameraKey key = scene.camera.At(geometry.time_s());
+  const Vec3f origin = key.position.cast<float>();
+  const Vec3f forward = (key.look_at - key.position).normalized().cast<float>();
+  const Vec3f right = forward.cross(scene.camera.up.cast<float>()).normalized();
+  const Vec3f up = right.cross(forward);
+  const float tan_half = std::tan(static_cast<float>(scene.camera.fov_deg * kPi / 360));
+  const float aspect = static_cast<float>(width) / static_cast<float>(height);
+  tbb::parallel_for(0, height, [&](int y) {
+    for (int x = 0; x < width; ++x) {
+      const float sx = (2 * (x + 0.5f) / width - 1) * tan_half * aspect, sy = (1 - 2 * (y + 0.5f) / height) * tan_half;
+      const Vec3f direction = (forward + sx * right + sy * up).normalized();
+      const Hit hit = geometry.Intersect(origin, direction);
+      if (!hit || !hit.front || !scene.objects[hit.object].phosphor) continue;
+      per_pixel(hit, image.at(x, y), static_cast<std::uint64_t>(y) * width + x);
+    }
+  });
+  return image;
+}
+
+double UnitIrradiance(const SceneGeometry& geometry, const Light& light, const Hit& hit) {
+  const Vec3f origin = hit.position + geometry.ray_epsilon() * hit.normal;
+  if (light.kind == Light::Kind::kPoint) {
+    const Vec3f d = light.position.cast<float>() - hit.position;
+    const float distance = d.norm(), cosine = hit.normal.dot(d) / distance;
+    if (!(cosine > 0) || geometry.Occluded(origin, d / distance, distance * (1 - 1e-4f) - geometry.ray_epsilon())) return 0;
+    return cosine / (distance * distance);
+  }
+  const Vec3f to_light = -light.direction.cast<float>();
+  const float cosine = hit.normal.dot(to_light);
+  if (!(cosine > 0) || geometry.Occluded(origin, to_light, 1e30f)) return 0;
+  return cosine;
+}
+
+}  // namespace
+
+Image EmittedRadianceOurs(const SceneGeometry& geometry, const CoupledSolver& solver) {
+  const int nb = geometry.scene().bands.band_count();
+  return ForEachPixel(geometry, [&](const Hit& hit, float* out, std::uint64_t) {
+    const int slot = solver.atlas().SlotOf(hit.object);
+    const std::size_t texel = solver.atlas().TexelOf(slot, hit.triangle, hit.b1, hit.b2);
+    for (int b = 0; b < nb; ++b) out[b] = solver.Lp(slot, b, texel);
+  });
+}
+
+Image EmittedRadianceReference(const SceneGeometry& geometry, double t_s) {
+  const Scene& scene = geometry.scene();
+  RequireStatic(scene);
+  const int nb = scene.bands.band_count();
+  // The moments irradiance changes: every switch between the start and t.
+  std::set<double> breaks = {t_s};
+  for (const Light& light : scene.lights)
+    for (double t : light.schedule.ChangesBetween(scene.start_s, t_s)) breaks.insert(t);
+  return ForEachPixel(geometry, [&](const Hit& hit, float* out, std::uint64_t) {
+    const Object& object = scene.objects[hit.object];
+    const Material& material = *object.phosphor;
+    std::vector<double> unit(scene.lights.size());
+    for (std::size_t l = 0; l < unit.size(); ++l) unit[l] = UnitIrradiance(geometry, scene.lights[l], hit);
+    std::vector<double> r(material.state_count(), 0.0);
+    if (object.initial.kind == InitialState::Kind::kUniform) std::fill(r.begin(), r.end(), object.initial.r0);
+    PHOS_CHECK(object.initial.kind != InitialState::Kind::kEquilibrium);  // not needed by the study
+    double t0 = scene.start_s;
+    for (double t1 : breaks) {
+      const double mid = 0.5 * (t0 + t1);
+      for (int i = 0; i < material.state_count(); ++i) {
+        double a = 0;  // Eq. 8.1: a_i = sum_b ke_i[b] E[b]
+        for (std::size_t l = 0; l < unit.size(); ++l) {
+          const double level = scene.lights[l].schedule.LevelAt(mid);
+          if (level <= 0 || unit[l] == 0) continue;
+          for (int b = 0; b < nb; ++b)
+            if (scene.lights[l].E_per_band[b] > 0) a += Ke(object, i, b) * level * scene.lights[l].E_per_band[b] * unit[l];
+        }
+        r[i] = ExactStep(r[i], a, material.states[i].kr, t1 - t0);
+      }
+      t0 = t1;
+    }
+    for (int b = 0; b < nb; ++b) {
+      double L = 0;
+      for (int i = 0; i < material.state_count(); ++i) L += material.states[i].Lambda[b] * material.states[i].kr * r[i];
+      out[b] = static_cast<float>(L);
+    }
+  });
+}
+
+Image EmittedRadianceGlassner(const SceneGeometry& geometry, double t_s, int time_samples, std::uint64_t seed,
+                              std::uint64_t* shadow_rays) {
+  const Scene& scene = geometry.scene();
+  RequireStatic(scene);
+  const int nb = scene.bands.band_count();
+  std::atomic<std::uint64_t> rays{0};
+  const double history = t_s - scene.start_s;
+  for (const Object& o : scene.objects)
+    if (o.phosphor && o.initial.kind != InitialState::Kind::kZero)
+      ThrowUserError(scene.source, "objects", "the Glassner baseline integrates from r = 0 ('" + o.name + "' starts otherwise)");
+  Image image = ForEachPixel(geometry, [&](const Hit& hit, float* out, std::uint64_t pixel) {
+    const Object& object = scene.objects[hit.object];
+    const Material& material = *object.phosphor;
+    std::uint64_t state = seed * 0x9E3779B97F4A7C15ull ^ (pixel + 1) * 0xD1B54A32D192ED03ull;
+    auto uniform = [&] {  // SplitMix64
+      std::uint64_t z = (state += 0x9E3779B97F4A7C15ull);
+      z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+      z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+      return static_cast<double>((z ^ (z >> 31)) >> 11) * 0x1.0p-53;
+    };
+    std::uint64_t cast = 0;
+    std::vector<double> r(material.state_count(), 0.0);
+    for (int i = 0; i < material.state_count(); ++i) {
+      const double kr = material.states[i].kr;
+      // tau = t - s, s ~ kr e^{-kr s} truncated to [0, history]: the kernel's own shape.
+      const double mass = -std::expm1(-kr * history);  // integral of kr e^{-kr s} over the history
+      if (!(mass > 0)) continue;
+      double sum = 0;
+      for (int k = 0; k < time_samples; ++k) {
+        const double s = -std::log1p(-uniform() * mass) / kr;
+        const double tau = t_s - s;
+        double a = 0;
+        for (const Light& light : scene.lights) {
+          const double level = light.schedule.LevelAt(tau);
+          if (level <= 0) continue;
+          double ke_E = 0;
+          for (int b = 0; b < nb; ++b)
+            if (light.E_per_band[b] > 0) ke_E += Ke(object, i, b) * light.E_per_band[b];
+          if (ke_E == 0) continue;
+          ++cast;  // a generic MC integrator asks the geometry at every sample
+          a += level * ke_E * UnitIrradiance(geometry, light, hit);
+        }
+        // a(tau) e^{-kr s} / pdf(s), pdf = kr e^{-kr s} / mass
+        sum += a * mass / kr;
+      }
+      r[i] = sum / time_samples;
+    }
+    for (int b = 0; b < nb; ++b) {
+      double L = 0;
+      for (int i = 0; i < material.state_count(); ++i) L += material.states[i].Lambda[b] * material.states[i].kr * r[i];
+      out[b] = static_cast<float>(L);
+    }
+    rays += cast;
+  });
+  if (shadow_rays) *shadow_rays = rays.load();
+  return image;
+}
+
+}  // namespace phos::render
