@@ -14,6 +14,7 @@
 #include <nlohmann/json.hpp>
 
 #include "commands.h"
+#include "phos/render/night_vision.h"
 #include "phos/render/renderer.h"
 #include "phos/render/scene.h"
 #include "phos/render/solver.h"
@@ -29,6 +30,7 @@ struct RenderArgs {
   bool no_phosphorescence = false, json = false;
   int spp = 0, width = 0, height = 0;
   double exposure = 0;
+  double night_vision_cd = 0;
 };
 
 double Seconds(std::chrono::steady_clock::time_point since) {
@@ -85,8 +87,18 @@ void Run(const RenderArgs& args) {
     const std::filesystem::path png = std::filesystem::path(args.out) / (std::string(name) + ".png");
     WriteExr(exr, rgb, bands, scene.bands);
     WritePng(png, rgb, scene.camera.exposure);
-    frames.push_back({{"t", t}, {"exr", exr.string()}, {"png", png.string()}, {"seconds", seconds},
-                      {"solver_seconds", solver_s}, {"render_seconds", render_s}, {"rays", stats.rays}});
+    nlohmann::json entry = {{"t", t}, {"exr", exr.string()}, {"png", png.string()}, {"seconds", seconds},
+                            {"solver_seconds", solver_s}, {"render_seconds", render_s}, {"rays", stats.rays}};
+    if (args.night_vision_cd > 0) {
+      NightVisionOptions night;
+      night.cd_per_unit = args.night_vision_cd;
+      night.exposure = scene.camera.exposure;
+      night.seed = scene.settings.seed * 1000003ull + f;  // fresh grain every frame
+      const std::filesystem::path night_png = std::filesystem::path(args.out) / (std::string(name) + "-night.png");
+      WritePng(night_png, NightVision(bands, rgb, scene.bands, night), 1.0);
+      entry["night_png"] = night_png.string();
+    }
+    frames.push_back(entry);
     progress.Advance();
   }
   progress.Finish();
@@ -134,6 +146,10 @@ void RegisterRender(CLI::App& app) {
   cmd->add_option("--width", args->width, "Override the camera's width in pixels")->check(CLI::Range(1, 16384));
   cmd->add_option("--height", args->height, "Override the camera's height in pixels")->check(CLI::Range(1, 16384));
   cmd->add_option("--exposure", args->exposure, "PNG exposure (default: the camera's); EXR files are never scaled")
+      ->check(CLI::PositiveNumber);
+  cmd->add_option("--night-vision", args->night_vision_cd,
+                  "Also write frame-NNNN-night.png as a dark-adapted eye sees it (Thompson et al. 2002:\n"
+                  "blue shift, loss of acuity, grain); the value is the luminance in cd/m^2 of radiance 1")
       ->check(CLI::PositiveNumber);
   cmd->add_flag("--json", args->json, "Print one JSON object: frames with t, exr, png and seconds");
   cmd->callback([args] { Run(*args); });
