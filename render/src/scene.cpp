@@ -261,13 +261,14 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
   if (auto f = camera.Optional("exposure")) scene.camera.exposure = f->NumberAtLeast(0);
 
   if (auto render = root.Optional("render")) {
-    render->RejectUnknownKeys({"spp", "max_depth", "direct_spp", "seed", "max_step_s"});
+    render->RejectUnknownKeys({"spp", "max_depth", "direct_spp", "seed", "max_step_s", "phosphor_irradiance"});
     RenderSettings& s = scene.settings;
     if (render->Has("spp")) s.spp = (*render)["spp"].Integer(1, 1 << 20);
     if (render->Has("max_depth")) s.max_depth = (*render)["max_depth"].Integer(1, 1000);
     if (render->Has("direct_spp")) s.direct_spp = (*render)["direct_spp"].Integer(1, 1024);
     if (render->Has("seed")) s.seed = static_cast<unsigned>((*render)["seed"].Integer(0, 1 << 30));
     if (render->Has("max_step_s")) s.max_step_s = (*render)["max_step_s"].NumberInRange(1e-6, 1e9);
+    s.phosphor_irradiance = ReadBool(*render, "phosphor_irradiance", false);
   }
 
   // Objects. Meshes and materials used twice are loaded once.

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <array>
 #include <set>
 
 #include <tbb/parallel_for.h>
@@ -29,6 +30,18 @@ CoupledSolver::CoupledSolver(const Scene& scene, SceneGeometry& geometry)
   for (const Light& light : scene.lights)
     if (EverOn(light))
       for (int b = 0; b < nb; ++b) lit[b] = lit[b] || light.E_per_band[b] > 0;
+  // With phosphor_irradiance, whatever a phosphor emits also lights the others.
+  glow_enabled_ = scene.settings.phosphor_irradiance && scene.HasPhosphors();
+  if (glow_enabled_) {
+    for (int b = 0; b < nb; ++b) {
+      bool emitted = false;
+      for (const Object& object : scene.objects)
+        if (object.phosphor)
+          for (const ExcitedState& state : object.phosphor->states) emitted = emitted || state.Lambda[b] > 0;
+      if (emitted) glow_.emission_bands.push_back(b);
+      lit[b] = lit[b] || emitted;
+    }
+  }
 
   for (const TexelAtlas::ObjectTexels& texels : atlas_.objects()) {
     const Object& object = scene.objects[texels.object];
@@ -64,7 +77,119 @@ CoupledSolver::CoupledSolver(const Scene& scene, SceneGeometry& geometry)
     stats_.texels += texels.count;
     groups_.push_back(std::move(g));
   }
+  if (glow_enabled_) BuildGlowPatches();
   InitialStates();
+}
+
+void CoupledSolver::BuildGlowPatches() {
+  // Patches per triangle: up to 8 x 8, fewer if the scene would have more than
+  // kMaxPatches (the transfer matrix is patches^2).
+  constexpr std::size_t kMaxPatches = 2048;
+  int ms_cap = 8;
+  auto count_patches = [&](int cap) {
+    std::size_t count = 0;
+    for (const TexelAtlas::ObjectTexels& texels : atlas_.objects())
+      for (std::uint16_t m : texels.m) count += std::size_t(std::min<int>(m, cap)) * std::min<int>(m, cap);
+    return count;
+  };
+  while (ms_cap > 1 && count_patches(ms_cap) > kMaxPatches) --ms_cap;
+  glow_.count = count_patches(ms_cap);
+  stats_.glow_patches = glow_.count;
+  glow_.centre.resize(glow_.count);
+  glow_.normal.resize(glow_.count);
+  glow_.area.resize(glow_.count);
+  // Sample points of each source patch: the centres of its 4 children one level finer.
+  std::vector<std::array<Vec3f, 4>> points(glow_.count);
+  std::size_t base = 0;
+  for (std::size_t slot = 0; slot < groups_.size(); ++slot) {
+    Group& g = groups_[slot];
+    const TexelAtlas::ObjectTexels& texels = atlas_.objects()[slot];
+    g.texel_patch.resize(texels.count);
+    for (int t = 0; t < geometry_.triangle_count(g.object); ++t) {
+      const int m = texels.m[t], ms = std::min(m, ms_cap);
+      for (int k = 0; k < m * m; ++k) {
+        float b1, b2;
+        SubTriangleCenter(m, k, b1, b2);
+        g.texel_patch[texels.first[t] + k] = static_cast<std::uint32_t>(base + SubTriangleIndex(ms, b1, b2));
+      }
+      const float area = geometry_.Area(g.object, t) / static_cast<float>(ms * ms);
+      std::vector<int> filled(ms * ms, 0);
+      for (int k = 0; k < ms * ms; ++k) {
+        float b1, b2;
+        SubTriangleCenter(ms, k, b1, b2);
+        glow_.centre[base + k] = geometry_.Point(g.object, t, b1, b2);
+        glow_.normal[base + k] = geometry_.FrontNormal(g.object, t);
+        glow_.area[base + k] = area;
+      }
+      for (int k = 0; k < 4 * ms * ms; ++k) {
+        float b1, b2;
+        SubTriangleCenter(2 * ms, k, b1, b2);
+        const int patch = SubTriangleIndex(ms, b1, b2);
+        points[base + patch][std::min(filled[patch]++, 3)] = geometry_.Point(g.object, t, b1, b2);
+      }
+      base += static_cast<std::size_t>(ms) * ms;
+    }
+  }
+  // Transfer: irradiance at receiver j per unit radiance of source k (front sides only).
+  const std::size_t n = glow_.count;
+  glow_.transfer.assign(n * n, 0.0f);
+  const float epsilon = geometry_.ray_epsilon();
+  tbb::parallel_for(std::size_t{0}, n, [&](std::size_t j) {
+    const Vec3f& x = glow_.centre[j];
+    const Vec3f& nx = glow_.normal[j];
+    for (std::size_t k = 0; k < n; ++k) {
+      if (k == j) continue;
+      float sum = 0;
+      for (const Vec3f& y : points[k]) {
+        Vec3f d = y - x;
+        const float distance2 = d.squaredNorm(), distance = std::sqrt(distance2);
+        if (!(distance > 0)) continue;
+        d /= distance;
+        const float cos_x = nx.dot(d), cos_y = -glow_.normal[k].dot(d);
+        if (cos_x <= 0 || cos_y <= 0) continue;
+        if (geometry_.Occluded(x + epsilon * nx, d, distance - 2 * epsilon)) continue;
+        sum += cos_x * cos_y / distance2;
+      }
+      glow_.transfer[j * n + k] = sum * glow_.area[k] / 4;
+    }
+  });
+  stats_.shadow_rays += n * n * 4;
+  glow_.geometry_version = double(geometry_.version());
+  glow_.Lp.assign(n * glow_.emission_bands.size(), 0.0f);
+  glow_.E.assign(n * glow_.emission_bands.size(), 0.0f);
+}
+
+bool CoupledSolver::GatherGlow() {
+  if (glow_.geometry_version != double(geometry_.version())) BuildGlowPatches();
+  const std::size_t n = glow_.count, nbg = glow_.emission_bands.size();
+  // Mean Lp of each patch, band-major.
+  std::fill(glow_.Lp.begin(), glow_.Lp.end(), 0.0f);
+  std::vector<float> texels_in(n, 0.0f);
+  for (std::size_t slot = 0; slot < groups_.size(); ++slot) {
+    const Group& g = groups_[slot];
+    for (std::size_t j = 0; j < g.states.n; ++j) texels_in[g.texel_patch[j]] += 1;
+    for (std::size_t bi = 0; bi < nbg; ++bi) {
+      const int e = g.emission_index[glow_.emission_bands[bi]];
+      if (e < 0) continue;
+      const float* Lp = g.Lp.data() + static_cast<std::size_t>(e) * g.states.n;
+      float* out = glow_.Lp.data() + bi * n;
+      for (std::size_t j = 0; j < g.states.n; ++j) out[g.texel_patch[j]] += Lp[j];
+    }
+  }
+  bool any = false;
+  for (std::size_t bi = 0; bi < nbg; ++bi)
+    for (std::size_t k = 0; k < n; ++k) {
+      glow_.Lp[bi * n + k] /= std::max(texels_in[k], 1.0f);
+      any = any || glow_.Lp[bi * n + k] > 0;
+    }
+  if (!any) return false;
+  // E = T Lp, one matrix-vector product per glowing band.
+  using Matrix = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+  const Eigen::Map<const Matrix> T(glow_.transfer.data(), static_cast<Eigen::Index>(n), static_cast<Eigen::Index>(n));
+  for (std::size_t bi = 0; bi < nbg; ++bi)
+    Eigen::Map<Eigen::VectorXf>(glow_.E.data() + bi * n, static_cast<Eigen::Index>(n)) =
+        T * Eigen::Map<const Eigen::VectorXf>(glow_.Lp.data() + bi * n, static_cast<Eigen::Index>(n));
+  return true;
 }
 
 void CoupledSolver::InitialStates() {
@@ -196,6 +321,15 @@ std::vector<double> CoupledSolver::TexelIrradiance(int slot, std::size_t texel) 
   return E;
 }
 
+std::vector<double> CoupledSolver::TexelGlowIrradiance(int slot, std::size_t texel) {
+  std::vector<double> E(band_count_, 0.0);
+  if (!glow_enabled_ || !GatherGlow()) return E;
+  const std::uint32_t patch = groups_[slot].texel_patch[texel];
+  for (std::size_t bi = 0; bi < glow_.emission_bands.size(); ++bi)
+    E[glow_.emission_bands[bi]] = glow_.E[bi * glow_.count + patch];
+  return E;
+}
+
 void CoupledSolver::Step(double t0_s, double t1_s, bool moving) {
   const double h = t1_s - t0_s;
   if (!(h > 0)) return;
@@ -204,9 +338,24 @@ void CoupledSolver::Step(double t0_s, double t1_s, bool moving) {
   // split at switches); positions are taken at the midpoint while things move.
   const double mid = 0.5 * (t0_s + t1_s);
   if (moving) geometry_.SetTime(mid);
+  // The glow lighting the phosphors is taken at the start of the step (lagged
+  // coupling; steps are short while it is on).
+  const bool glowing = glow_enabled_ && GatherGlow();
   for (Group& g : groups_) {
     const std::size_t n = g.states.n;
-    if (!g.excitation_bands.empty() && GatherIrradiance(g, mid)) {
+    bool lit = !g.excitation_bands.empty() && GatherIrradiance(g, mid);
+    if (glowing && !g.excitation_bands.empty()) {
+      if (!lit) std::fill(g.E.begin(), g.E.end(), 0.0f);
+      lit = true;
+      for (std::size_t bi = 0; bi < g.excitation_bands.size(); ++bi) {
+        const auto it = std::find(glow_.emission_bands.begin(), glow_.emission_bands.end(), g.excitation_bands[bi]);
+        if (it == glow_.emission_bands.end()) continue;
+        const float* glow_E = glow_.E.data() + static_cast<std::size_t>(it - glow_.emission_bands.begin()) * glow_.count;
+        float* E = g.E.data() + bi * n;
+        for (std::size_t j = 0; j < n; ++j) E[j] += glow_E[g.texel_patch[j]];
+      }
+    }
+    if (lit) {
       AdvanceBatch(Integrator::kExact, g.coefficients, g.E.data(), n, static_cast<float>(h), g.states, g.Lp.data(), n);
       ++stats_.steps;
     } else {
@@ -235,7 +384,8 @@ void CoupledSolver::AdvanceTo(double t_s) {
     bool moving = false;
     for (const Light& light : scene_.lights) moving = moving || light.motion.MovesBetween(t0, t1);
     for (const Object& object : scene_.objects) moving = moving || object.motion.MovesBetween(t0, t1);
-    const int substeps = moving ? std::max(1, static_cast<int>(std::ceil((t1 - t0) / max_step - 1e-9))) : 1;
+    const bool substep = moving || glow_enabled_;  // the glow changes within any interval
+    const int substeps = substep ? std::max(1, static_cast<int>(std::ceil((t1 - t0) / max_step - 1e-9))) : 1;
     for (int k = 0; k < substeps; ++k)
       Step(t0 + (t1 - t0) * k / substeps, k + 1 == substeps ? t1 : t0 + (t1 - t0) * (k + 1) / substeps, moving);
     t0 = t1;

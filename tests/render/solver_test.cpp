@@ -236,3 +236,58 @@ TEST(CoupledSolver, AMovingLightWritesATrailThatFadesBehindIt) {
 
 }  // namespace
 }  // namespace phos::render
+
+namespace phos::render {
+namespace {
+
+TEST(GlowIrradiance, InsideAUniformlyGlowingSphereIsPiTimesLp) {
+  // A closed surface of uniform radiance L irradiates every point of it with pi L.
+  Scene scene = EmptyScene();
+  scene.objects.push_back(MakeObject("sphere", MakeSphere(1.0, 3, true), 0.5,
+                                     UniformPhosphor(0.1, std::vector<double>(8, 0.1), {0, 0, 1, 2, 0, 0, 0, 0})));
+  scene.objects[0].initial = {InitialState::Kind::kUniform, 0.5};
+  scene.settings.phosphor_irradiance = true;
+  SceneGeometry geometry(scene);
+  CoupledSolver solver(scene, geometry);
+  EXPECT_GT(solver.stats().glow_patches, 500u);
+  const double Lp3 = 2 * 0.1 * 0.5;
+  for (std::size_t j = 0; j < solver.atlas().total_texels(); j += 211) {
+    const std::vector<double> E = solver.TexelGlowIrradiance(0, j);
+    EXPECT_NEAR(E[3], M_PI * Lp3, 0.05 * M_PI * Lp3) << "texel " << j;
+    EXPECT_NEAR(E[2], E[3] / 2, 1e-6);
+    EXPECT_EQ(E[0], 0.0);
+  }
+}
+
+TEST(GlowIrradiance, AGlowingPlateChargesTheOneFacingItInTheDark) {
+  auto run = [](bool glow) {
+    Scene scene = EmptyScene();
+    auto material = UniformPhosphor(0.05, {0, 0, 0.5, 0.5, 0, 0, 0, 0}, {0, 0, 1, 1, 0, 0, 0, 0});
+    scene.objects.push_back(MakeObject("charged", MakeQuad(1, 1), 0.5, material));  // faces +y at y = 0
+    scene.objects.push_back(MakeObject("dark", MakeQuad(1, 1), 0.5, material));
+    scene.objects[0].initial = {InitialState::Kind::kUniform, 0.9};
+    RigidKey flip;  // 0.2 m above, facing down
+    flip.translate = Vec3(0, 0.2, 0);
+    flip.rotate = Eigen::Quaterniond(Eigen::AngleAxisd(M_PI, Vec3::UnitX()));
+    scene.objects[1].motion.keys = {flip};
+    scene.settings.phosphor_irradiance = glow;
+    scene.settings.max_step_s = 0.1;
+    scene.texel_size_m = 0.05;
+    SceneGeometry geometry(scene);
+    CoupledSolver solver(scene, geometry);
+    solver.AdvanceTo(5.0);
+    double mean = 0;
+    const std::size_t n = solver.atlas().objects()[1].count;
+    for (std::size_t j = 0; j < n; ++j) mean += solver.State(1, 0, j);
+    return mean / static_cast<double>(n);
+  };
+  EXPECT_EQ(run(false), 0.0);
+  const double charged = run(true);
+  // Upper bound: irradiance at most pi Lp (a hemisphere of the plate's radiance),
+  // Lp <= 0.05 * 0.9 per band in two bands, ke = 0.5, for 5 s.
+  EXPECT_GT(charged, 0.0);
+  EXPECT_LT(charged, 0.5 * 2 * M_PI * 0.05 * 0.9 * 5.0);
+}
+
+}  // namespace
+}  // namespace phos::render

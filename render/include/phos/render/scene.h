@@ -112,6 +112,10 @@ struct RenderSettings {
   int direct_spp = 1;    // direct transport: jittered samples per pixel
   unsigned seed = 1;
   double max_step_s = 0.0;  // coupled solver's longest step while something moves (0: 1/fps)
+  // The phosphors' own glow charges the other phosphors (DESIGN.md: "optionally
+  // including the other phosphors' emission"). Costs steps of max_step_s in the
+  // dark too, since darkness is then no longer dark.
+  bool phosphor_irradiance = false;
 };
 
 struct Scene {

@@ -30,6 +30,7 @@ struct SolverStats {
   std::size_t dark_jumps = 0;        // closed-form dark steps (DecayBatch)
   std::size_t irradiance_updates = 0;  // per-light geometry recomputations (each: one shadow ray per texel)
   std::size_t shadow_rays = 0;
+  std::size_t glow_patches = 0;      // phosphor_irradiance: source/receiver patches
 };
 
 class CoupledSolver {
@@ -59,6 +60,9 @@ class CoupledSolver {
 
   // The irradiance (per scene band) that the lights put on texel j of slot s now.
   std::vector<double> TexelIrradiance(int slot, std::size_t texel);
+  // With phosphor_irradiance: the irradiance (per scene band) the phosphors'
+  // glow puts on texel j of slot s now; zeros without it.
+  std::vector<double> TexelGlowIrradiance(int slot, std::size_t texel);
 
  private:
   struct Group {
@@ -76,7 +80,27 @@ class CoupledSolver {
     std::vector<double> unit_E_geometry_time;
     std::vector<Eigen::Vector3f> texel_position, texel_normal;  // at texel_time
     double texel_time = -1e300;
+    std::vector<std::uint32_t> texel_patch;  // phosphor_irradiance: the glow patch of each texel
   };
+
+  // phosphor_irradiance (Sec. 8.5's optional term): every phosphorescent
+  // triangle is split into at most 8 x 8 patches; irradiance from patch k
+  // onto the centre of patch j per unit radiance, cos_j cos_k A_k / d^2 with
+  // visibility (4 points per source patch), is computed once per geometry;
+  // a step then costs a patches^2 product per glowing band, and each texel
+  // takes its patch's value.
+  struct GlowPatches {
+    std::vector<Eigen::Vector3f> centre, normal;
+    std::vector<float> area;
+    std::vector<float> transfer;  // [receiver * count + source]
+    std::vector<int> emission_bands;  // bands any phosphor emits
+    std::vector<float> Lp, E;         // per patch per band (scratch)
+    std::size_t count = 0;
+    double geometry_version = -1;
+  };
+  void BuildGlowPatches();
+  // Fills glow_.E from the current Lp; false if nothing glows.
+  bool GatherGlow();
 
   void Step(double t0_s, double t1_s, bool moving);
   void UpdateTexelFrames(Group& group);
@@ -93,6 +117,8 @@ class CoupledSolver {
   double time_s_ = 0;
   double geometry_stamp_ = 0;  // time of the last geometry change seen
   SolverStats stats_;
+  GlowPatches glow_;
+  bool glow_enabled_ = false;
 };
 
 }  // namespace phos::render
