@@ -168,24 +168,119 @@ TexelAtlas::TexelAtlas(const Scene& scene, const SceneGeometry& geometry) : slot
     const double size = object.texel_size_m > 0 ? object.texel_size_m : default_size;
     ObjectTexels texels;
     texels.object = static_cast<int>(o);
+    texels.mesh = object.mesh.get();
     const int triangles = geometry.triangle_count(static_cast<int>(o));
-    for (int t = 0; t < triangles; ++t) {
-      // Longest edge over the texel size: texels never longer than asked.
-      float longest = 0;
-      for (int c = 0; c < 3; ++c)
-        longest = std::max(longest, (geometry.Vertex(static_cast<int>(o), t, (c + 1) % 3) -
-                                     geometry.Vertex(static_cast<int>(o), t, c)).norm());
-      const int m = std::clamp(static_cast<int>(std::ceil(longest / size)), 1, 4096);
-      texels.first.push_back(static_cast<std::uint32_t>(texels.count));
-      texels.m.push_back(static_cast<std::uint16_t>(m));
-      texels.count += static_cast<std::size_t>(m) * static_cast<std::size_t>(m);
-      if (texels.count > (std::size_t{1} << 31))
-        ThrowUserError(scene.source, "objects[" + std::to_string(o) + "].texel_size_m",
-                       "more than 2^31 texels on '" + object.name + "'; choose a larger texel size");
+    const bool uv = object.texels == "uv" || (object.texels.empty() && object.mesh->has_uvs());
+    if (uv) {
+      BuildUv(texels, object, geometry, size);
+    } else {
+      for (int t = 0; t < triangles; ++t) {
+        // Longest edge over the texel size: texels never longer than asked.
+        float longest = 0;
+        for (int c = 0; c < 3; ++c)
+          longest = std::max(longest, (geometry.Vertex(static_cast<int>(o), t, (c + 1) % 3) -
+                                       geometry.Vertex(static_cast<int>(o), t, c)).norm());
+        const int m = std::clamp(static_cast<int>(std::ceil(longest / size)), 1, 4096);
+        texels.first.push_back(static_cast<std::uint32_t>(texels.count));
+        texels.m.push_back(static_cast<std::uint16_t>(m));
+        texels.count += static_cast<std::size_t>(m) * static_cast<std::size_t>(m);
+      }
     }
+    if (texels.count > (std::size_t{1} << 31))
+      ThrowUserError(scene.source, "objects[" + std::to_string(o) + "].texel_size_m",
+                     "more than 2^31 texels on '" + object.name + "'; choose a larger texel size");
     slot_[o] = static_cast<int>(objects_.size());
     objects_.push_back(std::move(texels));
   }
+}
+
+void TexelAtlas::BuildUv(ObjectTexels& texels, const Object& object, const SceneGeometry& geometry, double texel_size_m) {
+  const Mesh& mesh = *object.mesh;
+  const int o = texels.object, triangles = static_cast<int>(mesh.triangles.size());
+  // Resolution: texels of about texel_size_m, from world area over UV area.
+  double world_area = 0, uv_area = 0;
+  for (int t = 0; t < triangles; ++t) {
+    world_area += geometry.Area(o, t);
+    const Eigen::Vector2f a = mesh.uvs[mesh.uv_triangles[t][0]], b = mesh.uvs[mesh.uv_triangles[t][1]],
+                          c = mesh.uvs[mesh.uv_triangles[t][2]];
+    uv_area += 0.5 * std::abs((b - a).x() * (c - a).y() - (b - a).y() * (c - a).x());
+  }
+  int R = object.uv_resolution;
+  if (R <= 0) R = std::clamp(static_cast<int>(std::ceil(std::sqrt(world_area / std::max(uv_area, 1e-12)) / texel_size_m)), 1, 8192);
+  texels.uv_resolution = R;
+  texels.m.assign(triangles, 8);
+  texels.uv_corners.resize(3 * static_cast<std::size_t>(triangles));
+  // Rasterize every triangle in UV space. A texel belongs to the triangle that
+  // covers its centre (or, along chart borders, comes nearest to it), so every
+  // texel a triangle touches has a state and a point on the surface.
+  std::vector<float> best(std::size_t(R) * R, -1e30f);
+  std::vector<TexelAnchor> anchor(std::size_t(R) * R);
+  for (int t = 0; t < triangles; ++t) {
+    Eigen::Vector2f p[3];
+    for (int c = 0; c < 3; ++c) p[c] = texels.uv_corners[3 * t + c] = mesh.uvs[mesh.uv_triangles[t][c]] * static_cast<float>(R);
+    const float area2 = (p[1] - p[0]).x() * (p[2] - p[0]).y() - (p[1] - p[0]).y() * (p[2] - p[0]).x();
+    if (std::abs(area2) < 1e-12f) continue;  // degenerate in UV: nothing to store on it
+    const Eigen::Vector2f lo = p[0].cwiseMin(p[1]).cwiseMin(p[2]), hi = p[0].cwiseMax(p[1]).cwiseMax(p[2]);
+    const int x0 = std::clamp(static_cast<int>(std::floor(lo.x())) - 1, 0, R - 1), x1 = std::clamp(static_cast<int>(std::ceil(hi.x())), 0, R - 1);
+    const int y0 = std::clamp(static_cast<int>(std::floor(lo.y())) - 1, 0, R - 1), y1 = std::clamp(static_cast<int>(std::ceil(hi.y())), 0, R - 1);
+    // Per edge (opposite corner c): its length, and half the extent of a texel
+    // square along the edge's normal, (|n_x| + |n_y|) / 2.
+    float edge_length[3], half_extent[3];
+    for (int c = 0; c < 3; ++c) {
+      const Eigen::Vector2f e = p[(c + 2) % 3] - p[(c + 1) % 3];
+      edge_length[c] = std::max(e.norm(), 1e-12f);
+      half_extent[c] = 0.5f * (std::abs(e.x()) + std::abs(e.y())) / edge_length[c];
+    }
+    for (int y = y0; y <= y1; ++y)
+      for (int x = x0; x <= x1; ++x) {
+        const Eigen::Vector2f q(x + 0.5f, y + 0.5f);
+        float lambda[3];
+        for (int c = 0; c < 3; ++c) {
+          const Eigen::Vector2f a = p[(c + 1) % 3], b = p[(c + 2) % 3];
+          lambda[c] = ((b - a).x() * (q - a).y() - (b - a).y() * (q - a).x()) / area2;
+        }
+        // Signed distance (in texels) from the centre to each edge's line: the
+        // texel's square reaches inside every edge (strictly: touching is not
+        // covering). Score: the smallest distance, the centre's depth inside.
+        float score = 1e30f;
+        bool overlaps = true;
+        for (int c = 0; c < 3; ++c) {
+          const float distance = lambda[c] * std::abs(area2) / edge_length[c];
+          overlaps = overlaps && distance > -half_extent[c] + 1e-6f;
+          score = std::min(score, distance);
+        }
+        if (!overlaps) continue;
+        const std::size_t cell = std::size_t(y) * R + x;
+        if (score <= best[cell]) continue;
+        best[cell] = score;
+        float l0 = std::max(lambda[0], 0.0f), l1 = std::max(lambda[1], 0.0f), l2 = std::max(lambda[2], 0.0f);
+        const float sum = l0 + l1 + l2;
+        anchor[cell] = {static_cast<std::uint32_t>(t), l1 / sum, l2 / sum};
+      }
+  }
+  texels.uv_index.assign(std::size_t(R) * R, -1);
+  for (std::size_t cell = 0; cell < best.size(); ++cell) {
+    if (best[cell] == -1e30f) continue;
+    texels.uv_index[cell] = static_cast<std::int32_t>(texels.anchors.size());
+    texels.anchors.push_back(anchor[cell]);
+  }
+  texels.count = texels.anchors.size();
+}
+
+std::size_t TexelAtlas::UvTexelOf(const ObjectTexels& o, int triangle, float b1, float b2) {
+  const Eigen::Vector2f uv = (1 - b1 - b2) * o.uv_corners[3 * triangle] + b1 * o.uv_corners[3 * triangle + 1] +
+                             b2 * o.uv_corners[3 * triangle + 2];
+  const int R = o.uv_resolution;
+  const int x = std::clamp(static_cast<int>(uv.x()), 0, R - 1), y = std::clamp(static_cast<int>(uv.y()), 0, R - 1);
+  const std::int32_t texel = o.uv_index[std::size_t(y) * R + x];
+  if (texel >= 0) return static_cast<std::size_t>(texel);
+  // Rounding at a chart's border: the nearest stored neighbour.
+  for (int dy = -1; dy <= 1; ++dy)
+    for (int dx = -1; dx <= 1; ++dx) {
+      const int xx = std::clamp(x + dx, 0, R - 1), yy = std::clamp(y + dy, 0, R - 1);
+      if (o.uv_index[std::size_t(yy) * R + xx] >= 0) return static_cast<std::size_t>(o.uv_index[std::size_t(yy) * R + xx]);
+    }
+  return 0;
 }
 
 std::size_t TexelAtlas::total_texels() const {

@@ -4,6 +4,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
+#include <functional>
 #include <map>
 
 #include <tiny_gltf.h>
@@ -17,6 +19,7 @@ namespace {
 
 void FlipWinding(Mesh& mesh) {
   for (Eigen::Vector3i& t : mesh.triangles) std::swap(t[1], t[2]);
+  for (Eigen::Vector3i& t : mesh.uv_triangles) std::swap(t[1], t[2]);
 }
 
 Mesh LoadObj(const std::filesystem::path& path, const std::string& group, const std::string& where) {
@@ -34,6 +37,9 @@ Mesh LoadObj(const std::filesystem::path& path, const std::string& group, const 
   mesh.source = path.string() + (group.empty() ? "" : "#" + group);
   const std::vector<tinyobj::real_t>& v = reader.GetAttrib().vertices;
   for (std::size_t i = 0; i + 2 < v.size(); i += 3) mesh.positions.emplace_back(v[i], v[i + 1], v[i + 2]);
+  const std::vector<tinyobj::real_t>& vt = reader.GetAttrib().texcoords;
+  for (std::size_t i = 0; i + 1 < vt.size(); i += 2) mesh.uvs.emplace_back(vt[i], vt[i + 1]);
+  bool every_corner_has_uv = !mesh.uvs.empty();
   bool found = group.empty();
   std::string names;
   for (const tinyobj::shape_t& shape : reader.GetShapes()) {
@@ -46,7 +52,14 @@ Mesh LoadObj(const std::filesystem::path& path, const std::string& group, const 
       if (t.minCoeff() < 0 || t.maxCoeff() >= static_cast<int>(mesh.positions.size()))
         ThrowUserError(where, "", "OBJ '" + path.string() + "' has a face with a vertex index out of range");
       mesh.triangles.push_back(t);
+      const Eigen::Vector3i uv(indices[i].texcoord_index, indices[i + 1].texcoord_index, indices[i + 2].texcoord_index);
+      every_corner_has_uv = every_corner_has_uv && uv.minCoeff() >= 0 && uv.maxCoeff() < static_cast<int>(mesh.uvs.size());
+      mesh.uv_triangles.push_back(uv);
     }
+  }
+  if (!every_corner_has_uv) {  // a partial UV map is no map
+    mesh.uvs.clear();
+    mesh.uv_triangles.clear();
   }
   if (!found) ThrowUserError(where, "", "OBJ '" + path.string() + "' has no group '" + group + "' (groups: " + names + ")");
   return mesh;
@@ -113,6 +126,7 @@ Mesh LoadGltf(const std::filesystem::path& path, const std::string& group, const
   Mesh mesh;
   mesh.source = path.string() + (group.empty() ? "" : "#" + group);
   bool found = group.empty();
+  bool all_uv = true;
   const std::string file_where = where + " (" + path.string() + ")";
   // Walks the node tree of the default scene, applying each node's transform.
   std::function<void(int, const Eigen::Affine3d&, int)> visit = [&](int index, const Eigen::Affine3d& parent, int depth) {
@@ -132,6 +146,15 @@ Mesh LoadGltf(const std::filesystem::path& path, const std::string& group, const
         const int count = static_cast<int>(p.size() / 3);
         for (int i = 0; i < count; ++i)
           mesh.positions.push_back((transform * Vec3(p[3 * i], p[3 * i + 1], p[3 * i + 2])).cast<float>());
+        const auto texcoord = primitive.attributes.find("TEXCOORD_0");
+        const int uv_base = static_cast<int>(mesh.uvs.size());
+        bool with_uv = texcoord != primitive.attributes.end();
+        if (with_uv) {
+          const std::vector<float> uv = ReadAccessor<float>(model, texcoord->second, 2, file_where, "TEXCOORD_0");
+          with_uv = static_cast<int>(uv.size() / 2) == count;
+          for (int i = 0; with_uv && i < count; ++i) mesh.uvs.emplace_back(uv[2 * i], uv[2 * i + 1]);
+        }
+        all_uv = all_uv && with_uv;
         std::vector<int> indices;
         if (primitive.indices >= 0) {
           indices = ReadAccessor<int>(model, primitive.indices, 1, file_where, "indices");
@@ -142,11 +165,14 @@ Mesh LoadGltf(const std::filesystem::path& path, const std::string& group, const
           Eigen::Vector3i t(indices[i], indices[i + 1], indices[i + 2]);
           if (t.minCoeff() < 0 || t.maxCoeff() >= count) ThrowUserError(file_where, "indices", "vertex index out of range");
           mesh.triangles.push_back(t.array() + base);
+          if (with_uv) mesh.uv_triangles.push_back(t.array() + uv_base);
         }
         // A mirroring transform turns the winding around; keep fronts in front.
         if (transform.linear().determinant() < 0)
-          for (std::size_t t = mesh.triangles.size() - indices.size() / 3; t < mesh.triangles.size(); ++t)
+          for (std::size_t t = mesh.triangles.size() - indices.size() / 3; t < mesh.triangles.size(); ++t) {
             std::swap(mesh.triangles[t][1], mesh.triangles[t][2]);
+            if (with_uv) std::swap(mesh.uv_triangles[t][1], mesh.uv_triangles[t][2]);
+          }
       }
     }
     for (int child : node.children) visit(child, transform, depth + 1);
@@ -158,6 +184,10 @@ Mesh LoadGltf(const std::filesystem::path& path, const std::string& group, const
     for (std::size_t node = 0; node < model.nodes.size(); ++node) visit(static_cast<int>(node), Eigen::Affine3d::Identity(), 0);
   }
   if (!found) ThrowUserError(where, "", "glTF '" + path.string() + "' has no mesh named '" + group + "'");
+  if (!all_uv || mesh.uv_triangles.size() != mesh.triangles.size()) {  // a partial UV map is no map
+    mesh.uvs.clear();
+    mesh.uv_triangles.clear();
+  }
   return mesh;
 }
 

@@ -84,13 +84,18 @@ struct EmitterDistribution {
     double total = 0;
     for (std::size_t s = 0; s < atlas.objects().size(); ++s) {
       const TexelAtlas::ObjectTexels& texels = atlas.objects()[s];
-      for (int t = 0; t < geometry.triangle_count(texels.object); ++t) {
-        const std::size_t count = std::size_t(texels.m[t]) * texels.m[t];
-        double sum = 0;
-        for (int b : solver->emission_bands(static_cast<int>(s)))
-          for (std::size_t k = 0; k < count; ++k) sum += solver->Lp(static_cast<int>(s), b, texels.first[t] + k);
+      const int triangles = geometry.triangle_count(texels.object);
+      // Mean Lp (summed over bands) of each triangle's texels.
+      std::vector<double> sum(triangles, 0.0);
+      std::vector<std::size_t> count(triangles, 0);
+      const std::vector<int>& bands = solver->emission_bands(static_cast<int>(s));
+      atlas.ForEachTexel(static_cast<int>(s), [&](std::size_t k, int t, float, float) {
+        for (int b : bands) sum[t] += solver->Lp(static_cast<int>(s), b, k);
+        ++count[t];
+      });
+      for (int t = 0; t < triangles; ++t) {
         const float area = geometry.Area(texels.object, t);
-        const double p = sum / static_cast<double>(count) * area;
+        const double p = count[t] ? sum[t] / static_cast<double>(count[t]) * area : 0.0;
         if (!(p > 0)) continue;
         entries.push_back({texels.object, t, area});
         power.push_back(p);

@@ -279,7 +279,7 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
   for (std::size_t i = 0; i < objects.ArraySize(); ++i) {
     const JsonField o = objects.At(i);
     o.RejectUnknownKeys({"name", "mesh", "group", "shape", "albedo", "phosphor", "unknown_ke", "initial",
-                         "texel_size_m", "transform", "animation"});
+                         "texel_size_m", "texels", "uv_resolution", "transform", "animation"});
     Object object;
     object.name = o.Has("name") ? o["name"].NonEmptyString() : "object " + std::to_string(i);
     if (o.Has("mesh") == o.Has("shape")) o.Fail("give exactly one of 'mesh' (a file) or 'shape'");
@@ -328,6 +328,14 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
       if (!object.phosphor) f->Fail("only a phosphorescent object (with 'phosphor') has an initial state");
     }
     if (auto f = o.Optional("texel_size_m")) object.texel_size_m = f->NumberInRange(1e-6, 1e6);
+    if (auto f = o.Optional("texels")) {
+      object.texels = f->String();
+      if (object.texels != "auto" && object.texels != "uv")
+        f->Fail("expected \"auto\" or \"uv\", got \"" + object.texels + "\"");
+      if (object.texels == "uv" && !object.mesh->has_uvs())
+        f->Fail("the mesh has no UV map (" + object.mesh->source + "); use \"auto\"");
+    }
+    if (auto f = o.Optional("uv_resolution")) object.uv_resolution = f->Integer(1, 16384);
     scene.objects.push_back(std::move(object));
   }
 

@@ -105,13 +105,17 @@ void CoupledSolver::BuildGlowPatches() {
     Group& g = groups_[slot];
     const TexelAtlas::ObjectTexels& texels = atlas_.objects()[slot];
     g.texel_patch.resize(texels.count);
+    std::vector<std::size_t> triangle_base(geometry_.triangle_count(g.object));
+    std::size_t running = base;
+    for (int t = 0; t < geometry_.triangle_count(g.object); ++t) {
+      triangle_base[t] = running;
+      running += std::size_t(std::min<int>(texels.m[t], ms_cap)) * std::min<int>(texels.m[t], ms_cap);
+    }
+    atlas_.ForEachTexel(static_cast<int>(slot), [&](std::size_t k, int t, float b1, float b2) {
+      g.texel_patch[k] = static_cast<std::uint32_t>(triangle_base[t] + SubTriangleIndex(std::min<int>(texels.m[t], ms_cap), b1, b2));
+    });
     for (int t = 0; t < geometry_.triangle_count(g.object); ++t) {
       const int m = texels.m[t], ms = std::min(m, ms_cap);
-      for (int k = 0; k < m * m; ++k) {
-        float b1, b2;
-        SubTriangleCenter(m, k, b1, b2);
-        g.texel_patch[texels.first[t] + k] = static_cast<std::uint32_t>(base + SubTriangleIndex(ms, b1, b2));
-      }
       const float area = geometry_.Area(g.object, t) / static_cast<float>(ms * ms);
       std::vector<int> filled(ms * ms, 0);
       for (int k = 0; k < ms * ms; ++k) {
@@ -216,25 +220,14 @@ void CoupledSolver::InitialStates() {
 
 void CoupledSolver::UpdateTexelFrames(Group& g) {
   if (g.texel_time == static_cast<double>(geometry_.version()) && !g.texel_position.empty()) return;
-  const TexelAtlas::ObjectTexels& texels = atlas_.objects()[atlas_.SlotOf(g.object)];
-  g.texel_position.resize(texels.count);
-  g.texel_normal.resize(texels.count);
-  tbb::parallel_for(0, geometry_.triangle_count(g.object), [&](int t) {
-    const int m = texels.m[t];
-    const Vec3f normal = geometry_.FrontNormal(g.object, t);
-    const Vec3f v0 = geometry_.Vertex(g.object, t, 0), e1 = geometry_.Vertex(g.object, t, 1) - v0,
-                e2 = geometry_.Vertex(g.object, t, 2) - v0;
-    // Texel k in SubTriangleIndex's order: row i, then upright and inverted alternately.
-    std::size_t k = texels.first[t];
-    for (int i = 0; i < m; ++i)
-      for (int j = 0; j < m - i; ++j)
-        for (int inverted = 0; inverted < (i + j < m - 1 ? 2 : 1); ++inverted) {
-          const float third = inverted ? 2.0f / 3.0f : 1.0f / 3.0f;
-          const float b1 = (static_cast<float>(i) + third) / static_cast<float>(m);
-          const float b2 = (static_cast<float>(j) + third) / static_cast<float>(m);
-          g.texel_position[k] = v0 + b1 * e1 + b2 * e2;
-          g.texel_normal[k++] = normal;
-        }
+  const int slot = atlas_.SlotOf(g.object);
+  g.texel_position.resize(g.states.n);
+  g.texel_normal.resize(g.states.n);
+  tbb::parallel_for(std::size_t{0}, atlas_.chunk_count(slot), [&](std::size_t chunk) {
+    atlas_.ForEachTexelInChunk(slot, chunk, [&](std::size_t k, int t, float b1, float b2) {
+      g.texel_position[k] = geometry_.Point(g.object, t, b1, b2);
+      g.texel_normal[k] = geometry_.FrontNormal(g.object, t);
+    });
   });
   g.texel_time = static_cast<double>(geometry_.version());
 }

@@ -10,6 +10,7 @@
 #include <nlohmann/json.hpp>
 
 #include "phos/render/geometry.h"
+#include "phos/render/solver.h"
 #include "phos/render/scene.h"
 #include "phos/util/error.h"
 #include "phos/util/json.h"
@@ -189,6 +190,65 @@ TEST(Atlas, OnlyPhosphorsCarryTexelsOfTheAskedSize) {
   // Two triangles whose longest edge is the diagonal sqrt(2): m = ceil(14.14) = 15.
   EXPECT_EQ(atlas.objects()[0].m[0], 15);
   EXPECT_EQ(atlas.total_texels(), 2u * 15 * 15);
+}
+
+}  // namespace
+}  // namespace phos::render
+
+namespace phos::render {
+namespace {
+
+TEST(UvAtlas, TexelsFollowTheMeshsUvMapAndOnlyCoveredOnesCarryState) {
+  Scene scene = phos::testing::EmptyScene();
+  Object tile = phos::testing::MakeObject("tile", LoadMesh(phos::testing::Fixture("scenes/meshes/tile.obj"), "", "test"),
+                                          0.5, phos::testing::UniformPhosphor(0.1, std::vector<double>(8, 0.1),
+                                                                              std::vector<double>(8, 1)));
+  ASSERT_TRUE(tile.mesh->has_uvs());
+  tile.texel_size_m = 0.05;
+  scene.objects.push_back(tile);
+  SceneGeometry geometry(scene);
+  TexelAtlas atlas(scene, geometry);
+  const TexelAtlas::ObjectTexels& texels = atlas.objects()[0];
+  ASSERT_TRUE(texels.uv());
+  // 1 m^2 on a quarter of UV space: 2 m per UV unit, 0.05 m texels -> 40 per UV unit;
+  // the tile covers 20 x 20 of them, and only those carry a state.
+  EXPECT_EQ(texels.uv_resolution, 40);
+  EXPECT_EQ(texels.count, 400u);
+  // Every texel's anchor lies on the tile, inside its own UV cell, and hits map back to it.
+  atlas.ForEachTexel(0, [&](std::size_t k, int t, float b1, float b2) {
+    const Eigen::Vector3f p = geometry.Point(0, t, b1, b2);
+    EXPECT_LE(std::abs(p.x()), 0.5f + 1e-6f);
+    EXPECT_EQ(atlas.TexelOf(0, t, b1, b2), k);
+  });
+  // A point at (x, z) = (0.3, -0.2) has UV ((x + 0.5) / 2, (z + 0.5) / 2) = (0.4, 0.15): cell (16, 6).
+  const Hit hit = geometry.Intersect(Eigen::Vector3f(0.3f, 1, -0.2f), Eigen::Vector3f(0, -1, 0));
+  ASSERT_TRUE(hit);
+  EXPECT_EQ(static_cast<std::int32_t>(atlas.TexelOf(0, hit.triangle, hit.b1, hit.b2)), texels.uv_index[6 * 40 + 16]);
+  // "auto" overrides the map.
+  scene.objects[0].texels = "auto";
+  TexelAtlas automatic(scene, geometry);
+  EXPECT_FALSE(automatic.objects()[0].uv());
+}
+
+TEST(UvAtlas, SolverChargesUvTexelsLikeTheClosedForm) {
+  Scene scene = phos::testing::EmptyScene();
+  Object tile = phos::testing::MakeObject("tile", LoadMesh(phos::testing::Fixture("scenes/meshes/tile.obj"), "", "test"),
+                                          0.5, phos::testing::UniformPhosphor(0.1, {1, 0, 0, 0, 0, 0, 0, 0},
+                                                                              {0, 0, 0, 1, 0, 0, 0, 0}));
+  tile.texel_size_m = 0.1;
+  scene.objects.push_back(tile);
+  scene.lights.push_back(phos::testing::PointLight(Vec3(0, 1, 0), {1, 0, 0, 0, 0, 0, 0, 0}));
+  SceneGeometry geometry(scene);
+  CoupledSolver solver(scene, geometry);
+  solver.AdvanceTo(2.0);
+  // Under the light: E = 1 / 1^2 at the centre; texel centres lie within 0.05 m of it.
+  const Hit hit = geometry.Intersect(Eigen::Vector3f(0.01f, 1, 0.01f), Eigen::Vector3f(0, -1, 0));
+  const std::size_t texel = solver.atlas().TexelOf(0, hit.triangle, hit.b1, hit.b2);
+  const double E = solver.TexelIrradiance(0, texel)[0];
+  EXPECT_GT(E, 0.99);
+  EXPECT_LE(E, 1.0);
+  const double r = E / (E + 0.1) * -std::expm1(-(E + 0.1) * 2.0);
+  EXPECT_NEAR(solver.State(0, 0, texel), r, 1e-5);
 }
 
 }  // namespace

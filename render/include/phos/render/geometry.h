@@ -8,6 +8,7 @@
 // with its object for free, needs no UV map, and its lookup from a ray hit is
 // O(1) arithmetic.
 
+#include <algorithm>
 #include <cstdint>
 #include <memory>
 #include <vector>
@@ -87,29 +88,81 @@ class SceneGeometry {
   float ray_epsilon_ = 1e-4f, diagonal_ = 1.0f;
 };
 
-// The texels of the phosphorescent objects.
+// Where a texel sits on its object: a triangle and barycentric weights.
+struct TexelAnchor {
+  std::uint32_t triangle;
+  float b1, b2;
+};
+
+// The texels of the phosphorescent objects: the mesh's UV map when it has
+// one (a grid of uv_resolution^2 texels over [0, 1]^2, of which only those a
+// triangle covers carry a state), else the automatic per-triangle atlas.
 class TexelAtlas {
  public:
-  // m per triangle = ceil(triangle edge scale / texel size), at least 1.
+  // Auto: m per triangle = ceil(longest edge / texel size), at least 1.
+  // UV: resolution from the texel size and the ratio of surface to UV area.
   TexelAtlas(const Scene& scene, const SceneGeometry& geometry);
 
   struct ObjectTexels {
     int object = -1;
-    std::vector<std::uint32_t> first;  // per triangle: index of its first texel within the object
-    std::vector<std::uint16_t> m;      // per triangle: subdivisions
     std::size_t count = 0;             // texels of the object
+    // Auto atlas: per triangle, the index of its first texel and its subdivisions.
+    // UV atlas: first is unused and m is 8 (the glow patches' granularity).
+    std::vector<std::uint32_t> first;
+    std::vector<std::uint16_t> m;
+    // UV atlas.
+    int uv_resolution = 0;             // 0: auto atlas
+    std::vector<std::int32_t> uv_index;  // [y * resolution + x]: texel, or -1 where no triangle lies
+    std::vector<TexelAnchor> anchors;    // per texel
+    std::vector<Eigen::Vector2f> uv_corners;  // [3 * triangle + corner], in texels
+    const Mesh* mesh = nullptr;
+    bool uv() const { return uv_resolution > 0; }
   };
   // Index into objects() of a phosphorescent object, or -1.
   int SlotOf(int object) const { return slot_[object]; }
   const std::vector<ObjectTexels>& objects() const { return objects_; }
   std::size_t total_texels() const;
+
   // Texel of a hit on object slot s.
   std::size_t TexelOf(int slot, int triangle, float b1, float b2) const {
     const ObjectTexels& o = objects_[slot];
-    return o.first[triangle] + static_cast<std::size_t>(SubTriangleIndex(o.m[triangle], b1, b2));
+    if (!o.uv()) return o.first[triangle] + static_cast<std::size_t>(SubTriangleIndex(o.m[triangle], b1, b2));
+    return UvTexelOf(o, triangle, b1, b2);
+  }
+
+  // Calls f(texel, triangle, b1, b2) for every texel of slot s in `chunk`, for
+  // chunk in [0, chunk_count(s)): chunks can run in parallel.
+  std::size_t chunk_count(int slot) const {
+    const ObjectTexels& o = objects_[slot];
+    return o.uv() ? (o.anchors.size() + kUvChunk - 1) / kUvChunk : o.m.size();
+  }
+  template <typename F>
+  void ForEachTexelInChunk(int slot, std::size_t chunk, F&& f) const {
+    const ObjectTexels& o = objects_[slot];
+    if (o.uv()) {
+      const std::size_t end = std::min(o.anchors.size(), (chunk + 1) * kUvChunk);
+      for (std::size_t k = chunk * kUvChunk; k < end; ++k) f(k, static_cast<int>(o.anchors[k].triangle), o.anchors[k].b1, o.anchors[k].b2);
+      return;
+    }
+    // Texel k in SubTriangleIndex's order: row i, then upright and inverted alternately.
+    const int t = static_cast<int>(chunk), m = o.m[t];
+    std::size_t k = o.first[t];
+    for (int i = 0; i < m; ++i)
+      for (int j = 0; j < m - i; ++j)
+        for (int inverted = 0; inverted < (i + j < m - 1 ? 2 : 1); ++inverted) {
+          const float third = inverted ? 2.0f / 3.0f : 1.0f / 3.0f;
+          f(k++, t, (static_cast<float>(i) + third) / static_cast<float>(m), (static_cast<float>(j) + third) / static_cast<float>(m));
+        }
+  }
+  template <typename F>
+  void ForEachTexel(int slot, F&& f) const {
+    for (std::size_t c = 0; c < chunk_count(slot); ++c) ForEachTexelInChunk(slot, c, f);
   }
 
  private:
+  static constexpr std::size_t kUvChunk = 4096;
+  static std::size_t UvTexelOf(const ObjectTexels& o, int triangle, float b1, float b2);
+  void BuildUv(ObjectTexels& texels, const Object& object, const SceneGeometry& geometry, double texel_size_m);
   std::vector<int> slot_;
   std::vector<ObjectTexels> objects_;
 };

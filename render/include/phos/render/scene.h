@@ -29,7 +29,11 @@ using Vec3 = Eigen::Vector3d;
 struct Mesh {
   std::vector<Eigen::Vector3f> positions;
   std::vector<Eigen::Vector3i> triangles;
+  // The mesh's own UV map, if it has one: per triangle, indices into uvs.
+  std::vector<Eigen::Vector2f> uvs;
+  std::vector<Eigen::Vector3i> uv_triangles;
   std::string source;  // file it came from, or the built-in shape
+  bool has_uvs() const { return !uv_triangles.empty() && uv_triangles.size() == triangles.size(); }
 };
 
 // Rigid motion: keyframes of translation and rotation, linear in translation
@@ -65,6 +69,11 @@ struct Object {
   bool unknown_ke_as_zero = false;            // the scene's explicit assumption, never phos's guess
   InitialState initial;
   double texel_size_m = 0.0;                  // edge of the automatic atlas's texels (0: scene default)
+  // Texels: "auto" (per-triangle atlas), "uv" (the mesh's UV map) or "" (the
+  // UV map when the mesh has one, else auto). uv_resolution: texels per UV
+  // unit along each axis (0: from the texel size and the surface area).
+  std::string texels;
+  int uv_resolution = 0;
 };
 
 // Piecewise-constant level of a light: level of the last key at or before t.
