@@ -14,6 +14,7 @@
 #include <nlohmann/json.hpp>
 
 #include "commands.h"
+#include "phos/model/material.h"
 #include "phos/render/night_vision.h"
 #include "phos/render/renderer.h"
 #include "phos/render/scene.h"
@@ -31,6 +32,8 @@ struct RenderArgs {
   int spp = 0, width = 0, height = 0;
   double exposure = 0;
   double night_vision_cd = 0;
+  std::string contact_sheet;
+  std::vector<std::string> materials;
 };
 
 double Seconds(std::chrono::steady_clock::time_point since) {
@@ -44,6 +47,20 @@ void Run(const RenderArgs& args) {
   if (args.width > 0) scene.camera.width = args.width;
   if (args.height > 0) scene.camera.height = args.height;
   if (args.exposure > 0) scene.camera.exposure = args.exposure;
+  // --material OBJECT=FILE: try another (say, a freshly fitted) material in the scene.
+  for (const std::string& assignment : args.materials) {
+    const auto equals = assignment.find('=');
+    if (equals == std::string::npos || equals == 0 || equals + 1 == assignment.size())
+      ThrowUserError("", "--material", "expected OBJECT=FILE, got \"" + assignment + "\"");
+    const std::string name = assignment.substr(0, equals), file = assignment.substr(equals + 1);
+    auto object = std::find_if(scene.objects.begin(), scene.objects.end(), [&](const Object& o) { return o.name == name; });
+    if (object == scene.objects.end()) ThrowUserError("", "--material", "the scene has no object '" + name + "'");
+    auto material = std::make_shared<Material>(LoadMaterial(file));
+    if (!(material->bands == scene.bands))
+      ThrowUserError(file, "bands_nm", "differ from the scene's; the renderer needs one band grid");
+    object->phosphor = material;
+    object->phosphor_path = file;
+  }
 
   std::vector<double> times = scene.FrameTimes();
   if (!args.times.empty()) {
@@ -67,6 +84,8 @@ void Run(const RenderArgs& args) {
   if (args.spp > 0) options.spp = options.direct_spp = args.spp;
 
   nlohmann::json frames = nlohmann::json::array();
+  std::vector<Image> sheet_frames;
+  std::vector<std::string> sheet_labels;
   ProgressBar progress("render " + scene.name, times.size());
   for (std::size_t f = 0; f < times.size(); ++f) {
     const double t = times[f];
@@ -87,6 +106,10 @@ void Run(const RenderArgs& args) {
     const std::filesystem::path png = std::filesystem::path(args.out) / (std::string(name) + ".png");
     WriteExr(exr, rgb, bands, scene.bands);
     WritePng(png, rgb, scene.camera.exposure);
+    if (!args.contact_sheet.empty()) {
+      sheet_frames.push_back(ToneMap(rgb, scene.camera.exposure));
+      sheet_labels.push_back("t = " + FormatShort(t, 4) + " s");
+    }
     nlohmann::json entry = {{"t", t}, {"exr", exr.string()}, {"png", png.string()}, {"seconds", seconds},
                             {"solver_seconds", solver_s}, {"render_seconds", render_s}, {"rays", stats.rays}};
     if (args.night_vision_cd > 0) {
@@ -102,6 +125,7 @@ void Run(const RenderArgs& args) {
     progress.Advance();
   }
   progress.Finish();
+  if (!args.contact_sheet.empty()) WriteContactSheet(args.contact_sheet, sheet_frames, sheet_labels, 4);
 
   nlohmann::json result = {{"scene", args.scene}, {"transport", TransportName(transport)},
                            {"phosphorescence", solver != nullptr}, {"width", scene.camera.width},
@@ -151,6 +175,10 @@ void RegisterRender(CLI::App& app) {
                   "Also write frame-NNNN-night.png as a dark-adapted eye sees it (Thompson et al. 2002:\n"
                   "blue shift, loss of acuity, grain); the value is the luminance in cd/m^2 of radiance 1")
       ->check(CLI::PositiveNumber);
+  cmd->add_option("--contact-sheet", args->contact_sheet, "Also write every frame side by side, labelled with its time, to this PNG");
+  cmd->add_option("--material", args->materials,
+                  "OBJECT=FILE: give the object of that name this phosphor material (repeatable),\n"
+                  "e.g. one just fitted by 'phos fit', without editing the scene");
   cmd->add_flag("--json", args->json, "Print one JSON object: frames with t, exr, png and seconds");
   cmd->callback([args] { Run(*args); });
 }

@@ -4,7 +4,10 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 mkdir -p docs/bench
-for name in model fit; do
+# Names on the command line run only those (e.g. scripts/bench.sh render).
+names=("$@")
+[ ${#names[@]} -eq 0 ] && names=(model fit render)
+for name in "${names[@]}"; do
   out=docs/bench/$name.txt
   {
     echo "# command: build/bin/bench_$name --benchmark_counters_tabular=true"

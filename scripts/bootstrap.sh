@@ -15,6 +15,8 @@ PACKAGES=(
   libembree-dev libopenimageio-dev openimageio-tools libopenexr-dev libtbb-dev
   # render: mesh loaders (OBJ, glTF 2.0)
   libtinyobjloader-dev libtinygltf-dev libstb-dev
+  # contact-sheet labels
+  fonts-dejavu-core
   # tests and benchmarks
   libgtest-dev libgmock-dev libbenchmark-dev
   # JSON, command line, HTTP (editor)

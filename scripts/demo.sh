@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
-# The main job, for now (issue: foundation): simulate the Table 8.1 presets
-# under a charge-then-dark schedule and write their curves and plots to results/.
+# The main job: simulate the Table 8.1 presets under a charge-then-dark
+# schedule, capture a decay in the simulated lab, and render scenes where the
+# materials charge under a lamp and glow after it goes off; everything goes
+# to results/.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PHOS=build/bin/phos
@@ -35,7 +37,27 @@ rm -rf "$OUT/session-orange"
 "$PHOS" capture decay --device sim --sim-material fixtures/materials/orange.json --light led405 \
   --out "$OUT/session-orange"
 
+# Render the still life (Fig. 8.1): lamp on until 20 s, then a minute of
+# darkness. With a material fitted from the capture (results/fitted/orange.json,
+# once 'phos fit session' writes it) the orange ball wears that; else the preset.
+material_args=()
+if [ -f "$OUT/fitted/orange.json" ]; then
+  material_args=(--material "orange ball=$OUT/fitted/orange.json")
+fi
+rm -rf "$OUT/still-life" "$OUT/cornell" "$OUT/light-trail"
+"$PHOS" render fixtures/scenes/still-life.json --out "$OUT/still-life" --times 0,10,19,21,30,50,80 \
+  --contact-sheet "$OUT/still-life.png" --night-vision 0.05 "${material_args[@]}"
+# The Cornell box of Fig. 8.15, path traced 10 s after the LED went off: the
+# glowing walls light the white blocks.
+"$PHOS" render fixtures/scenes/cornell-phosphor.json --out "$OUT/cornell" --times 20,31,40,90 \
+  --transport path --contact-sheet "$OUT/cornell.png"
+# A moving 405 nm LED writes a fading trail into a painted floor.
+"$PHOS" render fixtures/scenes/light-trail.json --out "$OUT/light-trail" --times 1,3,5,7,9,10,12,15 \
+  --contact-sheet "$OUT/light-trail.png"
+
 echo "phos demo: simulated 11 Table 8.1 presets (60 s charge, 300 s dark, exact integrator)"
 echo "  curves (CSV: t,r_1,L_1..L_8):  $OUT/<material>.csv"
 echo "  plots (SVG):                   $OUT/charged.svg, $OUT/decay-only.svg, $OUT/<material>.svg"
 echo "  a captured decay session:      $OUT/session-orange (session.json, frames.jsonl, frames/*.tif, stop.json)"
+echo "  rendered scenes (contact sheets): $OUT/still-life.png, $OUT/cornell.png, $OUT/light-trail.png"
+echo "    frames (EXR data, PNG, night-vision PNG): $OUT/still-life/, $OUT/cornell/, $OUT/light-trail/"

@@ -4,6 +4,8 @@
 #include <atomic>
 #include <cmath>
 
+#include <OpenImageIO/imagebuf.h>
+#include <OpenImageIO/imagebufalgo.h>
 #include <OpenImageIO/imageio.h>
 #include <tbb/parallel_for.h>
 
@@ -422,10 +424,10 @@ void WriteExr(const std::filesystem::path& path, const Image& rgb, const Image& 
   WriteImageAtomically(path, spec, OIIO::TypeDesc::FLOAT, data.data());
 }
 
-void WritePng(const std::filesystem::path& path, const Image& rgb, double exposure) {
+Image ToneMap(const Image& rgb, double exposure) {
   PHOS_CHECK(rgb.channels == 3);
-  std::vector<std::uint8_t> data(rgb.pixels.size());
-  for (std::size_t p = 0; p < data.size() / 3; ++p) {
+  Image display(rgb.width, rgb.height, 3);
+  for (std::size_t p = 0; p < rgb.pixels.size() / 3; ++p) {
     // Reinhard's global operator on luminance (Reinhard et al. 2002): a glow
     // a hundred times dimmer than the lit scene stays visible, and lit
     // highlights roll off instead of clipping. Hue is kept.
@@ -434,12 +436,51 @@ void WritePng(const std::filesystem::path& path, const Image& rgb, double exposu
     const double scale = exposure / (1 + Y);
     for (int k = 0; k < 3; ++k) {
       const double v = std::clamp(c[k] * scale, 0.0, 1.0);
-      const double encoded = v <= 0.0031308 ? 12.92 * v : 1.055 * std::pow(v, 1 / 2.4) - 0.055;  // sRGB transfer
-      data[3 * p + k] = static_cast<std::uint8_t>(std::lround(encoded * 255));
+      display.pixels[3 * p + k] = static_cast<float>(v <= 0.0031308 ? 12.92 * v : 1.055 * std::pow(v, 1 / 2.4) - 0.055);
     }
   }
-  OIIO::ImageSpec spec(rgb.width, rgb.height, 3, OIIO::TypeDesc::UINT8);
+  return display;
+}
+
+namespace {
+
+void WriteDisplayPng(const std::filesystem::path& path, const Image& display) {
+  std::vector<std::uint8_t> data(display.pixels.size());
+  for (std::size_t i = 0; i < data.size(); ++i)
+    data[i] = static_cast<std::uint8_t>(std::lround(std::clamp(display.pixels[i], 0.0f, 1.0f) * 255));
+  OIIO::ImageSpec spec(display.width, display.height, display.channels, OIIO::TypeDesc::UINT8);
   WriteImageAtomically(path, spec, OIIO::TypeDesc::UINT8, data.data());
+}
+
+}  // namespace
+
+void WritePng(const std::filesystem::path& path, const Image& rgb, double exposure) {
+  WriteDisplayPng(path, ToneMap(rgb, exposure));
+}
+
+void WriteContactSheet(const std::filesystem::path& path, const std::vector<Image>& frames,
+                       const std::vector<std::string>& labels, int columns) {
+  PHOS_CHECK(!frames.empty() && labels.size() == frames.size() && columns > 0);
+  const int pad = 4, label_height = 22;
+  const int w = frames[0].width, h = frames[0].height;
+  columns = std::min<int>(columns, static_cast<int>(frames.size()));
+  const int rows = (static_cast<int>(frames.size()) + columns - 1) / columns;
+  const int cell_w = w + pad, cell_h = h + label_height + pad;
+  OIIO::ImageBuf sheet(OIIO::ImageSpec(columns * cell_w + pad, rows * cell_h + pad, 3, OIIO::TypeDesc::FLOAT));
+  const float background[3] = {0.12f, 0.12f, 0.12f};
+  OIIO::ImageBufAlgo::fill(sheet, background);
+  for (std::size_t f = 0; f < frames.size(); ++f) {
+    const int x0 = pad + static_cast<int>(f % columns) * cell_w, y0 = pad + static_cast<int>(f / columns) * cell_h;
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) sheet.setpixel(x0 + x, y0 + label_height + y, frames[f].at(x, y), 3);
+    // Labels need a font file; without one the sheet is still written.
+    const float white[3] = {0.9f, 0.9f, 0.9f};
+    OIIO::ImageBufAlgo::render_text(sheet, x0 + 2, y0 + 16, labels[f], 15,
+                                    "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf", white);
+  }
+  Image display(sheet.spec().width, sheet.spec().height, 3);
+  sheet.get_pixels(OIIO::ROI::All(), OIIO::TypeDesc::FLOAT, display.pixels.data());
+  WriteDisplayPng(path, display);
 }
 
 Image ReadImage(const std::filesystem::path& path) {

@@ -65,9 +65,15 @@ std::vector<double> BandToXyzWeights(const SpectralGrid& grid);
 // Linear EXR (32-bit float: glows are dim, half floats would lose them) with R, G, B and one channel per band ("band<b>"),
 // the band edges in the header attribute "phos:bands_nm". Atomic write.
 void WriteExr(const std::filesystem::path& path, const Image& rgb, const Image& bands, const SpectralGrid& grid);
-// 8-bit sRGB PNG for viewing: rgb * exposure through Reinhard's global
-// operator (L / (1 + L) on luminance), sRGB transfer. Atomic write.
+// For viewing: rgb * exposure through Reinhard's global operator (L / (1 + L)
+// on luminance), then the sRGB transfer: display values in [0, 1].
+Image ToneMap(const Image& rgb, double exposure);
+// 8-bit PNG of ToneMap(rgb, exposure). Atomic write.
 void WritePng(const std::filesystem::path& path, const Image& rgb, double exposure);
+// Display images (ToneMap's output, all the same size) side by side, `columns`
+// per row, each under its label (DejaVu Sans when installed). Atomic write.
+void WriteContactSheet(const std::filesystem::path& path, const std::vector<Image>& frames,
+                       const std::vector<std::string>& labels, int columns);
 // Reads any image OpenImageIO reads, as float (tests, regression references).
 Image ReadImage(const std::filesystem::path& path);
 
