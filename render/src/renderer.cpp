@@ -145,6 +145,16 @@ class Tracer {
   }
 
   // Lp at a surface point seen from its front; zero elsewhere.
+  // L += Lp at the hit (front sides of phosphors only): the emissive term of
+  // Eq. 8.2 in a frame, added band by band with no temporary.
+  void AddEmission(const Hit& hit, Bands& L) const {
+    if (!solver_ || !hit.front) return;
+    const int slot = solver_->atlas().SlotOf(hit.object);
+    if (slot < 0) return;
+    const std::size_t texel = solver_->atlas().TexelOf(slot, hit.triangle, hit.b1, hit.b2);
+    for (int b : solver_->emission_bands(slot)) L[b] += solver_->Lp(slot, b, texel);
+  }
+
   bool Emission(const Hit& hit, Bands& Le) const {
     if (!solver_ || !hit.front) return false;
     const int slot = solver_->atlas().SlotOf(hit.object);
@@ -190,8 +200,7 @@ class Tracer {
     ++rays;
     const Hit hit = geometry_.Intersect(origin, direction);
     if (!hit) return L;
-    Bands Le;
-    if (Emission(hit, Le)) L += Le;
+    AddEmission(hit, L);
     Bands E;
     DirectIrradiance(hit.position, hit.front ? hit.normal : Vec3f(-hit.normal), E, rays);
     L += Albedo(hit.object) * E / kPi;  // Lambertian reflection (Eq. 8.2's reflected term)
