@@ -10,5 +10,6 @@ void RegisterPlot(CLI::App& app);
 void RegisterFit(CLI::App& app);
 void RegisterCapture(CLI::App& app);
 void RegisterRender(CLI::App& app);
+void RegisterEdit(CLI::App& app);
 
 }  // namespace phos::app

@@ -12,7 +12,7 @@
 
 #include "phos/util/error.h"
 #include "phos/util/format.h"
-#include "small_nnls.h"
+#include "phos/fit/small_nnls.h"
 #include "solver_options.h"
 
 namespace phos {

@@ -1,4 +1,4 @@
-#include "small_nnls.h"
+#include "phos/fit/small_nnls.h"
 
 #include <Eigen/Cholesky>
 #include <limits>

@@ -1,0 +1,61 @@
+// phos.constraints/1 (DESIGN.md): the irradiance at one point over time, the
+// surface's albedo, how many states to solve for, and the constraints.
+
+#include <nlohmann/json.hpp>
+
+#include "phos/editor/solve.h"
+#include "phos/util/error.h"
+#include "phos/util/format.h"
+#include "phos/util/json.h"
+
+namespace phos::editor {
+
+Problem LoadProblem(const std::filesystem::path& path) { return ProblemFromJson(ReadJsonFile(path), path.string()); }
+
+Problem ProblemFromJson(const nlohmann::json& json, const std::string& source) {
+  const JsonField root(json, source);
+  root.RejectUnknownKeys({"schema", "description", "bands_nm", "dt_s", "irradiance", "albedo", "states", "constraints"});
+  if (root["schema"].String() != "phos.constraints/1")
+    root["schema"].Fail("expected \"phos.constraints/1\", got " + DescribeJson(root["schema"].value()));
+  Problem p;
+  p.source = source;
+  p.bands.edges_nm = root["bands_nm"].NumberArray(0, 1.0);
+  if (p.bands.edges_nm.size() < 2) root["bands_nm"].Fail("expected at least two band edges");
+  for (std::size_t i = 1; i < p.bands.edges_nm.size(); ++i)
+    if (!(p.bands.edges_nm[i] > p.bands.edges_nm[i - 1])) root["bands_nm"].At(i).Fail("band edges must increase");
+  const std::size_t nb = static_cast<std::size_t>(p.bands.band_count());
+  p.dt_s = root["dt_s"].NumberInRange(1e-6, 1e6);
+  const JsonField irradiance = root["irradiance"];
+  if (irradiance.ArraySize() == 0) irradiance.Fail("expected at least one frame");
+  if (irradiance.ArraySize() > 1000000) irradiance.Fail("more than a million frames");
+  for (std::size_t f = 0; f < irradiance.ArraySize(); ++f) p.irradiance.push_back(irradiance.At(f).NumberArray(nb, 0.0));
+  p.albedo = root["albedo"].NumberArray(nb, 0.0);
+  for (std::size_t b = 0; b < nb; ++b)
+    if (p.albedo[b] > 1) root["albedo"].At(b).Fail("expected an albedo in [0, 1], got " + FormatDouble(p.albedo[b]));
+  if (root.Has("states")) p.states = root["states"].Integer(1, 3);
+  const JsonField constraints = root["constraints"];
+  if (constraints.ArraySize() == 0) constraints.Fail("expected at least one constraint");
+  for (std::size_t c = 0; c < constraints.ArraySize(); ++c) {
+    const JsonField f = constraints.At(c);
+    f.RejectUnknownKeys({"t_s", "until_s", "radiance", "at_least", "at_most", "weight", "label"});
+    Constraint con;
+    con.label = f.Has("label") ? f["label"].String() : "constraints[" + std::to_string(c) + "]";
+    con.t_s = f["t_s"].NumberInRange(0, p.end_s());
+    const int kinds = f.Has("radiance") + f.Has("at_least") + f.Has("at_most");
+    if (kinds != 1) f.Fail("give exactly one of \"radiance\" (a target), \"at_least\" or \"at_most\"");
+    const char* key = f.Has("radiance") ? "radiance" : f.Has("at_least") ? "at_least" : "at_most";
+    con.kind = f.Has("radiance") ? Constraint::Kind::kTarget
+               : f.Has("at_least") ? Constraint::Kind::kAtLeast : Constraint::Kind::kAtMost;
+    con.radiance = f[key].NumberArray(nb, 0.0);
+    con.until_s = con.t_s;
+    if (f.Has("until_s")) {
+      if (con.kind == Constraint::Kind::kTarget) f["until_s"].Fail("a target holds at one time; ranges are for at_least and at_most");
+      con.until_s = f["until_s"].NumberInRange(con.t_s, p.end_s());
+    }
+    if (f.Has("weight")) con.weight = f["weight"].NumberAtLeast(0);
+    p.constraints.push_back(con);
+  }
+  return p;
+}
+
+}  // namespace phos::editor
