@@ -6,7 +6,7 @@ cd "$(dirname "$0")/.."
 mkdir -p docs/bench
 # Names on the command line run only those (e.g. scripts/bench.sh render).
 names=("$@")
-[ ${#names[@]} -eq 0 ] && names=(model fit render)
+[ ${#names[@]} -eq 0 ] && names=(model fit render editor)
 for name in "${names[@]}"; do
   out=docs/bench/$name.txt
   {

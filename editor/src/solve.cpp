@@ -398,24 +398,33 @@ Solution Solve(const Problem& p, const SolveOptions& options) {
     singles.emplace_back(ranked.back().first, static_cast<int>(k));
   }
   if (nc > 1) {
-    ranked.clear();
+    // Beam search: the best `beam` combinations of k curves, each extended by
+    // every curve of the library. A slow state that looks poor on its own
+    // (its singles rank low) is still found as the partner of a fast one.
+    const int beam = 16;
     std::sort(singles.begin(), singles.end());
-    const int top = std::min<int>(static_cast<int>(singles.size()), nc == 2 ? 40 : 14);
-    // Every combination of nc distinct curves among the best singles.
-    std::vector<int> pick(nc);
-    std::function<void(int, int)> choose = [&](int depth, int from) {
-      if (depth == nc) {
-        std::vector<const Curve*> curves;
-        for (int k : pick) curves.push_back(&library[singles[k].second]);
-        evaluate(curves);
-        return;
-      }
-      for (int k = from; k < top; ++k) {
-        pick[depth] = k;
-        choose(depth + 1, k + 1);
-      }
-    };
-    choose(0, 0);
+    std::vector<std::vector<int>> combinations;
+    for (int k = 0; k < std::min<int>(beam, static_cast<int>(singles.size())); ++k) combinations.push_back({singles[k].second});
+    for (int depth = 2; depth <= nc; ++depth) {
+      ranked.clear();
+      std::vector<std::pair<double, std::vector<int>>> next;
+      for (const std::vector<int>& combination : combinations)
+        for (int k = 0; k < static_cast<int>(library.size()); ++k) {
+          if (std::find(combination.begin(), combination.end(), k) != combination.end()) continue;
+          std::vector<int> extended = combination;
+          extended.push_back(k);
+          std::sort(extended.begin(), extended.end());
+          std::vector<const Curve*> curves;
+          for (int q : extended) curves.push_back(&library[q]);
+          evaluate(curves);
+          next.emplace_back(ranked.back().first, extended);
+        }
+      std::sort(next.begin(), next.end());
+      next.erase(std::unique(next.begin(), next.end(), [](const auto& a, const auto& b) { return a.second == b.second; }),
+                 next.end());
+      combinations.clear();
+      for (int k = 0; k < std::min<int>(beam, static_cast<int>(next.size())); ++k) combinations.push_back(next[k].second);
+    }
   }
   std::sort(ranked.begin(), ranked.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
 
