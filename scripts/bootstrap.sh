@@ -21,6 +21,8 @@ PACKAGES=(
   libgtest-dev libgmock-dev libbenchmark-dev
   # JSON, command line, HTTP (editor)
   nlohmann-json3-dev libcli11-dev libcpp-httplib-dev
+  # the editor page's browser test (Playwright drives Debian's Chromium)
+  chromium
 )
 
 missing=()

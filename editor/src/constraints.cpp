@@ -28,10 +28,12 @@ Problem ProblemFromJson(const nlohmann::json& json, const std::string& source) {
   const JsonField irradiance = root["irradiance"];
   if (irradiance.ArraySize() == 0) irradiance.Fail("expected at least one frame");
   if (irradiance.ArraySize() > 1000000) irradiance.Fail("more than a million frames");
-  for (std::size_t f = 0; f < irradiance.ArraySize(); ++f) p.irradiance.push_back(irradiance.At(f).NumberArray(nb, 0.0));
-  p.albedo = root["albedo"].NumberArray(nb, 0.0);
+  Point point;
+  for (std::size_t f = 0; f < irradiance.ArraySize(); ++f) point.irradiance.push_back(irradiance.At(f).NumberArray(nb, 0.0));
+  point.albedo = root["albedo"].NumberArray(nb, 0.0);
   for (std::size_t b = 0; b < nb; ++b)
-    if (p.albedo[b] > 1) root["albedo"].At(b).Fail("expected an albedo in [0, 1], got " + FormatDouble(p.albedo[b]));
+    if (point.albedo[b] > 1) root["albedo"].At(b).Fail("expected an albedo in [0, 1], got " + FormatDouble(point.albedo[b]));
+  p.points.push_back(std::move(point));
   if (root.Has("states")) p.states = root["states"].Integer(1, 3);
   const JsonField constraints = root["constraints"];
   if (constraints.ArraySize() == 0) constraints.Fail("expected at least one constraint");

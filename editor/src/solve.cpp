@@ -20,38 +20,48 @@ namespace {
 
 constexpr double kPi = 3.14159265358979323846;
 
-// The moments the cost looks at: every target's time and every frame start
-// inside a bound's range (and its ends), sorted, with who uses each.
+// The moments the cost looks at, per point: every target's time and every
+// frame start inside a bound's range (and its ends), sorted, with who uses each.
+struct PointSamples {
+  std::vector<double> t;    // sorted, unique
+  std::vector<int> frame;   // frame whose irradiance shows at t
+};
 struct Samples {
-  std::vector<double> t;                  // sorted, unique
-  std::vector<int> frame;                 // frame whose irradiance shows at t
-  std::vector<int> target_sample;         // per constraint (targets): index into t
-  std::vector<std::vector<int>> bound_samples;  // per constraint (bounds): indices into t
+  std::vector<PointSamples> points;
+  std::vector<int> target_sample;               // per constraint (targets): index into its point's t
+  std::vector<std::vector<int>> bound_samples;  // per constraint (bounds): indices into its point's t
 };
 
 Samples MakeSamples(const Problem& p) {
-  std::vector<double> times;
+  Samples s;
+  s.points.resize(p.points.size());
+  std::vector<std::vector<double>> times(p.points.size());
   for (const Constraint& c : p.constraints) {
-    times.push_back(c.t_s);
+    PHOS_CHECK(c.point >= 0 && c.point < static_cast<int>(p.points.size()));
+    times[c.point].push_back(c.t_s);
     if (c.kind != Constraint::Kind::kTarget) {
-      times.push_back(c.until_s);
-      for (double t = std::ceil(c.t_s / p.dt_s) * p.dt_s; t < c.until_s; t += p.dt_s) times.push_back(t);
+      times[c.point].push_back(c.until_s);
+      for (double t = std::ceil(c.t_s / p.dt_s) * p.dt_s; t < c.until_s; t += p.dt_s) times[c.point].push_back(t);
     }
   }
-  std::sort(times.begin(), times.end());
-  Samples s;
-  for (double t : times)
-    if (s.t.empty() || t > s.t.back() + 1e-9 * p.dt_s) s.t.push_back(t);
-  const int frames = static_cast<int>(p.irradiance.size());
-  for (double t : s.t) s.frame.push_back(std::clamp(static_cast<int>(std::floor(t / p.dt_s + 1e-9)), 0, frames - 1));
-  auto index_of = [&](double t) {
-    return static_cast<int>(std::lower_bound(s.t.begin(), s.t.end(), t - 1e-9 * p.dt_s) - s.t.begin());
+  const int frames = static_cast<int>(p.frames());
+  for (std::size_t q = 0; q < p.points.size(); ++q) {
+    std::sort(times[q].begin(), times[q].end());
+    PointSamples& ps = s.points[q];
+    for (double t : times[q])
+      if (ps.t.empty() || t > ps.t.back() + 1e-9 * p.dt_s) ps.t.push_back(t);
+    for (double t : ps.t) ps.frame.push_back(std::clamp(static_cast<int>(std::floor(t / p.dt_s + 1e-9)), 0, frames - 1));
+  }
+  auto index_of = [&](int q, double t) {
+    const std::vector<double>& ts = s.points[q].t;
+    return static_cast<int>(std::lower_bound(ts.begin(), ts.end(), t - 1e-9 * p.dt_s) - ts.begin());
   };
   for (const Constraint& c : p.constraints) {
-    s.target_sample.push_back(c.kind == Constraint::Kind::kTarget ? index_of(c.t_s) : -1);
+    s.target_sample.push_back(c.kind == Constraint::Kind::kTarget ? index_of(c.point, c.t_s) : -1);
     std::vector<int> range;
+    const std::vector<double>& ts = s.points[c.point].t;
     if (c.kind != Constraint::Kind::kTarget)
-      for (int k = index_of(c.t_s); k < static_cast<int>(s.t.size()) && s.t[k] <= c.until_s + 1e-9 * p.dt_s; ++k)
+      for (int k = index_of(c.point, c.t_s); k < static_cast<int>(ts.size()) && ts[k] <= c.until_s + 1e-9 * p.dt_s; ++k)
         range.push_back(k);
     s.bound_samples.push_back(range);
   }
@@ -61,7 +71,7 @@ Samples MakeSamples(const Problem& p) {
 // r(t) at the samples for decay rate kr and excitation rate a[frame] (Eq. 8.1
 // with the exact update, irradiance constant over each frame). T: double or a Ceres Jet.
 template <typename T>
-void StateAtSamples(const Samples& s, double dt_s, const std::vector<T>& a, const T& kr, std::vector<T>& r_out) {
+void StateAtSamples(const PointSamples& s, double dt_s, const std::vector<T>& a, const T& kr, std::vector<T>& r_out) {
   using std::exp;
   using std::expm1;
   r_out.resize(s.t.size());
@@ -85,15 +95,23 @@ void StateAtSamples(const Samples& s, double dt_s, const std::vector<T>& a, cons
   }
 }
 
-// The residuals of Eq. 8.7 given emitted radiance Lp[sample][band] (reflection added here).
+// Emitted radiance per point, sample and band.
 template <typename T>
-void Residuals(const Problem& p, const Samples& s, const std::vector<std::vector<T>>& Lp, T* out) {
+using Emitted = std::vector<std::vector<std::vector<T>>>;
+
+// The residuals of Eq. 8.7 given the emitted radiance (reflection added here).
+template <typename T>
+void Residuals(const Problem& p, const Samples& s, const Emitted<T>& Lp, T* out) {
   const int nb = p.bands.band_count();
   int k = 0;
   for (std::size_t c = 0; c < p.constraints.size(); ++c) {
     const Constraint& con = p.constraints[c];
+    const Point& point = p.points[con.point];
+    const PointSamples& ps = s.points[con.point];
     const double w = std::sqrt(con.weight);
-    auto L = [&](int sample, int b) { return Lp[sample][b] + p.albedo[b] * p.irradiance[s.frame[sample]][b] / kPi; };
+    auto L = [&](int sample, int b) {
+      return Lp[con.point][sample][b] + point.albedo[b] * point.irradiance[ps.frame[sample]][b] / kPi;
+    };
     if (con.kind == Constraint::Kind::kTarget) {
       for (int b = 0; b < nb; ++b) out[k++] = w * (L(s.target_sample[c], b) - con.radiance[b]);
     } else {
@@ -120,7 +138,8 @@ std::vector<int> LitBands(const Problem& p) {
   std::vector<int> lit;
   for (int b = 0; b < p.bands.band_count(); ++b) {
     bool any = false;
-    for (const auto& E : p.irradiance) any = any || E[b] > 0;
+    for (const Point& point : p.points)
+      for (const auto& E : point.irradiance) any = any || E[b] > 0;
     if (any) lit.push_back(b);
   }
   return lit;
@@ -138,7 +157,7 @@ Material ToMaterial(const Problem& p, const std::vector<int>& lit, const Paramet
   m.name = "edited";
   m.source = "phos edit solve (Sec. 8.6, Eq. 8.7) on " + p.source;
   m.bands = p.bands;
-  m.albedo = p.albedo;
+  m.albedo = p.points[0].albedo;
   for (std::size_t i = 0; i < x.kr.size(); ++i) {
     ExcitedState s;
     s.kr = x.kr[i];
@@ -150,12 +169,12 @@ Material ToMaterial(const Problem& p, const std::vector<int>& lit, const Paramet
   return m;
 }
 
-// Excitation rate per frame of a state: a = sum_b ke_b E_b.
+// Excitation rate per frame of a state at a point: a = sum_b ke_b E_b.
 template <typename T>
-std::vector<T> ExcitationPerFrame(const Problem& p, const std::vector<int>& lit, const T* ke) {
-  std::vector<T> a(p.irradiance.size(), T(0.0));
+std::vector<T> ExcitationPerFrame(const Point& point, const std::vector<int>& lit, const T* ke) {
+  std::vector<T> a(point.irradiance.size(), T(0.0));
   for (std::size_t f = 0; f < a.size(); ++f)
-    for (std::size_t l = 0; l < lit.size(); ++l) a[f] += ke[l] * p.irradiance[f][lit[l]];
+    for (std::size_t l = 0; l < lit.size(); ++l) a[f] += ke[l] * point.irradiance[f][lit[l]];
   return a;
 }
 
@@ -171,23 +190,27 @@ struct EditCost {
     const T* log_kr = parameters[0];
     const T* log_ke = parameters[1];
     const T* Lambda = parameters[2];
-    std::vector<std::vector<T>> Lp(s->t.size(), std::vector<T>(nb, T(0.0)));
+    Emitted<T> Lp(p->points.size());
+    for (std::size_t q = 0; q < p->points.size(); ++q)
+      Lp[q].assign(s->points[q].t.size(), std::vector<T>(nb, T(0.0)));
     std::vector<T> r;
     const int n_lit = static_cast<int>(lit->size());
     for (int i = 0; i < nc; ++i) {
       std::vector<T> ke(n_lit);
       for (int l = 0; l < n_lit; ++l) ke[l] = exp(log_ke[i * n_lit + l]);
       const T kr = exp(log_kr[i]);
-      StateAtSamples(*s, p->dt_s, ExcitationPerFrame(*p, *lit, ke.data()), kr, r);
-      for (std::size_t m = 0; m < r.size(); ++m)
-        for (int b = 0; b < nb; ++b) Lp[m][b] += Lambda[i * nb + b] * kr * r[m];
+      for (std::size_t q = 0; q < p->points.size(); ++q) {
+        StateAtSamples(s->points[q], p->dt_s, ExcitationPerFrame(p->points[q], *lit, ke.data()), kr, r);
+        for (std::size_t m = 0; m < r.size(); ++m)
+          for (int b = 0; b < nb; ++b) Lp[q][m][b] += Lambda[i * nb + b] * kr * r[m];
+      }
     }
     Residuals(*p, *s, Lp, residuals);
     return true;
   }
 };
 
-double CostOf(const Problem& p, const Samples& s, const std::vector<std::vector<double>>& Lp) {
+double CostOf(const Problem& p, const Samples& s, const Emitted<double>& Lp) {
   std::vector<double> residuals(ResidualCount(p, s));
   Residuals(p, s, Lp, residuals.data());
   double cost = 0;
@@ -195,15 +218,17 @@ double CostOf(const Problem& p, const Samples& s, const std::vector<std::vector<
   return cost;
 }
 
-std::vector<std::vector<double>> EmittedAtSamples(const Problem& p, const Samples& s, const std::vector<int>& lit,
-                                                  const Parameters& x) {
+Emitted<double> EmittedAtSamples(const Problem& p, const Samples& s, const std::vector<int>& lit, const Parameters& x) {
   const int nb = p.bands.band_count();
-  std::vector<std::vector<double>> Lp(s.t.size(), std::vector<double>(nb, 0.0));
+  Emitted<double> Lp(p.points.size());
   std::vector<double> r;
-  for (std::size_t i = 0; i < x.kr.size(); ++i) {
-    StateAtSamples(s, p.dt_s, ExcitationPerFrame(p, lit, x.ke[i].data()), x.kr[i], r);
-    for (std::size_t m = 0; m < r.size(); ++m)
-      for (int b = 0; b < nb; ++b) Lp[m][b] += x.Lambda[i][b] * x.kr[i] * r[m];
+  for (std::size_t q = 0; q < p.points.size(); ++q) {
+    Lp[q].assign(s.points[q].t.size(), std::vector<double>(nb, 0.0));
+    for (std::size_t i = 0; i < x.kr.size(); ++i) {
+      StateAtSamples(s.points[q], p.dt_s, ExcitationPerFrame(p.points[q], lit, x.ke[i].data()), x.kr[i], r);
+      for (std::size_t m = 0; m < r.size(); ++m)
+        for (int b = 0; b < nb; ++b) Lp[q][m][b] += x.Lambda[i][b] * x.kr[i] * r[m];
+    }
   }
   return Lp;
 }
@@ -217,7 +242,7 @@ std::vector<double> LogSpace(double lo, double hi, int n) {
 // Lambda for given state curves g_i(sample) = kr_i r_i: per band, non-negative
 // least squares on the targets (bounds are left to the refinement).
 std::vector<std::vector<double>> BestLambda(const Problem& p, const Samples& s,
-                                            const std::vector<std::vector<double>>& g) {
+                                            const std::vector<const std::vector<std::vector<double>>*>& g) {
   const int nc = static_cast<int>(g.size()), nb = p.bands.band_count();
   std::vector<std::vector<double>> Lambda(nc, std::vector<double>(nb, 0.0));
   for (int b = 0; b < nb; ++b) {
@@ -226,11 +251,13 @@ std::vector<std::vector<double>> BestLambda(const Problem& p, const Samples& s,
     for (std::size_t c = 0; c < p.constraints.size(); ++c) {
       const Constraint& con = p.constraints[c];
       if (con.kind != Constraint::Kind::kTarget) continue;
-      const int m = s.target_sample[c];
-      const double y = con.radiance[b] - p.albedo[b] * p.irradiance[s.frame[m]][b] / kPi;
+      const int m = s.target_sample[c], q = con.point;
+      const Point& point = p.points[q];
+      const double y = con.radiance[b] - point.albedo[b] * point.irradiance[s.points[q].frame[m]][b] / kPi;
       for (int i = 0; i < nc; ++i) {
-        rhs[i] += con.weight * g[i][m] * y;
-        for (int j = 0; j < nc; ++j) G(i, j) += con.weight * g[i][m] * g[j][m];
+        const double gi = (*g[i])[q][m];
+        rhs[i] += con.weight * gi * y;
+        for (int j = 0; j < nc; ++j) G(i, j) += con.weight * gi * (*g[j])[q][m];
       }
     }
     G.diagonal().array() += 1e-14 * (G.diagonal().maxCoeff() + 1e-300);  // a state unseen by any target
@@ -254,9 +281,10 @@ std::vector<std::string> Feedback(const Problem& p, const Samples& s, const std:
                       FormatShort(results[c].residual, 3) + " (" + FormatShort(100 * results[c].residual / std::max(scale, 1e-300), 3) +
                       "% of its largest band)");
     if (con.kind == Constraint::Kind::kTarget) {
-      const int frame = s.frame[s.target_sample[c]];
+      const Point& point = p.points[con.point];
+      const int frame = s.points[con.point].frame[s.target_sample[c]];
       for (int b = 0; b < nb; ++b) {
-        const double reflected = p.albedo[b] * p.irradiance[frame][b] / kPi;
+        const double reflected = point.albedo[b] * point.irradiance[frame][b] / kPi;
         if (con.radiance[b] < reflected * (1 - 1e-9))
           notes.push_back(con.label + ": band " + p.bands.BandName(b) + " asks for " + FormatShort(con.radiance[b], 3) +
                           " but the reflected light alone is " + FormatShort(reflected, 3));
@@ -268,11 +296,14 @@ std::vector<std::string> Feedback(const Problem& p, const Samples& s, const std:
   for (std::size_t i = 0; i < p.constraints.size(); ++i)
     for (std::size_t j = 0; j < p.constraints.size(); ++j) {
       const Constraint &a = p.constraints[i], &b = p.constraints[j];
-      if (a.kind != Constraint::Kind::kTarget || b.kind != Constraint::Kind::kTarget || !(a.t_s < b.t_s)) continue;
-      const int f0 = s.frame[s.target_sample[i]], f1 = s.frame[s.target_sample[j]];
+      if (a.kind != Constraint::Kind::kTarget || b.kind != Constraint::Kind::kTarget || !(a.t_s < b.t_s) ||
+          a.point != b.point)
+        continue;
+      const PointSamples& ps = s.points[a.point];
+      const int f0 = ps.frame[s.target_sample[i]], f1 = ps.frame[s.target_sample[j]];
       bool dark = true;
       for (int f = f0; f <= f1 && dark; ++f)
-        for (double e : p.irradiance[f]) dark = dark && (e == 0 || (f == f0 && a.t_s < p.dt_s * f0 - 1e-12));
+        for (double e : p.points[a.point].irradiance[f]) dark = dark && e == 0;
       if (!dark) continue;
       for (int band = 0; band < nb; ++band)
         if (b.radiance[band] > a.radiance[band] * (1 + 1e-6) + 1e-12) {
@@ -289,14 +320,17 @@ Solution Finish(const Problem& p, const Samples& s, const std::vector<int>& lit,
                 std::chrono::steady_clock::time_point start, int evaluations) {
   Solution solution;
   solution.material = ToMaterial(p, lit, x);
-  const std::vector<std::vector<double>> Lp = EmittedAtSamples(p, s, lit, x);
+  const Emitted<double> Lp = EmittedAtSamples(p, s, lit, x);
   solution.cost = CostOf(p, s, Lp);
   const int nb = p.bands.band_count();
   for (std::size_t c = 0; c < p.constraints.size(); ++c) {
     const Constraint& con = p.constraints[c];
+    const Point& point = p.points[con.point];
     ConstraintResult result;
     result.label = con.label;
-    auto L = [&](int m, int b) { return Lp[m][b] + p.albedo[b] * p.irradiance[s.frame[m]][b] / kPi; };
+    auto L = [&](int m, int b) {
+      return Lp[con.point][m][b] + point.albedo[b] * point.irradiance[s.points[con.point].frame[m]][b] / kPi;
+    };
     if (con.kind == Constraint::Kind::kTarget) {
       const int m = s.target_sample[c];
       double sum = 0;
@@ -333,13 +367,14 @@ Solution Solve(const Problem& p, const SolveOptions& options) {
   // lit frames scaled so that e . E_mean = 1 (kappa: the rate under the mean light).
   std::vector<double> mean(n_lit, 0.0), direction(n_lit, 0.0);
   int lit_frames = 0;
-  for (const auto& E : p.irradiance) {
-    double sum = 0;
-    for (int l = 0; l < n_lit; ++l) sum += E[lit[l]];
-    if (sum <= 0) continue;
-    ++lit_frames;
-    for (int l = 0; l < n_lit; ++l) mean[l] += E[lit[l]];
-  }
+  for (const Point& point : p.points)
+    for (const auto& E : point.irradiance) {
+      double sum = 0;
+      for (int l = 0; l < n_lit; ++l) sum += E[lit[l]];
+      if (sum <= 0) continue;
+      ++lit_frames;
+      for (int l = 0; l < n_lit; ++l) mean[l] += E[lit[l]];
+    }
   double norm2 = 0;
   for (int l = 0; l < n_lit; ++l) {
     mean[l] /= std::max(lit_frames, 1);
@@ -350,7 +385,7 @@ Solution Solve(const Problem& p, const SolveOptions& options) {
   // 1. The curve library: g = kr r(t) at the samples for a log grid of (kr, kappa).
   struct Curve {
     double kr, kappa;
-    std::vector<double> g;
+    std::vector<std::vector<double>> g;  // [point][sample]
   };
   std::vector<Curve> library;
   const std::vector<double> kr_grid = LogSpace(1e-3, 10.0, options.library_kr);
@@ -359,11 +394,15 @@ Solution Solve(const Problem& p, const SolveOptions& options) {
   for (double kappa : kappa_grid) {
     std::vector<double> ke(n_lit);
     for (int l = 0; l < n_lit; ++l) ke[l] = kappa * direction[l];
-    const std::vector<double> a = ExcitationPerFrame(p, lit, ke.data());
+    std::vector<std::vector<double>> a;
+    for (const Point& point : p.points) a.push_back(ExcitationPerFrame(point, lit, ke.data()));
     for (double kr : kr_grid) {
-      StateAtSamples(s, p.dt_s, a, kr, r);
-      Curve curve{kr, kappa, r};
-      for (double& v : curve.g) v *= kr;
+      Curve curve{kr, kappa, {}};
+      for (std::size_t q = 0; q < p.points.size(); ++q) {
+        StateAtSamples(s.points[q], p.dt_s, a[q], kr, r);
+        for (double& v : r) v *= kr;
+        curve.g.push_back(r);
+      }
       library.push_back(std::move(curve));
       ++evaluations;
     }
@@ -371,8 +410,8 @@ Solution Solve(const Problem& p, const SolveOptions& options) {
   // 2. Candidates: single curves (nc = 1) or combinations of the best singles,
   // each with its closed-form Lambda, ranked by the full cost.
   auto params_of = [&](const std::vector<const Curve*>& curves) {
-    std::vector<std::vector<double>> g;
-    for (const Curve* c : curves) g.push_back(c->g);
+    std::vector<const std::vector<std::vector<double>>*> g;
+    for (const Curve* c : curves) g.push_back(&c->g);
     Parameters x;
     x.Lambda = BestLambda(p, s, g);
     for (const Curve* c : curves) {
@@ -386,10 +425,13 @@ Solution Solve(const Problem& p, const SolveOptions& options) {
   std::vector<std::pair<double, Parameters>> ranked;
   auto evaluate = [&](const std::vector<const Curve*>& curves) {
     Parameters x = params_of(curves);
-    std::vector<std::vector<double>> Lp(s.t.size(), std::vector<double>(nb, 0.0));
-    for (std::size_t i = 0; i < curves.size(); ++i)
-      for (std::size_t m = 0; m < s.t.size(); ++m)
-        for (int b = 0; b < nb; ++b) Lp[m][b] += x.Lambda[i][b] * curves[i]->g[m];
+    Emitted<double> Lp(p.points.size());
+    for (std::size_t q = 0; q < p.points.size(); ++q) {
+      Lp[q].assign(s.points[q].t.size(), std::vector<double>(nb, 0.0));
+      for (std::size_t i = 0; i < curves.size(); ++i)
+        for (std::size_t m = 0; m < s.points[q].t.size(); ++m)
+          for (int b = 0; b < nb; ++b) Lp[q][m][b] += x.Lambda[i][b] * curves[i]->g[q][m];
+    }
     ranked.emplace_back(CostOf(p, s, Lp), std::move(x));
   };
   std::vector<std::pair<double, int>> singles;
@@ -512,14 +554,14 @@ std::optional<Solution> SolveGridBaseline(const Problem& p, std::string* why) {
   Parameters best;
   double best_cost = std::numeric_limits<double>::infinity();
   int evaluations = 0;
-  std::vector<int> ke_index(nb, 0);
-  std::vector<double> r;
+  std::vector<std::vector<double>> r(p.points.size());
   const int ke_combinations = static_cast<int>(std::pow(10, nb));
   for (double kr : kr_grid)
     for (int combination = 0; combination < ke_combinations; ++combination) {
       std::vector<double> ke(nb);
       for (int b = 0, rest = combination; b < nb; ++b, rest /= 10) ke[b] = ke_grid[rest % 10];
-      StateAtSamples(s, p.dt_s, ExcitationPerFrame(p, all_bands, ke.data()), kr, r);
+      for (std::size_t q = 0; q < p.points.size(); ++q)
+        StateAtSamples(s.points[q], p.dt_s, ExcitationPerFrame(p.points[q], all_bands, ke.data()), kr, r[q]);
       ++evaluations;
       // The cost separates over bands, and Lambda_b enters band b only: the
       // best Lambda grid point per band gives the grid's best over all 10^3.
@@ -531,7 +573,10 @@ std::optional<Solution> SolveGridBaseline(const Problem& p, std::string* why) {
           double c = 0;
           for (std::size_t k = 0; k < p.constraints.size(); ++k) {
             const Constraint& con = p.constraints[k];
-            auto L = [&](int m) { return Lambda * kr * r[m] + p.albedo[b] * p.irradiance[s.frame[m]][b] / kPi; };
+            const Point& point = p.points[con.point];
+            auto L = [&](int m) {
+              return Lambda * kr * r[con.point][m] + point.albedo[b] * point.irradiance[s.points[con.point].frame[m]][b] / kPi;
+            };
             if (con.kind == Constraint::Kind::kTarget) {
               c += con.weight * std::pow(L(s.target_sample[k]) - con.radiance[b], 2);
             } else {
@@ -571,10 +616,16 @@ double Cost(const Problem& p, const Material& material) {
 }
 
 std::vector<std::vector<double>> PredictRadiance(const Problem& p, const Material& material,
-                                                 const std::vector<double>& times_s) {
+                                                 const std::vector<double>& times_s, int point) {
   Problem probe = p;
   probe.constraints.clear();
-  for (double t : times_s) probe.constraints.push_back({Constraint::Kind::kTarget, t, t, std::vector<double>(p.bands.band_count(), 0.0), 1, ""});
+  for (double t : times_s) {
+    Constraint c;
+    c.point = point;
+    c.t_s = c.until_s = t;
+    c.radiance.assign(p.bands.band_count(), 0.0);
+    probe.constraints.push_back(c);
+  }
   const Samples s = MakeSamples(probe);
   const std::vector<int> lit = LitBands(p);
   Parameters x;
@@ -585,12 +636,14 @@ std::vector<std::vector<double>> PredictRadiance(const Problem& p, const Materia
     x.ke.push_back(ke);
     x.Lambda.push_back(state.Lambda);
   }
-  const std::vector<std::vector<double>> Lp = EmittedAtSamples(probe, s, lit, x);
+  const Emitted<double> Lp = EmittedAtSamples(probe, s, lit, x);
+  const Point& at = p.points[point];
   std::vector<std::vector<double>> out;
   for (std::size_t c = 0; c < times_s.size(); ++c) {
     const int m = s.target_sample[c];
     std::vector<double> L(p.bands.band_count());
-    for (int b = 0; b < p.bands.band_count(); ++b) L[b] = Lp[m][b] + p.albedo[b] * p.irradiance[s.frame[m]][b] / kPi;
+    for (int b = 0; b < p.bands.band_count(); ++b)
+      L[b] = Lp[point][m][b] + at.albedo[b] * at.irradiance[s.points[point].frame[m]][b] / kPi;
     out.push_back(L);
   }
   return out;

@@ -39,10 +39,12 @@ Problem FromTruth(const Material& truth, const std::vector<double>& E_lit, const
   p.bands = truth.bands;
   p.dt_s = 0.5;
   const int nb = truth.band_count();
-  for (int f = 0; f < 200; ++f) p.irradiance.push_back(f < 20 ? E_lit : std::vector<double>(nb, 0.0));
-  p.albedo.assign(nb, 0.5);
+  Point point;
+  for (int f = 0; f < 200; ++f) point.irradiance.push_back(f < 20 ? E_lit : std::vector<double>(nb, 0.0));
+  point.albedo.assign(nb, 0.5);
+  p.points.push_back(point);
   p.states = truth.state_count();
-  for (double t : times) p.constraints.push_back({Constraint::Kind::kTarget, t, t, std::vector<double>(nb, 0.0), 1, "t" + std::to_string(t)});
+  for (double t : times) p.constraints.push_back({Constraint::Kind::kTarget, 0, t, t, std::vector<double>(nb, 0.0), 1, "t" + std::to_string(t)});
   const auto L = PredictRadiance(p, truth, times);
   for (std::size_t c = 0; c < times.size(); ++c) p.constraints[c].radiance = L[c];
   return p;
@@ -95,7 +97,7 @@ TEST(EditorSolve, BoundsAreMet) {
   // "At least 0.05 in green until 60 s" with a fast-fading look otherwise.
   const Material truth = Truth(kRgb, {0.5}, {{0.2, 0.1, 0.05}}, {{0.5, 2.0, 0.3}});
   Problem p = FromTruth(truth, {1.0, 0.6, 0.2}, {5, 11});
-  p.constraints.push_back({Constraint::Kind::kAtLeast, 10, 60, {0, 0.05, 0}, 100, "bright until 60 s"});
+  p.constraints.push_back({Constraint::Kind::kAtLeast, 0, 10, 60, {0, 0.05, 0}, 100, "bright until 60 s"});
   const Solution s = Solve(p);
   EXPECT_LT(s.constraints.back().residual, 1e-3);  // largest violation over the range
   const auto L = PredictRadiance(p, s.material, {20, 40, 60});
@@ -112,6 +114,27 @@ TEST(EditorSolve, ContradictionsAreNamed) {
   bool named = false;
   for (const std::string& note : s.feedback) named = named || (note.find("early and late contradict") != std::string::npos);
   EXPECT_TRUE(named);
+}
+
+TEST(EditorSolve, SeveralPointsShareOneMaterial) {
+  // Two points of one surface, one lit twice as strongly: the same material
+  // must explain both looks.
+  const Material truth = Truth(kRgb, {0.3}, {{0.2, 0.1, 0.05}}, {{0.5, 2.0, 0.3}});
+  Problem p = FromTruth(truth, {1.0, 0.6, 0.2}, {5, 11, 30});
+  Point bright = p.points[0];
+  for (auto& E : bright.irradiance)
+    for (double& e : E) e *= 2;
+  p.points.push_back(bright);
+  const auto L = PredictRadiance(p, truth, {11, 30}, 1);
+  p.constraints.push_back({Constraint::Kind::kTarget, 1, 11, 11, L[0], 1, "bright 11"});
+  p.constraints.push_back({Constraint::Kind::kTarget, 1, 30, 30, L[1], 1, "bright 30"});
+  const Solution s = Solve(p);
+  EXPECT_LT(s.cost, 1e-8 * Scale(p));
+  EXPECT_NEAR(s.material.states[0].kr, 0.3, 0.003);
+  // Saturation differs between the points, which pins ke (not only ke * Lambda).
+  EXPECT_NEAR(s.material.states[0].ke[0].value() * 1.0 + s.material.states[0].ke[1].value() * 0.6 +
+                  s.material.states[0].ke[2].value() * 0.2,
+              0.2 + 0.06 + 0.01, 0.01);
 }
 
 TEST(EditorSolve, BadConstraintFilesNameTheField) {

@@ -35,6 +35,7 @@ namespace phos::editor {
 
 struct Constraint {
   enum class Kind { kTarget, kAtLeast, kAtMost } kind = Kind::kTarget;
+  int point = 0;                 // index into Problem::points
   double t_s = 0;
   double until_s = 0;            // bounds: the range's end (>= t_s); targets: = t_s
   std::vector<double> radiance;  // per band
@@ -42,15 +43,23 @@ struct Constraint {
   std::string label;             // "constraints[2]"
 };
 
+// A surface point the material is seen at: its irradiance over time (from
+// the renderer, once per edit session) and its albedo. A file has one; the
+// editor page adds one per clicked point, all sharing one material.
+struct Point {
+  std::vector<std::vector<double>> irradiance;  // per frame, per band
+  std::vector<double> albedo;                   // per band
+};
+
 struct Problem {
   std::string source;
   SpectralGrid bands;
   double dt_s = 0.1;
-  std::vector<std::vector<double>> irradiance;  // per frame, per band
-  std::vector<double> albedo;                   // per band
+  std::vector<Point> points;  // at least one; all with the same frame count
   int states = 1;
   std::vector<Constraint> constraints;
-  double end_s() const { return dt_s * static_cast<double>(irradiance.size()); }
+  std::size_t frames() const { return points.empty() ? 0 : points[0].irradiance.size(); }
+  double end_s() const { return dt_s * static_cast<double>(frames()); }
 };
 
 // phos.constraints/1 (DESIGN.md). Bad input: a UserError naming the file and field.
@@ -84,11 +93,11 @@ Solution Solve(const Problem& problem, const SolveOptions& options = {});
 // at most three bands, where Table 8.2's grid is defined.
 std::optional<Solution> SolveGridBaseline(const Problem& problem, std::string* why = nullptr);
 
-// The cost (Eq. 8.7) of any material on the problem, and its radiance per
-// frame start and band (for curves).
+// The cost (Eq. 8.7) of any material on the problem, and its radiance at
+// `point` at the given times, per band (for curves).
 double Cost(const Problem& problem, const Material& material);
 std::vector<std::vector<double>> PredictRadiance(const Problem& problem, const Material& material,
-                                                 const std::vector<double>& times_s);
+                                                 const std::vector<double>& times_s, int point = 0);
 
 nlohmann::json SolutionToJson(const Solution& solution);
 
