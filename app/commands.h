@@ -11,5 +11,6 @@ void RegisterFit(CLI::App& app);
 void RegisterCapture(CLI::App& app);
 void RegisterRender(CLI::App& app);
 void RegisterEdit(CLI::App& app);
+void RegisterEditor(CLI::App& app);
 
 }  // namespace phos::app

@@ -28,6 +28,7 @@ int main(int argc, char** argv) {
   phos::app::RegisterCapture(app);
   phos::app::RegisterRender(app);
   phos::app::RegisterEdit(app);
+  phos::app::RegisterEditor(app);
 
   // Name an unknown command rather than CLI11's "A subcommand is required".
   if (argc > 1 && argv[1][0] != '-') {

@@ -22,7 +22,7 @@ PACKAGES=(
   # JSON, command line, HTTP (editor)
   nlohmann-json3-dev libcli11-dev libcpp-httplib-dev
   # the editor page's browser test (Playwright drives Debian's Chromium)
-  chromium
+  chromium nodejs
 )
 
 missing=()

@@ -1,0 +1,97 @@
+#pragma once
+// One editing session of the material editor page (Sec. 8.6, Fig. 8.20): a
+// scene, the constraints an artist placed by clicking on its image, and the
+// materials solved for them. Every edit re-solves at once. The HTTP server
+// (server.h) is a thin layer over this class, which the tests drive directly.
+//
+// A constraint is a surface point (picked through a pixel), a time, a target
+// colour (linear sRGB, as the page shows it) and a weight. The irradiance at
+// each point over the scene's timeline comes from the renderer's lights and
+// shadow rays, computed once when the point is placed. Targets become band
+// radiance through the renderer's own colour conversion: the non-negative
+// mix of at most three bands with exactly the asked colour and the least
+// energy (see RgbToBands).
+//
+// Edit propagation (after Pellacini and Lawrence 2007): the solved material
+// is carried to other phosphorescent objects in proportion to their
+// similarity in albedo and position, w = exp(-d_albedo^2 / s_a^2 - d_pos^2 / s_p^2)
+// with the falloff s (0: no propagation), blending kr and ke in log space and
+// Lambda linearly.
+
+#include <cstdint>
+#include <filesystem>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "phos/editor/solve.h"
+#include "phos/model/material.h"
+#include "phos/render/geometry.h"
+#include "phos/render/scene.h"
+
+namespace phos::editor {
+
+class EditSession {
+ public:
+  // root: the only folder exports may write into. presets: phos.material/1 files.
+  EditSession(const std::filesystem::path& scene, const std::filesystem::path& presets_dir,
+              const std::filesystem::path& root);
+
+  // Everything the page shows: scene, timeline, objects, presets,
+  // constraints, their curves (predicted RGB over the timeline) and targets,
+  // the solution's cost, feedback and solve time.
+  nlohmann::json State() const;
+  // The view at t (direct transport, current materials), as PNG bytes.
+  std::vector<unsigned char> FramePng(double t_s, double exposure) const;
+
+  // Edits; each re-solves. Bad requests are UserErrors and change nothing.
+  void AddConstraint(int x, int y, double t_s);  // the pixel must show a phosphorescent surface
+  void UpdateConstraint(std::size_t index, const nlohmann::json& fields);  // rgb, t_s, weight, kind
+  void RemoveConstraint(std::size_t index);
+  void SetPreset(const std::string& object, const std::string& preset);
+  void SetStates(int states);
+  void SetPropagation(double falloff);
+  // The material of an object; and the same written under root (a relative path inside it).
+  nlohmann::json MaterialJson(const std::string& object) const;
+  std::filesystem::path ExportMaterial(const std::string& object, const std::string& relative_path) const;
+
+  const render::Scene& scene() const { return scene_; }
+  double last_solve_seconds() const { return last_solve_seconds_; }
+
+ private:
+  struct PlacedConstraint {
+    int object = -1;
+    Eigen::Vector3f position;
+    std::vector<std::vector<double>> irradiance;  // per timeline frame, per band
+    double t_s = 0;
+    std::vector<double> rgb;  // target, linear sRGB
+    double weight = 1;
+    Constraint::Kind kind = Constraint::Kind::kTarget;
+  };
+  int ObjectIndex(const std::string& name) const;
+  std::vector<double> RgbToBands(const std::vector<double>& rgb) const;
+  std::vector<double> BandsToRgb(const std::vector<double>& bands) const;
+  void Resolve();
+  void ApplyMaterials();
+
+  render::Scene scene_;
+  std::unique_ptr<render::SceneGeometry> geometry_;
+  std::filesystem::path root_;
+  std::map<std::string, std::filesystem::path> presets_;
+  std::vector<double> timeline_;  // frame start times
+  double dt_s_ = 0.1;
+  int states_ = 1;
+  double falloff_ = 0;
+  std::vector<PlacedConstraint> constraints_;
+  std::vector<std::shared_ptr<const Material>> base_;     // per object: before edits (scene or preset)
+  std::vector<std::shared_ptr<const Material>> solved_;   // per object: solved, or null
+  std::map<int, Solution> solutions_;                     // per edited object
+  std::vector<double> xyz_to_rgb_weights_;                // 3 x nb: band radiance -> linear sRGB
+  std::vector<int> wide_band_;                            // per band: 0 blue, 1 green, 2 red
+  double last_solve_seconds_ = 0;
+};
+
+}  // namespace phos::editor

@@ -1,0 +1,411 @@
+#include "phos/editor/session.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+
+#include <Eigen/LU>
+#include <stb/stb_image_write.h>
+
+#include "phos/render/renderer.h"
+#include "phos/render/solver.h"
+#include "phos/util/error.h"
+#include "phos/util/format.h"
+#include "phos/util/json.h"
+
+namespace phos::editor {
+namespace {
+
+constexpr int kTimelineFrames = 200;
+constexpr double kPi = 3.14159265358979323846;
+
+}  // namespace
+
+EditSession::EditSession(const std::filesystem::path& scene, const std::filesystem::path& presets_dir,
+                         const std::filesystem::path& root)
+    : scene_(render::LoadScene(scene)), root_(std::filesystem::weakly_canonical(root)) {
+  geometry_ = std::make_unique<render::SceneGeometry>(scene_);
+  std::error_code ec;
+  for (const auto& entry : std::filesystem::directory_iterator(presets_dir, ec))
+    if (entry.path().extension() == ".json") presets_[entry.path().stem().string()] = entry.path();
+  const double span = scene_.end_s - scene_.start_s;
+  dt_s_ = span > 0 ? span / kTimelineFrames : 0.1;
+  for (int k = 0; k < kTimelineFrames; ++k) timeline_.push_back(scene_.start_s + dt_s_ * k);
+  for (const render::Object& o : scene_.objects) base_.push_back(o.phosphor);
+  solved_.assign(scene_.objects.size(), nullptr);
+  // Band radiance -> linear sRGB: the renderer's own conversion (one pixel per band).
+  const int nb = scene_.bands.band_count();
+  render::Image unit(nb, 1, nb);
+  for (int b = 0; b < nb; ++b) unit.at(b, 0)[b] = 1.0f;
+  const render::Image rgb = render::BandsToLinearSrgb(unit, scene_.bands);
+  xyz_to_rgb_weights_.assign(3 * nb, 0.0);
+  for (int b = 0; b < nb; ++b)
+    for (int c = 0; c < 3; ++c) xyz_to_rgb_weights_[c * nb + b] = rgb.at(b, 0)[c];
+  for (int b = 0; b < nb; ++b) {
+    const double centre = scene_.bands.center_nm(b);
+    wide_band_.push_back(centre < 490 ? 0 : centre < 580 ? 1 : 2);
+  }
+}
+
+std::vector<double> EditSession::BandsToRgb(const std::vector<double>& bands) const {
+  const int nb = scene_.bands.band_count();
+  std::vector<double> rgb(3, 0.0);
+  for (int c = 0; c < 3; ++c)
+    for (int b = 0; b < nb; ++b) rgb[c] += xyz_to_rgb_weights_[c * nb + b] * bands[b];
+  return rgb;
+}
+
+std::vector<double> EditSession::RgbToBands(const std::vector<double>& rgb) const {
+  // A non-negative band spectrum with exactly the asked colour. By
+  // Caratheodory's theorem a colour in the cone of the bands' colours is a
+  // non-negative mix of at most three bands: try every three (56 for 8 bands)
+  // and keep the mix of least energy (the most spread). A colour no spectrum
+  // makes (outside the cone) falls back to flat radiance over three wide
+  // bands, clipped at zero.
+  const int nb = scene_.bands.band_count();
+  const Eigen::Vector3d target(rgb[0], rgb[1], rgb[2]);
+  std::vector<double> best;
+  double best_energy = std::numeric_limits<double>::infinity();
+  for (int a = 0; a < nb; ++a)
+    for (int b = a + 1; b < nb; ++b)
+      for (int c = b + 1; c < nb; ++c) {
+        Eigen::Matrix3d M;
+        for (int k = 0; k < 3; ++k) {
+          M(k, 0) = xyz_to_rgb_weights_[k * nb + a];
+          M(k, 1) = xyz_to_rgb_weights_[k * nb + b];
+          M(k, 2) = xyz_to_rgb_weights_[k * nb + c];
+        }
+        const Eigen::FullPivLU<Eigen::Matrix3d> lu(M);
+        if (!lu.isInvertible()) continue;
+        const Eigen::Vector3d x = lu.solve(target);
+        if (x.minCoeff() < -1e-12 * std::max(1.0, target.norm())) continue;
+        const double energy = x.squaredNorm();
+        if (energy < best_energy) {
+          best_energy = energy;
+          best.assign(nb, 0.0);
+          best[a] = std::max(0.0, x[0]);
+          best[b] = std::max(0.0, x[1]);
+          best[c] = std::max(0.0, x[2]);
+        }
+      }
+  if (!best.empty()) return best;
+  double width[3] = {0, 0, 0};
+  for (int b = 0; b < nb; ++b) width[wide_band_[b]] += scene_.bands.width_nm(b);
+  Eigen::Matrix3d M = Eigen::Matrix3d::Zero();
+  for (int b = 0; b < nb; ++b)
+    for (int c = 0; c < 3; ++c)
+      if (width[wide_band_[b]] > 0) M(c, wide_band_[b]) += xyz_to_rgb_weights_[c * nb + b] * scene_.bands.width_nm(b) / width[wide_band_[b]];
+  const Eigen::Vector3d wide = M.fullPivLu().solve(target).cwiseMax(0.0);
+  std::vector<double> bands(nb);
+  for (int b = 0; b < nb; ++b)
+    bands[b] = width[wide_band_[b]] > 0 ? wide[wide_band_[b]] * scene_.bands.width_nm(b) / width[wide_band_[b]] : 0.0;
+  return bands;
+}
+
+int EditSession::ObjectIndex(const std::string& name) const {
+  for (std::size_t o = 0; o < scene_.objects.size(); ++o)
+    if (scene_.objects[o].name == name) return static_cast<int>(o);
+  ThrowUserError("", "object", "the scene has no object '" + name + "'");
+}
+
+void EditSession::AddConstraint(int x, int y, double t_s) {
+  const render::Camera& camera = scene_.camera;
+  if (x < 0 || y < 0 || x >= camera.width || y >= camera.height)
+    ThrowUserError("", "x, y", "pixel (" + std::to_string(x) + ", " + std::to_string(y) + ") is outside the " +
+                                   std::to_string(camera.width) + "x" + std::to_string(camera.height) + " image");
+  if (!(t_s >= scene_.start_s && t_s <= scene_.end_s))
+    ThrowUserError("", "t_s", FormatDouble(t_s) + " s is outside the scene's time range");
+  // The camera ray through the pixel's centre (the renderer's own camera model).
+  const render::CameraKey key = camera.At(scene_.start_s);
+  const Eigen::Vector3f origin = key.position.cast<float>();
+  const Eigen::Vector3f forward = (key.look_at - key.position).normalized().cast<float>();
+  const Eigen::Vector3f right = forward.cross(camera.up.cast<float>()).normalized();
+  const Eigen::Vector3f up = right.cross(forward);
+  const float tan_half = std::tan(static_cast<float>(camera.fov_deg * kPi / 360));
+  const float sx = (2 * (x + 0.5f) / camera.width - 1) * tan_half * camera.width / camera.height;
+  const float sy = (1 - 2 * (y + 0.5f) / camera.height) * tan_half;
+  const render::Hit hit = geometry_->Intersect(origin, (forward + sx * right + sy * up).normalized());
+  if (!hit || !scene_.objects[hit.object].phosphor)
+    ThrowUserError("", "x, y", "pixel (" + std::to_string(x) + ", " + std::to_string(y) + ") shows " +
+                                   (hit ? "'" + scene_.objects[hit.object].name + "', which is not phosphorescent" : "nothing"));
+  if (!hit.front) ThrowUserError("", "x, y", "that is the back of '" + scene_.objects[hit.object].name + "', which does not glow");
+  PlacedConstraint c;
+  c.object = hit.object;
+  c.position = hit.position;
+  c.t_s = t_s;
+  // The irradiance there over the timeline, from every light (shadow rays), once.
+  const int nb = scene_.bands.band_count();
+  const Eigen::Vector3f p = hit.position + geometry_->ray_epsilon() * hit.normal;
+  for (double t : timeline_) {
+    std::vector<double> E(nb, 0.0);
+    const double mid = t + 0.5 * dt_s_;
+    for (const render::Light& light : scene_.lights) {
+      const double level = light.schedule.LevelAt(mid);
+      if (level <= 0) continue;
+      double unit = 0;
+      if (light.kind == render::Light::Kind::kPoint) {
+        const Eigen::Vector3f d = light.PositionAt(mid).cast<float>() - hit.position;
+        const float distance = d.norm(), cosine = hit.normal.dot(d) / distance;
+        if (cosine > 0 && !geometry_->Occluded(p, d / distance, distance * (1 - 1e-4f) - geometry_->ray_epsilon()))
+          unit = cosine / (distance * distance);
+      } else {
+        const Eigen::Vector3f to_light = -light.DirectionAt(mid).cast<float>();
+        const float cosine = hit.normal.dot(to_light);
+        if (cosine > 0 && !geometry_->Occluded(p, to_light, 1e30f)) unit = cosine;
+      }
+      for (int b = 0; b < nb; ++b) E[b] += level * light.E_per_band[b] * unit;
+    }
+    c.irradiance.push_back(E);
+  }
+  // The target starts as what the point looks like now.
+  const render::Object& object = scene_.objects[hit.object];
+  Problem probe;
+  probe.bands = scene_.bands;
+  probe.dt_s = dt_s_;
+  probe.points.push_back({c.irradiance, object.albedo});
+  const Material& now = *(solved_[hit.object] ? solved_[hit.object] : base_[hit.object]);
+  Material known = now;  // unknown ke where this scene assumes zero
+  for (ExcitedState& s : known.states)
+    for (auto& k : s.ke)
+      if (!k) k = 0.0;
+  c.rgb = BandsToRgb(PredictRadiance(probe, known, {t_s - scene_.start_s})[0]);
+  for (double& v : c.rgb) v = std::max(v, 0.0);
+  constraints_.push_back(c);
+  Resolve();
+}
+
+void EditSession::UpdateConstraint(std::size_t index, const nlohmann::json& fields) {
+  if (index >= constraints_.size()) ThrowUserError("", "index", "no constraint " + std::to_string(index));
+  PlacedConstraint c = constraints_[index];
+  const JsonField f(fields, "request");
+  f.RejectUnknownKeys({"index", "rgb", "t_s", "weight", "kind"});
+  if (f.Has("rgb")) c.rgb = f["rgb"].NumberArray(3, 0.0);
+  if (f.Has("t_s")) c.t_s = f["t_s"].NumberInRange(scene_.start_s, scene_.end_s);
+  if (f.Has("weight")) c.weight = f["weight"].NumberAtLeast(0);
+  if (f.Has("kind")) {
+    const std::string kind = f["kind"].String();
+    if (kind == "target") c.kind = Constraint::Kind::kTarget;
+    else if (kind == "at_least") c.kind = Constraint::Kind::kAtLeast;
+    else if (kind == "at_most") c.kind = Constraint::Kind::kAtMost;
+    else f["kind"].Fail("expected target, at_least or at_most");
+  }
+  constraints_[index] = c;  // only once every field is valid
+  Resolve();
+}
+
+void EditSession::RemoveConstraint(std::size_t index) {
+  if (index >= constraints_.size()) ThrowUserError("", "index", "no constraint " + std::to_string(index));
+  constraints_.erase(constraints_.begin() + static_cast<std::ptrdiff_t>(index));
+  Resolve();
+}
+
+void EditSession::SetPreset(const std::string& object, const std::string& preset) {
+  const int o = ObjectIndex(object);
+  if (!scene_.objects[o].phosphor) ThrowUserError("", "object", "'" + object + "' is not phosphorescent");
+  const auto it = presets_.find(preset);
+  if (it == presets_.end()) ThrowUserError("", "preset", "no preset '" + preset + "'");
+  auto material = std::make_shared<Material>(LoadMaterial(it->second));
+  if (!(material->bands == scene_.bands)) ThrowUserError(it->second.string(), "bands_nm", "differ from the scene's");
+  base_[o] = material;
+  Resolve();
+}
+
+void EditSession::SetStates(int states) {
+  if (states < 1 || states > 3) ThrowUserError("", "states", "expected 1, 2 or 3");
+  states_ = states;
+  Resolve();
+}
+
+void EditSession::SetPropagation(double falloff) {
+  if (!(falloff >= 0 && falloff <= 10)) ThrowUserError("", "falloff", "expected a number in [0, 10]");
+  falloff_ = falloff;
+  Resolve();
+}
+
+void EditSession::Resolve() {
+  const auto start = std::chrono::steady_clock::now();
+  solutions_.clear();
+  std::fill(solved_.begin(), solved_.end(), nullptr);
+  // One problem per edited object: its constraints' points share its material.
+  std::map<int, Problem> problems;
+  for (std::size_t i = 0; i < constraints_.size(); ++i) {
+    const PlacedConstraint& c = constraints_[i];
+    Problem& p = problems[c.object];
+    p.source = "editor: '" + scene_.objects[c.object].name + "'";
+    p.bands = scene_.bands;
+    p.dt_s = dt_s_;
+    p.states = states_;
+    p.points.push_back({c.irradiance, scene_.objects[c.object].albedo});
+    Constraint constraint;
+    constraint.kind = c.kind;
+    constraint.point = static_cast<int>(p.points.size()) - 1;
+    constraint.t_s = constraint.until_s = c.t_s - scene_.start_s;
+    if (c.kind != Constraint::Kind::kTarget) constraint.until_s = scene_.end_s - scene_.start_s;  // "until the end"
+    constraint.radiance = RgbToBands(c.rgb);
+    // Relative error counts: a faint glow matters as much as a lit look.
+    double norm2 = 0;
+    for (double v : constraint.radiance) norm2 += v * v;
+    constraint.weight = c.weight / std::max(norm2, 1e-12);
+    constraint.label = "constraint " + std::to_string(i + 1);
+    p.constraints.push_back(constraint);
+  }
+  for (auto& [object, problem] : problems) {
+    Solution solution = Solve(problem);
+    auto material = std::make_shared<Material>(solution.material);
+    material->name = scene_.objects[object].name + " (edited)";
+    material->albedo.reset();
+    solved_[object] = material;
+    solutions_[object] = std::move(solution);
+  }
+  ApplyMaterials();
+  last_solve_seconds_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+void EditSession::ApplyMaterials() {
+  // Edited objects wear their solution; the others, their base material, or a
+  // blend toward the most similar edited object's solution (edit propagation).
+  Eigen::AlignedBox3f scene_box;
+  std::vector<Eigen::Vector3f> centre(scene_.objects.size());
+  for (std::size_t o = 0; o < scene_.objects.size(); ++o) {
+    Eigen::AlignedBox3f box;
+    for (int t = 0; t < geometry_->triangle_count(static_cast<int>(o)); ++t)
+      for (int k = 0; k < 3; ++k) box.extend(geometry_->Vertex(static_cast<int>(o), t, k));
+    centre[o] = box.center();
+    scene_box.extend(box);
+  }
+  const double diagonal = scene_box.diagonal().norm();
+  for (std::size_t o = 0; o < scene_.objects.size(); ++o) {
+    render::Object& object = scene_.objects[o];
+    if (!object.phosphor) continue;
+    std::shared_ptr<const Material> material = solved_[o] ? solved_[o] : base_[o];
+    if (!solved_[o] && falloff_ > 0) {
+      double best_w = 0;
+      std::shared_ptr<const Material> source;
+      for (const auto& [edited, solution] : solutions_) {
+        double d_albedo = 0;
+        for (std::size_t b = 0; b < object.albedo.size(); ++b)
+          d_albedo += std::pow(object.albedo[b] - scene_.objects[edited].albedo[b], 2);
+        const double d_position = (centre[o] - centre[edited]).norm() / diagonal;
+        const double w = std::exp(-(d_albedo + d_position * d_position) / (falloff_ * falloff_));
+        if (w > best_w) {
+          best_w = w;
+          source = solved_[edited];
+        }
+      }
+      if (source && best_w > 0.01) {
+        auto blended = std::make_shared<Material>(*source);
+        const Material& base = *base_[o];
+        if (base.state_count() == source->state_count()) {
+          for (int i = 0; i < source->state_count(); ++i) {
+            ExcitedState& s = blended->states[i];
+            const ExcitedState& b = base.states[i];
+            s.kr = std::exp((1 - best_w) * std::log(b.kr) + best_w * std::log(s.kr));
+            for (std::size_t k = 0; k < s.ke.size(); ++k)
+              s.ke[k] = (1 - best_w) * b.ke[k].value_or(0.0) + best_w * s.ke[k].value_or(0.0);
+            for (std::size_t k = 0; k < s.Lambda.size(); ++k) s.Lambda[k] = (1 - best_w) * b.Lambda[k] + best_w * s.Lambda[k];
+          }
+        } else if (best_w < 0.5) {
+          blended = std::make_shared<Material>(base);
+        }
+        blended->name = object.name + " (propagated, w = " + FormatShort(best_w, 2) + ")";
+        material = blended;
+      }
+    }
+    object.phosphor = material;
+  }
+}
+
+nlohmann::json EditSession::State() const {
+  nlohmann::json objects = nlohmann::json::array();
+  for (std::size_t o = 0; o < scene_.objects.size(); ++o) {
+    const render::Object& object = scene_.objects[o];
+    objects.push_back({{"name", object.name},
+                       {"phosphorescent", object.phosphor != nullptr},
+                       {"material", object.phosphor ? object.phosphor->name : ""},
+                       {"edited", solved_[o] != nullptr}});
+  }
+  nlohmann::json presets = nlohmann::json::array();
+  for (const auto& [name, path] : presets_) presets.push_back(name);
+  nlohmann::json constraints = nlohmann::json::array();
+  for (std::size_t i = 0; i < constraints_.size(); ++i) {
+    const PlacedConstraint& c = constraints_[i];
+    Problem probe;
+    probe.bands = scene_.bands;
+    probe.dt_s = dt_s_;
+    probe.points.push_back({c.irradiance, scene_.objects[c.object].albedo});
+    Material material = *scene_.objects[c.object].phosphor;
+    for (ExcitedState& s : material.states)
+      for (auto& k : s.ke)
+        if (!k) k = 0.0;
+    std::vector<double> times;
+    for (double t : timeline_) times.push_back(t - scene_.start_s);
+    times.push_back(c.t_s - scene_.start_s);
+    const auto L = PredictRadiance(probe, material, times);
+    nlohmann::json curve = nlohmann::json::array();
+    for (std::size_t k = 0; k + 1 < L.size(); ++k) curve.push_back(BandsToRgb(L[k]));
+    const std::vector<double> predicted = BandsToRgb(L.back());
+    double error = 0, norm = 0;
+    for (int k = 0; k < 3; ++k) {
+      error += std::pow(predicted[k] - c.rgb[k], 2);
+      norm += c.rgb[k] * c.rgb[k];
+    }
+    const char* kind = c.kind == Constraint::Kind::kTarget ? "target" : c.kind == Constraint::Kind::kAtLeast ? "at_least" : "at_most";
+    constraints.push_back({{"object", scene_.objects[c.object].name}, {"t_s", c.t_s}, {"rgb", c.rgb},
+                           {"weight", c.weight}, {"kind", kind}, {"predicted", predicted},
+                           {"relative_error", std::sqrt(error / std::max(norm, 1e-300))}, {"curve", curve}});
+  }
+  nlohmann::json solutions = nlohmann::json::array();
+  for (const auto& [object, solution] : solutions_)
+    solutions.push_back({{"object", scene_.objects[object].name}, {"cost", solution.cost},
+                         {"feedback", solution.feedback}, {"seconds", solution.seconds},
+                         {"material", MaterialToJson(solution.material)}});
+  return {{"scene", scene_.name}, {"width", scene_.camera.width}, {"height", scene_.camera.height},
+          {"exposure", scene_.camera.exposure},
+          {"start_s", scene_.start_s}, {"end_s", scene_.end_s}, {"dt_s", dt_s_}, {"timeline", timeline_},
+          {"objects", objects}, {"presets", presets}, {"states", states_}, {"falloff", falloff_},
+          {"constraints", constraints}, {"solutions", solutions}, {"solve_ms", last_solve_seconds_ * 1e3}};
+}
+
+std::vector<unsigned char> EditSession::FramePng(double t_s, double exposure) const {
+  if (!(t_s >= scene_.start_s && t_s <= scene_.end_s + 1e-9))
+    ThrowUserError("", "t", FormatDouble(t_s) + " s is outside the scene's time range");
+  render::CoupledSolver solver(scene_, *geometry_);
+  solver.AdvanceTo(t_s);
+  const render::Image bands =
+      render::RenderBands(*geometry_, &solver, render::DefaultFrameOptions(scene_, render::Transport::kDirect));
+  const render::Image display = render::ToneMap(render::BandsToLinearSrgb(bands, scene_.bands), exposure);
+  std::vector<unsigned char> pixels(display.pixels.size());
+  for (std::size_t i = 0; i < pixels.size(); ++i)
+    pixels[i] = static_cast<unsigned char>(std::lround(std::clamp(display.pixels[i], 0.0f, 1.0f) * 255));
+  std::vector<unsigned char> png;
+  stbi_write_png_to_func(
+      [](void* context, void* data, int size) {
+        auto* out = static_cast<std::vector<unsigned char>*>(context);
+        out->insert(out->end(), static_cast<unsigned char*>(data), static_cast<unsigned char*>(data) + size);
+      },
+      &png, display.width, display.height, 3, pixels.data(), display.width * 3);
+  return png;
+}
+
+nlohmann::json EditSession::MaterialJson(const std::string& object) const {
+  const int o = ObjectIndex(object);
+  if (!scene_.objects[o].phosphor) ThrowUserError("", "object", "'" + object + "' is not phosphorescent");
+  return MaterialToJson(*scene_.objects[o].phosphor);
+}
+
+std::filesystem::path EditSession::ExportMaterial(const std::string& object, const std::string& relative_path) const {
+  const std::filesystem::path requested(relative_path);
+  const std::filesystem::path target = std::filesystem::weakly_canonical(root_ / requested);
+  const auto [root_end, ignored] = std::mismatch(root_.begin(), root_.end(), target.begin(), target.end());
+  if (requested.is_absolute() || root_end != root_.end() || target == root_)
+    ThrowUserError("", "path", "'" + relative_path + "' is outside the project's working folder " + root_.string());
+  if (target.extension() != ".json") ThrowUserError("", "path", "a material file ends in .json");
+  const int o = ObjectIndex(object);
+  if (!scene_.objects[o].phosphor) ThrowUserError("", "object", "'" + object + "' is not phosphorescent");
+  std::filesystem::create_directories(target.parent_path());
+  SaveMaterial(*scene_.objects[o].phosphor, target);
+  return target;
+}
+
+}  // namespace phos::editor
