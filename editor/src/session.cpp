@@ -266,12 +266,16 @@ void EditSession::ApplyMaterials() {
   // Edited objects wear their solution; the others, their base material, or a
   // blend toward the most similar edited object's solution (edit propagation).
   Eigen::AlignedBox3f scene_box;
-  std::vector<Eigen::Vector3f> centre(scene_.objects.size());
+  std::vector<Eigen::Vector3f> centre(scene_.objects.size()), normal(scene_.objects.size());
   for (std::size_t o = 0; o < scene_.objects.size(); ++o) {
     Eigen::AlignedBox3f box;
-    for (int t = 0; t < geometry_->triangle_count(static_cast<int>(o)); ++t)
+    Eigen::Vector3f area_normal = Eigen::Vector3f::Zero();
+    for (int t = 0; t < geometry_->triangle_count(static_cast<int>(o)); ++t) {
       for (int k = 0; k < 3; ++k) box.extend(geometry_->Vertex(static_cast<int>(o), t, k));
+      area_normal += geometry_->Area(static_cast<int>(o), t) * geometry_->FrontNormal(static_cast<int>(o), t);
+    }
     centre[o] = box.center();
+    normal[o] = area_normal.norm() > 0 ? Eigen::Vector3f(area_normal.normalized()) : Eigen::Vector3f::Zero();
     scene_box.extend(box);
   }
   const double diagonal = scene_box.diagonal().norm();
@@ -287,7 +291,9 @@ void EditSession::ApplyMaterials() {
         for (std::size_t b = 0; b < object.albedo.size(); ++b)
           d_albedo += std::pow(object.albedo[b] - scene_.objects[edited].albedo[b], 2);
         const double d_position = (centre[o] - centre[edited]).norm() / diagonal;
-        const double w = std::exp(-(d_albedo + d_position * d_position) / (falloff_ * falloff_));
+        // Closed objects average their normals to ~0: then orientation says nothing.
+        const double d_normal = 0.5 * (1.0 - normal[o].dot(normal[edited])) * normal[o].norm() * normal[edited].norm();
+        const double w = std::exp(-(d_albedo + d_position * d_position + d_normal) / (falloff_ * falloff_));
         if (w > best_w) {
           best_w = w;
           source = solved_[edited];

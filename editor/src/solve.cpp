@@ -601,9 +601,10 @@ std::optional<Solution> SolveGridBaseline(const Problem& p, std::string* why) {
   return Finish(p, s, all_bands, best, start, evaluations);
 }
 
-double Cost(const Problem& p, const Material& material) {
-  const Samples s = MakeSamples(p);
-  const std::vector<int> lit = LitBands(p);
+namespace {
+
+// A material as the solver's parameters (ke on the lit bands; unknown as 0).
+Parameters ParametersOf(const Material& material, const std::vector<int>& lit) {
   Parameters x;
   for (const ExcitedState& state : material.states) {
     x.kr.push_back(state.kr);
@@ -612,6 +613,15 @@ double Cost(const Problem& p, const Material& material) {
     x.ke.push_back(ke);
     x.Lambda.push_back(state.Lambda);
   }
+  return x;
+}
+
+}  // namespace
+
+double Cost(const Problem& p, const Material& material) {
+  const Samples s = MakeSamples(p);
+  const std::vector<int> lit = LitBands(p);
+  const Parameters x = ParametersOf(material, lit);
   return CostOf(p, s, EmittedAtSamples(p, s, lit, x));
 }
 
@@ -628,14 +638,7 @@ std::vector<std::vector<double>> PredictRadiance(const Problem& p, const Materia
   }
   const Samples s = MakeSamples(probe);
   const std::vector<int> lit = LitBands(p);
-  Parameters x;
-  for (const ExcitedState& state : material.states) {
-    x.kr.push_back(state.kr);
-    std::vector<double> ke;
-    for (int b : lit) ke.push_back(state.ke[b].value_or(0.0));
-    x.ke.push_back(ke);
-    x.Lambda.push_back(state.Lambda);
-  }
+  const Parameters x = ParametersOf(material, lit);
   const Emitted<double> Lp = EmittedAtSamples(probe, s, lit, x);
   const Point& at = p.points[point];
   std::vector<std::vector<double>> out;

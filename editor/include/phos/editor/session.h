@@ -14,9 +14,11 @@
 //
 // Edit propagation (after Pellacini and Lawrence 2007): the solved material
 // is carried to other phosphorescent objects in proportion to their
-// similarity in albedo and position, w = exp(-d_albedo^2 / s_a^2 - d_pos^2 / s_p^2)
-// with the falloff s (0: no propagation), blending kr and ke in log space and
-// Lambda linearly.
+// similarity in albedo, position and orientation,
+//   w = exp(-(|d_albedo|^2 + (d_position / scene diagonal)^2 + (1 - n . n') / 2) / falloff^2)
+// (n: an object's area-weighted mean normal; 0: no propagation), blending kr
+// in log space and ke and Lambda linearly. Materials are per object in the
+// renderer, so edits propagate object by object.
 
 #include <cstdint>
 #include <filesystem>
