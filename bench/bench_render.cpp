@@ -108,16 +108,14 @@ BENCHMARK(BM_PathFrameDark1spp)->Unit(benchmark::kMillisecond)->UseRealTime();
 // Embree's ceiling on this machine and scene: rays that only find their hit.
 void BM_EmbreeCeilingPrimary(benchmark::State& state) {
   Cornell c;
-  const Vec3f origin(0.278f, 0.273f, -0.8f);
-  const float tan_half = std::tan(39.3f * 3.14159265f / 360);
+  const CameraRays camera(c.scene, 0);
   std::uint64_t rays = 0;
   for (auto _ : state) {
     std::atomic<int> hits{0};
     tbb::parallel_for(0, kSize, [&](int y) {
       int h = 0;
       for (int x = 0; x < kSize; ++x) {
-        const Vec3f d = Vec3f((1 - 2 * (x + 0.5f) / kSize) * tan_half, (1 - 2 * (y + 0.5f) / kSize) * tan_half, 1).normalized();
-        h += static_cast<bool>(c.geometry->Intersect(origin, d));
+        h += static_cast<bool>(c.geometry->Intersect(camera.origin(), camera.Direction(x + 0.5f, y + 0.5f)));
       }
       hits += h;
     });

@@ -116,16 +116,9 @@ void EditSession::AddConstraint(int x, int y, double t_s) {
                                    std::to_string(camera.width) + "x" + std::to_string(camera.height) + " image");
   if (!(t_s >= scene_.start_s && t_s <= scene_.end_s))
     ThrowUserError("", "t_s", FormatDouble(t_s) + " s is outside the scene's time range");
-  // The camera ray through the pixel's centre (the renderer's own camera model).
-  const render::CameraKey key = camera.At(scene_.start_s);
-  const Eigen::Vector3f origin = key.position.cast<float>();
-  const Eigen::Vector3f forward = (key.look_at - key.position).normalized().cast<float>();
-  const Eigen::Vector3f right = forward.cross(camera.up.cast<float>()).normalized();
-  const Eigen::Vector3f up = right.cross(forward);
-  const float tan_half = std::tan(static_cast<float>(camera.fov_deg * kPi / 360));
-  const float sx = (2 * (x + 0.5f) / camera.width - 1) * tan_half * camera.width / camera.height;
-  const float sy = (1 - 2 * (y + 0.5f) / camera.height) * tan_half;
-  const render::Hit hit = geometry_->Intersect(origin, (forward + sx * right + sy * up).normalized());
+  // The camera ray through the pixel's centre (the renderer's own camera).
+  const render::CameraRays rays(scene_, scene_.start_s);
+  const render::Hit hit = geometry_->Intersect(rays.origin(), rays.Direction(x + 0.5f, y + 0.5f));
   if (!hit || !scene_.objects[hit.object].phosphor)
     ThrowUserError("", "x, y", "pixel (" + std::to_string(x) + ", " + std::to_string(y) + ") shows " +
                                    (hit ? "'" + scene_.objects[hit.object].name + "', which is not phosphorescent" : "nothing"));
@@ -136,24 +129,14 @@ void EditSession::AddConstraint(int x, int y, double t_s) {
   c.t_s = t_s;
   // The irradiance there over the timeline, from every light (shadow rays), once.
   const int nb = scene_.bands.band_count();
-  const Eigen::Vector3f p = hit.position + geometry_->ray_epsilon() * hit.normal;
   for (double t : timeline_) {
     std::vector<double> E(nb, 0.0);
     const double mid = t + 0.5 * dt_s_;
     for (const render::Light& light : scene_.lights) {
       const double level = light.schedule.LevelAt(mid);
       if (level <= 0) continue;
-      double unit = 0;
-      if (light.kind == render::Light::Kind::kPoint) {
-        const Eigen::Vector3f d = light.PositionAt(mid).cast<float>() - hit.position;
-        const float distance = d.norm(), cosine = hit.normal.dot(d) / distance;
-        if (cosine > 0 && !geometry_->Occluded(p, d / distance, distance * (1 - 1e-4f) - geometry_->ray_epsilon()))
-          unit = cosine / (distance * distance);
-      } else {
-        const Eigen::Vector3f to_light = -light.DirectionAt(mid).cast<float>();
-        const float cosine = hit.normal.dot(to_light);
-        if (cosine > 0 && !geometry_->Occluded(p, to_light, 1e30f)) unit = cosine;
-      }
+      const render::Vec3 at = light.kind == render::Light::Kind::kPoint ? light.PositionAt(mid) : light.DirectionAt(mid);
+      const double unit = render::UnitIrradiance(*geometry_, light.kind, at.cast<float>(), hit.position, hit.normal);
       for (int b = 0; b < nb; ++b) E[b] += level * light.E_per_band[b] * unit;
     }
     c.irradiance.push_back(E);
@@ -165,10 +148,8 @@ void EditSession::AddConstraint(int x, int y, double t_s) {
   probe.dt_s = dt_s_;
   probe.points.push_back({c.irradiance, object.albedo});
   const Material& now = *(solved_[hit.object] ? solved_[hit.object] : base_[hit.object]);
-  Material known = now;  // unknown ke where this scene assumes zero
-  for (ExcitedState& s : known.states)
-    for (auto& k : s.ke)
-      if (!k) k = 0.0;
+  Material known = now;
+  AssumeUnknownKeZero(known);  // only a curve to start the target from
   c.rgb = BandsToRgb(PredictRadiance(probe, known, {t_s - scene_.start_s})[0]);
   for (double& v : c.rgb) v = std::max(v, 0.0);
   constraints_.push_back(c);
@@ -341,9 +322,7 @@ nlohmann::json EditSession::State() const {
     probe.dt_s = dt_s_;
     probe.points.push_back({c.irradiance, scene_.objects[c.object].albedo});
     Material material = *scene_.objects[c.object].phosphor;
-    for (ExcitedState& s : material.states)
-      for (auto& k : s.ke)
-        if (!k) k = 0.0;
+    AssumeUnknownKeZero(material);  // the curves show it; unknown ke means unlit there
     std::vector<double> times;
     for (double t : timeline_) times.push_back(t - scene_.start_s);
     times.push_back(c.t_s - scene_.start_s);

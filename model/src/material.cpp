@@ -119,4 +119,10 @@ void SaveMaterial(const Material& material, const std::filesystem::path& path) {
   WriteFileAtomically(path, MaterialToJson(material).dump(2) + "\n");
 }
 
+void AssumeUnknownKeZero(Material& material) {
+  for (ExcitedState& state : material.states)
+    for (std::optional<double>& ke : state.ke)
+      if (!ke) ke = 0.0;
+}
+
 }  // namespace phos

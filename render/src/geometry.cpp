@@ -160,6 +160,44 @@ float SceneGeometry::Area(int object, int triangle) const {
   return 0.5f * (Vertex(object, triangle, 1) - v0).cross(Vertex(object, triangle, 2) - v0).norm();
 }
 
+float UnitIrradiance(const SceneGeometry& geometry, Light::Kind kind, const Vec3f& at, const Vec3f& p,
+                     const Vec3f& n, std::uint64_t* rays) {
+  const Vec3f origin = p + geometry.ray_epsilon() * n;
+  if (kind == Light::Kind::kPoint) {
+    const Vec3f d = at - p;
+    const float distance2 = d.squaredNorm(), distance = std::sqrt(distance2);
+    const float cosine = distance > 0 ? n.dot(d) / distance : 0.0f;
+    if (!(cosine > 0)) return 0.0f;  // behind the surface: only its front charges and reflects
+    if (rays) ++*rays;
+    if (geometry.Occluded(origin, d / distance, distance * (1 - 1e-4f) - geometry.ray_epsilon())) return 0.0f;
+    return cosine / distance2;
+  }
+  const Vec3f to_light = -at;
+  const float cosine = n.dot(to_light);
+  if (!(cosine > 0)) return 0.0f;
+  if (rays) ++*rays;
+  return geometry.Occluded(origin, to_light, 1e30f) ? 0.0f : cosine;
+}
+
+CameraRays::CameraRays(const Scene& scene, double t_s) {
+  const CameraKey key = scene.camera.At(t_s);
+  origin_ = key.position.cast<float>();
+  forward_ = (key.look_at - key.position).normalized().cast<float>();
+  right_ = forward_.cross(scene.camera.up.cast<float>()).normalized();
+  if (!right_.allFinite()) right_ = forward_.unitOrthogonal();  // looking along `up`
+  up_ = right_.cross(forward_);
+  tan_half_y_ = std::tan(static_cast<float>(scene.camera.fov_deg) * 3.14159265358979f / 360.0f);
+  width_ = static_cast<float>(scene.camera.width);
+  height_ = static_cast<float>(scene.camera.height);
+  aspect_ = width_ / height_;
+}
+
+Vec3f CameraRays::Direction(float x, float y) const {
+  const float sx = (2 * x / width_ - 1) * tan_half_y_ * aspect_;
+  const float sy = (1 - 2 * y / height_) * tan_half_y_;
+  return (forward_ + sx * right_ + sy * up_).normalized();
+}
+
 TexelAtlas::TexelAtlas(const Scene& scene, const SceneGeometry& geometry) : slot_(scene.objects.size(), -1) {
   const double default_size = scene.texel_size_m > 0 ? scene.texel_size_m : geometry.diagonal_m() / 200.0;
   for (std::size_t o = 0; o < scene.objects.size(); ++o) {

@@ -13,7 +13,6 @@
 namespace phos::render {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
 
 void RequireStatic(const Scene& scene) {
   for (const Object& o : scene.objects)
@@ -31,30 +30,15 @@ double Ke(const Object& object, int i, int b) {
                  "unknown, and object '" + object.name + "' does not assume zero (unknown_ke)");
 }
 
-// Per pixel: the visible phosphor point and, per light, its geometric
-// irradiance factor there (cos / d^2 or cos, shadowed).
-struct VisiblePoint {
-  int object = -1;
-  std::vector<double> unit;  // per light
-};
-
 template <typename PerPixel>
 Image ForEachPixel(const SceneGeometry& geometry, PerPixel per_pixel) {
   const Scene& scene = geometry.scene();
   const int nb = scene.bands.band_count(), width = scene.camera.width, height = scene.camera.height;
   Image image(width, height, nb);
-  const CameraKey key = scene.camera.At(geometry.time_s());
-  const Vec3f origin = key.position.cast<float>();
-  const Vec3f forward = (key.look_at - key.position).normalized().cast<float>();
-  const Vec3f right = forward.cross(scene.camera.up.cast<float>()).normalized();
-  const Vec3f up = right.cross(forward);
-  const float tan_half = std::tan(static_cast<float>(scene.camera.fov_deg * kPi / 360));
-  const float aspect = static_cast<float>(width) / static_cast<float>(height);
+  const CameraRays camera(scene, geometry.time_s());
   tbb::parallel_for(0, height, [&](int y) {
     for (int x = 0; x < width; ++x) {
-      const float sx = (2 * (x + 0.5f) / width - 1) * tan_half * aspect, sy = (1 - 2 * (y + 0.5f) / height) * tan_half;
-      const Vec3f direction = (forward + sx * right + sy * up).normalized();
-      const Hit hit = geometry.Intersect(origin, direction);
+      const Hit hit = geometry.Intersect(camera.origin(), camera.Direction(x + 0.5f, y + 0.5f));
       if (!hit || !hit.front || !scene.objects[hit.object].phosphor) continue;
       per_pixel(hit, image.at(x, y), static_cast<std::uint64_t>(y) * width + x);
     }
@@ -62,18 +46,10 @@ Image ForEachPixel(const SceneGeometry& geometry, PerPixel per_pixel) {
   return image;
 }
 
+// The light's geometric irradiance factor at a hit (lights are static here).
 double UnitIrradiance(const SceneGeometry& geometry, const Light& light, const Hit& hit) {
-  const Vec3f origin = hit.position + geometry.ray_epsilon() * hit.normal;
-  if (light.kind == Light::Kind::kPoint) {
-    const Vec3f d = light.position.cast<float>() - hit.position;
-    const float distance = d.norm(), cosine = hit.normal.dot(d) / distance;
-    if (!(cosine > 0) || geometry.Occluded(origin, d / distance, distance * (1 - 1e-4f) - geometry.ray_epsilon())) return 0;
-    return cosine / (distance * distance);
-  }
-  const Vec3f to_light = -light.direction.cast<float>();
-  const float cosine = hit.normal.dot(to_light);
-  if (!(cosine > 0) || geometry.Occluded(origin, to_light, 1e30f)) return 0;
-  return cosine;
+  const Vec3 at = light.kind == Light::Kind::kPoint ? light.PositionAt(0) : light.DirectionAt(0);
+  return render::UnitIrradiance(geometry, light.kind, at.cast<float>(), hit.position, hit.normal);
 }
 
 }  // namespace

@@ -35,30 +35,6 @@ struct Random {
 // Radiance or throughput per band, without allocation.
 using Bands = Eigen::Array<float, Eigen::Dynamic, 1, 0, kMaxBands, 1>;
 
-struct CameraFrame {
-  Vec3f origin, forward, right, up;
-  float tan_half_y, aspect;
-};
-
-CameraFrame MakeCameraFrame(const Scene& scene, double t_s) {
-  const CameraKey key = scene.camera.At(t_s);
-  CameraFrame c;
-  c.origin = key.position.cast<float>();
-  c.forward = (key.look_at - key.position).normalized().cast<float>();
-  c.right = c.forward.cross(scene.camera.up.cast<float>()).normalized();
-  if (!c.right.allFinite()) c.right = c.forward.unitOrthogonal();  // looking along `up`
-  c.up = c.right.cross(c.forward);
-  c.tan_half_y = std::tan(static_cast<float>(scene.camera.fov_deg) * kPi / 360.0f);
-  c.aspect = static_cast<float>(scene.camera.width) / static_cast<float>(scene.camera.height);
-  return c;
-}
-
-Vec3f CameraRay(const CameraFrame& c, const Scene& scene, float x, float y) {
-  const float sx = (2 * x / static_cast<float>(scene.camera.width) - 1) * c.tan_half_y * c.aspect;
-  const float sy = (1 - 2 * y / static_cast<float>(scene.camera.height)) * c.tan_half_y;
-  return (c.forward + sx * c.right + sy * c.up).normalized();
-}
-
 // Cosine-weighted direction about n (Malley's method).
 Vec3f SampleCosine(const Vec3f& n, float u1, float u2) {
   const float r = std::sqrt(u1), phi = 2 * kPi * u2;
@@ -136,8 +112,8 @@ class Tracer {
       const double level = light.schedule.LevelAt(t);
       if (level <= 0) continue;
       LitLight lit;
-      lit.point = light.kind == Light::Kind::kPoint;
-      lit.at = (lit.point ? light.PositionAt(t) : light.DirectionAt(t)).cast<float>();
+      lit.kind = light.kind;
+      lit.at = (light.kind == Light::Kind::kPoint ? light.PositionAt(t) : light.DirectionAt(t)).cast<float>();
       lit.E = Bands(nb_);
       for (int b = 0; b < nb_; ++b) lit.E[b] = static_cast<float>(level * light.E_per_band[b]);
       lights_.push_back(lit);
@@ -155,37 +131,20 @@ class Tracer {
     for (int b : solver_->emission_bands(slot)) L[b] += solver_->Lp(slot, b, texel);
   }
 
+  // Le = Lp at the hit; false where nothing glows.
   bool Emission(const Hit& hit, Bands& Le) const {
-    if (!solver_ || !hit.front) return false;
-    const int slot = solver_->atlas().SlotOf(hit.object);
-    if (slot < 0) return false;
-    const std::size_t texel = solver_->atlas().TexelOf(slot, hit.triangle, hit.b1, hit.b2);
+    if (!solver_ || !hit.front || solver_->atlas().SlotOf(hit.object) < 0) return false;
     Le.setZero(nb_);
-    for (int b : solver_->emission_bands(slot)) Le[b] = solver_->Lp(slot, b, texel);
+    AddEmission(hit, Le);
     return true;
   }
 
   // Irradiance from the scene's lights at p on the side of n_s (shadow rays).
   void DirectIrradiance(const Vec3f& p, const Vec3f& n_s, Bands& E, std::uint64_t& rays) const {
     E.setZero(nb_);
-    const Vec3f origin = p + geometry_.ray_epsilon() * n_s;
     for (const LitLight& light : lights_) {
-      if (light.point) {
-        const Vec3f d = light.at - p;
-        const float distance2 = d.squaredNorm(), distance = std::sqrt(distance2);
-        const float cosine = n_s.dot(d) / distance;
-        if (!(cosine > 0)) continue;
-        ++rays;
-        if (geometry_.Occluded(origin, d / distance, distance * (1 - 1e-4f) - geometry_.ray_epsilon())) continue;
-        E += light.E * (cosine / distance2);
-      } else {
-        const Vec3f to_light = -light.at;
-        const float cosine = n_s.dot(to_light);
-        if (!(cosine > 0)) continue;
-        ++rays;
-        if (geometry_.Occluded(origin, to_light, 1e30f)) continue;
-        E += light.E * cosine;
-      }
+      const float unit = UnitIrradiance(geometry_, light.kind, light.at, p, n_s, &rays);
+      if (unit > 0) E += light.E * unit;
     }
   }
 
@@ -277,7 +236,7 @@ class Tracer {
 
  private:
   struct LitLight {
-    bool point;
+    Light::Kind kind;
     Vec3f at;
     Bands E;
   };
@@ -330,7 +289,7 @@ Image RenderBands(const SceneGeometry& geometry, const CoupledSolver* solver, co
   const int width = scene.camera.width, height = scene.camera.height;
   Image image(width, height, nb);
   const Tracer tracer(geometry, solver, options);
-  const CameraFrame camera = MakeCameraFrame(scene, geometry.time_s());
+  const CameraRays camera(scene, geometry.time_s());
   std::atomic<std::uint64_t> total_rays{0};
   const int spp = options.transport == Transport::kPath ? options.spp : options.direct_spp;
   tbb::parallel_for(0, height, [&](int y) {
@@ -341,9 +300,9 @@ Image RenderBands(const SceneGeometry& geometry, const CoupledSolver* solver, co
       for (int s = 0; s < spp; ++s) {
         // One centred sample when there is one; jittered otherwise.
         const float jx = spp == 1 ? 0.5f : random.Uniform(), jy = spp == 1 ? 0.5f : random.Uniform();
-        const Vec3f direction = CameraRay(camera, scene, static_cast<float>(x) + jx, static_cast<float>(y) + jy);
-        sum += options.transport == Transport::kPath ? tracer.Path(camera.origin, direction, random, rays)
-                                                     : tracer.Direct(camera.origin, direction, rays);
+        const Vec3f direction = camera.Direction(static_cast<float>(x) + jx, static_cast<float>(y) + jy);
+        sum += options.transport == Transport::kPath ? tracer.Path(camera.origin(), direction, random, rays)
+                                                     : tracer.Direct(camera.origin(), direction, rays);
       }
       sum /= static_cast<float>(spp);
       std::copy(sum.data(), sum.data() + nb, image.at(x, y));

@@ -47,10 +47,7 @@ CoupledSolver::CoupledSolver(const Scene& scene, SceneGeometry& geometry)
     const Object& object = scene.objects[texels.object];
     Material material = *object.phosphor;
     const std::string where = scene.source + ": object '" + object.name + "' (" + object.phosphor_path + ")";
-    if (object.unknown_ke_as_zero)  // the scene file states this assumption explicitly
-      for (ExcitedState& state : material.states)
-        for (auto& ke : state.ke)
-          if (!ke) ke = 0.0;
+    if (object.unknown_ke_as_zero) AssumeUnknownKeZero(material);  // the scene file states this assumption
     Group g;
     g.object = texels.object;
     g.emission_index.assign(nb, -1);
@@ -73,7 +70,7 @@ CoupledSolver::CoupledSolver(const Scene& scene, SceneGeometry& geometry)
     g.E.assign(g.excitation_bands.size() * texels.count, 0.0f);
     g.unit_E.resize(scene.lights.size());
     g.unit_E_light_at.assign(scene.lights.size(), Eigen::Vector3d::Constant(std::nan("")));
-    g.unit_E_geometry_time.assign(scene.lights.size(), -1);
+    g.unit_E_version.assign(scene.lights.size(), ~std::uint64_t{0});
     stats_.texels += texels.count;
     groups_.push_back(std::move(g));
   }
@@ -158,13 +155,13 @@ void CoupledSolver::BuildGlowPatches() {
     }
   });
   stats_.shadow_rays += n * n * 4;
-  glow_.geometry_version = double(geometry_.version());
+  glow_.geometry_version = geometry_.version();
   glow_.Lp.assign(n * glow_.emission_bands.size(), 0.0f);
   glow_.E.assign(n * glow_.emission_bands.size(), 0.0f);
 }
 
 bool CoupledSolver::GatherGlow() {
-  if (glow_.geometry_version != double(geometry_.version())) BuildGlowPatches();
+  if (glow_.geometry_version != geometry_.version()) BuildGlowPatches();
   const std::size_t n = glow_.count, nbg = glow_.emission_bands.size();
   // Mean Lp of each patch, band-major.
   std::fill(glow_.Lp.begin(), glow_.Lp.end(), 0.0f);
@@ -219,7 +216,7 @@ void CoupledSolver::InitialStates() {
 }
 
 void CoupledSolver::UpdateTexelFrames(Group& g) {
-  if (g.texel_time == static_cast<double>(geometry_.version()) && !g.texel_position.empty()) return;
+  if (g.texel_version == geometry_.version() && !g.texel_position.empty()) return;
   const int slot = atlas_.SlotOf(g.object);
   g.texel_position.resize(g.states.n);
   g.texel_normal.resize(g.states.n);
@@ -229,7 +226,7 @@ void CoupledSolver::UpdateTexelFrames(Group& g) {
       g.texel_normal[k] = geometry_.FrontNormal(g.object, t);
     });
   });
-  g.texel_time = static_cast<double>(geometry_.version());
+  g.texel_version = geometry_.version();
 }
 
 const std::vector<float>& CoupledSolver::UnitIrradiance(Group& g, int l) {
@@ -237,36 +234,18 @@ const std::vector<float>& CoupledSolver::UnitIrradiance(Group& g, int l) {
   const double t = geometry_.time_s();
   const Eigen::Vector3d at = light.kind == Light::Kind::kPoint ? light.PositionAt(t) : light.DirectionAt(t);
   std::vector<float>& unit = g.unit_E[l];
-  if (!unit.empty() && at == g.unit_E_light_at[l] && g.unit_E_geometry_time[l] == double(geometry_.version()))
+  if (!unit.empty() && at == g.unit_E_light_at[l] && g.unit_E_version[l] == geometry_.version())
     return unit;
   UpdateTexelFrames(g);
   const std::size_t n = g.states.n;
   unit.resize(n);
-  const float epsilon = geometry_.ray_epsilon();
-  const Vec3f p_light = at.cast<float>();
+  const Vec3f light_at = at.cast<float>();
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 256), [&](const tbb::blocked_range<std::size_t>& range) {
-    for (std::size_t j = range.begin(); j != range.end(); ++j) {
-      const Vec3f& p = g.texel_position[j];
-      const Vec3f& normal = g.texel_normal[j];
-      float value = 0;
-      if (light.kind == Light::Kind::kPoint) {
-        const Vec3f d = p_light - p;
-        const float distance2 = d.squaredNorm();
-        const float distance = std::sqrt(distance2);
-        const float cosine = distance > 0 ? normal.dot(d) / distance : 0;
-        // E = I cos(theta) / d^2 for a point light, on the front side only.
-        if (cosine > 0 && !geometry_.Occluded(p + epsilon * normal, d / distance, distance * (1 - 1e-4f) - epsilon))
-          value = cosine / distance2;
-      } else {
-        const Vec3f to_light = -p_light;  // `at` is the direction light travels
-        const float cosine = normal.dot(to_light);
-        if (cosine > 0 && !geometry_.Occluded(p + epsilon * normal, to_light, 1e30f)) value = cosine;
-      }
-      unit[j] = value;
-    }
+    for (std::size_t j = range.begin(); j != range.end(); ++j)
+      unit[j] = render::UnitIrradiance(geometry_, light.kind, light_at, g.texel_position[j], g.texel_normal[j]);
   });
   g.unit_E_light_at[l] = at;
-  g.unit_E_geometry_time[l] = double(geometry_.version());
+  g.unit_E_version[l] = geometry_.version();
   ++stats_.irradiance_updates;
   stats_.shadow_rays += n;
   return unit;

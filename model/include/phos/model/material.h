@@ -55,6 +55,10 @@ Material MaterialFromJson(const nlohmann::json& json, const std::string& source)
 nlohmann::json MaterialToJson(const Material& material);
 // Writes atomically (temporary file + rename): an existing file is never left half-written.
 void SaveMaterial(const Material& material, const std::filesystem::path& path);
+// Sets every unknown ke to 0. Only for callers that state this assumption
+// (a scene's "unknown_ke": "zero"), never as phos's own guess.
+void AssumeUnknownKeZero(Material& material);
+
 // Checks a material built in code by the same rules as a loaded one.
 void ValidateMaterial(const Material& material, const std::string& source);
 

@@ -94,6 +94,29 @@ struct TexelAnchor {
   float b1, b2;
 };
 
+// Irradiance at point p (front normal n) per unit of a light's band
+// irradiance, shadowed by one Embree ray from just off the surface: cos / d^2
+// for a point light at `at`, cos for a directional light travelling along
+// `at`; 0 behind the surface or in shadow (E = I cos / d^2, Sec. 8.5). If
+// `rays` is given, it counts the shadow rays cast. Used by the coupled solver,
+// both transports, the comparison methods and the editor, so that all of them
+// light a point the same way.
+float UnitIrradiance(const SceneGeometry& geometry, Light::Kind kind, const Vec3f& at, const Vec3f& p,
+                     const Vec3f& n, std::uint64_t* rays = nullptr);
+
+// The pinhole camera at one moment: ray directions through image points in
+// pixels ((x + 0.5, y + 0.5) is the centre of pixel x, y).
+class CameraRays {
+ public:
+  CameraRays(const Scene& scene, double t_s);
+  Vec3f origin() const { return origin_; }
+  Vec3f Direction(float x, float y) const;
+
+ private:
+  Vec3f origin_, forward_, right_, up_;
+  float tan_half_y_, aspect_, width_, height_;
+};
+
 // The texels of the phosphorescent objects: the mesh's UV map when it has
 // one (a grid of uv_resolution^2 texels over [0, 1]^2, of which only those a
 // triangle covers carry a state), else the automatic per-triangle atlas.

@@ -77,9 +77,9 @@ class CoupledSolver {
     // only: cos / d^2 and visibility), and where it was computed.
     std::vector<std::vector<float>> unit_E;
     std::vector<Eigen::Vector3d> unit_E_light_at;
-    std::vector<double> unit_E_geometry_time;
-    std::vector<Eigen::Vector3f> texel_position, texel_normal;  // at texel_time
-    double texel_time = -1e300;
+    std::vector<std::uint64_t> unit_E_version;  // the geometry's version() it was computed at
+    std::vector<Eigen::Vector3f> texel_position, texel_normal;  // at texel_version
+    std::uint64_t texel_version = ~std::uint64_t{0};
     std::vector<std::uint32_t> texel_patch;  // phosphor_irradiance: the glow patch of each texel
   };
 
@@ -96,7 +96,7 @@ class CoupledSolver {
     std::vector<int> emission_bands;  // bands any phosphor emits
     std::vector<float> Lp, E;         // per patch per band (scratch)
     std::size_t count = 0;
-    double geometry_version = -1;
+    std::uint64_t geometry_version = ~std::uint64_t{0};
   };
   void BuildGlowPatches();
   // Fills glow_.E from the current Lp; false if nothing glows.
@@ -115,7 +115,6 @@ class CoupledSolver {
   std::vector<Group> groups_;
   int band_count_ = 0;
   double time_s_ = 0;
-  double geometry_stamp_ = 0;  // time of the last geometry change seen
   SolverStats stats_;
   GlowPatches glow_;
   bool glow_enabled_ = false;
