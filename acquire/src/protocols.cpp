@@ -3,10 +3,20 @@
 #include <algorithm>
 #include <cmath>
 
+#include <fstream>
+
 #include "phos/util/error.h"
 #include "phos/util/format.h"
 
 namespace phos {
+
+bool AutoExposure::IsValid(std::string* error) const {
+  if (!(min_exposure_s > 0) || !(initial_exposure_s >= min_exposure_s) || !(max_exposure_s >= initial_exposure_s))
+    return *error = "need 0 < min exposure <= initial exposure <= max exposure", false;
+  if (!(low_fraction > 0 && low_fraction < high_fraction && high_fraction < 1))
+    return *error = "need 0 < low fraction < high fraction < 1", false;
+  return true;
+}
 
 bool DecayProtocolOptions::IsValid(std::string* error) const {
   if (charge_light.empty()) return *error = "no charge light named", false;
@@ -38,10 +48,53 @@ double RecordFrame(SessionWriter& session, const Frame& frame, nlohmann::json li
     means.push_back(frame.MeanSignal(c));
     brightest = std::max(brightest, means.back() / range);
   }
+  // Through the LVF the light lands in a few columns: judge the exposure by
+  // the brightest column, which the frame mean would hide.
+  if (line.value("lvf", false)) {
+    brightest = 0;
+    for (int c = 0; c < frame.channels; ++c)
+      for (int x = 0; x < frame.width; ++x) {
+        double sum = 0;
+        for (int y = 0; y < frame.height; ++y)
+          sum += frame.pixels[(static_cast<std::size_t>(y) * frame.width + x) * frame.channels + c];
+        brightest = std::max(brightest, (sum / frame.height - frame.black_level_dn) / range);
+      }
+    line["peak_column_fraction"] = brightest;
+  }
   line["mean_signal_dn"] = means;
   line["saturated_fraction"] = frame.SaturatedFraction();
   session.WriteFrame(frame, line);
   return brightest;
+}
+
+// The next exposure after a frame whose brightest channel sat at `brightest`
+// of the range: halve when too bright or clipping, double when too dark.
+// Returns `exposure` unchanged when the frame was well exposed.
+double NextExposure(const AutoExposure& a, double exposure, double brightest, const Frame& frame) {
+  if (brightest > a.high_fraction || frame.SaturatedFraction() > 0) return std::max(exposure / 2, a.min_exposure_s);
+  if (brightest < a.low_fraction) return std::min(exposure * 2, a.max_exposure_s);
+  return exposure;
+}
+
+bool WellExposed(const AutoExposure& a, double brightest, const Frame& frame) {
+  return brightest >= a.low_fraction && brightest <= a.high_fraction && frame.SaturatedFraction() == 0;
+}
+
+void RecordRig(SessionWriter& session, const RigChange& rig, const Clock& clock, const std::string& what, bool in_place) {
+  rig(what, in_place);
+  session.Event({{"t_s", clock.now_s()}, {"event", "rig"}, {"what", what}, {"in_place", in_place}});
+}
+
+// The lines of a session's frames.jsonl that parse (a crash can tear the last).
+std::vector<nlohmann::json> ReadFrameLines(const std::filesystem::path& session_dir) {
+  std::vector<nlohmann::json> lines;
+  std::ifstream in(session_dir / "frames.jsonl");
+  std::string text;
+  while (std::getline(in, text)) {
+    nlohmann::json line = nlohmann::json::parse(text, nullptr, false);
+    if (!line.is_discarded() && line.is_object()) lines.push_back(std::move(line));
+  }
+  return lines;
 }
 
 // Runs a protocol's body; on any error the session is marked failed with the
@@ -115,7 +168,7 @@ bool ExcitationProtocolOptions::IsValid(std::string* error) const {
 }
 
 ExcitationProtocolResult RunExcitationProtocol(Camera& camera, Lights& lights, Clock& clock, SessionWriter& session,
-                                               const ExcitationProtocolOptions& options) {
+                                               const ExcitationProtocolOptions& options, const ExcitationDone& done) {
   std::string error;
   if (!options.IsValid(&error)) ThrowUserError("", "excitation protocol", error);
   const auto channels = lights.channels();
@@ -125,6 +178,12 @@ ExcitationProtocolResult RunExcitationProtocol(Camera& camera, Lights& lights, C
   ExcitationProtocolResult result;
   // One charge-then-measure experiment; returns the brightest channel's signal.
   auto measure = [&](const std::string& light, double charge_s) {
+    // Already measured before an interruption: replay its response. Charge
+    // times come from doublings and square roots of the same numbers, so
+    // they repeat exactly; a relative tolerance guards the last bit.
+    for (auto it = done.lower_bound({light, charge_s * (1 - 1e-9)});
+         it != done.end() && it->first.first == light && it->first.second <= charge_s * (1 + 1e-9); ++it)
+      return it->second;
     lights.AllOff();
     clock.SleepFor(options.reset_s);
     RecordLight(session, lights, clock, light, true);
@@ -137,6 +196,8 @@ ExcitationProtocolResult RunExcitationProtocol(Camera& camera, Lights& lights, C
     return RecordFrame(session, frame,
                        {{"light", light}, {"charge_s", charge_s}, {"delay_after_light_off_s", frame.t_start_s - off}});
   };
+  if (!done.empty())
+    session.Event({{"t_s", clock.now_s()}, {"event", "resume"}, {"measurements_kept", done.size()}});
   RunRecorded(session, lights, clock, "excitation", [&] {
     for (const std::string& light : options.lights) {
       // Doubling until the response stops growing.
@@ -153,6 +214,149 @@ ExcitationProtocolResult RunExcitationProtocol(Camera& camera, Lights& lights, C
     }
   });
   return result;
+}
+
+ExcitationDone ReadExcitationDone(const std::filesystem::path& session_dir) {
+  ExcitationDone done;
+  for (const nlohmann::json& line : ReadFrameLines(session_dir)) {
+    if (!line.contains("light") || !line.contains("charge_s") || !line.contains("mean_signal_dn") ||
+        !line.contains("adc_bits") || !line.contains("black_level_dn"))
+      continue;
+    const double range = std::pow(2.0, line["adc_bits"].get<int>()) - 1 - line["black_level_dn"].get<double>();
+    double brightest = 0;
+    for (double mean : line["mean_signal_dn"]) brightest = std::max(brightest, mean / range);
+    done[{line["light"].get<std::string>(), line["charge_s"].get<double>()}] = brightest;
+  }
+  return done;
+}
+
+bool SpectrumProtocolOptions::IsValid(std::string* error) const {
+  if (charge_light.empty()) return *error = "no charge light named", false;
+  if (!(charge_s >= 0)) return *error = "charge time must be >= 0", false;
+  if (frames < 1) return *error = "need at least 1 frame", false;
+  if (!(first_delay_s >= 0)) return *error = "first delay must be >= 0", false;
+  return exposure.IsValid(error);
+}
+
+SpectrumProtocolResult RunSpectrumProtocol(Camera& camera, Lights& lights, Clock& clock, SessionWriter& session,
+                                           const RigChange& rig, const SpectrumProtocolOptions& options) {
+  std::string error;
+  if (!options.IsValid(&error)) ThrowUserError("", "spectrum protocol", error);
+  const auto channels = lights.channels();
+  if (std::find(channels.begin(), channels.end(), options.charge_light) == channels.end())
+    lights.Set(options.charge_light, false);  // names the known channels in its error
+  LightsOffGuard guard(lights);
+  SpectrumProtocolResult result;
+  RunRecorded(session, lights, clock, "spectrum", [&] {
+    lights.AllOff();
+    // The filter goes in while the sample charges, so no glow is lost to it.
+    RecordRig(session, rig, clock, "lvf", true);
+    RecordLight(session, lights, clock, options.charge_light, true);
+    clock.SleepFor(options.charge_s);
+    RecordLight(session, lights, clock, options.charge_light, false);
+    const double off = clock.now_s();
+    clock.SleepUntil(off + options.first_delay_s);
+    double exposure = options.exposure.initial_exposure_s;
+    // Every frame is kept; a series that never settles stops after 4x the asked count.
+    for (int attempt = 0; result.well_exposed < options.frames && attempt < 4 * options.frames + 8; ++attempt) {
+      Frame frame = camera.Capture(std::min(exposure, camera.max_exposure_s()), options.gain);
+      // The brightest channel peaks in some column; judge the exposure there.
+      const double brightest = RecordFrame(session, frame,
+                                           {{"kind", "spectrum"},
+                                            {"lvf", true},
+                                            {"delay_after_light_off_s", frame.t_start_s - off}});
+      ++result.frames;
+      const bool good = WellExposed(options.exposure, brightest, frame);
+      result.well_exposed += good;
+      session.Event({{"t_s", clock.now_s()}, {"event", "exposure"}, {"seq", session.frame_count()}, {"well_exposed", good}});
+      exposure = NextExposure(options.exposure, exposure, brightest, frame);
+    }
+    RecordRig(session, rig, clock, "lvf", false);
+    if (result.well_exposed < options.frames)
+      ThrowUserError("", "spectrum protocol",
+                     "only " + std::to_string(result.well_exposed) + " of " + std::to_string(options.frames) +
+                         " frames were well exposed (the glow is too faint through the filter or fades too fast)");
+  });
+  return result;
+}
+
+bool LvfCalibrationOptions::IsValid(std::string* error) const {
+  if (lines.size() < 2) return *error = "need at least 2 sources of known wavelength", false;
+  for (const CalibrationLine& line : lines)
+    if (!(line.wavelength_nm > 200 && line.wavelength_nm < 1200))
+      return *error = "wavelength of '" + line.light + "' must be in 200-1200 nm", false;
+  if (flat_light.empty() || !(flat_temperature_k > 0)) return *error = "need a flat-field lamp and its temperature", false;
+  if (max_tries < 1) return *error = "max tries must be >= 1", false;
+  return exposure.IsValid(error);
+}
+
+LvfCalibrationResult RunLvfCalibrationProtocol(Camera& camera, Lights& lights, Clock& clock, SessionWriter& session,
+                                               const RigChange& rig, const LvfCalibrationOptions& options,
+                                               const std::vector<std::string>& done) {
+  std::string error;
+  if (!options.IsValid(&error)) ThrowUserError("", "lvf-calibration protocol", error);
+  const auto channels = lights.channels();
+  for (const CalibrationLine& line : options.lines)
+    if (std::find(channels.begin(), channels.end(), line.light) == channels.end()) lights.Set(line.light, false);
+  if (std::find(channels.begin(), channels.end(), options.flat_light) == channels.end())
+    lights.Set(options.flat_light, false);
+  LightsOffGuard guard(lights);
+  LvfCalibrationResult result;
+  auto is_done = [&](const std::string& light) { return std::find(done.begin(), done.end(), light) != done.end(); };
+  // One source: on, step the exposure until a frame is well exposed, off.
+  // Every frame is recorded; the well-exposed one says so.
+  auto expose = [&](const std::string& light, nlohmann::json what) {
+    if (!light.empty()) RecordLight(session, lights, clock, light, true);
+    double exposure = options.exposure.initial_exposure_s;
+    bool good = false;
+    for (int attempt = 0; attempt < options.max_tries && !good; ++attempt) {
+      Frame frame = camera.Capture(std::min(exposure, camera.max_exposure_s()), options.gain);
+      nlohmann::json line = what;
+      const double brightest = RecordFrame(session, frame, line);
+      ++result.frames;
+      good = light.empty() || WellExposed(options.exposure, brightest, frame);
+      session.Event({{"t_s", clock.now_s()}, {"event", "exposure"}, {"seq", session.frame_count()}, {"well_exposed", good}});
+      const double next = NextExposure(options.exposure, exposure, brightest, frame);
+      if (!good && next == exposure) break;  // at a bound: more tries would change nothing
+      exposure = next;
+    }
+    if (!light.empty()) RecordLight(session, lights, clock, light, false);
+    if (!good)
+      ThrowUserError("", "lvf-calibration protocol",
+                     "no well-exposed frame of '" + light + "' (is it on, and does it reach the white reference?)");
+    session.Event({{"t_s", clock.now_s()}, {"event", "calibrated"}, {"light", light}});
+  };
+  if (!done.empty()) session.Event({{"t_s", clock.now_s()}, {"event", "resume"}, {"sources_kept", done}});
+  RunRecorded(session, lights, clock, "lvf-calibration", [&] {
+    lights.AllOff();
+    RecordRig(session, rig, clock, "white_reference", true);
+    RecordRig(session, rig, clock, "lvf", true);
+    if (!is_done("")) expose("", {{"kind", "dark"}, {"lvf", true}});
+    for (const CalibrationLine& line : options.lines)
+      if (!is_done(line.light))
+        expose(line.light, {{"kind", "line"}, {"lvf", true}, {"light", line.light}, {"wavelength_nm", line.wavelength_nm}});
+    if (!is_done(options.flat_light))
+      expose(options.flat_light, {{"kind", "flat"},
+                                  {"lvf", true},
+                                  {"light", options.flat_light},
+                                  {"temperature_k", options.flat_temperature_k}});
+    RecordRig(session, rig, clock, "lvf", false);
+    RecordRig(session, rig, clock, "white_reference", false);
+  });
+  return result;
+}
+
+std::vector<std::string> ReadLvfCalibrationDone(const std::filesystem::path& session_dir) {
+  // A source is done once the event "calibrated" names it ("" = the dark frame).
+  std::vector<std::string> done;
+  std::ifstream in(session_dir / "events.jsonl");
+  std::string text;
+  while (std::getline(in, text)) {
+    nlohmann::json event = nlohmann::json::parse(text, nullptr, false);
+    if (!event.is_discarded() && event.is_object() && event.value("event", "") == "calibrated")
+      done.push_back(event.value("light", ""));
+  }
+  return done;
 }
 
 }  // namespace phos

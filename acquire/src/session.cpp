@@ -8,6 +8,7 @@
 #include <csignal>
 #include <cstring>
 #include <cstdio>
+#include <fstream>
 #include <random>
 
 #include <OpenImageIO/imageio.h>
@@ -86,6 +87,40 @@ SessionWriter::SessionWriter(std::filesystem::path dir, nlohmann::json start_rec
   start_record["started_utc"] = UtcNow();
   start_record["schema"] = "phos.session/1";
   WriteFileAtomically(dir_ / "session.json", start_record.dump(2) + "\n");
+  start_record_ = std::move(start_record);
+  ArmAbortRecord(dir_);
+}
+
+std::unique_ptr<SessionWriter> SessionWriter::Reopen(std::filesystem::path dir) {
+  return std::unique_ptr<SessionWriter>(new SessionWriter(ReopenTag{}, std::move(dir)));
+}
+
+SessionWriter::SessionWriter(ReopenTag, std::filesystem::path dir) : dir_(std::move(dir)) {
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(dir_ / "session.json", ec))
+    ThrowUserError(dir_.string(), "", "is not a capture session (no session.json)");
+  start_record_ = ReadJsonFile(dir_ / "session.json");
+  nlohmann::json previous_stop;
+  if (std::filesystem::exists(dir_ / "stop.json", ec)) {
+    previous_stop = ReadJsonFile(dir_ / "stop.json");
+    if (previous_stop.value("how", "") == "complete")
+      ThrowUserError(dir_.string(), "", "completed already: nothing to resume");
+  }
+  // Number on from the highest frame recorded or present on disk.
+  std::ifstream lines(dir_ / "frames.jsonl");
+  std::string text;
+  while (std::getline(lines, text)) {
+    nlohmann::json line = nlohmann::json::parse(text, nullptr, false);
+    if (!line.is_discarded() && line.is_object() && line.contains("seq")) frames_ = std::max(frames_, line["seq"].get<int>());
+  }
+  for (const auto& entry : std::filesystem::directory_iterator(dir_ / "frames", ec)) {
+    const std::string name = entry.path().filename().string();
+    if (name.size() >= 10 && name.find_first_not_of("0123456789") == 6) frames_ = std::max(frames_, std::atoi(name.c_str()));
+  }
+  Event({{"event", "resume"},
+         {"resumed_utc", UtcNow()},
+         {"previous_stop", previous_stop.is_null() ? nlohmann::json("none (killed, or the machine went down)") : previous_stop}});
+  std::filesystem::remove(dir_ / "stop.json", ec);
   ArmAbortRecord(dir_);
 }
 
@@ -142,6 +177,7 @@ std::string SessionWriter::WriteFrame(const Frame& frame, nlohmann::json extra) 
   extra["black_level_dn"] = frame.black_level_dn;
   extra["adc_bits"] = frame.adc_bits;
   extra["sensor_temperature_c"] = frame.sensor_temperature_c;
+  if (frame.camera_timestamp_ns != 0) extra["camera_timestamp_ns"] = frame.camera_timestamp_ns;
   AppendLine("frames.jsonl", extra);
   return name;
 }

@@ -36,8 +36,16 @@ LightSource HalogenLight(const std::string& name, double irradiance) {
 }
 
 std::vector<LightSource> DefaultLights() {
-  return {LedLight("led365", 365, 10, 1.0), LedLight("led405", 405, 15, 1.0), WhiteLedLight("white", 1.0),
-          HalogenLight("lamp", 1.0)};
+  std::vector<LightSource> lights = {LedLight("led365", 365, 10, 1.0), LedLight("led405", 405, 15, 1.0),
+                                     WhiteLedLight("white", 1.0), HalogenLight("lamp", 1.0)};
+  // Spectral lines are far narrower than the LVF (25 nm); 1 nm stands for them.
+  for (const KnownLine& line : DefaultCalibrationLines())
+    lights.push_back(LedLight(line.light, line.wavelength_nm, 1.0, 1.0));
+  return lights;
+}
+
+std::vector<KnownLine> DefaultCalibrationLines() {
+  return {{"hg436", 435.8}, {"hg546", 546.1}, {"hene633", 632.8}};
 }
 
 CameraModel DefaultCameraModel() {
@@ -61,14 +69,14 @@ SimulatedLab::SimulatedLab(Material material, std::vector<double> albedo, std::v
     for (double& e : E) e *= source.irradiance;
     source_E_.push_back(E);
   }
-  // A channel's response to band b: its mean sensitivity over the band.
-  for (const SampledSpectrum& s : camera_.sensitivity) camera_weight_.push_back(AverageOverBands(s, material_.bands));
+  plain_ = MakeOptics(false);
+  lvf_ = MakeOptics(true);
   lights_ = std::make_unique<RecordingLights>(names, clock_);
   // The state follows the lights: advance it to the moment of every switch
   // under the irradiance that held until then.
   lights_->before_change = [this](const std::string& channel, bool on) {
     AdvanceTo(clock_.now_s());
-    if (!on) return;
+    if (!on || white_reference_) return;  // the sample in the dark sees no light
     // Refuse, before it happens, a light the sample's model cannot take (ke
     // unknown in a band it reaches): the light stays off.
     std::vector<double> E = IrradianceNow();
@@ -81,6 +89,69 @@ SimulatedLab::SimulatedLab(Material material, std::vector<double> albedo, std::v
   t_state_ = clock_.now_s();
 }
 
+SimulatedLab::Optics SimulatedLab::MakeOptics(bool through_lvf) const {
+  // Everything is integrated on one fine wavelength grid (0.1 nm, far below
+  // the 1 nm lines), by the midpoint rule.
+  constexpr double kStepNm = 0.1, kLowerNm = 300, kUpperNm = 900;
+  const int n = static_cast<int>((kUpperNm - kLowerNm) / kStepNm);
+  std::vector<double> nm(static_cast<std::size_t>(n));
+  for (int i = 0; i < n; ++i) nm[i] = kLowerNm + (i + 0.5) * kStepNm;
+  const int columns = through_lvf ? camera_.width : 1;
+  const int channels = static_cast<int>(camera_.sensitivity.size());
+  const int nb = material_.band_count();
+  std::vector<int> band_of(static_cast<std::size_t>(n), -1);
+  for (int i = 0; i < n; ++i)
+    for (int b = 0; b < nb; ++b)
+      if (nm[i] >= material_.bands.lower_nm(b) && nm[i] < material_.bands.upper_nm(b)) band_of[i] = b;
+  std::vector<std::vector<double>> sensitivity(static_cast<std::size_t>(channels));
+  for (int c = 0; c < channels; ++c)
+    for (int i = 0; i < n; ++i) sensitivity[c].push_back(camera_.sensitivity[c].Evaluate(nm[i]));
+  std::vector<std::vector<double>> source(sources_.size());
+  for (std::size_t s = 0; s < sources_.size(); ++s)
+    for (int i = 0; i < n; ++i) source[s].push_back(sources_[s].spectrum.Evaluate(nm[i]));
+
+  Optics optics;
+  optics.emission.assign(columns, std::vector<std::vector<double>>(channels, std::vector<double>(nb, 0.0)));
+  optics.sample_reflect.assign(sources_.size(), std::vector<std::vector<double>>(columns, std::vector<double>(channels, 0.0)));
+  optics.white_reflect = optics.sample_reflect;
+  const double sigma = camera_.lvf.fwhm_nm / 2.3548;
+  std::vector<double> transmission(static_cast<std::size_t>(n), 1.0);
+  for (int x = 0; x < columns; ++x) {
+    if (through_lvf) {
+      const double center = camera_.lvf.CenterNm(x, camera_.width);
+      for (int i = 0; i < n; ++i)
+        transmission[i] = camera_.lvf.peak_transmission * std::exp(-0.5 * std::pow((nm[i] - center) / sigma, 2));
+    }
+    for (int c = 0; c < channels; ++c) {
+      // Emission has a uniform density inside each band (the model's own
+      // assumption), so its weight is the band mean of sensitivity x filter.
+      for (int i = 0; i < n; ++i)
+        if (band_of[i] >= 0)
+          optics.emission[x][c][band_of[i]] += sensitivity[c][i] * transmission[i] * kStepNm / material_.bands.width_nm(band_of[i]);
+      for (std::size_t s = 0; s < sources_.size(); ++s) {
+        double sample = 0, white = 0;
+        for (int i = 0; i < n; ++i) {
+          const double seen = source[s][i] * sensitivity[c][i] * transmission[i] * kStepNm;
+          white += seen;
+          if (band_of[i] >= 0) sample += albedo_[band_of[i]] * seen;
+        }
+        // Lambertian: radiance = reflectance * irradiance / pi.
+        optics.sample_reflect[s][x][c] = sources_[s].irradiance * sample / M_PI;
+        optics.white_reflect[s][x][c] = sources_[s].irradiance * white / M_PI;
+      }
+    }
+  }
+  return optics;
+}
+
+void SimulatedLab::SetLvfInPath(bool in_path) { lvf_in_path_ = in_path; }
+
+void SimulatedLab::SetWhiteReferenceInView(bool in_view) {
+  // The sample's state follows what it saw until now.
+  AdvanceTo(clock_.now_s());
+  white_reference_ = in_view;
+}
+
 std::string SimulatedLab::description() const {
   return "simulated lab: sample '" + material_.name + "', " + std::to_string(camera_.width) + "x" +
          std::to_string(camera_.height) + " " + std::to_string(camera_.channel_names.size()) + "-channel camera, " +
@@ -89,6 +160,7 @@ std::string SimulatedLab::description() const {
 
 std::vector<double> SimulatedLab::IrradianceNow() const {
   std::vector<double> E(static_cast<std::size_t>(material_.band_count()), 0.0);
+  if (white_reference_) return E;  // the sample is out of the lights' way
   for (std::size_t s = 0; s < sources_.size(); ++s)
     if (lights_->IsOn(sources_[s].name))
       for (std::size_t b = 0; b < E.size(); ++b) E[b] += source_E_[s][b];
@@ -128,33 +200,44 @@ Frame SimulatedLab::Capture(double exposure_s, double gain) {
   frame.sensor_temperature_c = 25.0;
 
   // Radiance integrated over the exposure, per band: emission (Eq. 8.2 with
-  // r integrated in closed form under the constant irradiance) plus diffuse
-  // reflection of the lights that are on (albedo E / pi).
+  // r integrated in closed form under the constant irradiance), unless the
+  // white reference hides the sample.
   const std::vector<double> E = IrradianceNow();
   const std::vector<double> a = ExcitationRates(material_, E, "simulated sample '" + material_.name + "'");
   const int nb = material_.band_count();
-  std::vector<double> integral(static_cast<std::size_t>(nb), 0.0);
-  for (int i = 0; i < material_.state_count(); ++i) {
-    const ExcitedState& s = material_.states[i];
-    const double k = a[i] + s.kr, r_inf = k > 0 ? a[i] / k : 0;
-    const double r_integral = k > 0 ? r_inf * exposure_s + (r_[i] - r_inf) * -std::expm1(-k * exposure_s) / k
-                                    : r_[i] * exposure_s;
-    for (int b = 0; b < nb; ++b) integral[b] += s.Lambda[b] * s.kr * r_integral;
-  }
-  for (int b = 0; b < nb; ++b) integral[b] += albedo_[b] * E[b] / M_PI * exposure_s;
+  std::vector<double> emission(static_cast<std::size_t>(nb), 0.0);
+  if (!white_reference_)
+    for (int i = 0; i < material_.state_count(); ++i) {
+      const ExcitedState& s = material_.states[i];
+      const double k = a[i] + s.kr, r_inf = k > 0 ? a[i] / k : 0;
+      const double r_integral = k > 0 ? r_inf * exposure_s + (r_[i] - r_inf) * -std::expm1(-k * exposure_s) / k
+                                      : r_[i] * exposure_s;
+      for (int b = 0; b < nb; ++b) emission[b] += s.Lambda[b] * s.kr * r_integral;
+    }
 
+  const Optics& optics = lvf_in_path_ ? lvf_ : plain_;
+  const int columns = static_cast<int>(optics.emission.size());
   const double top = static_cast<double>((1u << camera_.adc_bits) - 1);
   frame.pixels.resize(static_cast<std::size_t>(frame.width) * frame.height * frame.channels);
   std::normal_distribution<double> read_noise(0.0, camera_.read_noise_e);
-  for (int c = 0; c < frame.channels; ++c) {
-    double mean_e = camera_.dark_current_e_per_s * exposure_s;
-    for (int b = 0; b < nb; ++b) mean_e += camera_.electrons_per_unit * camera_weight_[c][b] * integral[b];
-    std::poisson_distribution<long long> shot(mean_e);
-    for (int p = 0; p < frame.width * frame.height; ++p) {
-      double electrons = std::min(static_cast<double>(shot(rng_)), camera_.full_well_e) + read_noise(rng_);
-      double dn = std::round(electrons * camera_.gain_dn_per_e * gain + camera_.black_level_dn);
-      frame.pixels[static_cast<std::size_t>(p) * frame.channels + c] =
-          static_cast<std::uint16_t>(std::clamp(dn, 0.0, top));
+  for (int x = 0; x < frame.width; ++x) {
+    const int column = columns == 1 ? 0 : x;
+    for (int c = 0; c < frame.channels; ++c) {
+      // Mean photo-electrons in a pixel of this column: dark current, the
+      // glow, and the diffuse reflection of every light that is on.
+      double signal = 0;
+      for (int b = 0; b < nb; ++b) signal += optics.emission[column][c][b] * emission[b];
+      for (std::size_t s = 0; s < sources_.size(); ++s)
+        if (lights_->IsOn(sources_[s].name))
+          signal += exposure_s * (white_reference_ ? optics.white_reflect : optics.sample_reflect)[s][column][c];
+      const double mean_e = camera_.dark_current_e_per_s * exposure_s + camera_.electrons_per_unit * signal;
+      std::poisson_distribution<long long> shot(mean_e);
+      for (int y = 0; y < frame.height; ++y) {
+        const double electrons = std::min(static_cast<double>(shot(rng_)), camera_.full_well_e) + read_noise(rng_);
+        const double dn = std::round(electrons * camera_.gain_dn_per_e * gain + camera_.black_level_dn);
+        frame.pixels[(static_cast<std::size_t>(y) * frame.width + x) * frame.channels + c] =
+            static_cast<std::uint16_t>(std::clamp(dn, 0.0, top));
+      }
     }
   }
   clock_.SleepFor(exposure_s + camera_.readout_s);

@@ -4,8 +4,10 @@
 // camera uses (ExposureTime or ExposureTimeAbs, Gain or GainRaw); no feature
 // name is hard-coded here. Tested against Aravis's own fake cameras.
 
+#include <functional>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "phos/acquire/camera.h"
 #include "phos/acquire/clock.h"
@@ -26,9 +28,34 @@ class AravisCamera final : public Camera {
   Frame Capture(double exposure_s, double gain) override;
   double max_exposure_s() const override;
 
-  // Region of interest in sensor pixels (the payload, and so the stream's
+  // Region of interest in (binned) pixels (the payload, and so the stream's
   // buffers, follow it).
   void SetRegion(int x, int y, int width, int height);
+  // Sums dx x dy sensor pixels into one (more signal per pixel for a faint
+  // glow); the region shrinks with it.
+  void SetBinning(int dx, int dy);
+  std::pair<int, int> binning() const;
+
+  // Pixel format by its GenICam name: Mono8, Mono10, Mono12, Mono16 or an
+  // unpacked Bayer format (BayerRG8, BayerRG12, ...). Frames keep the raw
+  // values with adc_bits set from the format; a Bayer frame is one channel
+  // named after its pattern (demosaicing would mix what was measured). The
+  // camera starts in the deepest mono format it offers.
+  void SetPixelFormat(const std::string& name);
+  std::string pixel_format() const;
+  std::vector<std::string> available_pixel_formats() const;
+
+  // Triggering. kFreeRun: the camera exposes when acquisition starts.
+  // kSoftware: acquisition is armed and a software trigger command starts
+  // the exposure (the exposure starts when phos says, not when the camera
+  // is ready). kHardware: armed, and the exposure starts on a pulse on
+  // `source` (e.g. "Line1"); fire_hardware_trigger, if set, is called once
+  // armed (a GPIO line of the lab wired to the camera's input). A trigger
+  // that never comes is a UserError after the timeout.
+  enum class Trigger { kFreeRun, kSoftware, kHardware };
+  void SetTrigger(Trigger trigger, const std::string& source = "Line1");
+  std::vector<std::string> available_trigger_sources() const;
+  std::function<void()> fire_hardware_trigger;
 
   // What the camera reports now (for tests and the start record).
   double exposure_s() const;
@@ -41,6 +68,8 @@ class AravisCamera final : public Camera {
 
  private:
   void AllocateBuffers();
+  Trigger trigger_ = Trigger::kFreeRun;
+  std::string trigger_source_;
   struct Impl;
   std::unique_ptr<Impl> impl_;
   const Clock& clock_;

@@ -1,7 +1,8 @@
 #pragma once
 // The camera a protocol drives: exposure, gain, and frames with timestamps.
-// Back ends: the simulated lab (sim_lab.h); Aravis for GigE Vision / USB3
-// Vision cameras is to come.
+// Back ends: the simulated lab (sim_lab.h) and Aravis for GigE Vision / USB3
+// Vision cameras (aravis_camera.h), which also set ROI, binning, pixel format
+// and trigger.
 
 #include <cstdint>
 #include <string>
@@ -16,7 +17,8 @@ struct Frame {
   int adc_bits = 16;
   double black_level_dn = 0;
   double exposure_s = 0, gain = 1;
-  double t_start_s = 0;  // start of the exposure on the protocol's clock
+  double t_start_s = 0;  // start of the exposure on the protocol's (host's) clock
+  std::uint64_t camera_timestamp_ns = 0;  // the camera's own clock, where it has one
   double sensor_temperature_c = 0;
 
   // Mean of one channel minus the black level, in DN.

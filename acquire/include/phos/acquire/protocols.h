@@ -2,10 +2,13 @@
 // Capture protocols (Sec. 8.4). Each runs on any Camera, Lights and Clock
 // (real hardware or the simulated lab), records every light switch and every
 // exposure on the clock, leaves the lights off on every way out, and writes
-// the session as it goes. So far: decay and excitation; emission spectrum
-// and LVF calibration are to come.
+// the session as it goes: LVF calibration, emission spectrum, decay and
+// excitation, in the order `phos capture all` runs them.
 
+#include <functional>
+#include <map>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "phos/acquire/camera.h"
@@ -14,6 +17,24 @@
 #include "phos/acquire/session.h"
 
 namespace phos {
+
+// A change to the rig a protocol needs between steps: "lvf" (the linear
+// variable filter in front of the camera) or "white_reference" (the white
+// reference in place of the sample), in place or removed. The simulated lab
+// makes it at once; on real hardware the operator does, prompted on the
+// terminal (or a motorized slide). Every change is recorded as an event.
+using RigChange = std::function<void(const std::string& what, bool in_place)>;
+
+// Exposure control shared by the protocols: keep the brightest channel's
+// mean signal between these fractions of the ADC range above black.
+struct AutoExposure {
+  double initial_exposure_s = 0.05;
+  double min_exposure_s = 1e-4;
+  double max_exposure_s = 4;
+  double low_fraction = 0.15, high_fraction = 0.7;
+
+  bool IsValid(std::string* error) const;
+};
 
 // Decay after saturation (Sec. 8.4.4): charge with the strongest light, light
 // off, then frames on a schedule starting a few ms after light-off. The
@@ -67,7 +88,71 @@ struct ExcitationProtocolResult {
   int frames = 0;
 };
 
+// What an interrupted excitation session already measured: the brightest
+// channel's response per (light, charge time). Resuming replays the schedule
+// against it and measures only what is missing (each measurement starts with
+// its own reset in darkness, so nothing earlier is needed).
+using ExcitationDone = std::map<std::pair<std::string, double>, double>;
+
 ExcitationProtocolResult RunExcitationProtocol(Camera& camera, Lights& lights, Clock& clock, SessionWriter& session,
-                                               const ExcitationProtocolOptions& options);
+                                               const ExcitationProtocolOptions& options,
+                                               const ExcitationDone& done = {});
+// Reads the measurements of an excitation session's frames.jsonl.
+ExcitationDone ReadExcitationDone(const std::filesystem::path& session_dir);
+
+// Emission spectrum through the LVF (Sec. 8.4.2): the filter goes in, the
+// sample charges under a strong light, the light goes off, and frames are
+// taken back to back from a few ms after light-off until `frames` of them
+// are well exposed (each records its exposure and delay, since the glow
+// fades during the series; the spectrum's shape does not, Sec. 8.4.5).
+struct SpectrumProtocolOptions {
+  std::string charge_light;
+  double charge_s = 600;
+  int frames = 4;
+  double first_delay_s = 0.005;
+  double gain = 1;
+  AutoExposure exposure{0.2, 1e-4, 8, 0.15, 0.7};
+
+  bool IsValid(std::string* error) const;
+};
+
+struct SpectrumProtocolResult {
+  int frames = 0, well_exposed = 0;
+};
+
+SpectrumProtocolResult RunSpectrumProtocol(Camera& camera, Lights& lights, Clock& clock, SessionWriter& session,
+                                           const RigChange& rig, const SpectrumProtocolOptions& options);
+
+// LVF calibration (Sec. 8.4.2): with the white reference in view and the
+// filter in the path, a dark frame, then one well-exposed frame per source
+// of known wavelength (which columns pass which wavelength), then a flat
+// field under a lamp of known colour temperature (how much each column
+// passes). The fit turns these into the filter's centre-vs-column line and
+// the per-column response that spectra are divided by.
+struct CalibrationLine {
+  std::string light;
+  double wavelength_nm;
+};
+
+struct LvfCalibrationOptions {
+  std::vector<CalibrationLine> lines;
+  std::string flat_light = "lamp";
+  double flat_temperature_k = 3000;
+  double gain = 1;
+  AutoExposure exposure{0.05, 1e-4, 8, 0.15, 0.7};
+  int max_tries = 12;  // exposure steps per source before giving up
+
+  bool IsValid(std::string* error) const;
+};
+
+struct LvfCalibrationResult {
+  int frames = 0;
+};
+
+// `done`: lights whose well-exposed frame an interrupted session already holds.
+LvfCalibrationResult RunLvfCalibrationProtocol(Camera& camera, Lights& lights, Clock& clock, SessionWriter& session,
+                                               const RigChange& rig, const LvfCalibrationOptions& options,
+                                               const std::vector<std::string>& done = {});
+std::vector<std::string> ReadLvfCalibrationDone(const std::filesystem::path& session_dir);
 
 }  // namespace phos

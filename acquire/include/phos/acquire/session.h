@@ -14,6 +14,7 @@
 // and JSON file is written to a temporary name and renamed into place.
 
 #include <filesystem>
+#include <memory>
 #include <string>
 
 #include <nlohmann/json.hpp>
@@ -26,6 +27,12 @@ class SessionWriter {
  public:
   // Creates `dir` (which must not exist, or be empty) and writes session.json.
   SessionWriter(std::filesystem::path dir, nlohmann::json start_record);
+  // Reopens an interrupted session to go on with it: frames are numbered on
+  // from the last one recorded (a torn last line or a frame file without
+  // its line is skipped, never overwritten), the old stop record (if any) is
+  // moved into events.jsonl as a "resume" event, and stop.json goes until the
+  // session stops again. A session that completed is a UserError.
+  static std::unique_ptr<SessionWriter> Reopen(std::filesystem::path dir);
   // Without a Stop, the session is marked failed ("ended without a stop record").
   ~SessionWriter();
   SessionWriter(const SessionWriter&) = delete;
@@ -39,10 +46,14 @@ class SessionWriter {
   // how: "complete", "aborted" or "failed".
   void Stop(const std::string& how, const std::string& why = "");
   int frame_count() const { return frames_; }
+  const nlohmann::json& start_record() const { return start_record_; }
 
  private:
+  struct ReopenTag {};
+  SessionWriter(ReopenTag, std::filesystem::path dir);
   void AppendLine(const std::string& file, const nlohmann::json& line);
   std::filesystem::path dir_;
+  nlohmann::json start_record_;
   int frames_ = 0;
   bool stopped_ = false;
 };

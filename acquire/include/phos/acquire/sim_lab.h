@@ -32,8 +32,29 @@ LightSource LedLight(const std::string& name, double center_nm, double fwhm_nm, 
 LightSource WhiteLedLight(const std::string& name, double irradiance);
 // A halogen lamp: a 3000 K blackbody from 350 to 800 nm.
 LightSource HalogenLight(const std::string& name, double irradiance);
-// led365, led405, white, lamp: the lab of the method (Sec. 8.4), irradiance 1 each.
+// led365, led405, white, lamp: the lab of the method (Sec. 8.4), irradiance 1
+// each; then the LVF calibration's sources of known wavelength (Sec. 8.4.2):
+// the mercury lines at 435.8 and 546.1 nm ("hg436", "hg546") and a HeNe
+// laser line at 632.8 nm ("hene633") behind a diffuser, which only light the
+// white reference.
 std::vector<LightSource> DefaultLights();
+// The known centre wavelength of each calibration source of DefaultLights().
+struct KnownLine {
+  std::string light;
+  double wavelength_nm;
+};
+std::vector<KnownLine> DefaultCalibrationLines();
+
+// A linear variable filter (Sec. 8.4.2): a band-pass whose centre moves
+// linearly across the image, from start_nm at the left edge to end_nm at the
+// right, Gaussian of fwhm_nm; placed in front of the camera for spectra.
+struct LinearVariableFilter {
+  double start_nm = 380, end_nm = 720;
+  double fwhm_nm = 25;
+  double peak_transmission = 0.6;
+  // The pass band's centre at pixel column x (centre of the pixel).
+  double CenterNm(double x, int width) const { return start_nm + (end_nm - start_nm) * (x + 0.5) / width; }
+};
 
 struct CameraModel {
   int width = 64, height = 48;
@@ -51,6 +72,7 @@ struct CameraModel {
   double readout_s = 0.01;
   double max_exposure_s = 30;
   unsigned seed = 1;
+  LinearVariableFilter lvf;  // used while the filter is in the light path
 };
 CameraModel DefaultCameraModel();
 
@@ -61,6 +83,16 @@ class SimulatedLab final : public Camera {
                Clock& clock);
 
   Lights& lights() { return *lights_; }
+
+  // What the operator (or a motorized slide) changes between protocols:
+  // the LVF in front of the camera or not; the sample or the white
+  // reference (reflectance 1, no phosphor) in the field of view. While the
+  // white reference is there, the sample sits in the dark and keeps decaying.
+  void SetLvfInPath(bool in_path);
+  void SetWhiteReferenceInView(bool in_view);
+  bool lvf_in_path() const { return lvf_in_path_; }
+  bool white_reference_in_view() const { return white_reference_; }
+  const CameraModel& camera_model() const { return camera_; }
   std::string description() const override;
   Frame Capture(double exposure_s, double gain) override;
   double max_exposure_s() const override { return camera_.max_exposure_s; }
@@ -78,7 +110,18 @@ class SimulatedLab final : public Camera {
   std::vector<LightSource> sources_;
   std::vector<std::vector<double>> source_E_;  // per source, per band
   CameraModel camera_;
-  std::vector<std::vector<double>> camera_weight_;  // per channel, per band
+  // How the camera sees, without the LVF (one column stands for all) and
+  // through it (one entry per column): the weight of the sample's emission
+  // per band, and the reflection of each light off the sample and off the
+  // white reference, integrated over wavelength (so narrow lines stay narrow).
+  struct Optics {
+    std::vector<std::vector<std::vector<double>>> emission;         // [column][channel][band]
+    std::vector<std::vector<std::vector<double>>> sample_reflect;   // [source][column][channel]
+    std::vector<std::vector<std::vector<double>>> white_reflect;    // [source][column][channel]
+  };
+  Optics MakeOptics(bool through_lvf) const;
+  Optics plain_, lvf_;
+  bool lvf_in_path_ = false, white_reference_ = false;
   Clock& clock_;
   std::unique_ptr<RecordingLights> lights_;
   std::vector<double> r_;
