@@ -159,7 +159,7 @@ std::string SessionWriter::WriteFrame(const Frame& frame, nlohmann::json extra) 
   spec.channelnames = frame.channel_names;
   spec.attribute("compression", "zip");  // lossless
   spec.attribute("oiio:BitsPerSample", 16);
-  spec.attribute("phos:exposure_s", static_cast<float>(frame.exposure_s));
+  spec.attribute("ExposureTime", static_cast<float>(frame.exposure_s));  // EXIF; frames.jsonl holds the rest
   if (!out->open(temporary.string(), spec) || !out->write_image(OIIO::TypeDesc::UINT16, frame.pixels.data()) ||
       !out->close()) {
     std::error_code ignored;
@@ -190,6 +190,20 @@ void SessionWriter::Stop(const std::string& how, const std::string& why) {
   WriteFileAtomically(dir_ / "stop.json", stop.dump(2) + "\n");
 }
 
+Frame ReadFrame(const std::filesystem::path& session_dir, const nlohmann::json& line) {
+  if (!line.is_object() || !line.contains("file") || !line["file"].is_string())
+    ThrowUserError((session_dir / "frames.jsonl").string(), "", "a frame line has no file");
+  Frame frame = ReadFrame(session_dir / line["file"].get<std::string>());
+  frame.exposure_s = line.value("exposure_s", frame.exposure_s);
+  frame.gain = line.value("gain", 1.0);
+  frame.black_level_dn = line.value("black_level_dn", 0.0);
+  frame.adc_bits = line.value("adc_bits", 16);
+  frame.t_start_s = line.value("t_start_s", 0.0);
+  frame.sensor_temperature_c = line.value("sensor_temperature_c", 0.0);
+  frame.camera_timestamp_ns = line.value("camera_timestamp_ns", std::uint64_t{0});
+  return frame;
+}
+
 Frame ReadFrame(const std::filesystem::path& path) {
   auto in = OIIO::ImageInput::open(path.string());
   if (!in) ThrowUserError(path.string(), "", "cannot read the frame: " + OIIO::geterror());
@@ -202,7 +216,7 @@ Frame ReadFrame(const std::filesystem::path& path) {
   frame.pixels.resize(static_cast<std::size_t>(spec.width) * spec.height * spec.nchannels);
   if (!in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::UINT16, frame.pixels.data()))
     ThrowUserError(path.string(), "", "cannot read the frame: " + in->geterror());
-  frame.exposure_s = spec.get_float_attribute("phos:exposure_s", 0.0f);
+  frame.exposure_s = spec.get_float_attribute("ExposureTime", 0.0f);
   return frame;
 }
 

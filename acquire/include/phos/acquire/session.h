@@ -58,7 +58,10 @@ class SessionWriter {
   bool stopped_ = false;
 };
 
-// Reads a frame written by WriteFrame back (tests, fitting sessions).
+// Reads a frame written by WriteFrame back: the pixels (and the exposure,
+// from the TIFF's EXIF ExposureTime) from the file alone, or with everything
+// its frames.jsonl line records (gain, black level, ADC bits, times).
 Frame ReadFrame(const std::filesystem::path& path);
+Frame ReadFrame(const std::filesystem::path& session_dir, const nlohmann::json& line);
 
 }  // namespace phos
