@@ -1,145 +1,584 @@
-// phos capture <protocol>: run a capture protocol against a device and write
-// the session folder as it goes. So far: decay and excitation, on the
-// simulated lab.
+// phos capture <protocol>: run a capture protocol against the simulated lab
+// (--device sim --sim-material M.json) or a real one (--lab LAB.json: an
+// Aravis camera and GPIO lights), writing the session folder as it goes.
+// `all` runs the four protocols in order into one folder; `resume` goes on
+// with an interrupted session where that makes sense.
 
+#include <algorithm>
 #include <cstdio>
+#include <fstream>
+#include <map>
 #include <memory>
 #include <string>
 
 #include <nlohmann/json.hpp>
 
 #include "commands.h"
+#include "phos/acquire/lab.h"
 #include "phos/acquire/protocols.h"
 #include "phos/acquire/sim_lab.h"
 #include "phos/model/material.h"
+#include "phos/render/renderer.h"
 #include "phos/util/error.h"
 #include "phos/util/format.h"
+#include "phos/util/json.h"
+#include "phos/util/svg_plot.h"
 
 namespace phos::app {
 namespace {
 
+namespace fs = std::filesystem;
+
 struct CaptureArgs {
-  std::string device = "sim", sim_material, out;
+  std::string device, lab, sim_material, out;
   double sim_albedo = 0.8;
   unsigned seed = 1;
 };
 
-// The simulated lab every protocol runs on with --device sim, and the start
-// record that describes it.
-struct SimSetup {
-  VirtualClock clock;
+// The devices a protocol runs on: the simulated lab or a real one, behind
+// the same interfaces, with the description that goes into session.json.
+struct Devices {
+  // Simulated.
+  VirtualClock virtual_clock;
+  std::unique_ptr<SimulatedLab> sim;
   Material material;
   std::vector<double> albedo;
-  std::unique_ptr<SimulatedLab> lab;
+  // Real.
+  std::unique_ptr<OpenedLab> real;
+  LabConfig lab_config;
 
-  explicit SimSetup(const CaptureArgs& args) {
-    if (args.device != "sim")
-      ThrowUserError("", "--device", "only 'sim' (the simulated lab) is available so far; real cameras are to come");
-    if (!(args.sim_albedo >= 0 && args.sim_albedo <= 1))
-      ThrowUserError("", "--sim-albedo", "expected a reflectance in [0, 1], got " + FormatDouble(args.sim_albedo));
-    material = LoadMaterial(args.sim_material);
-    albedo = material.albedo ? *material.albedo
-                             : std::vector<double>(static_cast<std::size_t>(material.band_count()), args.sim_albedo);
-    CameraModel camera = DefaultCameraModel();
-    camera.seed = args.seed;
-    lab = std::make_unique<SimulatedLab>(material, albedo, DefaultLights(), camera, clock);
+  Camera* camera = nullptr;
+  Lights* lights = nullptr;
+  Clock* clock = nullptr;
+  RigChange rig;
+  nlohmann::json description, sample;
+
+  bool simulated() const { return sim != nullptr; }
+
+  void OpenSim(Material m, std::vector<double> a, unsigned seed, const std::string& material_file) {
+    material = std::move(m);
+    albedo = std::move(a);
+    CameraModel camera_model = DefaultCameraModel();
+    camera_model.seed = seed;
+    sim = std::make_unique<SimulatedLab>(material, albedo, DefaultLights(), camera_model, virtual_clock);
+    camera = sim.get();
+    lights = &sim->lights();
+    clock = &virtual_clock;
+    SimulatedLab* lab = sim.get();
+    rig = [lab](const std::string& what, bool in_place) {
+      if (what == "lvf") lab->SetLvfInPath(in_place);
+      if (what == "white_reference") lab->SetWhiteReferenceInView(in_place);
+    };
+    description = {{"device", "sim"},
+                   {"camera", sim->description()},
+                   {"lights", sim->lights().channels()},
+                   {"clock", "virtual"},
+                   {"seed", seed}};
+    sample = {{"material_file", material_file}, {"material", MaterialToJson(material)}, {"albedo", albedo}};
   }
 
-  nlohmann::json StartRecord(const std::string& protocol, const CaptureArgs& args, nlohmann::json settings) {
-    settings["seed"] = args.seed;
-    return {{"protocol", protocol},
-            {"sample", {{"material_file", args.sim_material}, {"material", MaterialToJson(material)}, {"albedo", albedo}}},
-            {"devices", {{"camera", lab->description()}, {"lights", lab->lights().channels()}, {"clock", "virtual"}}},
-            {"settings", settings},
-            {"versions", {{"phos", "0.1.0"}}}};
+  void OpenLabConfig(const fs::path& path) {
+    lab_config = LoadLabConfig(path);
+    real = OpenLab(lab_config);
+    camera = real->camera.get();
+    lights = real->lights.get();
+    clock = &real->clock;
+    rig = real->rig;
+    description = real->description;
+    description["device"] = "lab";
+    sample = {{"note", "a real sample"}};
+  }
+
+  explicit Devices(const CaptureArgs& args) {
+    std::string device = args.device.empty() ? (args.lab.empty() ? "sim" : "lab") : args.device;
+    if (device == "sim") {
+      if (args.sim_material.empty())
+        ThrowUserError("", "--sim-material", "is required with --device sim (the simulated sample's material file)");
+      if (!(args.sim_albedo >= 0 && args.sim_albedo <= 1))
+        ThrowUserError("", "--sim-albedo", "expected a reflectance in [0, 1], got " + FormatDouble(args.sim_albedo));
+      Material m = LoadMaterial(args.sim_material);
+      std::vector<double> a = m.albedo ? *m.albedo : std::vector<double>(static_cast<std::size_t>(m.band_count()), args.sim_albedo);
+      OpenSim(std::move(m), std::move(a), args.seed, args.sim_material);
+    } else if (device == "lab") {
+      if (args.lab.empty()) ThrowUserError("", "--device lab", "needs --lab LAB.json (the lab config; docs/lab.md)");
+      OpenLabConfig(args.lab);
+    } else {
+      ThrowUserError("", "--device", "expected 'sim' (the simulated lab) or 'lab' (real devices from --lab), got '" + device + "'");
+    }
+  }
+
+  // Reopens the devices a session was recorded with (for resume).
+  Devices(const nlohmann::json& start, const fs::path& session_dir, int resume_count) {
+    const nlohmann::json devices = start.value("devices", nlohmann::json::object());
+    if (devices.value("device", "sim") == "lab") {
+      OpenLabConfig(devices.value("lab_config", ""));
+      return;
+    }
+    const nlohmann::json sample_json = start.value("sample", nlohmann::json::object());
+    if (!sample_json.contains("material"))
+      ThrowUserError((session_dir / "session.json").string(), "sample", "has no material: cannot rebuild the simulated lab");
+    Material m = MaterialFromJson(sample_json["material"], (session_dir / "session.json").string());
+    std::vector<double> a = sample_json.value("albedo", std::vector<double>(static_cast<std::size_t>(m.band_count()), 0.8));
+    // New noise on each resume: a resumed camera is not the same exposure again.
+    OpenSim(std::move(m), std::move(a), devices.value("seed", 1u) + 1000u * resume_count,
+            sample_json.value("material_file", ""));
   }
 };
 
-void AddSimOptions(CLI::App* cmd, CaptureArgs& args) {
-  cmd->add_option("--device", args.device, "sim (the simulated lab; default)");
-  cmd->add_option("--sim-material", args.sim_material, "material file of the simulated sample")->required();
+// Protocol options <-> the "settings" of session.json, so resume runs the
+// protocol exactly as it started.
+nlohmann::json AutoExposureJson(const AutoExposure& a) {
+  return {{"initial_exposure_s", a.initial_exposure_s}, {"min_exposure_s", a.min_exposure_s},
+          {"max_exposure_s", a.max_exposure_s},         {"low_fraction", a.low_fraction},
+          {"high_fraction", a.high_fraction}};
+}
+AutoExposure AutoExposureFrom(const nlohmann::json& j, AutoExposure a) {
+  a.initial_exposure_s = j.value("initial_exposure_s", a.initial_exposure_s);
+  a.min_exposure_s = j.value("min_exposure_s", a.min_exposure_s);
+  a.max_exposure_s = j.value("max_exposure_s", a.max_exposure_s);
+  a.low_fraction = j.value("low_fraction", a.low_fraction);
+  a.high_fraction = j.value("high_fraction", a.high_fraction);
+  return a;
+}
+
+nlohmann::json ToJson(const DecayProtocolOptions& o) {
+  return {{"charge_light", o.charge_light},   {"charge_s", o.charge_s},
+          {"interval_s", o.interval_s},       {"duration_s", o.duration_s},
+          {"first_delay_s", o.first_delay_s}, {"initial_exposure_s", o.initial_exposure_s},
+          {"max_exposure_s", o.max_exposure_s}, {"gain", o.gain}};
+}
+nlohmann::json ToJson(const ExcitationProtocolOptions& o) {
+  return {{"lights", o.lights},         {"reset_s", o.reset_s},       {"first_charge_s", o.first_charge_s},
+          {"max_charge_s", o.max_charge_s}, {"plateau_growth", o.plateau_growth}, {"delay_s", o.delay_s},
+          {"exposure_s", o.exposure_s}, {"gain", o.gain}};
+}
+ExcitationProtocolOptions ExcitationFrom(const nlohmann::json& j) {
+  ExcitationProtocolOptions o;
+  o.lights = j.value("lights", o.lights);
+  o.reset_s = j.value("reset_s", o.reset_s);
+  o.first_charge_s = j.value("first_charge_s", o.first_charge_s);
+  o.max_charge_s = j.value("max_charge_s", o.max_charge_s);
+  o.plateau_growth = j.value("plateau_growth", o.plateau_growth);
+  o.delay_s = j.value("delay_s", o.delay_s);
+  o.exposure_s = j.value("exposure_s", o.exposure_s);
+  o.gain = j.value("gain", o.gain);
+  return o;
+}
+nlohmann::json ToJson(const SpectrumProtocolOptions& o) {
+  return {{"charge_light", o.charge_light}, {"charge_s", o.charge_s},  {"frames", o.frames},
+          {"first_delay_s", o.first_delay_s}, {"gain", o.gain}, {"exposure", AutoExposureJson(o.exposure)}};
+}
+nlohmann::json ToJson(const LvfCalibrationOptions& o) {
+  nlohmann::json lines = nlohmann::json::array();
+  for (const CalibrationLine& l : o.lines) lines.push_back({{"light", l.light}, {"wavelength_nm", l.wavelength_nm}});
+  return {{"lines", lines},   {"flat_light", o.flat_light}, {"flat_temperature_k", o.flat_temperature_k},
+          {"gain", o.gain},   {"max_tries", o.max_tries},   {"exposure", AutoExposureJson(o.exposure)}};
+}
+LvfCalibrationOptions LvfCalibrationFrom(const nlohmann::json& j) {
+  LvfCalibrationOptions o;
+  for (const nlohmann::json& l : j.value("lines", nlohmann::json::array()))
+    o.lines.push_back({l.value("light", ""), l.value("wavelength_nm", 0.0)});
+  o.flat_light = j.value("flat_light", o.flat_light);
+  o.flat_temperature_k = j.value("flat_temperature_k", o.flat_temperature_k);
+  o.gain = j.value("gain", o.gain);
+  o.max_tries = j.value("max_tries", o.max_tries);
+  o.exposure = AutoExposureFrom(j.value("exposure", nlohmann::json::object()), o.exposure);
+  return o;
+}
+
+nlohmann::json StartRecord(const std::string& protocol, const Devices& devices, nlohmann::json settings) {
+  return {{"protocol", protocol},
+          {"sample", devices.sample},
+          {"devices", devices.description},
+          {"settings", std::move(settings)},
+          {"versions", {{"phos", "0.1.0"}}}};
+}
+
+// The calibration sources of this lab: the config's, or the simulated lab's.
+std::vector<CalibrationLine> CalibrationLinesOf(const Devices& devices) {
+  if (!devices.simulated()) return devices.lab_config.calibration_lines;
+  std::vector<CalibrationLine> lines;
+  for (const KnownLine& line : DefaultCalibrationLines()) lines.push_back({line.light, line.wavelength_nm});
+  return lines;
+}
+
+// ---- previews: what a session captured, to look at ----------------------
+
+std::vector<nlohmann::json> FrameLines(const fs::path& dir) {
+  std::vector<nlohmann::json> lines;
+  std::ifstream in(dir / "frames.jsonl");
+  for (std::string text; std::getline(in, text);) {
+    nlohmann::json line = nlohmann::json::parse(text, nullptr, false);
+    if (!line.is_discarded() && line.is_object()) lines.push_back(std::move(line));
+  }
+  return lines;
+}
+
+// A contact sheet of a session's frames, each scaled by its exposure so the
+// fading shows (one brightness scale for all), labelled with the delay.
+void WriteFramesContactSheet(const fs::path& session_dir, const fs::path& out, int max_frames) {
+  const std::vector<nlohmann::json> lines = FrameLines(session_dir);
+  if (lines.empty()) return;
+  const std::size_t step = std::max<std::size_t>(1, (lines.size() + max_frames - 1) / max_frames);
+  std::vector<Frame> frames;
+  std::vector<std::string> labels;
+  double brightest = 0;
+  for (std::size_t i = 0; i < lines.size(); i += step) {
+    frames.push_back(ReadFrame(session_dir, lines[i]));
+    const Frame& f = frames.back();
+    for (int c = 0; c < f.channels; ++c) brightest = std::max(brightest, f.MeanSignal(c) / f.exposure_s);
+    labels.push_back("t+" + FormatShort(lines[i].value("delay_after_light_off_s", 0.0)) + " s, " +
+                     FormatShort(f.exposure_s) + " s exp");
+  }
+  std::vector<render::Image> images;
+  for (const Frame& f : frames) {
+    // Upscale small sensors so the sheet is legible: nearest neighbour, 4x.
+    const int scale = f.width < 200 ? 4 : 1;
+    render::Image image(f.width * scale, f.height * scale, 3);
+    for (int y = 0; y < image.height; ++y)
+      for (int x = 0; x < image.width; ++x) {
+        const std::size_t p = (static_cast<std::size_t>(y / scale) * f.width + x / scale) * f.channels;
+        for (int c = 0; c < 3; ++c) {
+          const int source_channel = f.channels == 3 ? c : 0;
+          const double signal = (f.pixels[p + source_channel] - f.black_level_dn) / f.exposure_s;
+          // Linear in signal per second, the brightest frame's mean at 0.8.
+          image.at(x, y)[c] = static_cast<float>(std::clamp(0.8 * signal / std::max(brightest, 1e-12), 0.0, 1.0));
+        }
+      }
+    images.push_back(std::move(image));
+  }
+  render::WriteContactSheet(out, images, labels, 6);
+}
+
+// The measured curves as a plot: signal per second of exposure (decay: over
+// time after light-off; excitation: over charge time, one series per light).
+void WriteCurvesPlot(const fs::path& session_dir, const std::string& protocol, const fs::path& out) {
+  const std::vector<nlohmann::json> lines = FrameLines(session_dir);
+  std::map<std::string, PlotSeries> series;
+  for (const nlohmann::json& line : lines) {
+    if (!line.contains("mean_signal_dn")) continue;
+    const std::vector<double> means = line["mean_signal_dn"];
+    const double exposure = line.value("exposure_s", 1.0);
+    const std::vector<std::string> names = means.size() == 3 ? std::vector<std::string>{"R", "G", "B"}
+                                                             : std::vector<std::string>{"Y"};
+    for (std::size_t c = 0; c < means.size() && c < names.size(); ++c) {
+      const std::string key = protocol == "excitation" ? line.value("light", "") + " " + names[c] : names[c];
+      PlotSeries& s = series.try_emplace(key, PlotSeries(key)).first->second;
+      s.markers = true;
+      s.x.push_back(protocol == "excitation" ? line.value("charge_s", 0.0) : line.value("delay_after_light_off_s", 0.0));
+      s.y.push_back(means[c] / exposure);
+      if (names.size() == 3) s.color = c == 0 ? "#d62728" : c == 1 ? "#2ca02c" : "#1f77b4";
+    }
+  }
+  std::vector<PlotSeries> all;
+  for (auto& [key, s] : series) {
+    if (protocol == "excitation") {  // sort by charge time; the midpoints came last
+      std::vector<std::size_t> order(s.x.size());
+      for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+      std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return s.x[a] < s.x[b]; });
+      PlotSeries sorted = s;
+      for (std::size_t i = 0; i < order.size(); ++i) sorted.x[i] = s.x[order[i]], sorted.y[i] = s.y[order[i]];
+      sorted.color.clear();
+      all.push_back(sorted);
+    } else {
+      all.push_back(s);
+    }
+  }
+  if (all.empty()) return;
+  PlotOptions options;
+  options.title = protocol == "excitation" ? "Excitation: response after charging for t (per light, per channel)"
+                                           : "Decay after saturation, as captured";
+  options.x_label = protocol == "excitation" ? "charge time t (s)" : "time after light-off (s)";
+  options.y_label = "mean signal / exposure (DN/s)";
+  options.log_y = protocol != "excitation";
+  options.log_x = protocol == "excitation";
+  WriteFileAtomically(out, PlotSvg(all, options));
+}
+
+// ---- running protocols into a session -----------------------------------
+
+// Protocol settings (from options) and the code that runs them on devices,
+// for one session folder, new or reopened.
+struct Plan {
+  std::string protocol;
+  nlohmann::json settings;
+};
+
+void RunProtocol(const Plan& plan, Devices& devices, SessionWriter& session, bool resuming) {
+  Camera& camera = *devices.camera;
+  Lights& lights = *devices.lights;
+  Clock& clock = *devices.clock;
+  const nlohmann::json& s = plan.settings;
+  if (plan.protocol == "decay") {
+    DecayProtocolOptions o;
+    o.charge_light = s.value("charge_light", o.charge_light);
+    o.charge_s = s.value("charge_s", o.charge_s);
+    o.interval_s = s.value("interval_s", o.interval_s);
+    o.duration_s = s.value("duration_s", o.duration_s);
+    o.first_delay_s = s.value("first_delay_s", o.first_delay_s);
+    o.initial_exposure_s = s.value("initial_exposure_s", o.initial_exposure_s);
+    o.max_exposure_s = s.value("max_exposure_s", o.max_exposure_s);
+    o.gain = s.value("gain", o.gain);
+    RunDecayProtocol(camera, lights, clock, session, o);
+  } else if (plan.protocol == "excitation") {
+    RunExcitationProtocol(camera, lights, clock, session, ExcitationFrom(s),
+                          resuming ? ReadExcitationDone(session.dir()) : ExcitationDone{});
+  } else if (plan.protocol == "spectrum") {
+    SpectrumProtocolOptions o;
+    o.charge_light = s.value("charge_light", o.charge_light);
+    o.charge_s = s.value("charge_s", o.charge_s);
+    o.frames = s.value("frames", o.frames);
+    o.first_delay_s = s.value("first_delay_s", o.first_delay_s);
+    o.gain = s.value("gain", o.gain);
+    o.exposure = AutoExposureFrom(s.value("exposure", nlohmann::json::object()), o.exposure);
+    RunSpectrumProtocol(camera, lights, clock, session, devices.rig, o);
+  } else if (plan.protocol == "lvf-calibration") {
+    RunLvfCalibrationProtocol(camera, lights, clock, session, devices.rig, LvfCalibrationFrom(s),
+                              resuming ? ReadLvfCalibrationDone(session.dir()) : std::vector<std::string>{});
+  } else {
+    ThrowUserError("", "protocol", "unknown protocol '" + plan.protocol + "'");
+  }
+}
+
+bool Resumable(const std::string& protocol) { return protocol == "excitation" || protocol == "lvf-calibration"; }
+
+// What the user sees at the end of a session: where it is and what it holds.
+void PrintSession(const std::string& protocol, const fs::path& dir) {
+  const std::vector<nlohmann::json> lines = FrameLines(dir);
+  std::printf("phos capture %s: %zu frames -> %s\n", protocol.c_str(), lines.size(), dir.string().c_str());
+}
+
+void Previews(const std::string& protocol, const fs::path& session_dir, const fs::path& into) {
+  if (protocol == "decay") {
+    WriteFramesContactSheet(session_dir, into / "decay-frames.png", 12);
+    WriteCurvesPlot(session_dir, "decay", into / "decay-curve.svg");
+  } else if (protocol == "excitation") {
+    WriteCurvesPlot(session_dir, "excitation", into / "excitation-curves.svg");
+  }
+}
+
+void RunNewSession(const Plan& plan, CaptureArgs& args) {
+  Devices devices(args);
+  // Bad settings are refused before the folder exists.
+  SessionWriter session(args.out, StartRecord(plan.protocol, devices, plan.settings));
+  RunProtocol(plan, devices, session, false);
+  PrintSession(plan.protocol, args.out);
+  Previews(plan.protocol, args.out, args.out);
+}
+
+// ---- all -----------------------------------------------------------------
+
+const std::vector<std::string> kAllOrder = {"lvf-calibration", "spectrum", "decay", "excitation"};
+
+struct AllArgs : CaptureArgs {
+  std::string light;  // charge light (default: the lab's)
+  std::vector<std::string> excite;
+  double charge_s = 5400, duration_s = 180, interval_s = 5, reset_s = 900;
+};
+
+// Runs (or, resuming, finishes) every part of an `all` folder in order.
+void RunAllParts(const fs::path& dir, const nlohmann::json& parts, Devices& devices, int resume_count) {
+  for (const std::string& protocol : kAllOrder) {
+    const fs::path part = dir / protocol;
+    const Plan plan{protocol, parts.at(protocol)};
+    std::error_code ec;
+    if (fs::exists(part / "stop.json", ec) && ReadJsonFile(part / "stop.json").value("how", "") == "complete") {
+      std::printf("  %-16s complete already: kept\n", protocol.c_str());
+      continue;
+    }
+    if (fs::exists(part / "session.json", ec)) {
+      if (Resumable(protocol)) {
+        std::printf("  %-16s interrupted: resuming where it stopped\n", protocol.c_str());
+        std::unique_ptr<SessionWriter> session = SessionWriter::Reopen(part);
+        RunProtocol(plan, devices, *session, true);
+        continue;
+      }
+      // A decay or spectrum cannot go on: the glow kept fading unobserved.
+      // Its frames are kept aside and the part starts over.
+      fs::path aside;
+      for (int n = 1; fs::exists(aside = dir / (protocol + ".interrupted-" + std::to_string(n)), ec); ++n) {
+      }
+      fs::rename(part, aside, ec);
+      if (ec) ThrowUserError(part.string(), "", "cannot move the interrupted part aside: " + ec.message());
+      std::printf("  %-16s interrupted: a %s cannot continue (the glow faded unobserved); kept as %s, starting over\n",
+                  protocol.c_str(), protocol.c_str(), aside.filename().string().c_str());
+    }
+    nlohmann::json start = StartRecord(protocol, devices, plan.settings);
+    start["part_of"] = dir.filename().string();
+    if (resume_count > 0) start["resume"] = resume_count;
+    SessionWriter session(part, start);
+    RunProtocol(plan, devices, session, false);
+    std::printf("  %-16s %d frames\n", protocol.c_str(), session.frame_count());
+  }
+}
+
+void FinishAll(const fs::path& dir) {
+  Previews("decay", dir / "decay", dir);
+  Previews("excitation", dir / "excitation", dir);
+  WriteFramesContactSheet(dir / "spectrum", dir / "spectrum-frames.png", 6);
+}
+
+void RunCaptureAll(AllArgs args) {
+  Devices devices(args);
+  nlohmann::json parts;
+  const std::string charge_light =
+      !args.light.empty() ? args.light : devices.simulated() ? "led405" : devices.lab_config.charge_light;
+  std::vector<std::string> excite = args.excite;
+  if (excite.empty()) excite = devices.simulated() ? std::vector<std::string>{"led405", "led450", "led480"}
+                                                   : std::vector<std::string>{charge_light};
+  LvfCalibrationOptions calibration;
+  calibration.lines = CalibrationLinesOf(devices);
+  if (!devices.simulated()) {
+    calibration.flat_light = devices.lab_config.flat_light;
+    calibration.flat_temperature_k = devices.lab_config.flat_temperature_k;
+  }
+  SpectrumProtocolOptions spectrum;
+  spectrum.charge_light = charge_light;
+  DecayProtocolOptions decay;
+  decay.charge_light = charge_light;
+  decay.charge_s = args.charge_s;
+  decay.duration_s = args.duration_s;
+  decay.interval_s = args.interval_s;
+  ExcitationProtocolOptions excitation;
+  excitation.lights = excite;
+  excitation.reset_s = args.reset_s;
+  excitation.exposure_s = 0.2;
+  // Check every part's settings before anything is created.
+  std::string error;
+  if (!calibration.IsValid(&error)) ThrowUserError("", "lvf-calibration", error + " (calibration_lines in the lab config)");
+  if (!spectrum.IsValid(&error)) ThrowUserError("", "spectrum", error);
+  if (!decay.IsValid(&error)) ThrowUserError("", "decay", error);
+  if (!excitation.IsValid(&error)) ThrowUserError("", "excitation", error);
+  parts["lvf-calibration"] = ToJson(calibration);
+  parts["spectrum"] = ToJson(spectrum);
+  parts["decay"] = ToJson(decay);
+  parts["excitation"] = ToJson(excitation);
+
+  // The folder's own record: the plan of all parts, and how it ended.
+  SessionWriter top(args.out, StartRecord("all", devices, {{"parts", parts}, {"order", kAllOrder}}));
+  std::printf("phos capture all -> %s\n", args.out.c_str());
+  try {
+    RunAllParts(args.out, parts, devices, 0);
+  } catch (const std::exception& e) {
+    top.Stop("failed", e.what());
+    throw;
+  }
+  top.Stop("complete");
+  FinishAll(args.out);
+  std::printf("  previews: decay-frames.png, decay-curve.svg, excitation-curves.svg, spectrum-frames.png\n");
+}
+
+// ---- resume ----------------------------------------------------------------
+
+void RunCaptureResume(const std::string& dir_text) {
+  const fs::path dir = dir_text;
+  std::error_code ec;
+  if (!fs::is_regular_file(dir / "session.json", ec))
+    ThrowUserError(dir.string(), "", "is not a capture session (no session.json)");
+  const nlohmann::json start = ReadJsonFile(dir / "session.json");
+  const std::string protocol = start.value("protocol", "");
+  if (fs::exists(dir / "stop.json", ec) && ReadJsonFile(dir / "stop.json").value("how", "") == "complete") {
+    std::printf("phos capture resume: %s completed already; nothing to do\n", dir.string().c_str());
+    return;
+  }
+  if (protocol == "all") {
+    std::unique_ptr<SessionWriter> top = SessionWriter::Reopen(dir);
+    int resumes = 1;
+    {
+      std::ifstream events(dir / "events.jsonl");
+      for (std::string line; std::getline(events, line);) resumes += line.find("\"resume\"") != std::string::npos;
+    }
+    Devices devices(start, dir, resumes);
+    std::printf("phos capture resume: %s (all)\n", dir.string().c_str());
+    try {
+      RunAllParts(dir, start.at("settings").at("parts"), devices, resumes);
+    } catch (const std::exception& e) {
+      top->Stop("failed", e.what());
+      throw;
+    }
+    top->Stop("complete");
+    FinishAll(dir);
+    return;
+  }
+  if (!Resumable(protocol))
+    ThrowUserError(dir.string(), "resume",
+                   "a " + protocol + " cannot be continued: the glow kept fading while nothing watched; its frames are "
+                   "kept here, run 'phos capture " + protocol + "' again into a new folder");
+  std::unique_ptr<SessionWriter> session = SessionWriter::Reopen(dir);
+  Devices devices(start, dir, 1);
+  RunProtocol({protocol, start.value("settings", nlohmann::json::object())}, devices, *session, true);
+  PrintSession(protocol, dir);
+  Previews(protocol, dir, dir);
+}
+
+// ---- options ---------------------------------------------------------------
+
+void AddDeviceOptions(CLI::App* cmd, CaptureArgs& args) {
+  cmd->add_option("--device", args.device,
+                  "sim (the simulated lab; the default) or lab (real devices from --lab)");
+  cmd->add_option("--lab", args.lab, "lab config (phos.lab/1: camera, GPIO light channels; docs/lab.md)");
+  cmd->add_option("--sim-material", args.sim_material, "material file of the simulated sample (--device sim)");
   cmd->add_option("--sim-albedo", args.sim_albedo, "sample reflectance when the material has none (default 0.8)");
   cmd->add_option("--out", args.out, "session folder to create (new or empty)")->required();
   cmd->add_option("--seed", args.seed, "noise seed of the simulated camera (default 1)");
 }
 
 struct DecayArgs : CaptureArgs {
-  std::string light = "led405";
+  std::string light;
   DecayProtocolOptions decay;
 };
-
-void RunCaptureDecay(DecayArgs args) {
-  args.decay.charge_light = args.light;
-  std::string error;
-  if (!args.decay.IsValid(&error)) ThrowUserError("", "decay protocol", error);
-  SimSetup sim(args);
-  SessionWriter session(args.out, sim.StartRecord("decay", args,
-                                                  {{"charge_light", args.decay.charge_light},
-                                                   {"charge_s", args.decay.charge_s},
-                                                   {"interval_s", args.decay.interval_s},
-                                                   {"duration_s", args.decay.duration_s},
-                                                   {"first_delay_s", args.decay.first_delay_s},
-                                                   {"initial_exposure_s", args.decay.initial_exposure_s},
-                                                   {"max_exposure_s", args.decay.max_exposure_s}}));
-  DecayProtocolResult result = RunDecayProtocol(*sim.lab, sim.lab->lights(), sim.clock, session, args.decay);
-  std::printf("phos capture decay: %d frames over %s s after a %s s charge under '%s' -> %s\n", result.frames,
-              FormatDouble(args.decay.duration_s).c_str(), FormatDouble(args.decay.charge_s).c_str(),
-              args.decay.charge_light.c_str(), args.out.c_str());
-}
 
 struct ExcitationArgs : CaptureArgs {
   ExcitationProtocolOptions excitation;
 };
 
-void RunCaptureExcitation(ExcitationArgs args) {
-  if (args.excitation.lights.empty()) args.excitation.lights = {"led405"};
-  std::string error;
-  if (!args.excitation.IsValid(&error)) ThrowUserError("", "excitation protocol", error);
-  SimSetup sim(args);
-  SessionWriter session(args.out, sim.StartRecord("excitation", args,
-                                                  {{"lights", args.excitation.lights},
-                                                   {"reset_s", args.excitation.reset_s},
-                                                   {"first_charge_s", args.excitation.first_charge_s},
-                                                   {"max_charge_s", args.excitation.max_charge_s},
-                                                   {"plateau_growth", args.excitation.plateau_growth},
-                                                   {"delay_s", args.excitation.delay_s},
-                                                   {"exposure_s", args.excitation.exposure_s}}));
-  ExcitationProtocolResult result =
-      RunExcitationProtocol(*sim.lab, sim.lab->lights(), sim.clock, session, args.excitation);
-  std::printf("phos capture excitation: %d frames for %zu light(s) -> %s\n", result.frames,
-              args.excitation.lights.size(), args.out.c_str());
-}
+struct SpectrumArgs : CaptureArgs {
+  std::string light;
+  SpectrumProtocolOptions spectrum;
+};
 
 }  // namespace
 
 void RegisterCapture(CLI::App& app) {
-  CLI::App* capture = app.add_subcommand("capture", "Run a capture protocol and write its session folder as it goes.");
+  CLI::App* capture = app.add_subcommand(
+      "capture",
+      "Run a capture protocol (Sec. 8.4) on the simulated lab (--device sim --sim-material M.json) or a real\n"
+      "one (--lab LAB.json) and write its session folder as it goes: session.json, frames.jsonl,\n"
+      "events.jsonl, frames/*.tif (16-bit), stop.json. Lights go off on every way out.");
   capture->require_subcommand(1);
 
   auto decay_args = std::make_shared<DecayArgs>();
   CLI::App* decay = capture->add_subcommand(
       "decay",
       "Decay after saturation (Sec. 8.4.4): charge with one light, switch it off, then take frames on a\n"
-      "schedule starting a few ms after light-off, the exposure growing as the glow fades. Writes\n"
-      "session.json, frames.jsonl, events.jsonl, frames/*.tif (16-bit) and stop.json into --out.");
-  AddSimOptions(decay, *decay_args);
+      "schedule starting a few ms after light-off, the exposure growing as the glow fades. Also writes\n"
+      "decay-frames.png (contact sheet) and decay-curve.svg into --out.");
+  AddDeviceOptions(decay, *decay_args);
   decay->add_option("--light", decay_args->light,
-                    "light channel to charge with: led365, led405 (default), white, lamp. It must only reach\n"
+                    "light channel to charge with (default led405, or the lab's charge_light). It must only reach\n"
                     "bands whose ke the material knows");
   decay->add_option("--charge-s", decay_args->decay.charge_s, "seconds of charging (default 5400, 90 min)");
   decay->add_option("--interval-s", decay_args->decay.interval_s, "seconds between frames (default 5)");
   decay->add_option("--duration-s", decay_args->decay.duration_s, "seconds of decay to record (default 180)");
   decay->add_option("--first-delay-s", decay_args->decay.first_delay_s, "light-off to the first exposure (default 0.005)");
+  decay->add_option("--initial-exposure-s", decay_args->decay.initial_exposure_s, "first exposure (default 0.05)");
   decay->add_option("--max-exposure-s", decay_args->decay.max_exposure_s, "longest exposure (default 4)");
-  decay->callback([decay_args] { RunCaptureDecay(*decay_args); });
+  decay->callback([decay_args] {
+    DecayArgs args = *decay_args;
+    args.decay.charge_light = args.light.empty() ? "led405" : args.light;
+    if (args.light.empty() && !args.lab.empty()) args.decay.charge_light = LoadLabConfig(args.lab).charge_light;
+    std::string error;
+    if (!args.decay.IsValid(&error)) ThrowUserError("", "decay protocol", error);
+    RunNewSession({"decay", ToJson(args.decay)}, args);
+  });
 
   auto excitation_args = std::make_shared<ExcitationArgs>();
   CLI::App* excitation = capture->add_subcommand(
       "excitation",
       "Excitation per light (Sec. 8.4.6): for each light, reset in darkness, charge for t, switch off,\n"
       "wait a fixed short delay and expose; t doubles from --first-charge-s until a doubling adds less\n"
-      "than 3%, then the midpoints of the rising part are measured too.");
-  AddSimOptions(excitation, *excitation_args);
+      "than 3%, then the midpoints of the rising part are measured too. Resumable.");
+  AddDeviceOptions(excitation, *excitation_args);
   excitation->add_option("--light", excitation_args->excitation.lights,
                          "light channel(s) to measure, one after the other (default led405)");
   excitation->add_option("--reset-s", excitation_args->excitation.reset_s, "darkness before each charge (default 900)");
@@ -147,7 +586,80 @@ void RegisterCapture(CLI::App& app) {
   excitation->add_option("--max-charge-s", excitation_args->excitation.max_charge_s, "longest charge (default 4096)");
   excitation->add_option("--delay-s", excitation_args->excitation.delay_s, "light-off to the exposure (default 0.05)");
   excitation->add_option("--exposure-s", excitation_args->excitation.exposure_s, "exposure (default 1)");
-  excitation->callback([excitation_args] { RunCaptureExcitation(*excitation_args); });
+  excitation->callback([excitation_args] {
+    ExcitationArgs args = *excitation_args;
+    if (args.excitation.lights.empty()) args.excitation.lights = {"led405"};
+    std::string error;
+    if (!args.excitation.IsValid(&error)) ThrowUserError("", "excitation protocol", error);
+    RunNewSession({"excitation", ToJson(args.excitation)}, args);
+  });
+
+  auto spectrum_args = std::make_shared<SpectrumArgs>();
+  CLI::App* spectrum = capture->add_subcommand(
+      "spectrum",
+      "Emission spectrum through the linear variable filter (Sec. 8.4.2): the filter goes in, the sample\n"
+      "charges under a strong light, the light goes off and frames are taken back to back until --frames\n"
+      "of them are well exposed. The LVF calibration turns columns into wavelengths.");
+  AddDeviceOptions(spectrum, *spectrum_args);
+  spectrum->add_option("--light", spectrum_args->light, "light channel to charge with (default led405)");
+  spectrum->add_option("--charge-s", spectrum_args->spectrum.charge_s, "seconds of charging (default 600)");
+  spectrum->add_option("--frames", spectrum_args->spectrum.frames, "well-exposed frames to average (default 4)");
+  spectrum->callback([spectrum_args] {
+    SpectrumArgs args = *spectrum_args;
+    args.spectrum.charge_light = args.light.empty() ? "led405" : args.light;
+    if (args.light.empty() && !args.lab.empty()) args.spectrum.charge_light = LoadLabConfig(args.lab).charge_light;
+    std::string error;
+    if (!args.spectrum.IsValid(&error)) ThrowUserError("", "spectrum protocol", error);
+    RunNewSession({"spectrum", ToJson(args.spectrum)}, args);
+  });
+
+  auto calibration_args = std::make_shared<CaptureArgs>();
+  CLI::App* calibration = capture->add_subcommand(
+      "lvf-calibration",
+      "LVF calibration (Sec. 8.4.2): with the white reference in view and the filter in, a dark frame, one\n"
+      "well-exposed frame per source of known wavelength (the simulated lab: Hg 435.8 and 546.1 nm, HeNe\n"
+      "632.8 nm; a real lab: calibration_lines of its config), and a flat field under the 3000 K lamp. Resumable.");
+  AddDeviceOptions(calibration, *calibration_args);
+  calibration->callback([calibration_args] {
+    CaptureArgs args = *calibration_args;
+    LvfCalibrationOptions options;
+    if (!args.lab.empty()) {
+      LabConfig config = LoadLabConfig(args.lab);
+      options.lines = config.calibration_lines;
+      options.flat_light = config.flat_light;
+      options.flat_temperature_k = config.flat_temperature_k;
+    } else {
+      for (const KnownLine& line : DefaultCalibrationLines()) options.lines.push_back({line.light, line.wavelength_nm});
+    }
+    std::string error;
+    if (!options.IsValid(&error)) ThrowUserError("", "lvf-calibration protocol", error);
+    RunNewSession({"lvf-calibration", ToJson(options)}, args);
+  });
+
+  auto all_args = std::make_shared<AllArgs>();
+  CLI::App* all = capture->add_subcommand(
+      "all",
+      "Everything for one sample, in order, each part a session in its own subfolder of --out:\n"
+      "lvf-calibration, spectrum, decay, excitation. Ends with previews in --out: decay-frames.png,\n"
+      "decay-curve.svg, excitation-curves.svg, spectrum-frames.png. Resumable part by part.");
+  AddDeviceOptions(all, *all_args);
+  all->add_option("--light", all_args->light, "charge light of the spectrum and decay (default led405 / the lab's)");
+  all->add_option("--excite", all_args->excite,
+                  "lights to measure excitation with (default: led405 led450 led480 in the simulated lab)");
+  all->add_option("--charge-s", all_args->charge_s, "decay: seconds of charging (default 5400)");
+  all->add_option("--duration-s", all_args->duration_s, "decay: seconds recorded (default 180)");
+  all->add_option("--interval-s", all_args->interval_s, "decay: seconds between frames (default 5)");
+  all->add_option("--reset-s", all_args->reset_s, "excitation: darkness before each charge (default 900)");
+  all->callback([all_args] { RunCaptureAll(*all_args); });
+
+  auto resume_dir = std::make_shared<std::string>();
+  CLI::App* resume = capture->add_subcommand(
+      "resume",
+      "Go on with an interrupted session (killed, crashed, camera lost): excitation and LVF calibration go\n"
+      "on from the next measurement; an `all` folder keeps its complete parts and finishes the rest. A\n"
+      "decay or spectrum cannot continue (the glow faded unobserved): phos says so and keeps its frames.");
+  resume->add_option("DIR", *resume_dir, "the session folder")->required();
+  resume->callback([resume_dir] { RunCaptureResume(*resume_dir); });
 }
 
 }  // namespace phos::app

@@ -51,18 +51,20 @@ AravisCamera::AravisCamera(const std::string& device_id, const Clock& clock, dou
     arv_camera_gv_set_stream_options(impl_->camera, ARV_GV_STREAM_OPTION_PACKET_SOCKET_DISABLED);
   if (arv_camera_is_feature_available(impl_->camera, "AcquisitionMode", nullptr))
     arv_camera_set_acquisition_mode(impl_->camera, ARV_ACQUISITION_MODE_SINGLE_FRAME, nullptr);
-  impl_->stream = arv_camera_create_stream(impl_->camera, nullptr, nullptr, &error);
-  Check(error, device_id, "stream");
-  if (ARV_IS_GV_STREAM(impl_->stream))
-    g_object_set(impl_->stream, "socket-buffer", ARV_GV_STREAM_SOCKET_BUFFER_FIXED, "socket-buffer-size",
-                 8 * 1024 * 1024, nullptr);
   AllocateBuffers();
 }
 
 void AravisCamera::AllocateBuffers() {
-  // Drop the buffers of the old payload size, then queue two of the new one.
-  while (ArvBuffer* old = arv_stream_try_pop_buffer(impl_->stream)) g_object_unref(old);
+  // A new stream with two buffers of the current payload: the old stream's
+  // queued buffers have the old size (a region or binning change), and a
+  // stream gives back only the buffers it has filled.
   GError* error = nullptr;
+  if (impl_->stream) g_object_unref(impl_->stream);
+  impl_->stream = arv_camera_create_stream(impl_->camera, nullptr, nullptr, &error);
+  Check(error, impl_->id, "stream");
+  if (ARV_IS_GV_STREAM(impl_->stream))
+    g_object_set(impl_->stream, "socket-buffer", ARV_GV_STREAM_SOCKET_BUFFER_FIXED, "socket-buffer-size",
+                 8 * 1024 * 1024, nullptr);
   const guint payload = arv_camera_get_payload(impl_->camera, &error);
   Check(error, impl_->id, "payload");
   for (int i = 0; i < 2; ++i) arv_stream_push_buffer(impl_->stream, arv_buffer_new_allocate(payload));
@@ -113,6 +115,25 @@ void AravisCamera::SetBinning(int dx, int dy) {
                        " to " + std::to_string(hi) + ")");
   arv_camera_set_binning(impl_->camera, dx, dy, &error);
   Check(error, impl_->id, "binning");
+  // The region is in binned pixels: keep it inside the binned sensor (some
+  // cameras clamp it themselves, others, like Aravis's fake, do not).
+  gint x = 0, y = 0, width = 0, height = 0, wmin = 0, wmax = 0, hmin = 0, hmax = 0;
+  arv_camera_get_region(impl_->camera, &x, &y, &width, &height, &error);
+  Check(error, impl_->id, "region");
+  arv_camera_get_width_bounds(impl_->camera, &wmin, &wmax, &error);
+  Check(error, impl_->id, "region");
+  arv_camera_get_height_bounds(impl_->camera, &hmin, &hmax, &error);
+  Check(error, impl_->id, "region");
+  gint sensor_width = 0, sensor_height = 0;
+  arv_camera_get_sensor_size(impl_->camera, &sensor_width, &sensor_height, nullptr);
+  if (sensor_width > 0) wmax = std::min(wmax, sensor_width / dx);
+  if (sensor_height > 0) hmax = std::min(hmax, sensor_height / dy);
+  if (x + width > wmax || y + height > hmax) {
+    x = std::min(x, wmax - 1);
+    y = std::min(y, hmax - 1);
+    arv_camera_set_region(impl_->camera, x, y, std::min(width, wmax - x), std::min(height, hmax - y), &error);
+    Check(error, impl_->id, "region");
+  }
   AllocateBuffers();
 }
 
@@ -122,6 +143,14 @@ std::pair<int, int> AravisCamera::binning() const {
   arv_camera_get_binning(impl_->camera, &dx, &dy, &error);
   Check(error, impl_->id, "binning");
   return {dx, dy};
+}
+
+std::pair<int, int> AravisCamera::sensor_size() const {
+  GError* error = nullptr;
+  gint width = 0, height = 0;
+  arv_camera_get_sensor_size(impl_->camera, &width, &height, &error);
+  Check(error, impl_->id, "sensor size");
+  return {width, height};
 }
 
 std::vector<std::string> AravisCamera::available_trigger_sources() const {

@@ -1,5 +1,12 @@
-// `phos capture decay` as a user runs it.
+// `phos capture` as a user runs it: every protocol on the simulated lab,
+// `all` and `resume`, and a real lab config driving Aravis's fake cameras
+// (in process, and the GigE Vision one in its own process, pulled away
+// mid-run).
 
+#include <csignal>
+#include <set>
+#include <sstream>
+#include <fstream>
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -30,7 +37,7 @@ TEST(CaptureExcitationCommand, WritesACompleteSession) {
   auto result = RunPhos("capture excitation --sim-material " + testing::Fixture("materials/orange.json").string() +
                         " --out " + (dir / "s").string() + " --light led405 --exposure-s 0.2");
   ASSERT_EQ(result.exit_code, 0) << result.err;
-  EXPECT_NE(result.out.find("for 1 light(s)"), std::string::npos) << result.out;
+  EXPECT_NE(result.out.find("phos capture excitation: "), std::string::npos) << result.out;
   EXPECT_EQ(ReadJsonFile(dir / "s" / "session.json")["protocol"], "excitation");
   EXPECT_EQ(ReadJsonFile(dir / "s" / "stop.json")["how"], "complete");
   auto bad = RunPhos("capture excitation --sim-material " + testing::Fixture("materials/orange.json").string() +
@@ -46,8 +53,9 @@ TEST(CaptureDecayCommand, BadInputGivesOneLineAndExitCode2) {
   struct Case {
     std::string arguments, expected;
   } cases[] = {
-      {"capture decay --device aravis" + orange + " --out " + (dir / "a").string(), "--device: only 'sim'"},
-      {"capture decay --out " + (dir / "b").string(), "--sim-material is required"},
+      {"capture decay --device aravis" + orange + " --out " + (dir / "a").string(), "--device: expected 'sim'"},
+      {"capture decay --out " + (dir / "b").string(), "--sim-material: is required"},
+      {"capture decay --device lab --out " + (dir / "b").string(), "needs --lab"},
       {"capture decay --sim-material " + (dir / "none.json").string() + " --out " + (dir / "c").string(), "cannot open"},
       {"capture decay" + orange + " --out " + (dir / "full").string(), "already holds files"},
       {"capture decay" + orange + " --out " + (dir / "d").string() + " --light uv", "unknown channel 'uv'"},
@@ -70,6 +78,196 @@ TEST(CaptureDecayCommand, ALightTheSampleCannotTakeFailsTheSessionWithTheReason)
   nlohmann::json stop = ReadJsonFile(dir / "s" / "stop.json");
   EXPECT_EQ(stop["how"], "failed");
   EXPECT_NE(stop["why"].get<std::string>().find("unknown (not measured)"), std::string::npos) << stop.dump();
+}
+
+
+std::vector<nlohmann::json> ReadLines(const std::filesystem::path& path) {
+  std::vector<nlohmann::json> lines;
+  std::istringstream in(testing::ReadText(path));
+  for (std::string line; std::getline(in, line);) lines.push_back(nlohmann::json::parse(line));
+  return lines;
+}
+
+// Cuts a session back to its first `keep` frames, as if killed (kill -9)
+// right after recording them: later lines and files go, stop.json goes.
+void KillAfter(const std::filesystem::path& session, int keep) {
+  const std::vector<nlohmann::json> lines = ReadLines(session / "frames.jsonl");
+  std::ofstream out(session / "frames.jsonl", std::ios::trunc);
+  for (int i = 0; i < keep; ++i) out << lines[i].dump() << "\n";
+  for (std::size_t i = keep; i < lines.size(); ++i) std::filesystem::remove(session / lines[i]["file"].get<std::string>());
+  std::filesystem::remove(session / "stop.json");
+}
+
+TEST(CaptureAllCommand, RunsTheFourProtocolsInOrderAndResumesPartByPart) {
+  testing::TempDir dir;
+  const std::string out = (dir / "all").string();
+  auto result = RunPhos("capture all --sim-material " + testing::Fixture("materials/orange.json").string() +
+                        " --out " + out + " --charge-s 1800 --duration-s 60");
+  ASSERT_EQ(result.exit_code, 0) << result.err;
+  EXPECT_EQ(ReadJsonFile(dir / "all" / "stop.json")["how"], "complete");
+  double previous_start = -1;
+  for (const std::string part : {"lvf-calibration", "spectrum", "decay", "excitation"}) {
+    nlohmann::json start = ReadJsonFile(dir / "all" / part / "session.json");
+    EXPECT_EQ(start["protocol"], part);
+    EXPECT_EQ(ReadJsonFile(dir / "all" / part / "stop.json")["how"], "complete") << part;
+    const double first = ReadLines(dir / "all" / part / "frames.jsonl").front()["t_start_s"];
+    EXPECT_GT(first, previous_start) << part;  // in this order, on one clock
+    previous_start = first;
+  }
+  // Three lights measured for excitation; the previews are there.
+  std::set<std::string> lights;
+  for (const nlohmann::json& line : ReadLines(dir / "all" / "excitation" / "frames.jsonl")) lights.insert(line["light"]);
+  EXPECT_EQ(lights, (std::set<std::string>{"led405", "led450", "led480"}));
+  for (const std::string preview : {"decay-frames.png", "spectrum-frames.png"})
+    EXPECT_GT(std::filesystem::file_size(dir / "all" / preview), 1000u) << preview;
+  for (const std::string preview : {"decay-curve.svg", "excitation-curves.svg"})
+    EXPECT_NE(testing::ReadText(dir / "all" / preview).find("<svg"), std::string::npos) << preview;
+
+  // Killed in the middle of the excitation and at the start of the decay:
+  // resume keeps the calibration and spectrum, redoes the decay (its frames
+  // kept aside) and goes on with the excitation from where it stopped.
+  const std::size_t excitation_frames = ReadLines(dir / "all" / "excitation" / "frames.jsonl").size();
+  KillAfter(dir / "all" / "excitation", 7);
+  KillAfter(dir / "all" / "decay", 3);
+  std::filesystem::remove(dir / "all" / "stop.json");
+  const std::string spectrum_before = testing::ReadText(dir / "all" / "spectrum" / "frames.jsonl");
+  auto resumed = RunPhos("capture resume " + out);
+  ASSERT_EQ(resumed.exit_code, 0) << resumed.err;
+  EXPECT_NE(resumed.out.find("spectrum         complete already"), std::string::npos) << resumed.out;
+  EXPECT_NE(resumed.out.find("excitation       interrupted: resuming"), std::string::npos) << resumed.out;
+  EXPECT_NE(resumed.out.find("decay cannot continue"), std::string::npos) << resumed.out;
+  EXPECT_EQ(testing::ReadText(dir / "all" / "spectrum" / "frames.jsonl"), spectrum_before);
+  EXPECT_EQ(ReadLines(dir / "all" / "decay.interrupted-1" / "frames.jsonl").size(), 3u);
+  EXPECT_EQ(ReadJsonFile(dir / "all" / "decay" / "stop.json")["how"], "complete");
+  EXPECT_EQ(ReadJsonFile(dir / "all" / "excitation" / "stop.json")["how"], "complete");
+  EXPECT_EQ(ReadJsonFile(dir / "all" / "stop.json")["how"], "complete");
+  // The excitation measured each (light, charge time) once over both runs;
+  // the plan is the same, give or take a plateau decision near its threshold.
+  std::set<std::pair<std::string, double>> seen;
+  for (const nlohmann::json& line : ReadLines(dir / "all" / "excitation" / "frames.jsonl"))
+    EXPECT_TRUE(seen.insert({line["light"].get<std::string>(), line["charge_s"].get<double>()}).second) << line.dump();
+  EXPECT_NEAR(static_cast<double>(seen.size()), static_cast<double>(excitation_frames), 4.0);
+}
+
+TEST(CaptureResumeCommand, SaysWhatCannotBeResumed) {
+  testing::TempDir dir;
+  const std::string orange = " --sim-material " + testing::Fixture("materials/orange.json").string();
+  ASSERT_EQ(RunPhos("capture decay" + orange + " --out " + (dir / "d").string() + " --charge-s 60 --duration-s 20").exit_code, 0);
+  auto done = RunPhos("capture resume " + (dir / "d").string());
+  EXPECT_EQ(done.exit_code, 0);
+  EXPECT_NE(done.out.find("completed already"), std::string::npos) << done.out;
+  KillAfter(dir / "d", 2);
+  EXPECT_TRUE(testing::IsOneLineUserError(RunPhos("capture resume " + (dir / "d").string()),
+                                          "a decay cannot be continued"));
+  EXPECT_EQ(ReadLines(dir / "d" / "frames.jsonl").size(), 2u);  // kept
+  EXPECT_TRUE(testing::IsOneLineUserError(RunPhos("capture resume " + (dir / "nothing").string()),
+                                          "is not a capture session"));
+}
+
+TEST(CaptureSpectrumAndCalibrationCommands, WriteCompleteSessions) {
+  testing::TempDir dir;
+  const std::string orange = " --sim-material " + testing::Fixture("materials/orange.json").string();
+  auto spectrum = RunPhos("capture spectrum" + orange + " --out " + (dir / "s").string() + " --frames 2");
+  ASSERT_EQ(spectrum.exit_code, 0) << spectrum.err;
+  EXPECT_EQ(ReadJsonFile(dir / "s" / "stop.json")["how"], "complete");
+  auto calibration = RunPhos("capture lvf-calibration" + orange + " --out " + (dir / "c").string());
+  ASSERT_EQ(calibration.exit_code, 0) << calibration.err;
+  int lines = 0;
+  for (const nlohmann::json& line : ReadLines(dir / "c" / "frames.jsonl")) lines += line["kind"] == "line";
+  EXPECT_GE(lines, 3);
+}
+
+// A lab config for Aravis's cameras and lights that only record (no GPIO here).
+std::string WriteLab(const testing::TempDir& dir, const std::string& camera, const std::string& extra = "") {
+  const std::string text = R"({"schema": "phos.lab/1",
+    "camera": {"aravis": ")" + camera + R"(", "region": [0, 0, 128, 96], "trigger": "software", "timeout_s": 2},
+    "lights": {"backend": "none", "channels": {"led405": {"line": 17}, "lamp": {"line": 22, "active_low": true},
+               "hg436": {"line": 23}, "hg546": {"line": 24}}},
+    "calibration_lines": [{"light": "hg436", "wavelength_nm": 435.8}, {"light": "hg546", "wavelength_nm": 546.1}],
+    "rig": "fixed")" + extra + "}";
+  testing::WriteText(dir / "lab.json", text);
+  return (dir / "lab.json").string();
+}
+
+TEST(CaptureWithALabConfig, DrivesTheFakeCameraInRealTime) {
+  testing::TempDir dir;
+  const std::string lab = WriteLab(dir, "Fake_1");
+  auto result = RunPhos("capture decay --lab " + lab + " --out " + (dir / "s").string() +
+                        " --charge-s 0.2 --interval-s 0.25 --duration-s 1 --initial-exposure-s 0.01 --max-exposure-s 0.05");
+  ASSERT_EQ(result.exit_code, 0) << result.err;
+  nlohmann::json start = ReadJsonFile(dir / "s" / "session.json");
+  EXPECT_EQ(start["devices"]["device"], "lab");
+  EXPECT_NE(start["devices"]["camera"].get<std::string>().find("Fake_1"), std::string::npos);
+  const std::vector<nlohmann::json> frames = ReadLines(dir / "s" / "frames.jsonl");
+  ASSERT_GE(frames.size(), 4u);
+  for (std::size_t m = 0; m < frames.size(); ++m) {
+    // Real time: each exposure starts at (or just after) its slot, measured.
+    const double delay = frames[m]["delay_after_light_off_s"];
+    EXPECT_GE(delay, 0.005 + 0.25 * m - 1e-6);
+    EXPECT_LT(delay, 0.005 + 0.25 * m + 0.2);
+    EXPECT_GT(frames[m]["camera_timestamp_ns"].get<std::uint64_t>(), 0u);
+    EXPECT_EQ(frames[m]["adc_bits"].get<int>() % 8 == 0 || frames[m]["adc_bits"].get<int>() == 12, true);
+  }
+  // The lights recorded: on, then off, and nothing left on.
+  bool on = false, off = false;
+  for (const nlohmann::json& event : ReadLines(dir / "s" / "events.jsonl"))
+    if (event.value("event", "") == "light") (event["on"].get<bool>() ? on : off) = true;
+  EXPECT_TRUE(on && off);
+  EXPECT_EQ(ReadJsonFile(dir / "s" / "stop.json")["how"], "complete");
+}
+
+TEST(CaptureWithALabConfig, BadConfigsAndMissingDevicesAreOneLine) {
+  testing::TempDir dir;
+  struct Case {
+    std::string config, expected;
+  } cases[] = {
+      {R"({"schema": "phos.lab/1", "camera": {"aravis": "Fake_1"}, "lights": {"channels": {"led405": {"line": 1}, "lamp": {"line": 1}}}})",
+       "is used by two channels"},
+      {R"({"schema": "phos.lab/1", "camera": {"aravis": "Fake_1", "exposure": 1}, "lights": {"channels": {"led405": {"line": 1}}}})",
+       "exposure"},
+      {R"({"schema": "phos.lab/1", "camera": {"aravis": "Fake_1"}, "lights": {"channels": {"uv": {"line": 1}}}})",
+       "charge_light 'led405' is not a channel"},
+      {R"({"schema": "phos.lab/1", "camera": {"aravis": "Fake_1"}, "lights": {"chip": "gpiochip-phos-none", "channels": {"led405": {"line": 1}}}})",
+       "GPIO chip 'gpiochip-phos-none'"},
+      {R"({"schema": "phos.lab/1", "camera": {"aravis": "No_Such_Camera"}, "lights": {"backend": "none", "channels": {"led405": {"line": 1}}}})",
+       "camera 'No_Such_Camera'"},
+      {R"({"schema": "phos.lab/1", "camera": {"aravis": "Fake_1", "pixel_format": "Mono7"}, "lights": {"backend": "none", "channels": {"led405": {"line": 1}}}})",
+       "does not offer 'Mono7'"},
+  };
+  int n = 0;
+  for (const Case& c : cases) {
+    std::string name = "lab";
+    name.append(std::to_string(n++)).append(".json");
+    const std::filesystem::path lab = dir / name;
+    testing::WriteText(lab, c.config);
+    auto result = RunPhos("capture decay --lab " + lab.string() + " --out " + (dir / name).replace_extension(".session").string() +
+                          " --charge-s 0.1 --duration-s 0.5");
+    EXPECT_TRUE(testing::IsOneLineUserError(result, c.expected)) << c.config;
+  }
+}
+
+TEST(CaptureWithALabConfig, ACameraThatDisappearsMidRunFailsTheSessionAndKeepsItsFrames) {
+  // Aravis's GigE Vision fake camera in its own process on loopback; it is
+  // killed two seconds into a decay that would last thirty.
+  testing::TempDir dir;
+  const std::string lab = WriteLab(dir, "127.0.0.1");
+  const std::string script = "arv-fake-gv-camera-0.8 -i 127.0.0.1 >/dev/null 2>&1 & F=$!; sleep 0.7; "
+                             "(sleep 2; kill -9 $F) & " + std::string(PHOS_BINARY) + " capture decay --lab " + lab +
+                             " --out " + (dir / "s").string() +
+                             " --charge-s 0.1 --interval-s 0.2 --duration-s 30 --initial-exposure-s 0.01 "
+                             "--max-exposure-s 0.02 >" + (dir / "out").string() + " 2>" + (dir / "err").string() +
+                             "; echo $? >" + (dir / "rc").string() + "; kill -9 $F 2>/dev/null; wait";
+  ASSERT_EQ(std::system(("bash -c '" + script + "'").c_str()), 0);
+  EXPECT_EQ(testing::ReadText(dir / "rc"), "2\n") << testing::ReadText(dir / "err");
+  EXPECT_EQ(testing::LineCount(testing::ReadText(dir / "err")), 1) << testing::ReadText(dir / "err");
+  EXPECT_NE(testing::ReadText(dir / "err").find("camera '127.0.0.1'"), std::string::npos) << testing::ReadText(dir / "err");
+  nlohmann::json stop = ReadJsonFile(dir / "s" / "stop.json");
+  EXPECT_EQ(stop["how"], "failed");
+  EXPECT_NE(stop["why"].get<std::string>().find("camera '127.0.0.1'"), std::string::npos) << stop.dump();
+  const std::vector<nlohmann::json> frames = ReadLines(dir / "s" / "frames.jsonl");
+  EXPECT_GE(frames.size(), 3u);  // what came before the camera went is kept
+  EXPECT_EQ(stop["frames"].get<std::size_t>(), frames.size());
+  for (const nlohmann::json& frame : frames) EXPECT_TRUE(std::filesystem::exists(dir / "s" / frame["file"].get<std::string>()));
 }
 
 }  // namespace

@@ -35,6 +35,7 @@ class AravisCamera final : public Camera {
   // glow); the region shrinks with it.
   void SetBinning(int dx, int dy);
   std::pair<int, int> binning() const;
+  std::pair<int, int> sensor_size() const;
 
   // Pixel format by its GenICam name: Mono8, Mono10, Mono12, Mono16 or an
   // unpacked Bayer format (BayerRG8, BayerRG12, ...). Frames keep the raw

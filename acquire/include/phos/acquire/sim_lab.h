@@ -32,8 +32,8 @@ LightSource LedLight(const std::string& name, double center_nm, double fwhm_nm, 
 LightSource WhiteLedLight(const std::string& name, double irradiance);
 // A halogen lamp: a 3000 K blackbody from 350 to 800 nm.
 LightSource HalogenLight(const std::string& name, double irradiance);
-// led365, led405, white, lamp: the lab of the method (Sec. 8.4), irradiance 1
-// each; then the LVF calibration's sources of known wavelength (Sec. 8.4.2):
+// led365, led405, led450, led480, white, lamp: the lab of the method (Sec.
+// 8.4), irradiance 1 each; then the LVF calibration's sources of known wavelength (Sec. 8.4.2):
 // the mercury lines at 435.8 and 546.1 nm ("hg436", "hg546") and a HeNe
 // laser line at 632.8 nm ("hene633") behind a diffuser, which only light the
 // white reference.
