@@ -31,11 +31,13 @@ done
 "$PHOS" plot "${decay_only[@]}" --log-y --out "$OUT/decay-only.svg" \
   --title "Presets without measured ke: decay from saturation (r0 = 1)"
 
-# The lab, simulated: capture the decay of the orange preset after a 90-minute
-# charge under the 405 nm LED (virtual clock: it takes a second).
-rm -rf "$OUT/session-orange"
-"$PHOS" capture decay --device sim --sim-material fixtures/materials/orange.json --light led405 \
-  --out "$OUT/session-orange"
+# The lab, simulated: the four protocols of Sec. 8.4 on the orange preset
+# (LVF calibration, spectrum, a decay after a 90-minute charge under the
+# 405 nm LED, excitation under three LEDs); 17.5 hours of bench time on the
+# virtual clock take a second. Previews: a contact sheet of the decay frames
+# and the measured curves.
+rm -rf "$OUT/capture-orange"
+"$PHOS" capture all --device sim --sim-material fixtures/materials/orange.json --out "$OUT/capture-orange"
 
 # Render the still life (Fig. 8.1): lamp on until 20 s, then a minute of
 # darkness. With a material fitted from the capture (results/fitted/orange.json,
@@ -58,6 +60,7 @@ rm -rf "$OUT/still-life" "$OUT/cornell" "$OUT/light-trail"
 echo "phos demo: simulated 11 Table 8.1 presets (60 s charge, 300 s dark, exact integrator)"
 echo "  curves (CSV: t,r_1,L_1..L_8):  $OUT/<material>.csv"
 echo "  plots (SVG):                   $OUT/charged.svg, $OUT/decay-only.svg, $OUT/<material>.svg"
-echo "  a captured decay session:      $OUT/session-orange (session.json, frames.jsonl, frames/*.tif, stop.json)"
+echo "  a captured sample (4 protocols): $OUT/capture-orange/{lvf-calibration,spectrum,decay,excitation}"
+echo "    what it captured: $OUT/capture-orange/decay-frames.png (contact sheet), decay-curve.svg, excitation-curves.svg"
 echo "  rendered scenes (contact sheets): $OUT/still-life.png, $OUT/cornell.png, $OUT/light-trail.png"
 echo "    frames (EXR data, PNG, night-vision PNG): $OUT/still-life/, $OUT/cornell/, $OUT/light-trail/"
