@@ -30,7 +30,7 @@ namespace {
 namespace fs = std::filesystem;
 
 struct CaptureArgs {
-  std::string device, lab, sim_material, out;
+  std::string device, lab, sim_material, sim_camera, out;
   double sim_albedo = 0.8;
   unsigned seed = 1;
 };
@@ -55,10 +55,11 @@ struct Devices {
 
   bool simulated() const { return sim != nullptr; }
 
-  void OpenSim(Material m, std::vector<double> a, unsigned seed, const std::string& material_file) {
+  void OpenSim(Material m, std::vector<double> a, unsigned seed, const std::string& material_file,
+               const std::string& camera_csv) {
     material = std::move(m);
     albedo = std::move(a);
-    CameraModel camera_model = DefaultCameraModel();
+    CameraModel camera_model = camera_csv.empty() ? DefaultCameraModel() : CameraModelFromCsv(camera_csv);
     camera_model.seed = seed;
     sim = std::make_unique<SimulatedLab>(material, albedo, DefaultLights(), camera_model, virtual_clock);
     camera = sim.get();
@@ -73,7 +74,13 @@ struct Devices {
                    {"camera", sim->description()},
                    {"lights", sim->lights().channels()},
                    {"clock", "virtual"},
-                   {"seed", seed}};
+                   {"seed", seed},
+                   {"camera_csv", camera_csv}};
+    // What each light puts on the sample per band: the fit needs it for ke.
+    nlohmann::json band_irradiance = nlohmann::json::object();
+    for (const std::string& light : sim->lights().channels()) band_irradiance[light] = sim->SourceBandIrradiance(light);
+    description["light_band_irradiance"] = band_irradiance;
+    description["bands_nm"] = material.bands.edges_nm;
     sample = {{"material_file", material_file}, {"material", MaterialToJson(material)}, {"albedo", albedo}};
   }
 
@@ -98,7 +105,7 @@ struct Devices {
         ThrowUserError("", "--sim-albedo", "expected a reflectance in [0, 1], got " + FormatDouble(args.sim_albedo));
       Material m = LoadMaterial(args.sim_material);
       std::vector<double> a = m.albedo ? *m.albedo : std::vector<double>(static_cast<std::size_t>(m.band_count()), args.sim_albedo);
-      OpenSim(std::move(m), std::move(a), args.seed, args.sim_material);
+      OpenSim(std::move(m), std::move(a), args.seed, args.sim_material, args.sim_camera);
     } else if (device == "lab") {
       if (args.lab.empty()) ThrowUserError("", "--device lab", "needs --lab LAB.json (the lab config; docs/lab.md)");
       OpenLabConfig(args.lab);
@@ -121,7 +128,7 @@ struct Devices {
     std::vector<double> a = sample_json.value("albedo", std::vector<double>(static_cast<std::size_t>(m.band_count()), 0.8));
     // New noise on each resume: a resumed camera is not the same exposure again.
     OpenSim(std::move(m), std::move(a), devices.value("seed", 1u) + 1000u * resume_count,
-            sample_json.value("material_file", ""));
+            sample_json.value("material_file", ""), devices.value("camera_csv", ""));
   }
 };
 
@@ -172,6 +179,7 @@ nlohmann::json ToJson(const LvfCalibrationOptions& o) {
   nlohmann::json lines = nlohmann::json::array();
   for (const CalibrationLine& l : o.lines) lines.push_back({{"light", l.light}, {"wavelength_nm", l.wavelength_nm}});
   return {{"lines", lines},   {"flat_light", o.flat_light}, {"flat_temperature_k", o.flat_temperature_k},
+          {"flat_irradiance", o.flat_irradiance},
           {"gain", o.gain},   {"max_tries", o.max_tries},   {"exposure", AutoExposureJson(o.exposure)}};
 }
 LvfCalibrationOptions LvfCalibrationFrom(const nlohmann::json& j) {
@@ -180,6 +188,7 @@ LvfCalibrationOptions LvfCalibrationFrom(const nlohmann::json& j) {
     o.lines.push_back({l.value("light", ""), l.value("wavelength_nm", 0.0)});
   o.flat_light = j.value("flat_light", o.flat_light);
   o.flat_temperature_k = j.value("flat_temperature_k", o.flat_temperature_k);
+  o.flat_irradiance = j.value("flat_irradiance", o.flat_irradiance);
   o.gain = j.value("gain", o.gain);
   o.max_tries = j.value("max_tries", o.max_tries);
   o.exposure = AutoExposureFrom(j.value("exposure", nlohmann::json::object()), o.exposure);
@@ -424,7 +433,7 @@ void RunCaptureAll(AllArgs args) {
   const std::string charge_light =
       !args.light.empty() ? args.light : devices.simulated() ? "led405" : devices.lab_config.charge_light;
   std::vector<std::string> excite = args.excite;
-  if (excite.empty()) excite = devices.simulated() ? std::vector<std::string>{"led405", "led450", "led480"}
+  if (excite.empty()) excite = devices.simulated() ? std::vector<std::string>{"led420", "led456", "led494"}
                                                    : std::vector<std::string>{charge_light};
   LvfCalibrationOptions calibration;
   calibration.lines = CalibrationLinesOf(devices);
@@ -519,6 +528,9 @@ void AddDeviceOptions(CLI::App* cmd, CaptureArgs& args) {
   cmd->add_option("--lab", args.lab, "lab config (phos.lab/1: camera, GPIO light channels; docs/lab.md)");
   cmd->add_option("--sim-material", args.sim_material, "material file of the simulated sample (--device sim)");
   cmd->add_option("--sim-albedo", args.sim_albedo, "sample reflectance when the material has none (default 0.8)");
+  cmd->add_option("--sim-camera", args.sim_camera,
+                  "CSV of the simulated camera's spectral sensitivities: wavelength_nm, then one column per\n"
+                  "channel (R,G,B or Y); default: Gaussians at 600, 540, 460 nm, 90 nm wide (docs/capture.md)");
   cmd->add_option("--out", args.out, "session folder to create (new or empty)")->required();
   cmd->add_option("--seed", args.seed, "noise seed of the simulated camera (default 1)");
 }
@@ -645,7 +657,8 @@ void RegisterCapture(CLI::App& app) {
   AddDeviceOptions(all, *all_args);
   all->add_option("--light", all_args->light, "charge light of the spectrum and decay (default led405 / the lab's)");
   all->add_option("--excite", all_args->excite,
-                  "lights to measure excitation with (default: led405 led450 led480 in the simulated lab)");
+                  "lights to measure excitation with, one per band (default: led420 led456 led494 in the\n"
+                  "simulated lab; the lab's charge_light on a bench)");
   all->add_option("--charge-s", all_args->charge_s, "decay: seconds of charging (default 5400)");
   all->add_option("--duration-s", all_args->duration_s, "decay: seconds recorded (default 180)");
   all->add_option("--interval-s", all_args->interval_s, "decay: seconds between frames (default 5)");

@@ -1,9 +1,11 @@
 // phos fit decay-curve / charge-curve: fit curves from any instrument (plain
-// CSV in, JSON out), as in the DESIGN.md contracts.
+// CSV in, JSON out), as in the DESIGN.md contracts; phos fit session: a
+// captured sample (phos capture all) into a material file and a report.
 
 #include <cmath>
 #include <cstdio>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include <nlohmann/json.hpp>
@@ -11,6 +13,8 @@
 #include "commands.h"
 #include "phos/fit/charge_fit.h"
 #include "phos/fit/decay_fit.h"
+#include "phos/fit/session_fit.h"
+#include "phos/model/material.h"
 #include "phos/util/csv.h"
 #include "phos/util/error.h"
 #include "phos/util/format.h"
@@ -164,6 +168,64 @@ void RunChargeCurve(const CurveArgs& args) {
               FormatShort(fit.rate_stderr, 2).c_str(), FormatShort(fit.rss, 6).c_str());
 }
 
+struct SessionArgs {
+  std::string dir, out, report, compare, weights = "poisson";
+  int components = 0, max_components = 3;
+  bool json = false;
+};
+
+void RunFitSession(const SessionArgs& args) {
+  SessionFitOptions options;
+  options.components = args.components;
+  options.max_components = args.max_components;
+  options.weighting = ParseWeightsOption(args.weights);
+  if (options.components < 0 || options.components > 4) ThrowUserError("", "--components", "expected 1 to 4");
+  std::optional<Material> truth;
+  if (!args.compare.empty()) truth = LoadMaterial(args.compare);  // a bad file fails before any work
+  const SessionFit fit = FitSession(args.dir, options);
+  SaveMaterial(fit.material, args.out);
+  if (!args.report.empty())
+    WriteFileAtomically(args.report, SessionReportHtml(fit, "phos fit session " + args.dir));
+  nlohmann::json json = {{"material", args.out}, {"seconds", fit.seconds}, {"notes", fit.notes}};
+  json["n_components"] = fit.decay ? fit.decay->n_components : 0;
+  json["choice"] = fit.decay ? fit.decay->choice : "";
+  nlohmann::json kr = nlohmann::json::array();
+  for (std::size_t i = 0; i < fit.material.states.size(); ++i)
+    kr.push_back({{"kr", fit.material.states[i].kr}, {"kr_stderr", fit.decay->components[i].rate_stderr}});
+  json["states"] = kr;
+  if (!args.json) {
+    std::printf("phos fit session: %s -> %s (%s s)\n", args.dir.c_str(), args.out.c_str(), FormatShort(fit.seconds).c_str());
+    for (std::size_t i = 0; i < fit.material.states.size(); ++i)
+      std::printf("  state %zu: kr = %s +- %s /s\n", i + 1, FormatShort(fit.material.states[i].kr).c_str(),
+                  FormatShort(fit.decay->components[i].rate_stderr).c_str());
+    std::printf("  nc = %d: %s\n", fit.decay->n_components, fit.decay->choice.c_str());
+    std::string ke;
+    for (int b = 0; b < fit.material.band_count(); ++b) {
+      const auto& k = fit.material.states[0].ke[b];
+      ke.append(b ? ", " : "").append(k ? FormatShort(*k) : "-");
+    }
+    std::printf("  ke per band: %s\n", ke.c_str());
+    for (const std::string& note : fit.notes) std::printf("  note: %s\n", note.c_str());
+    if (!args.report.empty()) std::printf("  report: %s\n", args.report.c_str());
+  }
+  if (truth) {
+    const MaterialComparison c = CompareMaterials(fit.material, *truth);
+    nlohmann::json cmp = {{"kr_relative_error", c.kr_relative_error}, {"spectrum_l1", c.spectrum_l1}};
+    nlohmann::json ke = nlohmann::json::array();
+    for (const auto& e : c.ke_relative_error) ke.push_back(e ? nlohmann::json(*e) : nlohmann::json(nullptr));
+    cmp["ke_relative_error"] = ke;
+    json["comparison"] = cmp;
+    if (!args.json) {
+      std::string kr_text, ke_text;
+      for (double e : c.kr_relative_error) kr_text.append(kr_text.empty() ? "" : ", ").append(FormatShort(100 * e)).append("%");
+      for (const auto& e : c.ke_relative_error) ke_text.append(ke_text.empty() ? "" : ", ").append(e ? FormatShort(100 * *e) + "%" : "-");
+      std::printf("  against %s: kr off by %s; emission spectrum L1 %s; ke off by %s\n", args.compare.c_str(),
+                  kr_text.c_str(), FormatShort(c.spectrum_l1).c_str(), ke_text.c_str());
+    }
+  }
+  if (args.json) std::printf("%s\n", json.dump().c_str());
+}
+
 }  // namespace
 
 void RegisterFit(CLI::App& app) {
@@ -199,6 +261,25 @@ void RegisterFit(CLI::App& app) {
   c->add_option("--plot", charge->plot, "write an SVG of the data against the fit");
   c->add_flag("--json", charge->json, "print one JSON object");
   c->callback([charge] { RunChargeCurve(*charge); });
+
+  auto session = std::make_shared<SessionArgs>();
+  CLI::App* f = fit->add_subcommand(
+      "session",
+      "Fit a captured sample (the folder of 'phos capture all') into a material file: the LVF calibration,\n"
+      "the emission spectrum (non-negative reconstruction through the filter), the decay (kr, nc by BIC),\n"
+      "the excitation per light (ke per band, the delay after light-off modelled) and Lambda (Sec.\n"
+      "8.4.2-8.4.6). What cannot be fitted is noted; the report shows data against fit as plots.");
+  f->add_option("DIR", session->dir, "the capture folder")->required();
+  f->add_option("--out", session->out, "material file to write (phos.material/1)")->required();
+  f->add_option("--report", session->report, "HTML report: data against fit, residuals, uncertainties, nc and why");
+  auto fixed_nc = f->add_option("--components", session->components, "fix the number of states (1-4)");
+  auto chosen_nc = f->add_option("--max-components", session->max_components, "choose nc by BIC up to N (default 3)");
+  fixed_nc->excludes(chosen_nc);
+  f->add_option("--weights", session->weights, "poisson (default: photon counting) or none");
+  f->add_option("--compare", session->compare,
+                "a material to compare with (the one a simulated sample was made of): kr, spectrum and ke errors");
+  f->add_flag("--json", session->json, "print one JSON object");
+  f->callback([session] { RunFitSession(*session); });
 }
 
 }  // namespace phos::app

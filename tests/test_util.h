@@ -12,6 +12,9 @@
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
 
 namespace phos::testing {
 
@@ -42,6 +45,14 @@ inline std::string ReadText(const std::filesystem::path& path) {
   std::stringstream s;
   s << in.rdbuf();
   return s.str();
+}
+
+// The lines of a JSONL file (frames.jsonl, events.jsonl), parsed.
+inline std::vector<nlohmann::json> ReadJsonLines(const std::filesystem::path& path) {
+  std::vector<nlohmann::json> lines;
+  std::istringstream in(ReadText(path));
+  for (std::string line; std::getline(in, line);) lines.push_back(nlohmann::json::parse(line));
+  return lines;
 }
 
 inline void WriteText(const std::filesystem::path& path, const std::string& text) {

@@ -60,6 +60,16 @@ double RecordFrame(SessionWriter& session, const Frame& frame, nlohmann::json li
         brightest = std::max(brightest, (sum / frame.height - frame.black_level_dn) / range);
       }
     line["peak_column_fraction"] = brightest;
+    // The column profile (all channels summed, black removed) is what a
+    // spectrum is made of: recorded with the frame so fits need not decode
+    // images (the raw frame stays for reprocessing).
+    std::vector<double> profile(static_cast<std::size_t>(frame.width), 0.0);
+    for (int y = 0; y < frame.height; ++y)
+      for (int x = 0; x < frame.width; ++x)
+        for (int c = 0; c < frame.channels; ++c)
+          profile[x] += (frame.pixels[(static_cast<std::size_t>(y) * frame.width + x) * frame.channels + c] -
+                         frame.black_level_dn) / frame.height;
+    line["column_mean_dn"] = profile;
   }
   line["mean_signal_dn"] = means;
   line["saturated_fraction"] = frame.SaturatedFraction();
@@ -339,7 +349,8 @@ LvfCalibrationResult RunLvfCalibrationProtocol(Camera& camera, Lights& lights, C
       expose(options.flat_light, {{"kind", "flat"},
                                   {"lvf", true},
                                   {"light", options.flat_light},
-                                  {"temperature_k", options.flat_temperature_k}});
+                                  {"temperature_k", options.flat_temperature_k},
+                                  {"irradiance", options.flat_irradiance}});
     RecordRig(session, rig, clock, "lvf", false);
     RecordRig(session, rig, clock, "white_reference", false);
   });

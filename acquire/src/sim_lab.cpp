@@ -5,6 +5,7 @@
 
 #include "phos/model/rate_equation.h"
 #include "phos/model/schedule.h"
+#include "phos/util/csv.h"
 #include "phos/util/error.h"
 #include "phos/util/format.h"
 
@@ -36,12 +37,14 @@ LightSource HalogenLight(const std::string& name, double irradiance) {
 }
 
 std::vector<LightSource> DefaultLights() {
-  // led450 and led480 stay inside 400-512.5 nm (their Gaussians end at 4
-  // sigma), the bands where Table 8.1 measured ke: with led405 they excite
-  // each band in different proportions, so per-band ke can be told apart.
+  // led420, led456 and led494 are LEDs behind band-pass filters, each inside
+  // one of the bands 400-437.5, 437.5-475 and 475-512.5 nm where Table 8.1
+  // measured ke (their Gaussians end at 4 sigma): excitation per band, as
+  // Sec. 8.4.6 measures it.
   std::vector<LightSource> lights = {LedLight("led365", 365, 10, 1.0), LedLight("led405", 405, 15, 1.0),
-                                     LedLight("led450", 450, 20, 1.0),  LedLight("led480", 480, 15, 1.0),
-                                     WhiteLedLight("white", 1.0),       HalogenLight("lamp", 1.0)};
+                                     LedLight("led420", 420, 10, 1.0), LedLight("led456", 456, 10, 1.0),
+                                     LedLight("led494", 494, 8, 1.0),  WhiteLedLight("white", 1.0),
+                                     HalogenLight("lamp", 1.0)};
   // Spectral lines are far narrower than the LVF (25 nm); 1 nm stands for them.
   for (const KnownLine& line : DefaultCalibrationLines())
     lights.push_back(LedLight(line.light, line.wavelength_nm, 1.0, 1.0));
@@ -55,6 +58,33 @@ std::vector<KnownLine> DefaultCalibrationLines() {
 CameraModel DefaultCameraModel() {
   CameraModel camera;
   camera.sensitivity = {GaussianSpectrum(600, 90), GaussianSpectrum(540, 90), GaussianSpectrum(460, 90)};
+  return camera;
+}
+
+CameraModel CameraModelFromCsv(const std::filesystem::path& path) {
+  const CsvTable table = ReadCsv(path);
+  const int wavelength = table.Find("wavelength_nm");
+  if (wavelength < 0) ThrowUserError(path.string(), "", "needs a column wavelength_nm (then one column per channel)");
+  if (table.header.size() < 2) ThrowUserError(path.string(), "", "needs at least one channel column beside wavelength_nm");
+  if (table.row_count() < 2) ThrowUserError(path.string(), "", "needs at least 2 rows");
+  const std::vector<double>& nm = table.columns[wavelength];
+  for (std::size_t i = 1; i < nm.size(); ++i)
+    if (!(nm[i] > nm[i - 1]))
+      ThrowUserError(path.string(), "wavelength_nm", "must increase (row " + std::to_string(i + 2) + ")");
+  CameraModel camera = DefaultCameraModel();
+  camera.channel_names.clear();
+  camera.sensitivity.clear();
+  for (std::size_t c = 0; c < table.header.size(); ++c) {
+    if (static_cast<int>(c) == wavelength) continue;
+    double peak = 0;
+    for (double v : table.columns[c]) {
+      if (v < 0) ThrowUserError(path.string(), table.header[c], "sensitivity must be >= 0");
+      peak = std::max(peak, v);
+    }
+    if (peak <= 0) ThrowUserError(path.string(), table.header[c], "is zero everywhere: this channel would see nothing");
+    camera.channel_names.push_back(table.header[c]);
+    camera.sensitivity.push_back({nm, table.columns[c]});
+  }
   return camera;
 }
 
@@ -146,6 +176,12 @@ SimulatedLab::Optics SimulatedLab::MakeOptics(bool through_lvf) const {
     }
   }
   return optics;
+}
+
+std::vector<double> SimulatedLab::SourceBandIrradiance(const std::string& light) const {
+  for (std::size_t s = 0; s < sources_.size(); ++s)
+    if (sources_[s].name == light) return source_E_[s];
+  ThrowUserError("", "light", "unknown channel '" + light + "'");
 }
 
 void SimulatedLab::SetLvfInPath(bool in_path) { lvf_in_path_ = in_path; }

@@ -17,12 +17,7 @@
 namespace phos {
 namespace {
 
-std::vector<nlohmann::json> ReadLines(const std::filesystem::path& path) {
-  std::vector<nlohmann::json> lines;
-  std::istringstream in(testing::ReadText(path));
-  for (std::string line; std::getline(in, line);) lines.push_back(nlohmann::json::parse(line));
-  return lines;
-}
+using testing::ReadJsonLines;
 
 struct Lab {
   VirtualClock clock;
@@ -76,12 +71,12 @@ TEST(DecayProtocol, RecordsTimingFramesAndTheSamplesDecayRate) {
 
   nlohmann::json stop = ReadJsonFile(dir / "s" / "stop.json");
   EXPECT_EQ(stop["how"], "complete");
-  std::vector<nlohmann::json> events = ReadLines(dir / "s" / "events.jsonl");
+  std::vector<nlohmann::json> events = ReadJsonLines(dir / "s" / "events.jsonl");
   ASSERT_GE(events.size(), 4u);
   EXPECT_EQ(events[1]["channel"], "led405");
   EXPECT_EQ(events[2]["on"], false);
   EXPECT_EQ(events[2]["t_s"], 1800);
-  std::vector<nlohmann::json> frames = ReadLines(dir / "s" / "frames.jsonl");
+  std::vector<nlohmann::json> frames = ReadJsonLines(dir / "s" / "frames.jsonl");
   ASSERT_EQ(frames.size(), 36u);
 
   // Timing is part of the data: frame m starts 5 ms + 5 m s after light-off.
@@ -127,7 +122,7 @@ TEST(DecayProtocol, AFailureMidRunKeepsWhatWasCapturedAndSaysWhy) {
   EXPECT_NE(stop["why"].get<std::string>().find("cannot expose"), std::string::npos) << stop.dump();
   const int captured = stop["frames"];
   EXPECT_GE(captured, 1);
-  EXPECT_EQ(static_cast<int>(ReadLines(dir / "s" / "frames.jsonl").size()), captured);
+  EXPECT_EQ(static_cast<int>(ReadJsonLines(dir / "s" / "frames.jsonl").size()), captured);
 }
 
 TEST(SessionWriter, RefusesAFolderThatHoldsFiles) {

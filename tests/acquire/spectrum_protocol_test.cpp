@@ -18,12 +18,7 @@
 namespace phos {
 namespace {
 
-std::vector<nlohmann::json> ReadLines(const std::filesystem::path& path) {
-  std::vector<nlohmann::json> lines;
-  std::istringstream in(testing::ReadText(path));
-  for (std::string line; std::getline(in, line);) lines.push_back(nlohmann::json::parse(line));
-  return lines;
-}
+using testing::ReadJsonLines;
 
 struct Lab {
   VirtualClock clock;
@@ -107,7 +102,7 @@ TEST(LvfCalibrationProtocol, RecordsADarkFrameEachLineAndTheFlatFieldWellExposed
   // The last frame of each source is the well-exposed one; its peak is where
   // the filter passes the line.
   std::map<std::string, nlohmann::json> last;
-  for (const nlohmann::json& line : ReadLines(dir / "s" / "frames.jsonl")) last[line.value("light", "dark")] = line;
+  for (const nlohmann::json& line : ReadJsonLines(dir / "s" / "frames.jsonl")) last[line.value("light", "dark")] = line;
   ASSERT_EQ(last.size(), 5u);  // dark, 3 lines, the lamp
   EXPECT_EQ(last["dark"]["kind"], "dark");
   EXPECT_EQ(last["lamp"]["kind"], "flat");
@@ -138,7 +133,7 @@ TEST(SpectrumProtocol, TheGlowThroughTheFilterFollowsTheEmissionSpectrum) {
   EXPECT_EQ(ReadJsonFile(dir / "s" / "stop.json")["how"], "complete");
   EXPECT_EQ(result.well_exposed, options.frames);
   EXPECT_FALSE(lab.lab.lvf_in_path());
-  const std::vector<nlohmann::json> lines = ReadLines(dir / "s" / "frames.jsonl");
+  const std::vector<nlohmann::json> lines = ReadJsonLines(dir / "s" / "frames.jsonl");
   ASSERT_EQ(static_cast<int>(lines.size()), result.frames);
   EXPECT_NEAR(lines[0]["delay_after_light_off_s"].get<double>(), options.first_delay_s, 1e-9);
   // Orange emits 7.7 in 587.5-625 nm and 0.04 in 400-437.5 nm (Table 8.1):
@@ -185,7 +180,7 @@ TEST(ExcitationProtocol, ResumingMeasuresOnlyWhatIsMissingAndOverwritesNothing) 
   EXPECT_EQ(ReadJsonFile(dir / "s" / "stop.json")["how"], "failed");
   EXPECT_NE(ReadJsonFile(dir / "s" / "stop.json")["why"].get<std::string>().find("disconnected"), std::string::npos);
   const std::string first_frame = testing::ReadText(dir / "s" / "frames" / "000001.tif");
-  ASSERT_EQ(ReadLines(dir / "s" / "frames.jsonl").size(), 5u);
+  ASSERT_EQ(ReadJsonLines(dir / "s" / "frames.jsonl").size(), 5u);
 
   const ExcitationDone done = ReadExcitationDone(dir / "s");
   EXPECT_EQ(done.size(), 5u);
@@ -199,7 +194,7 @@ TEST(ExcitationProtocol, ResumingMeasuresOnlyWhatIsMissingAndOverwritesNothing) 
   // Every (light, charge time) once; frames numbered 1..n without a gap.
   std::set<std::pair<std::string, double>> seen;
   int seq = 0;
-  for (const nlohmann::json& line : ReadLines(dir / "s" / "frames.jsonl")) {
+  for (const nlohmann::json& line : ReadJsonLines(dir / "s" / "frames.jsonl")) {
     EXPECT_EQ(line["seq"].get<int>(), ++seq);
     const bool first_time = seen.insert({line["light"].get<std::string>(), line["charge_s"].get<double>()}).second;
     EXPECT_TRUE(first_time) << line.dump();
@@ -210,7 +205,7 @@ TEST(ExcitationProtocol, ResumingMeasuresOnlyWhatIsMissingAndOverwritesNothing) 
   EXPECT_EQ(lights.size(), 2u);
   // The resume is on record, with how the session had stopped.
   bool resumed = false;
-  for (const nlohmann::json& event : ReadLines(dir / "s" / "events.jsonl"))
+  for (const nlohmann::json& event : ReadJsonLines(dir / "s" / "events.jsonl"))
     resumed = resumed || (event["event"] == "resume" && event.contains("previous_stop") &&
                           event["previous_stop"]["how"] == "failed");
   EXPECT_TRUE(resumed);

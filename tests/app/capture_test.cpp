@@ -10,6 +10,7 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include "phos/acquire/session.h"
 #include "phos/util/json.h"
 #include "test_util.h"
 
@@ -81,17 +82,12 @@ TEST(CaptureDecayCommand, ALightTheSampleCannotTakeFailsTheSessionWithTheReason)
 }
 
 
-std::vector<nlohmann::json> ReadLines(const std::filesystem::path& path) {
-  std::vector<nlohmann::json> lines;
-  std::istringstream in(testing::ReadText(path));
-  for (std::string line; std::getline(in, line);) lines.push_back(nlohmann::json::parse(line));
-  return lines;
-}
+using testing::ReadJsonLines;
 
 // Cuts a session back to its first `keep` frames, as if killed (kill -9)
 // right after recording them: later lines and files go, stop.json goes.
 void KillAfter(const std::filesystem::path& session, int keep) {
-  const std::vector<nlohmann::json> lines = ReadLines(session / "frames.jsonl");
+  const std::vector<nlohmann::json> lines = ReadJsonLines(session / "frames.jsonl");
   std::ofstream out(session / "frames.jsonl", std::ios::trunc);
   for (int i = 0; i < keep; ++i) out << lines[i].dump() << "\n";
   for (std::size_t i = keep; i < lines.size(); ++i) std::filesystem::remove(session / lines[i]["file"].get<std::string>());
@@ -110,14 +106,14 @@ TEST(CaptureAllCommand, RunsTheFourProtocolsInOrderAndResumesPartByPart) {
     nlohmann::json start = ReadJsonFile(dir / "all" / part / "session.json");
     EXPECT_EQ(start["protocol"], part);
     EXPECT_EQ(ReadJsonFile(dir / "all" / part / "stop.json")["how"], "complete") << part;
-    const double first = ReadLines(dir / "all" / part / "frames.jsonl").front()["t_start_s"];
+    const double first = ReadJsonLines(dir / "all" / part / "frames.jsonl").front()["t_start_s"];
     EXPECT_GT(first, previous_start) << part;  // in this order, on one clock
     previous_start = first;
   }
   // Three lights measured for excitation; the previews are there.
   std::set<std::string> lights;
-  for (const nlohmann::json& line : ReadLines(dir / "all" / "excitation" / "frames.jsonl")) lights.insert(line["light"]);
-  EXPECT_EQ(lights, (std::set<std::string>{"led405", "led450", "led480"}));
+  for (const nlohmann::json& line : ReadJsonLines(dir / "all" / "excitation" / "frames.jsonl")) lights.insert(line["light"]);
+  EXPECT_EQ(lights, (std::set<std::string>{"led420", "led456", "led494"}));
   for (const std::string preview : {"decay-frames.png", "spectrum-frames.png"})
     EXPECT_GT(std::filesystem::file_size(dir / "all" / preview), 1000u) << preview;
   for (const std::string preview : {"decay-curve.svg", "excitation-curves.svg"})
@@ -126,7 +122,7 @@ TEST(CaptureAllCommand, RunsTheFourProtocolsInOrderAndResumesPartByPart) {
   // Killed in the middle of the excitation and at the start of the decay:
   // resume keeps the calibration and spectrum, redoes the decay (its frames
   // kept aside) and goes on with the excitation from where it stopped.
-  const std::size_t excitation_frames = ReadLines(dir / "all" / "excitation" / "frames.jsonl").size();
+  const std::size_t excitation_frames = ReadJsonLines(dir / "all" / "excitation" / "frames.jsonl").size();
   KillAfter(dir / "all" / "excitation", 7);
   KillAfter(dir / "all" / "decay", 3);
   std::filesystem::remove(dir / "all" / "stop.json");
@@ -137,14 +133,14 @@ TEST(CaptureAllCommand, RunsTheFourProtocolsInOrderAndResumesPartByPart) {
   EXPECT_NE(resumed.out.find("excitation       interrupted: resuming"), std::string::npos) << resumed.out;
   EXPECT_NE(resumed.out.find("decay cannot continue"), std::string::npos) << resumed.out;
   EXPECT_EQ(testing::ReadText(dir / "all" / "spectrum" / "frames.jsonl"), spectrum_before);
-  EXPECT_EQ(ReadLines(dir / "all" / "decay.interrupted-1" / "frames.jsonl").size(), 3u);
+  EXPECT_EQ(ReadJsonLines(dir / "all" / "decay.interrupted-1" / "frames.jsonl").size(), 3u);
   EXPECT_EQ(ReadJsonFile(dir / "all" / "decay" / "stop.json")["how"], "complete");
   EXPECT_EQ(ReadJsonFile(dir / "all" / "excitation" / "stop.json")["how"], "complete");
   EXPECT_EQ(ReadJsonFile(dir / "all" / "stop.json")["how"], "complete");
   // The excitation measured each (light, charge time) once over both runs;
   // the plan is the same, give or take a plateau decision near its threshold.
   std::set<std::pair<std::string, double>> seen;
-  for (const nlohmann::json& line : ReadLines(dir / "all" / "excitation" / "frames.jsonl"))
+  for (const nlohmann::json& line : ReadJsonLines(dir / "all" / "excitation" / "frames.jsonl"))
     EXPECT_TRUE(seen.insert({line["light"].get<std::string>(), line["charge_s"].get<double>()}).second) << line.dump();
   EXPECT_NEAR(static_cast<double>(seen.size()), static_cast<double>(excitation_frames), 4.0);
 }
@@ -159,7 +155,7 @@ TEST(CaptureResumeCommand, SaysWhatCannotBeResumed) {
   KillAfter(dir / "d", 2);
   EXPECT_TRUE(testing::IsOneLineUserError(RunPhos("capture resume " + (dir / "d").string()),
                                           "a decay cannot be continued"));
-  EXPECT_EQ(ReadLines(dir / "d" / "frames.jsonl").size(), 2u);  // kept
+  EXPECT_EQ(ReadJsonLines(dir / "d" / "frames.jsonl").size(), 2u);  // kept
   EXPECT_TRUE(testing::IsOneLineUserError(RunPhos("capture resume " + (dir / "nothing").string()),
                                           "is not a capture session"));
 }
@@ -173,7 +169,7 @@ TEST(CaptureSpectrumAndCalibrationCommands, WriteCompleteSessions) {
   auto calibration = RunPhos("capture lvf-calibration" + orange + " --out " + (dir / "c").string());
   ASSERT_EQ(calibration.exit_code, 0) << calibration.err;
   int lines = 0;
-  for (const nlohmann::json& line : ReadLines(dir / "c" / "frames.jsonl")) lines += line["kind"] == "line";
+  for (const nlohmann::json& line : ReadJsonLines(dir / "c" / "frames.jsonl")) lines += line["kind"] == "line";
   EXPECT_GE(lines, 3);
 }
 
@@ -198,7 +194,7 @@ TEST(CaptureWithALabConfig, DrivesTheFakeCameraInRealTime) {
   nlohmann::json start = ReadJsonFile(dir / "s" / "session.json");
   EXPECT_EQ(start["devices"]["device"], "lab");
   EXPECT_NE(start["devices"]["camera"].get<std::string>().find("Fake_1"), std::string::npos);
-  const std::vector<nlohmann::json> frames = ReadLines(dir / "s" / "frames.jsonl");
+  const std::vector<nlohmann::json> frames = ReadJsonLines(dir / "s" / "frames.jsonl");
   ASSERT_GE(frames.size(), 4u);
   for (std::size_t m = 0; m < frames.size(); ++m) {
     // Real time: each exposure starts at (or just after) its slot, measured.
@@ -210,7 +206,7 @@ TEST(CaptureWithALabConfig, DrivesTheFakeCameraInRealTime) {
   }
   // The lights recorded: on, then off, and nothing left on.
   bool on = false, off = false;
-  for (const nlohmann::json& event : ReadLines(dir / "s" / "events.jsonl"))
+  for (const nlohmann::json& event : ReadJsonLines(dir / "s" / "events.jsonl"))
     if (event.value("event", "") == "light") (event["on"].get<bool>() ? on : off) = true;
   EXPECT_TRUE(on && off);
   EXPECT_EQ(ReadJsonFile(dir / "s" / "stop.json")["how"], "complete");
@@ -264,10 +260,28 @@ TEST(CaptureWithALabConfig, ACameraThatDisappearsMidRunFailsTheSessionAndKeepsIt
   nlohmann::json stop = ReadJsonFile(dir / "s" / "stop.json");
   EXPECT_EQ(stop["how"], "failed");
   EXPECT_NE(stop["why"].get<std::string>().find("camera '127.0.0.1'"), std::string::npos) << stop.dump();
-  const std::vector<nlohmann::json> frames = ReadLines(dir / "s" / "frames.jsonl");
+  const std::vector<nlohmann::json> frames = ReadJsonLines(dir / "s" / "frames.jsonl");
   EXPECT_GE(frames.size(), 3u);  // what came before the camera went is kept
   EXPECT_EQ(stop["frames"].get<std::size_t>(), frames.size());
   for (const nlohmann::json& frame : frames) EXPECT_TRUE(std::filesystem::exists(dir / "s" / frame["file"].get<std::string>()));
+}
+
+
+TEST(CaptureDecayCommand, AMonoCameraFromItsSensitivityCsv) {
+  testing::TempDir dir;
+  const std::string orange = " --sim-material " + testing::Fixture("materials/orange.json").string();
+  auto result = RunPhos("capture decay" + orange + " --sim-camera " + testing::Fixture("cameras/mono-cmos.csv").string() +
+                        " --out " + (dir / "s").string() + " --charge-s 600 --duration-s 20");
+  ASSERT_EQ(result.exit_code, 0) << result.err;
+  const std::vector<nlohmann::json> frames = ReadJsonLines(dir / "s" / "frames.jsonl");
+  ASSERT_FALSE(frames.empty());
+  EXPECT_EQ(frames[0]["mean_signal_dn"].size(), 1u);
+  EXPECT_EQ(ReadFrame(dir / "s", frames[0]).channel_names, std::vector<std::string>{"Y"});
+  EXPECT_GT(frames[0]["mean_signal_dn"][0].get<double>(), 10.0);  // it sees the glow
+  testing::WriteText(dir / "bad.csv", "wavelength_nm,Y\n500,1\n490,1\n");
+  EXPECT_TRUE(testing::IsOneLineUserError(
+      RunPhos("capture decay" + orange + " --sim-camera " + (dir / "bad.csv").string() + " --out " + (dir / "t").string()),
+      "wavelength_nm: must increase"));
 }
 
 }  // namespace

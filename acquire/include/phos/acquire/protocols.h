@@ -138,6 +138,7 @@ struct LvfCalibrationOptions {
   std::vector<CalibrationLine> lines;
   std::string flat_light = "lamp";
   double flat_temperature_k = 3000;
+  double flat_irradiance = 1;  // on the white reference, in the material's units (1: relative only)
   double gain = 1;
   AutoExposure exposure{0.05, 1e-4, 8, 0.15, 0.7};
   int max_tries = 12;  // exposure steps per source before giving up

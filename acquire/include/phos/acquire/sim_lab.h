@@ -6,6 +6,7 @@
 // saturation), all on one clock. Protocols drive it through the same Camera
 // and Lights interfaces as real hardware.
 
+#include <filesystem>
 #include <memory>
 #include <random>
 #include <string>
@@ -32,8 +33,9 @@ LightSource LedLight(const std::string& name, double center_nm, double fwhm_nm, 
 LightSource WhiteLedLight(const std::string& name, double irradiance);
 // A halogen lamp: a 3000 K blackbody from 350 to 800 nm.
 LightSource HalogenLight(const std::string& name, double irradiance);
-// led365, led405, led450, led480, white, lamp: the lab of the method (Sec.
-// 8.4), irradiance 1 each; then the LVF calibration's sources of known wavelength (Sec. 8.4.2):
+// led365, led405, led420, led456, led494 (filtered, one per band of Table
+// 8.1's measured ke), white, lamp: the lab of the method (Sec. 8.4),
+// irradiance 1 each; then the LVF calibration's sources of known wavelength (Sec. 8.4.2):
 // the mercury lines at 435.8 and 546.1 nm ("hg436", "hg546") and a HeNe
 // laser line at 632.8 nm ("hene633") behind a diffuser, which only light the
 // white reference.
@@ -75,6 +77,11 @@ struct CameraModel {
   LinearVariableFilter lvf;  // used while the filter is in the light path
 };
 CameraModel DefaultCameraModel();
+// The default camera with the spectral sensitivities of a CSV file: a column
+// wavelength_nm (increasing) and one column per channel, named by its header
+// ("R,G,B" for a colour camera, "Y" for a mono one). Values are relative;
+// negative, non-increasing or missing data is a UserError naming the file.
+CameraModel CameraModelFromCsv(const std::filesystem::path& path);
 
 class SimulatedLab final : public Camera {
  public:
@@ -101,6 +108,9 @@ class SimulatedLab final : public Camera {
   std::vector<double> StateNow();
   // Band-integrated irradiance on the sample from the lights that are on.
   std::vector<double> IrradianceNow() const;
+  // What one light puts on the sample, per band of the material's grid (what
+  // a bench measures with a calibrated spectroradiometer once per LED).
+  std::vector<double> SourceBandIrradiance(const std::string& light) const;
 
  private:
   void AdvanceTo(double t_s);

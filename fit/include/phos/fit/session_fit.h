@@ -1,0 +1,118 @@
+#pragma once
+// Fitting a captured sample (Sec. 8.4.2-8.4.6): the sessions that
+// `phos capture all` writes, read from disk (fit never talks to devices),
+// turned into a material file.
+//
+//  1. LVF calibration (Sec. 8.4.2): the centroid column of each line of known
+//     wavelength gives the filter's centre-per-column line (least squares),
+//     its spread the filter's width; the flat field under the lamp of known
+//     colour temperature gives each column's response.
+//  2. Emission spectrum: every well-exposed spectrum frame's column profile,
+//     divided by the column response, is a blurred view of the sample's
+//     radiance; the band radiances are its non-negative, lightly regularized
+//     least-squares reconstruction through the filter's measured shape.
+//  3. Decay (Sec. 8.4.4): frames normalized by their exposure, at the middle
+//     of the exposure, saturated frames left out; FitDecay with shared rates
+//     across channels, a background, and nc chosen by BIC (or fixed).
+//  4. Excitation (Sec. 8.4.6): per light, FitExcitation with kr from the
+//     decay (the delay and the exposure are in its model); ke per band from
+//     the rates and the lights' band irradiances (non-negative).
+//  5. Re-radiation (Sec. 8.4.5): Lambda_b = L_b / (kr r), with r the state
+//     during each spectrum frame, known in closed form from its charge, the
+//     ke just fitted and the frame's delay and exposure. With nc > 1, the
+//     states share the shape and split it by their decay amplitudes,
+//     Lambda_i = a_i Lambda* / kr_i.
+
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "phos/fit/decay_fit.h"
+#include "phos/fit/excitation_fit.h"
+#include "phos/model/material.h"
+
+namespace phos {
+
+struct LvfCalibrationFit {
+  int width = 0;                      // columns
+  double center0_nm = 0;              // centre of column 0
+  double nm_per_column = 0;
+  double fwhm_nm = 0;                 // the filter's pass band, from the lines' spread
+  double rms_residual_nm = 0;         // of the line fit
+  struct Line {
+    std::string light;
+    double wavelength_nm = 0, column = 0;
+  };
+  std::vector<Line> lines;
+  std::vector<double> flat_dn_per_s;  // per column, all channels summed
+  double flat_temperature_k = 3000, flat_irradiance = 1;
+
+  double CenterNm(double column) const { return center0_nm + nm_per_column * column; }
+};
+
+// Reads an lvf-calibration session. Fewer than two usable lines, or no flat
+// field, is a UserError naming the session.
+LvfCalibrationFit FitLvfCalibration(const std::filesystem::path& session_dir);
+
+struct SpectrumFit {
+  // Per well-exposed frame: band radiance (material units), its delay after
+  // light-off and exposure; the measured and modelled column profiles.
+  struct FrameFit {
+    double delay_s = 0, exposure_s = 0;
+    std::vector<double> band_radiance;
+    std::vector<double> measured, modelled;  // per column, DN/s
+  };
+  std::vector<FrameFit> frames;
+  std::vector<double> shape;  // mean band radiance, normalized to sum 1
+  std::string charge_light;
+  double charge_s = 0;
+};
+
+SpectrumFit FitEmissionSpectrum(const std::filesystem::path& session_dir, const LvfCalibrationFit& calibration,
+                                const SpectralGrid& bands);
+
+struct SessionFitOptions {
+  int components = 0;      // 0: BIC chooses up to max_components
+  int max_components = 3;
+  Weighting weighting = Weighting::kPoisson;
+};
+
+struct SessionFit {
+  Material material;
+  std::optional<LvfCalibrationFit> calibration;
+  std::optional<SpectrumFit> spectrum;
+  std::optional<DecayFitSummary> decay;
+  Curve decay_curve;
+  struct ExcitationLight {
+    std::string light;
+    std::vector<ExcitationSample> samples;
+    ExcitationFitSummary fit;
+    std::vector<double> band_irradiance;
+  };
+  std::vector<ExcitationLight> excitation;
+  std::vector<std::string> notes;  // what was left out or could not be fitted, and why
+  double seconds = 0;
+};
+
+// Fits an `all` folder (phos capture all). What cannot be fitted is noted and
+// left out; a material needs at least the decay (kr) and the spectrum
+// (Lambda), else a UserError naming what is missing.
+SessionFit FitSession(const std::filesystem::path& dir, const SessionFitOptions& options);
+
+// How close a fitted material is to the one a simulated sample was made of:
+// kr relative error per state, the L1 distance of the normalized emission
+// spectra (sum of |difference| over bands, each spectrum summing to 1), and
+// the relative error of ke in every band both know.
+struct MaterialComparison {
+  std::vector<double> kr_relative_error;
+  double spectrum_l1 = 0;
+  std::vector<std::optional<double>> ke_relative_error;  // per band of the first state
+};
+MaterialComparison CompareMaterials(const Material& fitted, const Material& truth);
+
+// A self-contained HTML report: data against fit, residuals, uncertainties,
+// the chosen nc with its reason, as inline SVG plots.
+std::string SessionReportHtml(const SessionFit& fit, const std::string& title);
+
+}  // namespace phos

@@ -1,0 +1,665 @@
+#include "phos/fit/session_fit.h"
+
+#include <ceres/ceres.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <fstream>
+#include <map>
+#include <numeric>
+
+#include "phos/model/spectral.h"
+#include "phos/util/error.h"
+#include "phos/util/format.h"
+#include "phos/util/json.h"
+#include "phos/util/svg_plot.h"
+#include "solver_options.h"
+
+namespace phos {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::vector<nlohmann::json> ReadJsonLines(const fs::path& path) {
+  std::vector<nlohmann::json> lines;
+  std::ifstream in(path);
+  for (std::string text; std::getline(in, text);) {
+    // A crash can tear the last line; what parses is what was recorded.
+    nlohmann::json line = nlohmann::json::parse(text, nullptr, false);
+    if (!line.is_discarded() && line.is_object()) lines.push_back(std::move(line));
+  }
+  return lines;
+}
+
+std::vector<double> ColumnRate(const nlohmann::json& line) {
+  std::vector<double> profile = line.at("column_mean_dn").get<std::vector<double>>();
+  const double exposure = line.at("exposure_s").get<double>();
+  for (double& v : profile) v /= exposure;
+  return profile;
+}
+
+bool Clipped(const nlohmann::json& line) { return line.value("saturated_fraction", 0.0) > 0; }
+
+double SumSignal(const nlohmann::json& line) {
+  double sum = 0;
+  for (double v : line.at("mean_signal_dn")) sum += v;
+  return sum;
+}
+
+// Integral of exp(-(x - c)^2 / (2 s^2)) over [lo, hi].
+double GaussianIntegral(double lo, double hi, double c, double s) {
+  const double k = 1.0 / (s * std::sqrt(2.0));
+  return s * std::sqrt(M_PI / 2) * (std::erf((hi - c) * k) - std::erf((lo - c) * k));
+}
+
+// Centroid and spread (in columns) of the peak of a profile: a window of
+// +-3 sigma around the centroid, refined a few times, so the tails and the
+// far baseline do not pull it.
+void PeakMoments(const std::vector<double>& p, double* centroid, double* sigma) {
+  const int n = static_cast<int>(p.size());
+  const int peak = static_cast<int>(std::max_element(p.begin(), p.end()) - p.begin());
+  double c = peak, s = 2;
+  for (int iteration = 0; iteration < 5; ++iteration) {
+    const int lo = std::max(0, static_cast<int>(std::floor(c - 3 * s))), hi = std::min(n - 1, static_cast<int>(std::ceil(c + 3 * s)));
+    double w = 0, wx = 0, wxx = 0;
+    for (int x = lo; x <= hi; ++x) {
+      const double v = std::max(0.0, p[x]);
+      w += v;
+      wx += v * x;
+      wxx += v * x * x;
+    }
+    if (w <= 0) break;
+    c = wx / w;
+    s = std::sqrt(std::max(0.25, wxx / w - c * c));
+  }
+  *centroid = c;
+  *sigma = s;
+}
+
+// min sum_r (w_r (A x - y)_r)^2 + alpha |D x|^2 over x >= 0 (D: first
+// differences), as a bounded Ceres problem: the non-negative, regularized
+// reconstruction of a spectrum from blurred samples.
+struct LinearRow {
+  LinearRow(std::vector<double> row, double target, double weight) : row_(std::move(row)), target_(target), weight_(weight) {}
+  template <typename T>
+  bool operator()(T const* const* x, T* residual) const {
+    T sum = T(-target_);
+    for (std::size_t i = 0; i < row_.size(); ++i) sum += row_[i] * x[0][i];
+    residual[0] = weight_ * sum;
+    return true;
+  }
+  std::vector<double> row_;
+  double target_, weight_;
+};
+
+std::vector<double> SolveNonNegative(const std::vector<std::vector<double>>& A, const std::vector<double>& y,
+                                     const std::vector<double>& weight, double alpha) {
+  const std::size_t n = A.empty() ? 0 : A[0].size();
+  std::vector<double> x(n, 0.0);
+  // Start: the unconstrained scale of a flat spectrum.
+  double ay = 0, aa = 0;
+  for (std::size_t r = 0; r < A.size(); ++r) {
+    const double a = std::accumulate(A[r].begin(), A[r].end(), 0.0);
+    ay += a * y[r] * weight[r] * weight[r];
+    aa += a * a * weight[r] * weight[r];
+  }
+  std::fill(x.begin(), x.end(), aa > 0 ? std::max(ay / aa, 0.0) : 0.0);
+  ceres::Problem problem;
+  auto add = [&](std::vector<double> row, double target, double w) {
+    auto* cost = new ceres::DynamicAutoDiffCostFunction<LinearRow>(new LinearRow(std::move(row), target, w));
+    cost->AddParameterBlock(static_cast<int>(n));
+    cost->SetNumResiduals(1);
+    problem.AddResidualBlock(cost, nullptr, x.data());
+  };
+  for (std::size_t r = 0; r < A.size(); ++r) add(A[r], y[r], weight[r]);
+  for (std::size_t i = 0; i + 1 < n && alpha > 0; ++i) {
+    std::vector<double> row(n, 0.0);
+    row[i] = -1;
+    row[i + 1] = 1;
+    add(row, 0.0, std::sqrt(alpha));
+  }
+  for (std::size_t i = 0; i < n; ++i) problem.SetParameterLowerBound(x.data(), static_cast<int>(i), 0.0);
+  ceres::Solver::Options options = SmallDenseSolverOptions(200, 1e-14);
+  ceres::Solver::Summary summary;
+  ceres::Solve(options, &problem, &summary);
+  return x;
+}
+
+nlohmann::json SessionStart(const fs::path& dir) {
+  if (!fs::is_regular_file(dir / "session.json"))
+    ThrowUserError(dir.string(), "", "is not a capture session (no session.json)");
+  return ReadJsonFile(dir / "session.json");
+}
+
+std::string StopHow(const fs::path& dir) {
+  if (!fs::exists(dir / "stop.json")) return "none (killed, or still running)";
+  return ReadJsonFile(dir / "stop.json").value("how", "?");
+}
+
+}  // namespace
+
+LvfCalibrationFit FitLvfCalibration(const fs::path& dir) {
+  const nlohmann::json start = SessionStart(dir);
+  const nlohmann::json settings = start.value("settings", nlohmann::json::object());
+  LvfCalibrationFit fit;
+  fit.flat_temperature_k = settings.value("flat_temperature_k", 3000.0);
+  fit.flat_irradiance = settings.value("flat_irradiance", 1.0);
+  // The last unclipped frame of each source is its well-exposed one.
+  std::map<std::string, nlohmann::json> last;
+  for (const nlohmann::json& line : ReadJsonLines(dir / "frames.jsonl")) {
+    if (!line.contains("column_mean_dn") || Clipped(line)) continue;
+    last[line.value("kind", "") == "dark" ? std::string("(dark)") : line.value("light", "")] = line;
+  }
+  std::vector<double> dark;
+  if (last.count("(dark)")) dark = ColumnRate(last["(dark)"]);
+  auto rate = [&](const nlohmann::json& line) {
+    std::vector<double> p = ColumnRate(line);
+    for (std::size_t x = 0; x < p.size() && x < dark.size(); ++x) p[x] -= dark[x];
+    return p;
+  };
+  std::vector<double> sigmas;
+  for (const auto& [light, line] : last) {
+    if (line.value("kind", "") == "line") {
+      const std::vector<double> p = rate(line);
+      fit.width = static_cast<int>(p.size());
+      double c = 0, s = 0;
+      PeakMoments(p, &c, &s);
+      fit.lines.push_back({light, line.at("wavelength_nm").get<double>(), c});
+      sigmas.push_back(std::sqrt(std::max(0.0, s * s - 1.0 / 12)));  // less the pixel's own width
+    } else if (line.value("kind", "") == "flat") {
+      fit.flat_dn_per_s = rate(line);
+    }
+  }
+  if (fit.lines.size() < 2)
+    ThrowUserError(dir.string(), "lvf-calibration", "needs well-exposed frames of at least 2 lines, has " +
+                                                         std::to_string(fit.lines.size()));
+  if (fit.flat_dn_per_s.empty()) ThrowUserError(dir.string(), "lvf-calibration", "has no unclipped flat-field frame");
+  // centre(x) = c0 + c1 x by least squares over the lines.
+  double sx = 0, sy = 0, sxx = 0, sxy = 0;
+  const double n = static_cast<double>(fit.lines.size());
+  for (const auto& line : fit.lines) {
+    sx += line.column;
+    sy += line.wavelength_nm;
+    sxx += line.column * line.column;
+    sxy += line.column * line.wavelength_nm;
+  }
+  const double denominator = n * sxx - sx * sx;
+  if (!(std::fabs(denominator) > 1e-12))
+    ThrowUserError(dir.string(), "lvf-calibration", "all lines fall on one column: the filter's line cannot be fitted");
+  fit.nm_per_column = (n * sxy - sx * sy) / denominator;
+  fit.center0_nm = (sy - fit.nm_per_column * sx) / n;
+  double sq = 0;
+  for (const auto& line : fit.lines) sq += std::pow(fit.CenterNm(line.column) - line.wavelength_nm, 2);
+  fit.rms_residual_nm = std::sqrt(sq / n);
+  double mean_sigma = 0;
+  for (double s : sigmas) mean_sigma += s / static_cast<double>(sigmas.size());
+  fit.fwhm_nm = 2.3548 * mean_sigma * std::fabs(fit.nm_per_column);
+  return fit;
+}
+
+SpectrumFit FitEmissionSpectrum(const fs::path& dir, const LvfCalibrationFit& calibration, const SpectralGrid& bands) {
+  const nlohmann::json start = SessionStart(dir);
+  const nlohmann::json settings = start.value("settings", nlohmann::json::object());
+  const nlohmann::json exposure = settings.value("exposure", nlohmann::json::object());
+  const double low = exposure.value("low_fraction", 0.15), high = exposure.value("high_fraction", 0.7);
+  SpectrumFit fit;
+  fit.charge_light = settings.value("charge_light", "");
+  fit.charge_s = settings.value("charge_s", 0.0);
+  const int nb = bands.band_count();
+  const double sigma = calibration.fwhm_nm / 2.3548;
+  // Each column's response to the lamp's known radiance, E B(lambda) / pi,
+  // through its pass band: what turns DN/s into radiance.
+  const SampledSpectrum lamp = BlackbodySpectrum(calibration.flat_temperature_k, 350, 800);
+  const int width = static_cast<int>(calibration.flat_dn_per_s.size());
+  std::vector<std::vector<double>> A(static_cast<std::size_t>(width), std::vector<double>(nb, 0.0));
+  std::vector<bool> usable(static_cast<std::size_t>(width), false);
+  const double flat_max = *std::max_element(calibration.flat_dn_per_s.begin(), calibration.flat_dn_per_s.end());
+  for (int x = 0; x < width; ++x) {
+    const double c = calibration.CenterNm(x);
+    double lamp_seen = 0;
+    for (double nm = c - 4 * sigma; nm <= c + 4 * sigma; nm += 0.25)
+      lamp_seen += calibration.flat_irradiance * lamp.Evaluate(nm) / M_PI * std::exp(-0.5 * std::pow((nm - c) / sigma, 2)) * 0.25;
+    // Columns the lamp barely lights (the blue end of a 3000 K lamp) are
+    // too noisy to scale by: left out.
+    usable[x] = lamp_seen > 0 && calibration.flat_dn_per_s[x] > 0.02 * flat_max;
+    if (!usable[x]) continue;
+    const double response = calibration.flat_dn_per_s[x] / lamp_seen;
+    for (int b = 0; b < nb; ++b)
+      A[x][b] = response * GaussianIntegral(bands.lower_nm(b), bands.upper_nm(b), c, sigma) / bands.width_nm(b);
+  }
+  for (const nlohmann::json& line : ReadJsonLines(dir / "frames.jsonl")) {
+    if (line.value("kind", "") != "spectrum" || !line.contains("column_mean_dn") || Clipped(line)) continue;
+    const double peak = line.value("peak_column_fraction", 0.0);
+    if (peak < low || peak > high) continue;  // not well exposed: the protocol stepped past it
+    const std::vector<double> y = ColumnRate(line);
+    if (static_cast<int>(y.size()) != width)
+      ThrowUserError(dir.string(), "spectrum", "frames and the LVF calibration differ in width");
+    std::vector<std::vector<double>> rows;
+    std::vector<double> targets, weights;
+    const double y_max = *std::max_element(y.begin(), y.end());
+    for (int x = 0; x < width; ++x) {
+      if (!usable[x]) continue;
+      rows.push_back(A[x]);
+      targets.push_back(y[x]);
+      weights.push_back(1.0 / std::sqrt(std::max(std::fabs(y[x]), 0.01 * y_max)));  // photon counting
+    }
+    // A whisper of smoothness (1e-4 of the data's weight) keeps bands the
+    // filter barely separates from trading off; it does not shape the rest.
+    double diag = 0;
+    for (std::size_t r = 0; r < rows.size(); ++r)
+      for (double a : rows[r]) diag += a * a * weights[r] * weights[r];
+    const std::vector<double> L = SolveNonNegative(rows, targets, weights, 1e-4 * diag / std::max(1, nb));
+    SpectrumFit::FrameFit frame;
+    frame.delay_s = line.value("delay_after_light_off_s", 0.0);
+    frame.exposure_s = line.value("exposure_s", 0.0);
+    frame.band_radiance = L;
+    frame.measured = y;
+    frame.modelled.assign(static_cast<std::size_t>(width), std::nan(""));
+    for (int x = 0; x < width; ++x)
+      if (usable[x]) frame.modelled[x] = std::inner_product(A[x].begin(), A[x].end(), L.begin(), 0.0);
+    fit.frames.push_back(std::move(frame));
+  }
+  if (fit.frames.empty()) ThrowUserError(dir.string(), "spectrum", "has no well-exposed, unclipped frame");
+  fit.shape.assign(static_cast<std::size_t>(nb), 0.0);
+  for (const auto& frame : fit.frames) {
+    const double total = std::accumulate(frame.band_radiance.begin(), frame.band_radiance.end(), 0.0);
+    for (int b = 0; b < nb && total > 0; ++b) fit.shape[b] += frame.band_radiance[b] / total / fit.frames.size();
+  }
+  return fit;
+}
+
+SessionFit FitSession(const fs::path& dir, const SessionFitOptions& options) {
+  const auto started = std::chrono::steady_clock::now();
+  const nlohmann::json top = SessionStart(dir);
+  if (top.value("protocol", "") != "all")
+    ThrowUserError(dir.string(), "", "is a '" + top.value("protocol", "?") +
+                                         "' session; fit session takes the folder of 'phos capture all'");
+  SessionFit result;
+  const std::string top_how = StopHow(dir);
+  if (top_how != "complete")
+    result.notes.push_back("the capture did not complete (stop: " + top_how + "); fitting what it recorded");
+  // The bands: the simulated sample's grid, or the paper's.
+  const nlohmann::json devices = top.value("devices", nlohmann::json::object());
+  SpectralGrid bands = SpectralGrid::Paper();
+  if (devices.contains("bands_nm")) bands.edges_nm = devices["bands_nm"].get<std::vector<double>>();
+  const int nb = bands.band_count();
+  auto part_ok = [&](const std::string& part) {
+    if (!fs::exists(dir / part / "session.json")) {
+      result.notes.push_back(part + ": not captured");
+      return false;
+    }
+    const std::string how = StopHow(dir / part);
+    if (how != "complete") result.notes.push_back(part + ": stopped '" + how + "'; using the frames it kept");
+    return true;
+  };
+
+  // 1-2. LVF calibration and the emission spectrum.
+  if (part_ok("lvf-calibration")) {
+    try {
+      result.calibration = FitLvfCalibration(dir / "lvf-calibration");
+    } catch (const UserError& e) {
+      result.notes.push_back(e.what());
+    }
+  }
+  if (result.calibration && part_ok("spectrum")) {
+    try {
+      result.spectrum = FitEmissionSpectrum(dir / "spectrum", *result.calibration, bands);
+    } catch (const UserError& e) {
+      result.notes.push_back(e.what());
+    }
+  }
+
+  // 3. Decay.
+  if (part_ok("decay")) {
+    Curve curve;
+    int clipped = 0;
+    for (const nlohmann::json& line : ReadJsonLines(dir / "decay" / "frames.jsonl")) {
+      if (!line.contains("mean_signal_dn")) continue;
+      if (Clipped(line)) {
+        ++clipped;
+        continue;
+      }
+      const std::vector<double> means = line["mean_signal_dn"].get<std::vector<double>>();
+      const double exposure = line.at("exposure_s").get<double>();
+      if (curve.channels.empty()) {
+        curve.channels.resize(means.size());
+        for (std::size_t c = 0; c < means.size(); ++c) curve.names.push_back(means.size() == 3 ? std::string(1, "RGB"[c]) : "Y");
+      }
+      // Signal per second of exposure, at the middle of the exposure.
+      curve.t_s.push_back(line.value("delay_after_light_off_s", 0.0) + exposure / 2);
+      for (std::size_t c = 0; c < means.size() && c < curve.channels.size(); ++c) curve.channels[c].push_back(means[c] / exposure);
+    }
+    if (clipped > 0) result.notes.push_back("decay: " + std::to_string(clipped) + " clipped frame(s) left out");
+    try {
+      DecayFitOptions decay_options;
+      decay_options.components = options.components;
+      decay_options.max_components = options.max_components;
+      decay_options.weighting = options.weighting;
+      decay_options.background = true;  // dark current
+      result.decay = FitDecay(curve, decay_options, (dir / "decay").string());
+      result.decay_curve = curve;
+    } catch (const UserError& e) {
+      result.notes.push_back(e.what());
+    }
+  }
+  if (!result.decay) ThrowUserError(dir.string(), "", "no decay could be fitted, so no kr: nothing to write");
+  const DecayFitSummary& decay = *result.decay;
+  // The state that carries most of the glow stands for all in the excitation fit.
+  std::vector<double> share;
+  for (const DecayComponent& c : decay.components) share.push_back(std::accumulate(c.amplitude.begin(), c.amplitude.end(), 0.0));
+  const double share_total = std::accumulate(share.begin(), share.end(), 0.0);
+  const std::size_t main = static_cast<std::size_t>(std::max_element(share.begin(), share.end()) - share.begin());
+  const double kr = decay.components[main].rate;
+  if (decay.n_components > 1)
+    result.notes.push_back("nc = " + std::to_string(decay.n_components) +
+                           ": one excitation rate per light is fitted with the dominant state's kr, and every state "
+                           "gets the same ke");
+
+  // 4. Excitation and ke per band.
+  std::vector<std::optional<double>> ke(static_cast<std::size_t>(nb));
+  if (part_ok("excitation")) {
+    const nlohmann::json exc_devices = SessionStart(dir / "excitation").value("devices", devices);
+    const nlohmann::json irradiance = exc_devices.value("light_band_irradiance", nlohmann::json::object());
+    std::map<std::string, SessionFit::ExcitationLight> by_light;
+    for (const nlohmann::json& line : ReadJsonLines(dir / "excitation" / "frames.jsonl")) {
+      if (!line.contains("light") || Clipped(line)) continue;
+      SessionFit::ExcitationLight& light = by_light[line["light"].get<std::string>()];
+      light.light = line["light"];
+      const double exposure = line.at("exposure_s").get<double>();
+      light.samples.push_back({line.at("charge_s").get<double>(), line.value("delay_after_light_off_s", 0.0), exposure,
+                               SumSignal(line) / exposure});
+    }
+    std::vector<std::vector<double>> E_per_light;
+    std::vector<double> a_per_light;
+    for (auto& [name, light] : by_light) {
+      std::sort(light.samples.begin(), light.samples.end(),
+                [](const ExcitationSample& a, const ExcitationSample& b) { return a.charge_s < b.charge_s; });
+      try {
+        ExcitationFitOptions excitation_options;
+        excitation_options.kr = kr;
+        light.fit = FitExcitation(light.samples, excitation_options, (dir / "excitation").string() + " (" + name + ")");
+      } catch (const UserError& e) {
+        result.notes.push_back(e.what());
+        continue;
+      }
+      if (!irradiance.contains(name)) {
+        result.notes.push_back("excitation: no band irradiance recorded for '" + name +
+                               "' (a bench's lab config must give it): its rate is reported, not turned into ke");
+      } else {
+        light.band_irradiance = irradiance[name].get<std::vector<double>>();
+        if (static_cast<int>(light.band_irradiance.size()) == nb) {
+          E_per_light.push_back(light.band_irradiance);
+          a_per_light.push_back(light.fit.a);
+        }
+      }
+      result.excitation.push_back(light);
+    }
+    if (!E_per_light.empty()) {
+      try {
+        ke = KeFromExcitationRates(E_per_light, a_per_light, (dir / "excitation").string());
+      } catch (const UserError& e) {
+        result.notes.push_back(e.what());
+      }
+    }
+  }
+
+  // 5. Lambda from the spectrum, the state during each spectrum frame known
+  //    from its charge (Eq. 8.1 in closed form) and the ke just fitted.
+  Material& material = result.material;
+  const nlohmann::json sample = top.value("sample", nlohmann::json::object());
+  material.name = (sample.contains("material") ? sample["material"].value("name", std::string("sample")) : std::string("sample")) + " (fitted)";
+  material.bands = bands;
+  std::vector<double> band_radiance_per_kr_r(static_cast<std::size_t>(nb), 0.0);
+  bool have_lambda = false;
+  if (result.spectrum) {
+    const nlohmann::json spectrum_devices = SessionStart(dir / "spectrum").value("devices", devices);
+    const nlohmann::json irradiance = spectrum_devices.value("light_band_irradiance", nlohmann::json::object());
+    double a_charge = 0;
+    bool known = irradiance.contains(result.spectrum->charge_light);
+    if (known) {
+      const std::vector<double> E = irradiance[result.spectrum->charge_light].get<std::vector<double>>();
+      for (int b = 0; b < nb && b < static_cast<int>(E.size()); ++b) {
+        if (E[b] <= 0) continue;
+        if (!ke[b]) known = false;
+        else a_charge += *ke[b] * E[b];
+      }
+    }
+    if (!known || a_charge <= 0) {
+      result.notes.push_back("spectrum: the charge light's excitation is not known in every band it reaches, so the "
+                             "state during the spectrum is not: Lambda keeps the measured shape, scaled to the decay");
+    } else {
+      const double k = a_charge + kr;
+      const double r0 = a_charge / k * -std::expm1(-k * result.spectrum->charge_s);
+      for (const auto& frame : result.spectrum->frames) {
+        // The state averaged over the frame's exposure.
+        const double e = std::max(frame.exposure_s, 1e-12);
+        const double r = r0 * std::exp(-kr * frame.delay_s) * -std::expm1(-kr * e) / (kr * e);
+        for (int b = 0; b < nb; ++b)
+          band_radiance_per_kr_r[b] += frame.band_radiance[b] / (kr * r) / result.spectrum->frames.size();
+      }
+      have_lambda = true;
+    }
+  }
+  if (!have_lambda)
+    ThrowUserError(dir.string(), "", "no emission spectrum with a known excitation: Lambda cannot be fitted" +
+                                         std::string(result.notes.empty() ? "" : " (" + result.notes.back() + ")"));
+  for (std::size_t i = 0; i < decay.components.size(); ++i) {
+    ExcitedState state;
+    state.kr = decay.components[i].rate;
+    state.ke = ke;
+    // Sec. 8.4.5: the states share the emission shape, split by their decay
+    // amplitudes, Lambda_i = a_i Lambda* / kr_i (for nc = 1 simply Lambda*).
+    const double fraction = share_total > 0 ? share[i] / share_total : 1.0 / decay.components.size();
+    for (int b = 0; b < nb; ++b)
+      state.Lambda.push_back(decay.n_components == 1 ? band_radiance_per_kr_r[b]
+                                                     : fraction * band_radiance_per_kr_r[b] * kr / state.kr);
+    material.states.push_back(state);
+  }
+  material.source = "phos fit session " + dir.string() + ": nc = " + std::to_string(decay.n_components) + " (" +
+                    decay.choice + ")";
+  ValidateMaterial(material, dir.string());
+  result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+  return result;
+}
+
+MaterialComparison CompareMaterials(const Material& fitted, const Material& truth) {
+  MaterialComparison c;
+  for (std::size_t i = 0; i < fitted.states.size() && i < truth.states.size(); ++i)
+    c.kr_relative_error.push_back(std::fabs(fitted.states[i].kr - truth.states[i].kr) / truth.states[i].kr);
+  // Emission per unit state: sum over states of kr Lambda (what a saturated
+  // sample shows at light-off), normalized.
+  auto shape = [](const Material& m) {
+    std::vector<double> s(static_cast<std::size_t>(m.band_count()), 0.0);
+    for (const ExcitedState& state : m.states)
+      for (int b = 0; b < m.band_count(); ++b) s[b] += state.Lambda[b] * state.kr;
+    const double total = std::accumulate(s.begin(), s.end(), 0.0);
+    for (double& v : s) v /= total > 0 ? total : 1;
+    return s;
+  };
+  const std::vector<double> a = shape(fitted), b = shape(truth);
+  for (std::size_t i = 0; i < a.size() && i < b.size(); ++i) c.spectrum_l1 += std::fabs(a[i] - b[i]);
+  // ke relative to the truth, with a floor of 5% of its largest ke: a band
+  // that barely charges is judged on the scale of the ones that do.
+  double largest = 0;
+  for (const auto& k : truth.states[0].ke) largest = std::max(largest, k.value_or(0.0));
+  for (std::size_t band = 0; band < truth.states[0].ke.size(); ++band) {
+    const auto& t = truth.states[0].ke[band];
+    const auto& f = band < fitted.states[0].ke.size() ? fitted.states[0].ke[band] : std::nullopt;
+    if (t && f) c.ke_relative_error.push_back(std::fabs(*f - *t) / std::max(*t, 0.05 * largest));
+    else c.ke_relative_error.push_back(std::nullopt);
+  }
+  return c;
+}
+
+namespace {
+
+std::string Escape(const std::string& text) {
+  std::string out;
+  for (char ch : text) {
+    if (ch == '<') out += "&lt;";
+    else if (ch == '>') out += "&gt;";
+    else if (ch == '&') out += "&amp;";
+    else out += ch;
+  }
+  return out;
+}
+
+}  // namespace
+
+std::string SessionReportHtml(const SessionFit& fit, const std::string& title) {
+  std::string html;
+  html.append("<!doctype html>\n<html><head><meta charset=\"utf-8\"><title>").append(Escape(title)).append(
+      "</title>\n<style>body{font-family:sans-serif;max-width:900px;margin:2em auto;color:#222}"
+      "table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}"
+      "th{background:#f4f4f4}.note{color:#a33}</style></head><body>\n");
+  html.append("<h1>").append(Escape(title)).append("</h1>\n");
+  const Material& m = fit.material;
+  html.append("<p>Fitted in ").append(FormatShort(fit.seconds)).append(" s. ").append(Escape(m.source)).append("</p>\n");
+  for (const std::string& note : fit.notes) html.append("<p class=\"note\">").append(Escape(note)).append("</p>\n");
+
+  // The material.
+  html.append("<h2>Material</h2>\n<table><tr><th>state</th><th>kr (1/s)</th><th>&plusmn; 1&sigma;</th></tr>\n");
+  for (std::size_t i = 0; i < m.states.size(); ++i) {
+    const double stderr_kr = fit.decay ? fit.decay->components[i].rate_stderr : 0;
+    html.append("<tr><td>").append(std::to_string(i + 1)).append("</td><td>").append(FormatShort(m.states[i].kr))
+        .append("</td><td>").append(FormatShort(stderr_kr)).append("</td></tr>\n");
+  }
+  html.append("</table>\n<table><tr><th>band (nm)</th><th>ke</th><th>&Lambda; (state 1)</th></tr>\n");
+  for (int b = 0; b < m.band_count(); ++b) {
+    const auto& ke = m.states[0].ke[b];
+    html.append("<tr><td>").append(m.bands.BandName(b)).append("</td><td>").append(ke ? FormatShort(*ke) : "not measured")
+        .append("</td><td>").append(FormatShort(m.states[0].Lambda[b])).append("</td></tr>\n");
+  }
+  html.append("</table>\n");
+
+  // Decay: data against fit, and residuals.
+  if (fit.decay) {
+    const DecayFitSummary& d = *fit.decay;
+    html.append("<h2>Decay</h2>\n<p>nc = ").append(std::to_string(d.n_components)).append(": ").append(Escape(d.choice))
+        .append(". BIC per nc: ");
+    for (std::size_t i = 0; i < d.bic.size(); ++i)
+      html.append(i ? ", " : "").append(std::to_string(i + 1)).append(": ").append(std::isfinite(d.bic[i]) ? FormatShort(d.bic[i]) : "invalid");
+    html.append(". rss ").append(FormatShort(d.rss)).append(" (DN/s)&sup2;.</p>\n");
+    std::vector<PlotSeries> data_fit, residuals;
+    for (int c = 0; c < fit.decay_curve.channel_count(); ++c) {
+      PlotSeries data(fit.decay_curve.names[c] + " measured"), model(fit.decay_curve.names[c] + " fit"),
+          residual(fit.decay_curve.names[c]);
+      data.markers = true;
+      data.line = false;
+      data.color = model.color = residual.color = PaletteColor(c);
+      model.dashed = true;
+      residual.markers = true;
+      for (std::size_t j = 0; j < fit.decay_curve.size(); ++j) {
+        const double t = fit.decay_curve.t_s[j], y = fit.decay_curve.channels[c][j], f = EvaluateDecay(d, c, t);
+        data.x.push_back(t);
+        data.y.push_back(y);
+        model.x.push_back(t);
+        model.y.push_back(f);
+        residual.x.push_back(t);
+        residual.y.push_back(y - f);
+      }
+      data_fit.push_back(data);
+      data_fit.push_back(model);
+      residuals.push_back(residual);
+    }
+    PlotOptions o;
+    o.title = "Decay after saturation: data and fit";
+    o.x_label = "time after light-off (s)";
+    o.y_label = "signal / exposure (DN/s)";
+    o.log_y = true;
+    html.append(PlotSvg(data_fit, o)).append("\n");
+    o.title = "Decay residuals";
+    o.log_y = false;
+    o.y_label = "data - fit (DN/s)";
+    o.height_px = 280;
+    html.append(PlotSvg(residuals, o)).append("\n");
+  }
+
+  // Excitation per light.
+  if (!fit.excitation.empty()) {
+    html.append("<h2>Excitation</h2>\n<table><tr><th>light</th><th>a (1/s)</th><th>&plusmn; 1&sigma;</th><th>samples</th><th>note</th></tr>\n");
+    std::vector<PlotSeries> series;
+    int index = 0;
+    for (const auto& light : fit.excitation) {
+      html.append("<tr><td>").append(Escape(light.light)).append("</td><td>").append(FormatShort(light.fit.a))
+          .append("</td><td>").append(FormatShort(light.fit.a_stderr)).append("</td><td>")
+          .append(std::to_string(light.samples.size())).append("</td><td>").append(Escape(light.fit.note)).append("</td></tr>\n");
+      PlotSeries data(light.light + " measured"), model(light.light + " fit");
+      data.markers = true;
+      data.line = false;
+      data.color = model.color = PaletteColor(index++);
+      model.dashed = true;
+      for (const ExcitationSample& s : light.samples) {
+        data.x.push_back(s.charge_s);
+        data.y.push_back(s.value);
+        model.x.push_back(s.charge_s);
+        model.y.push_back(ExcitationSignal(light.fit.a, fit.material.states[0].kr, light.fit.scale, s));
+      }
+      series.push_back(data);
+      series.push_back(model);
+    }
+    html.append("</table>\n");
+    PlotOptions o;
+    o.title = "Excitation: response after charging for t, and the fit";
+    o.x_label = "charge time t (s)";
+    o.y_label = "signal / exposure (DN/s)";
+    o.log_x = true;
+    html.append(PlotSvg(series, o)).append("\n");
+  }
+
+  // LVF calibration and spectrum.
+  if (fit.calibration) {
+    const LvfCalibrationFit& c = *fit.calibration;
+    html.append("<h2>LVF calibration</h2>\n<p>centre(x) = ").append(FormatShort(c.center0_nm)).append(" nm + ")
+        .append(FormatShort(c.nm_per_column)).append(" nm &times; column; pass band ").append(FormatShort(c.fwhm_nm))
+        .append(" nm FWHM; line residual rms ").append(FormatShort(c.rms_residual_nm)).append(" nm.</p>\n");
+    PlotSeries lines("lines"), model("fitted line");
+    lines.markers = true;
+    lines.line = false;
+    for (const auto& line : c.lines) {
+      lines.x.push_back(line.column);
+      lines.y.push_back(line.wavelength_nm);
+    }
+    model.x = {0.0, static_cast<double>(c.width - 1)};
+    model.y = {c.CenterNm(0), c.CenterNm(c.width - 1)};
+    PlotOptions o;
+    o.title = "LVF: known lines against their centroid column";
+    o.x_label = "column";
+    o.y_label = "wavelength (nm)";
+    o.height_px = 320;
+    html.append(PlotSvg({lines, model}, o)).append("\n");
+  }
+  if (fit.spectrum && !fit.spectrum->frames.empty()) {
+    const auto& frame = fit.spectrum->frames.front();
+    PlotSeries measured("measured (first frame)"), modelled("reconstruction through the filter");
+    measured.markers = true;
+    measured.line = false;
+    for (std::size_t x = 0; x < frame.measured.size(); ++x) {
+      const double nm = fit.calibration->CenterNm(static_cast<double>(x));
+      measured.x.push_back(nm);
+      measured.y.push_back(frame.measured[x]);
+      modelled.x.push_back(nm);
+      modelled.y.push_back(frame.modelled[x]);
+    }
+    PlotOptions o;
+    o.title = "Emission spectrum through the LVF";
+    o.x_label = "wavelength (nm)";
+    o.y_label = "column signal (DN/s)";
+    html.append("<h2>Emission spectrum</h2>\n").append(PlotSvg({measured, modelled}, o)).append("\n");
+    PlotSeries shape("normalized band radiance");
+    shape.markers = true;
+    for (int b = 0; b < m.band_count(); ++b) {
+      shape.x.push_back(m.bands.center_nm(b));
+      shape.y.push_back(fit.spectrum->shape[b]);
+    }
+    o.title = "Emission spectrum per band (normalized)";
+    o.y_label = "share of the emission";
+    o.height_px = 320;
+    html.append(PlotSvg({shape}, o)).append("\n");
+  }
+  html.append("</body></html>\n");
+  return html;
+}
+
+}  // namespace phos
