@@ -172,7 +172,7 @@ ExcitationProtocolOptions ExcitationFrom(const nlohmann::json& j) {
   return o;
 }
 nlohmann::json ToJson(const SpectrumProtocolOptions& o) {
-  return {{"charge_light", o.charge_light}, {"charge_s", o.charge_s},  {"frames", o.frames},
+  return {{"charge_light", o.charge_light}, {"charge_s", o.charge_s},  {"recharge_s", o.recharge_s}, {"frames", o.frames},
           {"first_delay_s", o.first_delay_s}, {"gain", o.gain}, {"exposure", AutoExposureJson(o.exposure)}};
 }
 nlohmann::json ToJson(const LvfCalibrationOptions& o) {
@@ -336,6 +336,7 @@ void RunProtocol(const Plan& plan, Devices& devices, SessionWriter& session, boo
     SpectrumProtocolOptions o;
     o.charge_light = s.value("charge_light", o.charge_light);
     o.charge_s = s.value("charge_s", o.charge_s);
+    o.recharge_s = s.value("recharge_s", o.recharge_s);
     o.frames = s.value("frames", o.frames);
     o.first_delay_s = s.value("first_delay_s", o.first_delay_s);
     o.gain = s.value("gain", o.gain);
@@ -609,12 +610,14 @@ void RegisterCapture(CLI::App& app) {
   auto spectrum_args = std::make_shared<SpectrumArgs>();
   CLI::App* spectrum = capture->add_subcommand(
       "spectrum",
-      "Emission spectrum through the linear variable filter (Sec. 8.4.2): the filter goes in, the sample\n"
-      "charges under a strong light, the light goes off and frames are taken back to back until --frames\n"
-      "of them are well exposed. The LVF calibration turns columns into wavelengths.");
+      "Emission spectrum through the linear variable filter (Sec. 8.4.2): the filter goes in; then, per\n"
+      "frame, the sample charges under a strong light, the light goes off and the camera exposes 5 ms\n"
+      "later, the exposure stepping between cycles until --frames are well exposed. The LVF calibration\n"
+      "turns columns into wavelengths.");
   AddDeviceOptions(spectrum, *spectrum_args);
   spectrum->add_option("--light", spectrum_args->light, "light channel to charge with (default led405)");
-  spectrum->add_option("--charge-s", spectrum_args->spectrum.charge_s, "seconds of charging (default 600)");
+  spectrum->add_option("--charge-s", spectrum_args->spectrum.charge_s, "seconds of the first charge (default 600)");
+  spectrum->add_option("--recharge-s", spectrum_args->spectrum.recharge_s, "seconds of each later charge (default 300)");
   spectrum->add_option("--frames", spectrum_args->spectrum.frames, "well-exposed frames to average (default 4)");
   spectrum->callback([spectrum_args] {
     SpectrumArgs args = *spectrum_args;

@@ -242,7 +242,7 @@ ExcitationDone ReadExcitationDone(const std::filesystem::path& session_dir) {
 
 bool SpectrumProtocolOptions::IsValid(std::string* error) const {
   if (charge_light.empty()) return *error = "no charge light named", false;
-  if (!(charge_s >= 0)) return *error = "charge time must be >= 0", false;
+  if (!(charge_s >= 0) || !(recharge_s >= 0)) return *error = "charge times must be >= 0", false;
   if (frames < 1) return *error = "need at least 1 frame", false;
   if (!(first_delay_s >= 0)) return *error = "first delay must be >= 0", false;
   return exposure.IsValid(error);
@@ -259,18 +259,18 @@ SpectrumProtocolResult RunSpectrumProtocol(Camera& camera, Lights& lights, Clock
   SpectrumProtocolResult result;
   RunRecorded(session, lights, clock, "spectrum", [&] {
     lights.AllOff();
-    // The filter goes in while the sample charges, so no glow is lost to it.
+    // The filter goes in before the first charge, so no glow is lost to it.
     RecordRig(session, rig, clock, "lvf", true);
-    RecordLight(session, lights, clock, options.charge_light, true);
-    clock.SleepFor(options.charge_s);
-    RecordLight(session, lights, clock, options.charge_light, false);
-    const double off = clock.now_s();
-    clock.SleepUntil(off + options.first_delay_s);
     double exposure = options.exposure.initial_exposure_s;
     // Every frame is kept; a series that never settles stops after 4x the asked count.
     for (int attempt = 0; result.well_exposed < options.frames && attempt < 4 * options.frames + 8; ++attempt) {
+      RecordLight(session, lights, clock, options.charge_light, true);
+      clock.SleepFor(attempt == 0 ? options.charge_s : options.recharge_s);
+      RecordLight(session, lights, clock, options.charge_light, false);
+      const double off = clock.now_s();
+      clock.SleepUntil(off + options.first_delay_s);
       Frame frame = camera.Capture(std::min(exposure, camera.max_exposure_s()), options.gain);
-      // The brightest channel peaks in some column; judge the exposure there.
+      // The glow lands in a few columns per band; judge the exposure there.
       const double brightest = RecordFrame(session, frame,
                                            {{"kind", "spectrum"},
                                             {"lvf", true},
@@ -285,7 +285,7 @@ SpectrumProtocolResult RunSpectrumProtocol(Camera& camera, Lights& lights, Clock
     if (result.well_exposed < options.frames)
       ThrowUserError("", "spectrum protocol",
                      "only " + std::to_string(result.well_exposed) + " of " + std::to_string(options.frames) +
-                         " frames were well exposed (the glow is too faint through the filter or fades too fast)");
+                         " frames were well exposed (the glow is too faint through the filter even at the longest exposure)");
   });
   return result;
 }
@@ -317,7 +317,10 @@ LvfCalibrationResult RunLvfCalibrationProtocol(Camera& camera, Lights& lights, C
   // Every frame is recorded; the well-exposed one says so.
   auto expose = [&](const std::string& light, nlohmann::json what) {
     if (!light.empty()) RecordLight(session, lights, clock, light, true);
-    double exposure = options.exposure.initial_exposure_s;
+    // The dark frame is exposed long (an eighth of the longest exposure):
+    // the dark signal per second it measures is then well above its noise.
+    double exposure = light.empty() ? std::max(options.exposure.initial_exposure_s, options.exposure.max_exposure_s / 8)
+                                    : options.exposure.initial_exposure_s;
     bool good = false;
     for (int attempt = 0; attempt < options.max_tries && !good; ++attempt) {
       Frame frame = camera.Capture(std::min(exposure, camera.max_exposure_s()), options.gain);

@@ -324,6 +324,8 @@ DecayFitSummary FitDecay(const Curve& curve, const DecayFitOptions& options, con
     d.scale.push_back(s);
     d.y.push_back(y / s);
     std::vector<double> w = SampleWeights(v, options.weighting);
+    if (options.weighting == Weighting::kPoisson && curve.exposure_s.size() == v.size())
+      for (std::size_t j = 0; j < w.size(); ++j) w[j] *= std::sqrt(curve.exposure_s[j]);
     d.w.push_back(Eigen::Map<const Eigen::ArrayXd>(w.data(), d.m) * s);
   }
   if (!any_variation) ThrowUserError(where, "", "every value is the same: there is no decay to fit");

@@ -182,16 +182,16 @@ ExcitationFitSummary FitExcitation(const std::vector<ExcitationSample>& samples,
 
 namespace {
 struct KeResidual {
-  KeResidual(std::vector<double> E, double a) : E_(std::move(E)), a_(a) {}
+  KeResidual(std::vector<double> E, double a, double scale) : E_(std::move(E)), a_(a), scale_(scale) {}
   template <typename T>
   bool operator()(T const* const* ke, T* residual) const {
     T sum(0);
     for (std::size_t b = 0; b < E_.size(); ++b) sum += ke[0][b] * E_[b];
-    residual[0] = (sum - a_) / a_;  // relative: each light counts the same
+    residual[0] = (sum - a_) / scale_;  // relative: each light counts the same
     return true;
   }
   std::vector<double> E_;
-  double a_;
+  double a_, scale_;
 };
 }  // namespace
 
@@ -202,7 +202,8 @@ std::vector<std::optional<double>> KeFromExcitationRates(const std::vector<std::
   const std::size_t bands = E_per_light[0].size();
   for (std::size_t l = 0; l < E_per_light.size(); ++l) {
     if (E_per_light[l].size() != bands) ThrowUserError(where, "light " + std::to_string(l + 1), "band count differs");
-    if (!(a_per_light[l] > 0)) ThrowUserError(where, "light " + std::to_string(l + 1), "excitation rate must be > 0");
+    // 0 is a measurement too: that light does not excite the sample.
+    if (!(a_per_light[l] >= 0)) ThrowUserError(where, "light " + std::to_string(l + 1), "excitation rate must be >= 0");
   }
   // Only the bands some light reaches are parameters.
   std::vector<int> lit;
@@ -219,12 +220,17 @@ std::vector<std::optional<double>> KeFromExcitationRates(const std::vector<std::
     for (int b : lit) total += E_per_light[l][b];
     if (total > 0) mean_ratio += a_per_light[l] / total / static_cast<double>(E_per_light.size());
   }
+  mean_ratio = std::max(mean_ratio, 1e-12);  // a start inside the bounds, even when no light excites
   std::vector<double> ke(lit.size(), mean_ratio);
   ceres::Problem problem;
   for (std::size_t l = 0; l < E_per_light.size(); ++l) {
     std::vector<double> E;
     for (int b : lit) E.push_back(E_per_light[l][b]);
-    auto* cost = new ceres::DynamicAutoDiffCostFunction<KeResidual>(new KeResidual(E, a_per_light[l]));
+    // Relative to the light's own rate; a light that does not excite (a = 0)
+    // is held to 0.1% of the strongest, the resolution the rates have.
+    const double strongest = *std::max_element(a_per_light.begin(), a_per_light.end());
+    const double scale = std::max(a_per_light[l], strongest > 0 ? 1e-3 * strongest : 1.0);
+    auto* cost = new ceres::DynamicAutoDiffCostFunction<KeResidual>(new KeResidual(E, a_per_light[l], scale));
     cost->AddParameterBlock(static_cast<int>(lit.size()));
     cost->SetNumResiduals(1);
     problem.AddResidualBlock(cost, nullptr, ke.data());

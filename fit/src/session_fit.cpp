@@ -47,12 +47,6 @@ double SumSignal(const nlohmann::json& line) {
   return sum;
 }
 
-// Integral of exp(-(x - c)^2 / (2 s^2)) over [lo, hi].
-double GaussianIntegral(double lo, double hi, double c, double s) {
-  const double k = 1.0 / (s * std::sqrt(2.0));
-  return s * std::sqrt(M_PI / 2) * (std::erf((hi - c) * k) - std::erf((lo - c) * k));
-}
-
 // Centroid and spread (in columns) of the peak of a profile: a window of
 // +-3 sigma around the centroid, refined a few times, so the tails and the
 // far baseline do not pull it.
@@ -153,9 +147,13 @@ LvfCalibrationFit FitLvfCalibration(const fs::path& dir) {
   }
   std::vector<double> dark;
   if (last.count("(dark)")) dark = ColumnRate(last["(dark)"]);
+  fit.dark_dn_per_s = dark;
+  // Dark current is uniform: its mean over the columns, not each noisy column.
+  double dark_mean = 0;
+  for (double d : dark) dark_mean += d / dark.size();
   auto rate = [&](const nlohmann::json& line) {
     std::vector<double> p = ColumnRate(line);
-    for (std::size_t x = 0; x < p.size() && x < dark.size(); ++x) p[x] -= dark[x];
+    for (double& v : p) v -= dark_mean;
     return p;
   };
   std::vector<double> sigmas;
@@ -198,7 +196,12 @@ LvfCalibrationFit FitLvfCalibration(const fs::path& dir) {
   return fit;
 }
 
-SpectrumFit FitEmissionSpectrum(const fs::path& dir, const LvfCalibrationFit& calibration, const SpectralGrid& bands) {
+SpectrumFit FitEmissionSpectrum(const fs::path& dir, const LvfCalibrationFit& calibration, const SpectralGrid& bands,
+                                double dark_dn_per_s) {
+  if (!std::isfinite(dark_dn_per_s)) {
+    dark_dn_per_s = 0;
+    for (double d : calibration.dark_dn_per_s) dark_dn_per_s += d / calibration.dark_dn_per_s.size();
+  }
   const nlohmann::json start = SessionStart(dir);
   const nlohmann::json settings = start.value("settings", nlohmann::json::object());
   const nlohmann::json exposure = settings.value("exposure", nlohmann::json::object());
@@ -208,31 +211,72 @@ SpectrumFit FitEmissionSpectrum(const fs::path& dir, const LvfCalibrationFit& ca
   fit.charge_s = settings.value("charge_s", 0.0);
   const int nb = bands.band_count();
   const double sigma = calibration.fwhm_nm / 2.3548;
-  // Each column's response to the lamp's known radiance, E B(lambda) / pi,
-  // through its pass band: what turns DN/s into radiance.
+  if (!(sigma > 0)) ThrowUserError(dir.string(), "spectrum", "the LVF calibration gives no pass-band width");
+  // What one column sees of a radiance density L(lambda) is
+  //   y(x) = integral L(lambda) u(lambda) G_x(lambda) dlambda,
+  // G_x the filter's pass band (centre and width from the lines) and u the
+  // camera's sensitivity times the filter's peak transmission, unknown. The
+  // flat field, a lamp of known colour temperature and irradiance on the
+  // white reference (radiance E B(lambda) / pi), gives u: a non-negative,
+  // smooth reconstruction on nodes every 5 nm. Dividing by the flat column
+  // by column instead would assume u constant across each pass band, which
+  // it is not where a colour filter's edge falls.
   const SampledSpectrum lamp = BlackbodySpectrum(calibration.flat_temperature_k, 350, 800);
   const int width = static_cast<int>(calibration.flat_dn_per_s.size());
-  std::vector<std::vector<double>> A(static_cast<std::size_t>(width), std::vector<double>(nb, 0.0));
-  std::vector<bool> usable(static_cast<std::size_t>(width), false);
   const double flat_max = *std::max_element(calibration.flat_dn_per_s.begin(), calibration.flat_dn_per_s.end());
+  constexpr double kNodeNm = 5, kStepNm = 0.25;
+  const double lo_nm = std::min(calibration.CenterNm(0), calibration.CenterNm(width - 1)) - 4 * sigma;
+  const double hi_nm = std::max(calibration.CenterNm(0), calibration.CenterNm(width - 1)) + 4 * sigma;
+  const int nodes = static_cast<int>(std::ceil((hi_nm - lo_nm) / kNodeNm)) + 1;
+  // Hat function of node k at lambda.
+  auto hat = [&](int k, double nm) { return std::max(0.0, 1.0 - std::fabs((nm - lo_nm) / kNodeNm - k)); };
+  std::vector<bool> usable(static_cast<std::size_t>(width), false);
+  std::vector<std::vector<double>> flat_rows;
+  std::vector<double> flat_targets, flat_weights;
   for (int x = 0; x < width; ++x) {
-    const double c = calibration.CenterNm(x);
-    double lamp_seen = 0;
-    for (double nm = c - 4 * sigma; nm <= c + 4 * sigma; nm += 0.25)
-      lamp_seen += calibration.flat_irradiance * lamp.Evaluate(nm) / M_PI * std::exp(-0.5 * std::pow((nm - c) / sigma, 2)) * 0.25;
-    // Columns the lamp barely lights (the blue end of a 3000 K lamp) are
-    // too noisy to scale by: left out.
-    usable[x] = lamp_seen > 0 && calibration.flat_dn_per_s[x] > 0.02 * flat_max;
+    // Columns the lamp barely lights are too noisy to learn from: left out.
+    usable[x] = calibration.flat_dn_per_s[x] > 0.02 * flat_max;
     if (!usable[x]) continue;
-    const double response = calibration.flat_dn_per_s[x] / lamp_seen;
-    for (int b = 0; b < nb; ++b)
-      A[x][b] = response * GaussianIntegral(bands.lower_nm(b), bands.upper_nm(b), c, sigma) / bands.width_nm(b);
+    const double c = calibration.CenterNm(x);
+    std::vector<double> row(static_cast<std::size_t>(nodes), 0.0);
+    for (double nm = c - 4 * sigma; nm <= c + 4 * sigma; nm += kStepNm) {
+      const double seen = calibration.flat_irradiance * lamp.Evaluate(nm) / M_PI *
+                          std::exp(-0.5 * std::pow((nm - c) / sigma, 2)) * kStepNm;
+      const int k0 = static_cast<int>(std::floor((nm - lo_nm) / kNodeNm));
+      for (int k = std::max(0, k0); k <= std::min(nodes - 1, k0 + 1); ++k) row[k] += seen * hat(k, nm);
+    }
+    flat_rows.push_back(row);
+    flat_targets.push_back(calibration.flat_dn_per_s[x]);
+    flat_weights.push_back(1.0 / std::sqrt(calibration.flat_dn_per_s[x]));
+  }
+  double flat_diag = 0;
+  for (std::size_t r = 0; r < flat_rows.size(); ++r)
+    for (double a : flat_rows[r]) flat_diag += a * a * flat_weights[r] * flat_weights[r];
+  const std::vector<double> u = SolveNonNegative(flat_rows, flat_targets, flat_weights, 1e-5 * flat_diag / nodes);
+  auto sensitivity = [&](double nm) {
+    const int k0 = static_cast<int>(std::floor((nm - lo_nm) / kNodeNm));
+    double value = 0;
+    for (int k = std::max(0, k0); k <= std::min(nodes - 1, k0 + 1); ++k) value += u[k] * hat(k, nm);
+    return value;
+  };
+  // The sample's radiance density is uniform inside each band (the model's
+  // own assumption): A[x][b] = integral over band b of u G_x / width_b.
+  std::vector<std::vector<double>> A(static_cast<std::size_t>(width), std::vector<double>(nb, 0.0));
+  for (int x = 0; x < width; ++x) {
+    if (!usable[x]) continue;
+    const double c = calibration.CenterNm(x);
+    for (int b = 0; b < nb; ++b) {
+      const double lo = std::max(bands.lower_nm(b), c - 4 * sigma), hi = std::min(bands.upper_nm(b), c + 4 * sigma);
+      for (double nm = lo + kStepNm / 2; nm < hi; nm += kStepNm)
+        A[x][b] += sensitivity(nm) * std::exp(-0.5 * std::pow((nm - c) / sigma, 2)) * kStepNm / bands.width_nm(b);
+    }
   }
   for (const nlohmann::json& line : ReadJsonLines(dir / "frames.jsonl")) {
     if (line.value("kind", "") != "spectrum" || !line.contains("column_mean_dn") || Clipped(line)) continue;
     const double peak = line.value("peak_column_fraction", 0.0);
     if (peak < low || peak > high) continue;  // not well exposed: the protocol stepped past it
-    const std::vector<double> y = ColumnRate(line);
+    std::vector<double> y = ColumnRate(line);
+    for (double& v : y) v -= dark_dn_per_s;
     if (static_cast<int>(y.size()) != width)
       ThrowUserError(dir.string(), "spectrum", "frames and the LVF calibration differ in width");
     std::vector<std::vector<double>> rows;
@@ -253,6 +297,7 @@ SpectrumFit FitEmissionSpectrum(const fs::path& dir, const LvfCalibrationFit& ca
     SpectrumFit::FrameFit frame;
     frame.delay_s = line.value("delay_after_light_off_s", 0.0);
     frame.exposure_s = line.value("exposure_s", 0.0);
+    frame.t_start_s = line.value("t_start_s", 0.0);
     frame.band_radiance = L;
     frame.measured = y;
     frame.modelled.assign(static_cast<std::size_t>(width), std::nan(""));
@@ -302,17 +347,10 @@ SessionFit FitSession(const fs::path& dir, const SessionFitOptions& options) {
       result.notes.push_back(e.what());
     }
   }
-  if (result.calibration && part_ok("spectrum")) {
-    try {
-      result.spectrum = FitEmissionSpectrum(dir / "spectrum", *result.calibration, bands);
-    } catch (const UserError& e) {
-      result.notes.push_back(e.what());
-    }
-  }
-
   // 3. Decay.
   if (part_ok("decay")) {
     Curve curve;
+    std::vector<double> exposures;
     int clipped = 0;
     for (const nlohmann::json& line : ReadJsonLines(dir / "decay" / "frames.jsonl")) {
       if (!line.contains("mean_signal_dn")) continue;
@@ -328,6 +366,8 @@ SessionFit FitSession(const fs::path& dir, const SessionFitOptions& options) {
       }
       // Signal per second of exposure, at the middle of the exposure.
       curve.t_s.push_back(line.value("delay_after_light_off_s", 0.0) + exposure / 2);
+      exposures.push_back(exposure);
+      curve.exposure_s.push_back(exposure);
       for (std::size_t c = 0; c < means.size() && c < curve.channels.size(); ++c) curve.channels[c].push_back(means[c] / exposure);
     }
     if (clipped > 0) result.notes.push_back("decay: " + std::to_string(clipped) + " clipped frame(s) left out");
@@ -337,12 +377,49 @@ SessionFit FitSession(const fs::path& dir, const SessionFitOptions& options) {
       decay_options.max_components = options.max_components;
       decay_options.weighting = options.weighting;
       decay_options.background = true;  // dark current
-      result.decay = FitDecay(curve, decay_options, (dir / "decay").string());
-      result.decay_curve = curve;
+      // A frame integrates the glow over its exposure e: per second it reads
+      // A exp(-k (d + e/2)) sinh(k e / 2) / (k e / 2). The middle of the
+      // exposure alone leaves that last factor, 1 + (k e)^2 / 24, which a
+      // mean over thousands of pixels resolves and BIC would take for a
+      // second state. So: fit, divide by the factor at the fitted rate of
+      // the dominant state, fit again (the factor moves by far less then).
+      Curve corrected = curve;
+      DecayFitSummary first = FitDecay(curve, decay_options, (dir / "decay").string());
+      for (int pass = 0; pass < 2; ++pass) {
+        std::size_t dominant = 0;
+        double best = -1;
+        for (std::size_t i = 0; i < first.components.size(); ++i) {
+          const double total = std::accumulate(first.components[i].amplitude.begin(), first.components[i].amplitude.end(), 0.0);
+          if (total > best) best = total, dominant = i;
+        }
+        const double k = first.components[dominant].rate;
+        for (std::size_t j = 0; j < curve.size(); ++j) {
+          const double x = k * exposures[j] / 2;
+          const double factor = x > 1e-8 ? std::sinh(x) / x : 1.0;
+          for (int c = 0; c < curve.channel_count(); ++c) corrected.channels[c][j] = curve.channels[c][j] / factor;
+        }
+        first = FitDecay(corrected, decay_options, (dir / "decay").string());
+      }
+      result.decay = first;
+      result.decay_curve = corrected;
     } catch (const UserError& e) {
       result.notes.push_back(e.what());
     }
   }
+  // 2. The spectrum, with the dark signal the decay measured.
+  if (result.calibration && part_ok("spectrum")) {
+    try {
+      double dark = std::nan("");
+      if (result.decay) {
+        dark = 0;
+        for (double b : result.decay->background) dark += b;
+      }
+      result.spectrum = FitEmissionSpectrum(dir / "spectrum", *result.calibration, bands, dark);
+    } catch (const UserError& e) {
+      result.notes.push_back(e.what());
+    }
+  }
+
   if (!result.decay) ThrowUserError(dir.string(), "", "no decay could be fitted, so no kr: nothing to write");
   const DecayFitSummary& decay = *result.decay;
   // The state that carries most of the glow stands for all in the excitation fit.
@@ -361,39 +438,82 @@ SessionFit FitSession(const fs::path& dir, const SessionFitOptions& options) {
   if (part_ok("excitation")) {
     const nlohmann::json exc_devices = SessionStart(dir / "excitation").value("devices", devices);
     const nlohmann::json irradiance = exc_devices.value("light_band_irradiance", nlohmann::json::object());
+    // The decay's background is the camera's dark signal per second (dark
+    // current): the excitation frames carry it too, under the same camera.
+    double dark = 0;
+    for (double b : decay.background) dark += b;
     std::map<std::string, SessionFit::ExcitationLight> by_light;
     for (const nlohmann::json& line : ReadJsonLines(dir / "excitation" / "frames.jsonl")) {
-      if (!line.contains("light") || Clipped(line)) continue;
+      if (!line.contains("light") || !line.contains("mean_signal_dn")) continue;
+      if (Clipped(line)) {
+        result.notes.push_back("excitation: a clipped frame of '" + line["light"].get<std::string>() + "' left out");
+        continue;
+      }
       SessionFit::ExcitationLight& light = by_light[line["light"].get<std::string>()];
       light.light = line["light"];
       const double exposure = line.at("exposure_s").get<double>();
       light.samples.push_back({line.at("charge_s").get<double>(), line.value("delay_after_light_off_s", 0.0), exposure,
-                               SumSignal(line) / exposure});
+                               SumSignal(line) / exposure - dark});
     }
+    // S, the signal of a saturated sample, is the same under every light:
+    // it comes from the light that charges the sample highest (its level and
+    // speed pin S best), and every other light's rate is fitted with S
+    // known, so a light that barely charges is read from the level it
+    // reaches, not from a charging speed that hardly differs from kr (the
+    // weak spot Sec. 8.4.6 names). A light whose response stays below 0.1%
+    // of the best one's excites nothing this camera resolves: a = 0.
+    auto peak_of = [](const SessionFit::ExcitationLight& light) {
+      double peak = 0;
+      for (const ExcitationSample& s : light.samples) peak = std::max(peak, s.value);
+      return peak;
+    };
+    std::string best;
+    for (const auto& [name, light] : by_light)
+      if (best.empty() || peak_of(light) > peak_of(by_light[best])) best = name;
+    std::optional<double> S;
     std::vector<std::vector<double>> E_per_light;
     std::vector<double> a_per_light;
-    for (auto& [name, light] : by_light) {
+    auto fit_light = [&](SessionFit::ExcitationLight& light) {
       std::sort(light.samples.begin(), light.samples.end(),
                 [](const ExcitationSample& a, const ExcitationSample& b) { return a.charge_s < b.charge_s; });
-      try {
+      const std::string where = (dir / "excitation").string() + " (" + light.light + ")";
+      if (S && peak_of(light) < 1e-3 * peak_of(by_light[best])) {
+        light.fit = ExcitationFitSummary{};
+        light.fit.scale = *S;
+        light.fit.note = "no response above 0.1% of " + best + "'s: a = 0";
+      } else {
         ExcitationFitOptions excitation_options;
         excitation_options.kr = kr;
-        light.fit = FitExcitation(light.samples, excitation_options, (dir / "excitation").string() + " (" + name + ")");
-      } catch (const UserError& e) {
-        result.notes.push_back(e.what());
-        continue;
+        excitation_options.saturated_signal = S;
+        light.fit = FitExcitation(light.samples, excitation_options, where);
       }
-      if (!irradiance.contains(name)) {
-        result.notes.push_back("excitation: no band irradiance recorded for '" + name +
+      if (!irradiance.contains(light.light)) {
+        result.notes.push_back("excitation: no band irradiance recorded for '" + light.light +
                                "' (a bench's lab config must give it): its rate is reported, not turned into ke");
       } else {
-        light.band_irradiance = irradiance[name].get<std::vector<double>>();
+        light.band_irradiance = irradiance[light.light].get<std::vector<double>>();
         if (static_cast<int>(light.band_irradiance.size()) == nb) {
           E_per_light.push_back(light.band_irradiance);
           a_per_light.push_back(light.fit.a);
         }
       }
       result.excitation.push_back(light);
+    };
+    if (!best.empty()) {
+      try {
+        fit_light(by_light[best]);
+        S = result.excitation.back().fit.scale;
+        for (auto& [name, light] : by_light)
+          if (name != best) {
+            try {
+              fit_light(light);
+            } catch (const UserError& e) {
+              result.notes.push_back(e.what());
+            }
+          }
+      } catch (const UserError& e) {
+        result.notes.push_back(e.what());
+      }
     }
     if (!E_per_light.empty()) {
       try {
@@ -427,16 +547,35 @@ SessionFit FitSession(const fs::path& dir, const SessionFitOptions& options) {
     }
     if (!known || a_charge <= 0) {
       result.notes.push_back("spectrum: the charge light's excitation is not known in every band it reaches, so the "
-                             "state during the spectrum is not: Lambda keeps the measured shape, scaled to the decay");
+                             "state during the spectrum is not, nor Lambda's scale");
     } else {
-      const double k = a_charge + kr;
-      const double r0 = a_charge / k * -std::expm1(-k * result.spectrum->charge_s);
+      // The state through the recorded switches (r = 0 before the first: the
+      // calibration before it kept the sample dark), then averaged over
+      // each frame's exposure in the dark.
+      struct Switch {
+        double t_s;
+        bool on;
+      };
+      std::vector<Switch> switches;
+      for (const nlohmann::json& event : ReadJsonLines(dir / "spectrum" / "events.jsonl"))
+        if (event.value("event", "") == "light" && event.value("channel", "") == result.spectrum->charge_light)
+          switches.push_back({event.value("t_s", 0.0), event.value("on", false)});
       for (const auto& frame : result.spectrum->frames) {
-        // The state averaged over the frame's exposure.
+        double r = 0, t = switches.empty() ? frame.t_start_s : switches.front().t_s;
+        bool on = false;
+        for (const Switch& sw : switches) {
+          if (sw.t_s > frame.t_start_s) break;
+          const double a = on ? a_charge : 0.0, k = a + kr, dt = sw.t_s - t;
+          r = a / k + (r - a / k) * std::exp(-k * dt);  // Eq. 8.1, exact over a constant interval
+          t = sw.t_s;
+          on = sw.on;
+        }
+        const double a = on ? a_charge : 0.0, k = a + kr;
+        r = a / k + (r - a / k) * std::exp(-k * (frame.t_start_s - t));
         const double e = std::max(frame.exposure_s, 1e-12);
-        const double r = r0 * std::exp(-kr * frame.delay_s) * -std::expm1(-kr * e) / (kr * e);
+        const double r_mean = r * -std::expm1(-kr * e) / (kr * e);
         for (int b = 0; b < nb; ++b)
-          band_radiance_per_kr_r[b] += frame.band_radiance[b] / (kr * r) / result.spectrum->frames.size();
+          band_radiance_per_kr_r[b] += frame.band_radiance[b] / (kr * r_mean) / result.spectrum->frames.size();
       }
       have_lambda = true;
     }

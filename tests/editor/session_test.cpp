@@ -64,7 +64,7 @@ TEST(EditSession, BadEditsChangeNothing) {
 TEST(EditSession, ColoursBecomeSpectraOfExactlyThatColour) {
   Cornell c;
   c.session.AddConstraint(128, 64, 35);
-  for (const std::vector<double> rgb : {std::vector<double>{0.004, 0.02, 0.012}, std::vector<double>{0.01, 0.002, 0.001},
+  for (const std::vector<double>& rgb : {std::vector<double>{0.004, 0.02, 0.012}, std::vector<double>{0.01, 0.002, 0.001},
                                         std::vector<double>{0.0, 0.03, 0.0}}) {
     c.session.UpdateConstraint(0, {{"rgb", rgb}});
     const nlohmann::json state = c.session.State();

@@ -100,14 +100,18 @@ ExcitationProtocolResult RunExcitationProtocol(Camera& camera, Lights& lights, C
 // Reads the measurements of an excitation session's frames.jsonl.
 ExcitationDone ReadExcitationDone(const std::filesystem::path& session_dir);
 
-// Emission spectrum through the LVF (Sec. 8.4.2): the filter goes in, the
-// sample charges under a strong light, the light goes off, and frames are
-// taken back to back from a few ms after light-off until `frames` of them
-// are well exposed (each records its exposure and delay, since the glow
-// fades during the series; the spectrum's shape does not, Sec. 8.4.5).
+// Emission spectrum through the LVF (Sec. 8.4.2): the filter goes in, and
+// then, frame after frame: charge under a strong light (charge_s the first
+// time, recharge_s after), light off, expose `first_delay_s` later. The
+// exposure steps between cycles until `frames` frames are well exposed, so
+// a glow that fades in seconds (green, yellow) is caught as surely as a slow
+// one. Each frame records its exposure and delay, and events.jsonl every
+// switch, so the fit knows the state during each frame; the spectrum's
+// shape does not change as it fades (Sec. 8.4.5).
 struct SpectrumProtocolOptions {
   std::string charge_light;
   double charge_s = 600;
+  double recharge_s = 300;
   int frames = 4;
   double first_delay_s = 0.005;
   double gain = 1;

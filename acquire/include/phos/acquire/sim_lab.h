@@ -68,7 +68,7 @@ struct CameraModel {
   double read_noise_e = 5;
   double dark_current_e_per_s = 2;
   double full_well_e = 15000;
-  double gain_dn_per_e = 0.25;
+  double gain_dn_per_e = 0.27;  // full well (15000 e) lands above the ADC's top, so clipping shows in the DN
   double black_level_dn = 64;
   int adc_bits = 12;
   double readout_s = 0.01;

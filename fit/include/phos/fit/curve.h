@@ -14,6 +14,11 @@ struct Curve {
   std::vector<double> t_s;                    // strictly increasing
   std::vector<std::vector<double>> channels;  // channels[c][j], same length as t_s
   std::vector<std::string> names;             // one per channel (for reports)
+  // Optional, per sample: how long each value integrated (a frame's
+  // exposure), when values are rates (counts / exposure). A rate's photon
+  // noise variance is value / exposure, so Poisson weights grow with
+  // sqrt(exposure): a 0.05 s frame must not count as much as a 3 s one.
+  std::vector<double> exposure_s = {};
 
   std::size_t size() const { return t_s.size(); }
   int channel_count() const { return static_cast<int>(channels.size()); }

@@ -18,8 +18,9 @@
 //     decay (the delay and the exposure are in its model); ke per band from
 //     the rates and the lights' band irradiances (non-negative).
 //  5. Re-radiation (Sec. 8.4.5): Lambda_b = L_b / (kr r), with r the state
-//     during each spectrum frame, known in closed form from its charge, the
-//     ke just fitted and the frame's delay and exposure. With nc > 1, the
+//     during each spectrum frame, known in closed form (Eq. 8.1) from the
+//     session's recorded light switches, the ke just fitted and the frame's
+//     exposure. With nc > 1, the
 //     states share the shape and split it by their decay amplitudes,
 //     Lambda_i = a_i Lambda* / kr_i.
 
@@ -45,7 +46,8 @@ struct LvfCalibrationFit {
     double wavelength_nm = 0, column = 0;
   };
   std::vector<Line> lines;
-  std::vector<double> flat_dn_per_s;  // per column, all channels summed
+  std::vector<double> flat_dn_per_s;  // per column, all channels summed, dark removed
+  std::vector<double> dark_dn_per_s;  // per column: the camera's dark signal, to remove from spectra
   double flat_temperature_k = 3000, flat_irradiance = 1;
 
   double CenterNm(double column) const { return center0_nm + nm_per_column * column; }
@@ -59,7 +61,7 @@ struct SpectrumFit {
   // Per well-exposed frame: band radiance (material units), its delay after
   // light-off and exposure; the measured and modelled column profiles.
   struct FrameFit {
-    double delay_s = 0, exposure_s = 0;
+    double delay_s = 0, exposure_s = 0, t_start_s = 0;
     std::vector<double> band_radiance;
     std::vector<double> measured, modelled;  // per column, DN/s
   };
@@ -69,8 +71,11 @@ struct SpectrumFit {
   double charge_s = 0;
 };
 
+// `dark_dn_per_s`: the camera's dark signal per second, all channels summed
+// (the decay fit's background measures it best); NaN: the calibration's
+// dark frame, averaged over its columns (dark current is uniform).
 SpectrumFit FitEmissionSpectrum(const std::filesystem::path& session_dir, const LvfCalibrationFit& calibration,
-                                const SpectralGrid& bands);
+                                const SpectralGrid& bands, double dark_dn_per_s);
 
 struct SessionFitOptions {
   int components = 0;      // 0: BIC chooses up to max_components
