@@ -5,7 +5,11 @@
 #include <cmath>
 #include <cstdio>
 #include <memory>
+#include <algorithm>
+#include <atomic>
 #include <optional>
+#include <set>
+#include <thread>
 #include <string>
 
 #include <nlohmann/json.hpp>
@@ -19,6 +23,7 @@
 #include "phos/util/error.h"
 #include "phos/util/format.h"
 #include "phos/util/json.h"
+#include "phos/util/progress.h"
 #include "phos/util/svg_plot.h"
 
 namespace phos::app {
@@ -226,6 +231,138 @@ void RunFitSession(const SessionArgs& args) {
   if (args.json) std::printf("%s\n", json.dump().c_str());
 }
 
+// ---- phos fit batch ----------------------------------------------------------
+
+struct BatchArgs {
+  std::vector<std::string> inputs;
+  std::string out, weights = "poisson";
+  int jobs = 0, components = 0;
+  bool reports = true;
+};
+
+// The capture folders named: each input is one, or holds them as subfolders.
+std::vector<std::filesystem::path> BatchItems(const std::vector<std::string>& inputs) {
+  namespace fs = std::filesystem;
+  std::vector<fs::path> items;
+  for (const std::string& input : inputs) {
+    const fs::path path = input;
+    std::error_code ec;
+    if (fs::is_regular_file(path / "session.json", ec)) {
+      items.push_back(path);
+      continue;
+    }
+    if (!fs::is_directory(path, ec)) ThrowUserError(input, "", "is neither a capture folder nor a folder of them");
+    std::vector<fs::path> found;
+    for (const auto& entry : fs::directory_iterator(path, ec))
+      if (entry.is_directory() && fs::is_regular_file(entry.path() / "session.json"))
+        found.push_back(entry.path());
+    if (found.empty()) ThrowUserError(input, "", "holds no capture folder (no */session.json)");
+    std::sort(found.begin(), found.end());
+    items.insert(items.end(), found.begin(), found.end());
+  }
+  std::set<std::string> names;
+  for (const fs::path& item : items)
+    if (!names.insert(item.filename().string()).second)
+      ThrowUserError(item.string(), "", "two items are named '" + item.filename().string() +
+                                            "': outputs are named after the folder, so names must differ");
+  return items;
+}
+
+void RunFitBatch(const BatchArgs& args) {
+  namespace fs = std::filesystem;
+  SessionFitOptions options;
+  options.components = args.components;
+  options.weighting = ParseWeightsOption(args.weights);
+  const std::vector<fs::path> items = BatchItems(args.inputs);
+  std::error_code ec;
+  fs::create_directories(args.out, ec);
+  if (ec) ThrowUserError(args.out, "", "cannot create the output folder: " + ec.message());
+  const int jobs = args.jobs > 0 ? args.jobs : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+
+  // An item is done when its record (<name>.done.json, written last and
+  // atomically, after the material and the report) exists: a crash
+  // mid-batch leaves the unfinished items without one, and only they rerun.
+  struct Row {
+    std::string name, status, detail;
+    int nc = 0;
+    double kr = 0, seconds = 0;
+  };
+  std::vector<Row> rows(items.size());
+  std::vector<std::size_t> todo;
+  for (std::size_t i = 0; i < items.size(); ++i) {
+    rows[i].name = items[i].filename().string();
+    const fs::path done = fs::path(args.out) / (rows[i].name + ".done.json");
+    if (fs::exists(done, ec)) {
+      const nlohmann::json record = ReadJsonFile(done);
+      rows[i].status = "kept";
+      rows[i].nc = record.value("n_components", 0);
+      rows[i].kr = record.value("kr", 0.0);
+      rows[i].seconds = record.value("seconds", 0.0);
+      rows[i].detail = "done in an earlier run";
+    } else {
+      todo.push_back(i);
+    }
+  }
+  ProgressBar progress("fit batch", todo.size());
+  std::atomic<std::size_t> next{0};
+  auto worker = [&] {
+    for (std::size_t k = next++; k < todo.size(); k = next++) {
+      const std::size_t i = todo[k];
+      Row& row = rows[i];
+      const fs::path base = fs::path(args.out) / row.name;
+      try {
+        const SessionFit fit = FitSession(items[i], options);
+        SaveMaterial(fit.material, base.string() + ".json");
+        if (args.reports) WriteFileAtomically(base.string() + ".html", SessionReportHtml(fit, "phos fit batch: " + row.name));
+        row.status = "fitted";
+        row.nc = fit.decay->n_components;
+        row.kr = fit.material.states[0].kr;
+        row.seconds = fit.seconds;
+        row.detail = fit.notes.empty() ? "" : std::to_string(fit.notes.size()) + " note(s): " + fit.notes.front();
+        WriteFileAtomically(base.string() + ".done.json",
+                            nlohmann::json({{"item", items[i].string()}, {"n_components", row.nc}, {"kr", row.kr},
+                                            {"seconds", row.seconds}, {"notes", fit.notes}})
+                                    .dump(2) + "\n");
+        fs::remove(base.string() + ".failed.txt", ec);
+      } catch (const std::exception& e) {
+        // One item's bad data must not stop the others; it is said, and kept.
+        row.status = "failed";
+        row.detail = e.what();
+        try {
+          WriteFileAtomically(base.string() + ".failed.txt", std::string(e.what()) + "\n");
+        } catch (...) {
+        }
+      }
+      progress.Advance();
+    }
+  };
+  std::vector<std::thread> threads;
+  for (int t = 0; t < std::min<int>(jobs, static_cast<int>(todo.size())); ++t) threads.emplace_back(worker);
+  for (std::thread& t : threads) t.join();
+  progress.Finish();
+
+  // One summary table, on screen and as CSV.
+  std::string csv = "item,status,n_components,kr_per_s,seconds,detail\n";
+  std::printf("%-24s %-7s %3s %12s %8s  %s\n", "item", "status", "nc", "kr (1/s)", "s", "detail");
+  int failed = 0;
+  for (const Row& row : rows) {
+    failed += row.status == "failed";
+    std::printf("%-24s %-7s %3d %12s %8s  %s\n", row.name.c_str(), row.status.c_str(), row.nc,
+                row.status == "failed" ? "-" : FormatShort(row.kr).c_str(), FormatShort(row.seconds).c_str(),
+                row.detail.c_str());
+    std::string detail = row.detail;
+    std::replace(detail.begin(), detail.end(), '"', '\'');
+    csv.append(row.name).append(",").append(row.status).append(",").append(std::to_string(row.nc)).append(",")
+        .append(FormatDouble(row.kr)).append(",").append(FormatDouble(row.seconds)).append(",\"").append(detail).append("\"\n");
+  }
+  WriteFileAtomically(fs::path(args.out) / "summary.csv", csv);
+  std::printf("phos fit batch: %zu item(s), %zu fitted now, %zu kept, %d failed -> %s (summary.csv)\n", rows.size(),
+              todo.size() - failed, rows.size() - todo.size(), failed, args.out.c_str());
+  if (failed > 0)
+    ThrowUserError("", "fit batch", std::to_string(failed) + " item(s) could not be fitted (see the table and " +
+                                        args.out + "/<item>.failed.txt)");
+}
+
 }  // namespace
 
 void RegisterFit(CLI::App& app) {
@@ -280,6 +417,21 @@ void RegisterFit(CLI::App& app) {
                 "a material to compare with (the one a simulated sample was made of): kr, spectrum and ke errors");
   f->add_flag("--json", session->json, "print one JSON object");
   f->callback([session] { RunFitSession(*session); });
+
+  auto batch = std::make_shared<BatchArgs>();
+  CLI::App* b = fit->add_subcommand(
+      "batch",
+      "Fit many captured samples, in parallel (one per core): each input is a 'capture all' folder or a\n"
+      "folder of them. Writes <item>.json (material), <item>.html (report) and <item>.done.json into --out;\n"
+      "a rerun keeps the items that have their .done.json and fits only the rest, so a crash mid-batch\n"
+      "redoes only what was unfinished. Ends with one summary table (also summary.csv). An item that\n"
+      "fails is said and kept out; the others go on (exit code 2 if any failed).");
+  b->add_option("INPUT", batch->inputs, "capture folders, or folders holding them")->required();
+  b->add_option("--out", batch->out, "output folder")->required();
+  b->add_option("--jobs", batch->jobs, "items fitted at once (default: the number of cores)");
+  b->add_option("--components", batch->components, "fix the number of states (1-4; default: BIC)");
+  b->add_option("--weights", batch->weights, "poisson (default) or none");
+  b->callback([batch] { RunFitBatch(*batch); });
 }
 
 }  // namespace phos::app

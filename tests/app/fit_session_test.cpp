@@ -91,5 +91,36 @@ TEST(FitSessionCommand, PartialSessionsAndBadInput) {
       "cannot open"));
 }
 
+
+TEST(FitBatchCommand, FitsInParallelResumesAndSummarizes) {
+  testing::TempDir dir;
+  for (const std::string name : {"orange", "white", "yellow"})
+    ASSERT_EQ(RunPhos("capture all --sim-material " + testing::Fixture("materials/" + name + ".json").string() +
+                      " --out " + (dir / "captures" / name).string()).exit_code, 0);
+  std::filesystem::create_directories(dir / "captures" / "broken");
+  testing::WriteText(dir / "captures" / "broken" / "session.json", "{}");
+  const std::string command = "fit batch " + (dir / "captures").string() + " --out " + (dir / "out").string() + " --jobs 2";
+
+  auto first = RunPhos(command);
+  EXPECT_EQ(first.exit_code, 2);  // one item failed; the others were fitted
+  EXPECT_EQ(testing::LineCount(first.err), 1) << first.err;
+  EXPECT_NE(first.out.find("3 fitted now, 0 kept, 1 failed"), std::string::npos) << first.out;
+  for (const std::string name : {"orange", "white", "yellow"}) {
+    EXPECT_TRUE(std::filesystem::exists(dir / "out" / (name + ".json"))) << name;
+    EXPECT_TRUE(std::filesystem::exists(dir / "out" / (name + ".html"))) << name;
+  }
+  EXPECT_NE(testing::ReadText(dir / "out" / "broken.failed.txt").find("capture all"), std::string::npos);
+  const std::string summary = testing::ReadText(dir / "out" / "summary.csv");
+  EXPECT_EQ(testing::LineCount(summary), 5);  // header + 4 items
+
+  // A crash after white's material but before its record: only white reruns.
+  std::filesystem::remove(dir / "out" / "white.done.json");
+  const std::string orange_before = testing::ReadText(dir / "out" / "orange.json");
+  auto second = RunPhos(command);
+  EXPECT_NE(second.out.find("1 fitted now, 2 kept, 1 failed"), std::string::npos) << second.out;
+  EXPECT_EQ(testing::ReadText(dir / "out" / "orange.json"), orange_before);
+  EXPECT_TRUE(std::filesystem::exists(dir / "out" / "white.done.json"));
+}
+
 }  // namespace
 }  // namespace phos
