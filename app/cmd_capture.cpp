@@ -8,6 +8,8 @@
 #include <cstdio>
 #include <fstream>
 #include <map>
+#include <optional>
+#include <sstream>
 #include <memory>
 #include <string>
 
@@ -30,7 +32,8 @@ namespace {
 namespace fs = std::filesystem;
 
 struct CaptureArgs {
-  std::string device, lab, sim_material, sim_camera, out;
+  std::string device, lab, sim_material, sim_camera, sim_size, sim_inset, out;
+  double sim_inset_radius = 0.5;
   double sim_albedo = 0.8;
   unsigned seed = 1;
 };
@@ -56,12 +59,16 @@ struct Devices {
   bool simulated() const { return sim != nullptr; }
 
   void OpenSim(Material m, std::vector<double> a, unsigned seed, const std::string& material_file,
-               const std::string& camera_csv) {
+               const std::string& camera_csv, int width, int height, const std::optional<Material>& inset,
+               double inset_radius) {
     material = std::move(m);
     albedo = std::move(a);
     CameraModel camera_model = camera_csv.empty() ? DefaultCameraModel() : CameraModelFromCsv(camera_csv);
     camera_model.seed = seed;
+    if (width > 0) camera_model.width = width;
+    if (height > 0) camera_model.height = height;
     sim = std::make_unique<SimulatedLab>(material, albedo, DefaultLights(), camera_model, virtual_clock);
+    if (inset) sim->SetInset(*inset, inset_radius);
     camera = sim.get();
     lights = &sim->lights();
     clock = &virtual_clock;
@@ -82,6 +89,8 @@ struct Devices {
     description["light_band_irradiance"] = band_irradiance;
     description["bands_nm"] = material.bands.edges_nm;
     sample = {{"material_file", material_file}, {"material", MaterialToJson(material)}, {"albedo", albedo}};
+    if (inset) sample["inset"] = {{"material", MaterialToJson(*inset)}, {"radius_fraction", inset_radius}};
+    description["size"] = {camera_model.width, camera_model.height};
   }
 
   void OpenLabConfig(const fs::path& path) {
@@ -105,7 +114,18 @@ struct Devices {
         ThrowUserError("", "--sim-albedo", "expected a reflectance in [0, 1], got " + FormatDouble(args.sim_albedo));
       Material m = LoadMaterial(args.sim_material);
       std::vector<double> a = m.albedo ? *m.albedo : std::vector<double>(static_cast<std::size_t>(m.band_count()), args.sim_albedo);
-      OpenSim(std::move(m), std::move(a), args.seed, args.sim_material, args.sim_camera);
+      int width = 0, height = 0;
+      if (!args.sim_size.empty()) {
+        char x = 0;
+        std::istringstream in(args.sim_size);
+        if (!(in >> width >> x >> height) || x != 'x' || width < 8 || height < 8 || width > 8192 || height > 8192 ||
+            !in.eof())
+          ThrowUserError("", "--sim-size", "expected WxH with 8 to 8192 pixels a side, got '" + args.sim_size + "'");
+      }
+      std::optional<Material> inset;
+      if (!args.sim_inset.empty()) inset = LoadMaterial(args.sim_inset);
+      OpenSim(std::move(m), std::move(a), args.seed, args.sim_material, args.sim_camera, width, height, inset,
+              args.sim_inset_radius);
     } else if (device == "lab") {
       if (args.lab.empty()) ThrowUserError("", "--device lab", "needs --lab LAB.json (the lab config; docs/lab.md)");
       OpenLabConfig(args.lab);
@@ -127,8 +147,16 @@ struct Devices {
     Material m = MaterialFromJson(sample_json["material"], (session_dir / "session.json").string());
     std::vector<double> a = sample_json.value("albedo", std::vector<double>(static_cast<std::size_t>(m.band_count()), 0.8));
     // New noise on each resume: a resumed camera is not the same exposure again.
+    std::optional<Material> inset;
+    double inset_radius = 0.5;
+    if (sample_json.contains("inset")) {
+      inset = MaterialFromJson(sample_json["inset"]["material"], (session_dir / "session.json").string());
+      inset_radius = sample_json["inset"].value("radius_fraction", 0.5);
+    }
+    const std::vector<int> size = devices.value("size", std::vector<int>{0, 0});
     OpenSim(std::move(m), std::move(a), devices.value("seed", 1u) + 1000u * resume_count,
-            sample_json.value("material_file", ""), devices.value("camera_csv", ""));
+            sample_json.value("material_file", ""), devices.value("camera_csv", ""), size.size() == 2 ? size[0] : 0,
+            size.size() == 2 ? size[1] : 0, inset, inset_radius);
   }
 };
 
@@ -532,6 +560,10 @@ void AddDeviceOptions(CLI::App* cmd, CaptureArgs& args) {
   cmd->add_option("--sim-camera", args.sim_camera,
                   "CSV of the simulated camera's spectral sensitivities: wavelength_nm, then one column per\n"
                   "channel (R,G,B or Y); default: Gaussians at 600, 540, 460 nm, 90 nm wide (docs/capture.md)");
+  cmd->add_option("--sim-size", args.sim_size, "simulated sensor size, WxH (default 64x48)");
+  cmd->add_option("--sim-inset", args.sim_inset,
+                  "a second material filling a centred disk of the sample (a spatially varying sample)");
+  cmd->add_option("--sim-inset-radius", args.sim_inset_radius, "the disk's radius, a fraction of the half-height (default 0.5)");
   cmd->add_option("--out", args.out, "session folder to create (new or empty)")->required();
   cmd->add_option("--seed", args.seed, "noise seed of the simulated camera (default 1)");
 }

@@ -6,17 +6,21 @@
 #include <cstdio>
 #include <memory>
 #include <algorithm>
+#include <fstream>
 #include <atomic>
 #include <optional>
 #include <set>
 #include <thread>
 #include <string>
 
+#include <OpenImageIO/imageio.h>
 #include <nlohmann/json.hpp>
 
 #include "commands.h"
 #include "phos/fit/charge_fit.h"
+#include "phos/acquire/session.h"
 #include "phos/fit/decay_fit.h"
+#include "phos/fit/decay_map.h"
 #include "phos/fit/session_fit.h"
 #include "phos/model/material.h"
 #include "phos/util/csv.h"
@@ -28,6 +32,23 @@
 
 namespace phos::app {
 namespace {
+
+// Writes a float image with named channels (EXR) or 8-bit grey (PNG), whole or not at all.
+void WriteFloatImage(const std::filesystem::path& path, int width, int height, const std::vector<std::string>& names,
+                     const std::vector<float>& pixels) {
+  const std::filesystem::path temporary = path.string() + ".tmp" + path.extension().string();
+  auto out = OIIO::ImageOutput::create(temporary.string());
+  if (!out) ThrowUserError(path.string(), "", "no writer: " + OIIO::geterror());
+  const bool png = path.extension() == ".png";
+  OIIO::ImageSpec spec(width, height, static_cast<int>(names.size()), png ? OIIO::TypeDesc::UINT8 : OIIO::TypeDesc::FLOAT);
+  spec.channelnames = names;
+  if (!png) spec.attribute("compression", "zip");
+  if (!out->open(temporary.string(), spec) || !out->write_image(OIIO::TypeDesc::FLOAT, pixels.data()) || !out->close())
+    ThrowUserError(path.string(), "", "could not write (disk full?): " + out->geterror());
+  std::error_code ec;
+  std::filesystem::rename(temporary, path, ec);
+  if (ec) ThrowUserError(path.string(), "", "could not move into place: " + ec.message());
+}
 
 struct CurveArgs {
   std::string csv, weights = "none", plot;
@@ -231,6 +252,104 @@ void RunFitSession(const SessionArgs& args) {
   if (args.json) std::printf("%s\n", json.dump().c_str());
 }
 
+// ---- phos fit map ------------------------------------------------------------
+
+struct MapArgs {
+  std::string session, out, weights = "poisson";
+  bool no_background = false;
+};
+
+void RunFitMap(const MapArgs& args) {
+  namespace fs = std::filesystem;
+  const fs::path dir = args.session;
+  std::error_code ec;
+  if (!fs::is_regular_file(dir / "session.json", ec))
+    ThrowUserError(dir.string(), "", "is not a capture session (no session.json)");
+  const std::string protocol = ReadJsonFile(dir / "session.json").value("protocol", "");
+  if (protocol != "decay")
+    ThrowUserError(dir.string(), "", "is a '" + protocol + "' session; a decay map needs a decay session");
+  std::vector<nlohmann::json> lines;
+  {
+    std::ifstream in(dir / "frames.jsonl");
+    for (std::string text; std::getline(in, text);) {
+      nlohmann::json line = nlohmann::json::parse(text, nullptr, false);
+      if (!line.is_discarded() && line.is_object() && line.contains("file")) lines.push_back(std::move(line));
+    }
+  }
+  DecayMapInput input;
+  int clipped = 0;
+  std::vector<std::string> channel_names;
+  {
+    ProgressBar reading("reading frames", lines.size());
+    for (const nlohmann::json& line : lines) {
+      reading.Advance();
+      if (line.value("saturated_fraction", 0.0) > 0) {
+        ++clipped;
+        continue;
+      }
+      const Frame frame = ReadFrame(dir, line);
+      if (input.frames.empty()) {
+        input.width = frame.width;
+        input.height = frame.height;
+        input.channels = frame.channels;
+        channel_names = frame.channel_names;
+      } else if (frame.width != input.width || frame.height != input.height || frame.channels != input.channels) {
+        ThrowUserError(dir.string(), line["file"].get<std::string>(), "differs in size from the first frame");
+      }
+      std::vector<float> rate(frame.pixels.size());
+      for (std::size_t i = 0; i < rate.size(); ++i)
+        rate[i] = static_cast<float>((frame.pixels[i] - frame.black_level_dn) / frame.exposure_s);
+      input.frames.push_back(std::move(rate));
+      input.exposure_s.push_back(frame.exposure_s);
+      input.t_s.push_back(line.value("delay_after_light_off_s", 0.0) + frame.exposure_s / 2);
+    }
+  }
+  if (clipped > 0) std::printf("phos fit map: %d clipped frame(s) left out\n", clipped);
+  DecayMapOptions options;
+  options.background = !args.no_background;
+  options.weighting = ParseWeightsOption(args.weights);
+  ProgressBar fitting("fitting pixels", static_cast<std::size_t>(input.height));
+  const DecayMap map = FitDecayMap(input, options, dir.string(), [&](std::size_t) { fitting.Advance(); });
+  fitting.Finish();
+
+  fs::create_directories(args.out, ec);
+  if (ec) ThrowUserError(args.out, "", "cannot create the output folder: " + ec.message());
+  // One float EXR: kr, then amplitude and background per camera channel, then rms.
+  const int C = map.channels, nch = 2 + 2 * C;
+  const std::size_t pixels = static_cast<std::size_t>(map.width) * map.height;
+  std::vector<float> image(pixels * nch);
+  std::vector<std::string> names = {"kr"};
+  for (int c = 0; c < C; ++c) names.push_back("amplitude." + channel_names[c]);
+  for (int c = 0; c < C; ++c) names.push_back("background." + channel_names[c]);
+  names.push_back("rms");
+  for (std::size_t p = 0; p < pixels; ++p) {
+    float* out = &image[p * nch];
+    out[0] = map.kr[p];
+    for (int c = 0; c < C; ++c) {
+      out[1 + c] = map.amplitude[p * C + c];
+      out[1 + C + c] = map.background[p * C + c];
+    }
+    out[1 + 2 * C] = map.rms[p];
+  }
+  const fs::path exr = fs::path(args.out) / "decay-map.exr";
+  WriteFloatImage(exr, map.width, map.height, names, image);
+  // A look at kr: grey from the 1st to the 99th percentile.
+  std::vector<float> finite;
+  for (float k : map.kr)
+    if (std::isfinite(k)) finite.push_back(k);
+  std::sort(finite.begin(), finite.end());
+  const float lo = finite.empty() ? 0 : finite[finite.size() / 100], hi = finite.empty() ? 1 : finite[finite.size() * 99 / 100];
+  const float median = finite.empty() ? std::nanf("") : finite[finite.size() / 2];
+  std::vector<float> grey(pixels);
+  for (std::size_t p = 0; p < pixels; ++p)
+    grey[p] = std::isfinite(map.kr[p]) ? std::clamp((map.kr[p] - lo) / std::max(hi - lo, 1e-12f), 0.0f, 1.0f) : 0.0f;
+  WriteFloatImage(fs::path(args.out) / "kr.png", map.width, map.height, {"Y"}, grey);
+  std::printf("phos fit map: %dx%d pixels, %zu frames, fitted in %s s -> %s (kr, amplitude.*, background.*, rms), kr.png\n",
+              map.width, map.height, input.frames.size(), FormatShort(map.seconds).c_str(), exr.string().c_str());
+  std::printf("  kr: median %s /s, 1%%-99%% %s to %s /s; %zu pixel(s) without a decay\n", FormatShort(median).c_str(),
+              FormatShort(lo).c_str(), FormatShort(hi).c_str(), map.no_decay);
+}
+
 // ---- phos fit batch ----------------------------------------------------------
 
 struct BatchArgs {
@@ -417,6 +536,19 @@ void RegisterFit(CLI::App& app) {
                 "a material to compare with (the one a simulated sample was made of): kr, spectrum and ke errors");
   f->add_flag("--json", session->json, "print one JSON object");
   f->callback([session] { RunFitSession(*session); });
+
+  auto map_args = std::make_shared<MapArgs>();
+  CLI::App* mp = fit->add_subcommand(
+      "map",
+      "Fit every pixel of a decay session (a spatially varying sample): one rate shared by the pixel's\n"
+      "channels, an amplitude and a background per channel, by variable projection on a shared rate grid\n"
+      "and Newton steps, in parallel. Writes decay-map.exr (float: kr, amplitude.*, background.*, rms)\n"
+      "and kr.png (kr in grey, 1st to 99th percentile) into --out.");
+  mp->add_option("SESSION", map_args->session, "a decay session folder")->required();
+  mp->add_option("--out", map_args->out, "output folder")->required();
+  mp->add_option("--weights", map_args->weights, "poisson (default) or none");
+  mp->add_flag("--no-background", map_args->no_background, "no background term (dark signal already removed)");
+  mp->callback([map_args] { RunFitMap(*map_args); });
 
   auto batch = std::make_shared<BatchArgs>();
   CLI::App* b = fit->add_subcommand(

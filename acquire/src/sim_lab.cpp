@@ -118,6 +118,7 @@ SimulatedLab::SimulatedLab(Material material, std::vector<double> albedo, std::v
       if (sources_[s].name == channel)
         for (std::size_t b = 0; b < E.size(); ++b) E[b] += source_E_[s][b];
     ExcitationRates(material_, E, "simulated sample '" + material_.name + "' under '" + channel + "'");
+    if (inset_) ExcitationRates(*inset_, E, "simulated inset '" + inset_->name + "' under '" + channel + "'");
   };
   r_.assign(static_cast<std::size_t>(material_.state_count()), 0.0);
   t_state_ = clock_.now_s();
@@ -213,7 +214,30 @@ void SimulatedLab::AdvanceTo(double t_s) {
   if (t_s <= t_state_) return;
   const std::vector<double> a = ExcitationRates(material_, IrradianceNow(), "simulated sample '" + material_.name + "'");
   for (int i = 0; i < material_.state_count(); ++i) r_[i] = ExactStep(r_[i], a[i], material_.states[i].kr, t_s - t_state_);
+  if (inset_) {
+    const std::vector<double> b = ExcitationRates(*inset_, IrradianceNow(), "simulated inset '" + inset_->name + "'");
+    for (int i = 0; i < inset_->state_count(); ++i)
+      inset_r_[i] = ExactStep(inset_r_[i], b[i], inset_->states[i].kr, t_s - t_state_);
+  }
   t_state_ = t_s;
+}
+
+void SimulatedLab::SetInset(Material inset, double radius_fraction) {
+  if (!(inset.bands == material_.bands))
+    ThrowUserError("simulated inset '" + inset.name + "'", "bands_nm", "must be the sample's band grid");
+  if (!(radius_fraction > 0 && radius_fraction <= 1))
+    ThrowUserError("", "inset radius", "expected a fraction in (0, 1]");
+  AdvanceTo(clock_.now_s());
+  inset_ = std::move(inset);
+  inset_r_.assign(static_cast<std::size_t>(inset_->state_count()), 0.0);
+  inset_radius_ = radius_fraction;
+}
+
+bool SimulatedLab::InInset(int x, int y) const {
+  if (!inset_) return false;
+  const double dx = x + 0.5 - camera_.width / 2.0, dy = y + 0.5 - camera_.height / 2.0;
+  const double r = inset_radius_ * camera_.height / 2.0;
+  return dx * dx + dy * dy < r * r;
 }
 
 std::vector<double> SimulatedLab::StateNow() {
@@ -243,17 +267,23 @@ Frame SimulatedLab::Capture(double exposure_s, double gain) {
   // r integrated in closed form under the constant irradiance), unless the
   // white reference hides the sample.
   const std::vector<double> E = IrradianceNow();
-  const std::vector<double> a = ExcitationRates(material_, E, "simulated sample '" + material_.name + "'");
   const int nb = material_.band_count();
-  std::vector<double> emission(static_cast<std::size_t>(nb), 0.0);
-  if (!white_reference_)
-    for (int i = 0; i < material_.state_count(); ++i) {
-      const ExcitedState& s = material_.states[i];
+  // Eq. 8.2 integrated over the exposure for one material and its states.
+  auto emission_of = [&](const Material& material, const std::vector<double>& r) {
+    std::vector<double> emission(static_cast<std::size_t>(nb), 0.0);
+    if (white_reference_) return emission;
+    const std::vector<double> a = ExcitationRates(material, E, "simulated sample '" + material.name + "'");
+    for (int i = 0; i < material.state_count(); ++i) {
+      const ExcitedState& s = material.states[i];
       const double k = a[i] + s.kr, r_inf = k > 0 ? a[i] / k : 0;
-      const double r_integral = k > 0 ? r_inf * exposure_s + (r_[i] - r_inf) * -std::expm1(-k * exposure_s) / k
-                                      : r_[i] * exposure_s;
+      const double r_integral = k > 0 ? r_inf * exposure_s + (r[i] - r_inf) * -std::expm1(-k * exposure_s) / k
+                                      : r[i] * exposure_s;
       for (int b = 0; b < nb; ++b) emission[b] += s.Lambda[b] * s.kr * r_integral;
     }
+    return emission;
+  };
+  const std::vector<double> emission = emission_of(material_, r_);
+  const std::vector<double> inset_emission = inset_ ? emission_of(*inset_, inset_r_) : emission;
 
   const Optics& optics = lvf_in_path_ ? lvf_ : plain_;
   const int columns = static_cast<int>(optics.emission.size());
@@ -265,15 +295,21 @@ Frame SimulatedLab::Capture(double exposure_s, double gain) {
     for (int c = 0; c < frame.channels; ++c) {
       // Mean photo-electrons in a pixel of this column: dark current, the
       // glow, and the diffuse reflection of every light that is on.
-      double signal = 0;
-      for (int b = 0; b < nb; ++b) signal += optics.emission[column][c][b] * emission[b];
+      double signal = 0, inset_signal = 0;
+      for (int b = 0; b < nb; ++b) {
+        signal += optics.emission[column][c][b] * emission[b];
+        inset_signal += optics.emission[column][c][b] * inset_emission[b];
+      }
+      double reflected = 0;
       for (std::size_t s = 0; s < sources_.size(); ++s)
         if (lights_->IsOn(sources_[s].name))
-          signal += exposure_s * (white_reference_ ? optics.white_reflect : optics.sample_reflect)[s][column][c];
-      const double mean_e = camera_.dark_current_e_per_s * exposure_s + camera_.electrons_per_unit * signal;
-      std::poisson_distribution<long long> shot(mean_e);
+          reflected += exposure_s * (white_reference_ ? optics.white_reflect : optics.sample_reflect)[s][column][c];
+      const double dark_e = camera_.dark_current_e_per_s * exposure_s;
+      std::poisson_distribution<long long> shot(dark_e + camera_.electrons_per_unit * (signal + reflected));
+      std::poisson_distribution<long long> inset_shot(dark_e + camera_.electrons_per_unit * (inset_signal + reflected));
       for (int y = 0; y < frame.height; ++y) {
-        const double electrons = std::min(static_cast<double>(shot(rng_)), camera_.full_well_e) + read_noise(rng_);
+        const long long count = InInset(x, y) ? inset_shot(rng_) : shot(rng_);
+        const double electrons = std::min(static_cast<double>(count), camera_.full_well_e) + read_noise(rng_);
         const double dn = std::round(electrons * camera_.gain_dn_per_e * gain + camera_.black_level_dn);
         frame.pixels[(static_cast<std::size_t>(y) * frame.width + x) * frame.channels + c] =
             static_cast<std::uint16_t>(std::clamp(dn, 0.0, top));

@@ -4,7 +4,10 @@
 // (L1 over bands), ke within 15% in the measured bands (issue 4's bar). The
 // truth is the material the simulated sample was made of, not a stored output.
 
+#include <OpenImageIO/imageio.h>
 #include <gtest/gtest.h>
+
+#include <algorithm>
 #include <nlohmann/json.hpp>
 
 #include "phos/util/json.h"
@@ -120,6 +123,40 @@ TEST(FitBatchCommand, FitsInParallelResumesAndSummarizes) {
   EXPECT_NE(second.out.find("1 fitted now, 2 kept, 1 failed"), std::string::npos) << second.out;
   EXPECT_EQ(testing::ReadText(dir / "out" / "orange.json"), orange_before);
   EXPECT_TRUE(std::filesystem::exists(dir / "out" / "white.done.json"));
+}
+
+
+TEST(FitMapCommand, MapsASpatiallyVaryingSample) {
+  // Orange with a disk of blue in the middle: the map must show each its kr.
+  testing::TempDir dir;
+  ASSERT_EQ(RunPhos("capture decay --sim-material " + testing::Fixture("materials/orange.json").string() +
+                    " --sim-inset " + testing::Fixture("materials/blue.json").string() + " --sim-size 80x60 --out " +
+                    (dir / "s").string() + " --charge-s 1800").exit_code, 0);
+  auto result = RunPhos("fit map " + (dir / "s").string() + " --out " + (dir / "map").string());
+  ASSERT_EQ(result.exit_code, 0) << result.err;
+  auto in = OIIO::ImageInput::open((dir / "map" / "decay-map.exr").string());
+  ASSERT_TRUE(in);
+  const OIIO::ImageSpec spec = in->spec();
+  ASSERT_EQ(spec.width, 80);
+  ASSERT_EQ(spec.height, 60);
+  const int kr_channel = spec.channelindex("kr");
+  ASSERT_GE(kr_channel, 0);
+  std::vector<float> pixels(static_cast<std::size_t>(spec.width) * spec.height * spec.nchannels);
+  ASSERT_TRUE(in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, pixels.data()));
+  auto kr = [&](int x, int y) { return pixels[(static_cast<std::size_t>(y) * spec.width + x) * spec.nchannels + kr_channel]; };
+  // Medians of a 10 x 10 patch in the centre (blue, 0.032/s) and in a corner (orange, 0.015/s).
+  auto median = [&](int x0, int y0) {
+    std::vector<float> v;
+    for (int y = y0; y < y0 + 10; ++y)
+      for (int x = x0; x < x0 + 10; ++x) v.push_back(kr(x, y));
+    std::nth_element(v.begin(), v.begin() + 50, v.end());
+    return v[50];
+  };
+  EXPECT_NEAR(median(35, 25), 0.032, 0.03 * 0.032);
+  EXPECT_NEAR(median(2, 2), 0.015, 0.03 * 0.015);
+  EXPECT_TRUE(std::filesystem::exists(dir / "map" / "kr.png"));
+  EXPECT_TRUE(testing::IsOneLineUserError(RunPhos("fit map " + (dir / "nothing").string() + " --out " +
+                                                  (dir / "m2").string()), "is not a capture session"));
 }
 
 }  // namespace

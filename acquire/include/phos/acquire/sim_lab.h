@@ -8,6 +8,7 @@
 
 #include <filesystem>
 #include <memory>
+#include <optional>
 #include <random>
 #include <string>
 #include <vector>
@@ -98,6 +99,11 @@ class SimulatedLab final : public Camera {
   void SetLvfInPath(bool in_path);
   void SetWhiteReferenceInView(bool in_view);
   bool lvf_in_path() const { return lvf_in_path_; }
+  // A spatially varying sample: `inset` (same band grid) fills a centred disk
+  // of `radius_fraction` of the half-height; the rest is the sample's own
+  // material. Each part charges and decays by its own model.
+  void SetInset(Material inset, double radius_fraction);
+  bool InInset(int x, int y) const;
   bool white_reference_in_view() const { return white_reference_; }
   const CameraModel& camera_model() const { return camera_; }
   std::string description() const override;
@@ -135,6 +141,9 @@ class SimulatedLab final : public Camera {
   Clock& clock_;
   std::unique_ptr<RecordingLights> lights_;
   std::vector<double> r_;
+  std::optional<Material> inset_;
+  std::vector<double> inset_r_;
+  double inset_radius_ = 0;
   double t_state_;
   std::mt19937_64 rng_;
 };

@@ -1,0 +1,107 @@
+// Per-pixel decay maps against two independent truths: the rates a
+// synthetic, noisy image stack was made with, and FitDecay (the curve fit,
+// a different method) run on single pixels of the same stack.
+
+#include "phos/fit/decay_map.h"
+
+#include <cmath>
+#include <gtest/gtest.h>
+#include <random>
+
+#include "phos/fit/decay_fit.h"
+#include "phos/util/error.h"
+
+namespace phos {
+namespace {
+
+// A 40 x 30 stack, 3 channels: rate k(x) = 0.01 * (1 + x / 10) rising left to
+// right, amplitudes 3000/1200/800 DN/s, background 2 DN/s, photon noise at
+// 25 electrons per DN, exposures growing as in the decay protocol.
+DecayMapInput Stack(unsigned seed) {
+  DecayMapInput in;
+  in.width = 40;
+  in.height = 30;
+  in.channels = 3;
+  std::mt19937_64 rng(seed);
+  const double amplitude[3] = {3000, 1200, 800};
+  for (int j = 0; j < 36; ++j) {
+    const double e = std::min(4.0, 0.05 * std::pow(2.0, j / 4));
+    const double start = 0.005 + 5.0 * j;
+    in.t_s.push_back(start + e / 2);
+    in.exposure_s.push_back(e);
+    std::vector<float> frame(static_cast<std::size_t>(in.width) * in.height * 3);
+    for (int y = 0; y < in.height; ++y)
+      for (int x = 0; x < in.width; ++x) {
+        const double k = 0.01 * (1 + x / 10.0);
+        for (int c = 0; c < 3; ++c) {
+          // Counts over the exposure: the exact integral of A exp(-k t) + B.
+          const double mean = amplitude[c] * std::exp(-k * start) * -std::expm1(-k * e) / k + 2 * e;
+          std::poisson_distribution<long long> counts(25 * mean);
+          frame[(static_cast<std::size_t>(y) * in.width + x) * 3 + c] = static_cast<float>(counts(rng) / 25.0 / e);
+        }
+      }
+    in.frames.push_back(std::move(frame));
+  }
+  return in;
+}
+
+TEST(DecayMap, RecoversEveryPixelsRateAndAgreesWithTheCurveFit) {
+  const DecayMapInput in = Stack(3);
+  std::size_t rows = 0;
+  const DecayMap map = FitDecayMap(in, DecayMapOptions{}, "stack", [&](std::size_t done) { rows = std::max(rows, done); });
+  EXPECT_EQ(rows, 30u);
+  EXPECT_EQ(map.no_decay, 0u);
+  double worst = 0;
+  for (int y = 0; y < in.height; ++y)
+    for (int x = 0; x < in.width; ++x) {
+      const double k = 0.01 * (1 + x / 10.0);
+      worst = std::max(worst, std::fabs(map.kr[y * in.width + x] - k) / k);
+    }
+  EXPECT_LT(worst, 0.03);  // photon noise of single pixels
+
+  // The same pixels through FitDecay (grid scan + Ceres, a different method).
+  for (int x : {0, 17, 39}) {
+    const int y = 11;
+    Curve curve;
+    curve.channels.resize(3);
+    curve.names = {"R", "G", "B"};
+    curve.t_s = in.t_s;
+    curve.exposure_s = in.exposure_s;
+    for (std::size_t j = 0; j < in.frames.size(); ++j) {
+      const double ke = 0.01 * (1 + x / 10.0) * in.exposure_s[j] / 2;  // the exposure factor, at the true rate
+      for (int c = 0; c < 3; ++c)
+        curve.channels[c].push_back(in.frames[j][(static_cast<std::size_t>(y) * in.width + x) * 3 + c] /
+                                    (std::sinh(ke) / ke));
+    }
+    DecayFitOptions options;
+    options.components = 1;
+    options.background = true;
+    options.weighting = Weighting::kPoisson;
+    const DecayFitSummary fit = FitDecay(curve, options, "pixel");
+    EXPECT_NEAR(map.kr[y * in.width + x], fit.components[0].rate, 0.002 * fit.components[0].rate) << "x " << x;
+    for (int c = 0; c < 3; ++c)
+      EXPECT_NEAR(map.amplitude[(y * in.width + x) * 3 + c], fit.components[0].amplitude[c],
+                  0.01 * fit.components[0].amplitude[c]);
+  }
+}
+
+TEST(DecayMap, APixelThatDoesNotDecayIsSaidAndBadStacksAreRefused) {
+  DecayMapInput in = Stack(5);
+  for (auto& frame : in.frames) frame[0] = frame[1] = frame[2] = 7.0f;  // pixel (0, 0): constant
+  const DecayMap map = FitDecayMap(in, DecayMapOptions{}, "stack");
+  EXPECT_TRUE(std::isnan(map.kr[0]));
+  EXPECT_EQ(map.no_decay, 1u);
+  EXPECT_NEAR(map.background[0], 7.0, 1e-3);
+
+  DecayMapInput short_stack = in;
+  short_stack.frames.resize(2);
+  short_stack.t_s.resize(2);
+  short_stack.exposure_s.resize(2);
+  EXPECT_THROW(FitDecayMap(short_stack, DecayMapOptions{}, "stack"), UserError);
+  DecayMapInput ragged = in;
+  ragged.frames[4].pop_back();
+  EXPECT_THROW(FitDecayMap(ragged, DecayMapOptions{}, "stack"), UserError);
+}
+
+}  // namespace
+}  // namespace phos
