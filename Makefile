@@ -2,7 +2,7 @@
 #   make demo   install what is missing (apt), build in Release, run the main job
 #   make test   install what is missing, build under ASan+UBSan, run every test (ctest)
 # Other targets: build (Release only), bench (benchmarks, Release), study
-# (regenerate the integrator error study in docs/), clean.
+# (regenerate the integrator error, Glassner and nc trade studies in docs/), clean.
 
 JOBS ?= $(shell nproc)
 
@@ -31,6 +31,7 @@ bench: build
 study: build
 	@build/bin/phos-integrator-study --out docs
 	@build/bin/phos-glassner-study --out docs
+	@build/bin/phos-nc-study --out docs
 
 clean:
 	rm -rf build build-asan results
