@@ -305,6 +305,7 @@ DecayFitSummary FitDecay(const Curve& curve, const DecayFitOptions& options, con
   if (!options.IsValid(&error)) ThrowUserError(where, "options", error);
   const int max_nc = options.components > 0 ? options.components : options.max_components;
   const int C = curve.channel_count();
+  if (C == 0) ValidateCurve(curve, 1, where);  // names the missing value column (and spares a division by 0)
   // Every parameter needs a sample, plus one for the noise.
   const std::size_t parameters = static_cast<std::size_t>(max_nc) * (1 + C) + (options.background ? C : 0);
   ValidateCurve(curve, std::max<std::size_t>(3, parameters / C + 1), where);

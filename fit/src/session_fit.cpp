@@ -371,7 +371,8 @@ SessionFit FitSession(const fs::path& dir, const SessionFitOptions& options) {
       for (std::size_t c = 0; c < means.size() && c < curve.channels.size(); ++c) curve.channels[c].push_back(means[c] / exposure);
     }
     if (clipped > 0) result.notes.push_back("decay: " + std::to_string(clipped) + " clipped frame(s) left out");
-    try {
+    if (curve.size() == 0) result.notes.push_back("decay: no unclipped frame to fit");
+    else try {
       DecayFitOptions decay_options;
       decay_options.components = options.components;
       decay_options.max_components = options.max_components;
@@ -420,7 +421,13 @@ SessionFit FitSession(const fs::path& dir, const SessionFitOptions& options) {
     }
   }
 
-  if (!result.decay) ThrowUserError(dir.string(), "", "no decay could be fitted, so no kr: nothing to write");
+  if (!result.decay) {
+    std::string why;
+    for (const std::string& note : result.notes)
+      if (note.find("decay") != std::string::npos) why.append(why.empty() ? "" : "; ").append(note);
+    ThrowUserError(dir.string(), "", "no decay could be fitted, so no kr: nothing to write" +
+                                         (why.empty() ? std::string() : " (" + why + ")"));
+  }
   const DecayFitSummary& decay = *result.decay;
   // The state that carries most of the glow stands for all in the excitation fit.
   std::vector<double> share;

@@ -75,6 +75,19 @@ TEST(FitSessionCommand, PartialSessionsAndBadInput) {
   ASSERT_EQ(partial.exit_code, 0) << partial.err;
   EXPECT_NE(partial.out.find("excitation: stopped 'none"), std::string::npos) << partial.out;
 
+  // Every decay frame clipped: said, and nothing written.
+  {
+    const std::vector<nlohmann::json> lines = testing::ReadJsonLines(dir / "c" / "decay" / "frames.jsonl");
+    std::ofstream out(dir / "c" / "decay" / "frames.jsonl", std::ios::trunc);
+    for (nlohmann::json line : lines) {
+      line["saturated_fraction"] = 0.4;
+      out << line.dump() << "\n";
+    }
+  }
+  auto clipped = RunPhos("fit session " + (dir / "c").string() + " --out " + (dir / "k.json").string());
+  EXPECT_TRUE(testing::IsOneLineUserError(clipped, "clipped frame(s) left out")) << clipped.err;
+  EXPECT_FALSE(std::filesystem::exists(dir / "k.json"));
+
   // No decay at all: nothing can be written, and nothing is.
   std::filesystem::rename(dir / "c" / "decay", dir / "c" / "decay.moved");
   auto no_decay = RunPhos("fit session " + (dir / "c").string() + " --out " + (dir / "n.json").string());

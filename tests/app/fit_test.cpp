@@ -91,6 +91,7 @@ TEST(FitCommands, BadInputGivesOneLineAndExitCode2) {
   testing::WriteText(dir / "nan.csv", "t,value\n0,1\n1,nan\n");
   testing::WriteText(dir / "rising.csv", "t,value\n0,1\n1,2\n2,3\n3,4\n4,5\n5,6\n6,7\n7,8\n");
   testing::WriteText(dir / "onecol.csv", "t\n0\n1\n");
+  testing::WriteText(dir / "negative.csv", "t,value\n0,-1\n1,-2\n2,-3\n3,-4\n4,-5\n5,-6\n6,-7\n7,-8\n");
   struct Case {
     std::string arguments, expected;
   } cases[] = {
@@ -102,6 +103,7 @@ TEST(FitCommands, BadInputGivesOneLineAndExitCode2) {
       {"fit decay-curve --csv " + (dir / "nan.csv").string() + " --json", "nan.csv: line 3, column value: expected a finite number"},
       {"fit decay-curve --csv " + (dir / "rising.csv").string() + " --components 1 --json", "no decaying component"},
       {"fit decay-curve --csv " + (dir / "onecol.csv").string() + " --json", "expected columns t,value"},
+      {"fit decay-curve --csv " + (dir / "negative.csv").string() + " --components 1 --json", "no decaying component"},
       {"fit decay-curve --csv " + good + " --components 5 --json", "--components: expected 1 to 4, got 5"},
       {"fit decay-curve --csv " + good + " --components 2 --max-components 3 --json", "excludes"},
       {"fit decay-curve --csv " + good + " --weights gauss --json", "--weights: expected none or poisson"},

@@ -158,6 +158,8 @@ TEST(DecayFit, BadCurvesAreClearErrors) {
   DecayFitOptions options;
   Curve curve;
   curve.names = {"v"};
+  curve.channels = {};
+  EXPECT_EQ(ErrorOf([&] { FitDecay(curve, options, "none.csv"); }), "none.csv: no value column (expected t,value[,value...])");
   curve.channels = {{}};
   EXPECT_EQ(ErrorOf([&] { FitDecay(curve, options, "e.csv"); }), "e.csv: has 0 samples; this fit needs at least 7");
   curve.t_s = {0};
