@@ -197,7 +197,7 @@ void RunChargeCurve(const CurveArgs& args) {
 struct SessionArgs {
   std::string dir, out, report, compare, weights = "poisson";
   int components = 0, max_components = 3;
-  bool json = false;
+  bool json = false, joint = false;
 };
 
 void RunFitSession(const SessionArgs& args) {
@@ -205,6 +205,7 @@ void RunFitSession(const SessionArgs& args) {
   options.components = args.components;
   options.max_components = args.max_components;
   options.weighting = ParseWeightsOption(args.weights);
+  options.joint = args.joint;
   if (options.components < 0 || options.components > 4) ThrowUserError("", "--components", "expected 1 to 4");
   std::optional<Material> truth;
   if (!args.compare.empty()) truth = LoadMaterial(args.compare);  // a bad file fails before any work
@@ -219,6 +220,14 @@ void RunFitSession(const SessionArgs& args) {
   for (std::size_t i = 0; i < fit.material.states.size(); ++i)
     kr.push_back({{"kr", fit.material.states[i].kr}, {"kr_stderr", fit.decay->components[i].rate_stderr}});
   json["states"] = kr;
+  if (fit.joint) {
+    const JointFit& j = *fit.joint;
+    json["joint"] = {{"kr", j.kr},
+                     {"a", j.a},
+                     {"weighted_ss_sequential", {{"decay", j.decay_sequential}, {"excitation", j.excitation_sequential}}},
+                     {"weighted_ss_joint", {{"decay", j.decay_joint}, {"excitation", j.excitation_joint}}},
+                     {"written", args.joint}};
+  }
   if (!args.json) {
     std::printf("phos fit session: %s -> %s (%s s)\n", args.dir.c_str(), args.out.c_str(), FormatShort(fit.seconds).c_str());
     for (std::size_t i = 0; i < fit.material.states.size(); ++i)
@@ -231,6 +240,15 @@ void RunFitSession(const SessionArgs& args) {
       ke.append(b ? ", " : "").append(k ? FormatShort(*k) : "-");
     }
     std::printf("  ke per band: %s\n", ke.c_str());
+    if (fit.joint) {
+      const JointFit& j = *fit.joint;
+      std::printf("  joint refinement%s: kr = %s /s; weighted sum of squares (decay + excitation) %s + %s = %s, "
+                  "sequential %s + %s = %s\n",
+                  args.joint ? " (written)" : "", FormatShort(j.kr).c_str(), FormatShort(j.decay_joint).c_str(),
+                  FormatShort(j.excitation_joint).c_str(), FormatShort(j.decay_joint + j.excitation_joint).c_str(),
+                  FormatShort(j.decay_sequential).c_str(), FormatShort(j.excitation_sequential).c_str(),
+                  FormatShort(j.decay_sequential + j.excitation_sequential).c_str());
+    }
     for (const std::string& note : fit.notes) std::printf("  note: %s\n", note.c_str());
     if (!args.report.empty()) std::printf("  report: %s\n", args.report.c_str());
   }
@@ -534,6 +552,9 @@ void RegisterFit(CLI::App& app) {
   f->add_option("--weights", session->weights, "poisson (default: photon counting) or none");
   f->add_option("--compare", session->compare,
                 "a material to compare with (the one a simulated sample was made of): kr, spectrum and ke errors");
+  f->add_flag("--joint", session->joint,
+              "write the joint refinement (decay and excitation fitted at once) instead of the sequential fit\n"
+              "of the paper; both are always reported");
   f->add_flag("--json", session->json, "print one JSON object");
   f->callback([session] { RunFitSession(*session); });
 

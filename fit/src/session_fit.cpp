@@ -3,6 +3,7 @@
 #include <ceres/ceres.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <fstream>
@@ -131,6 +132,115 @@ std::string StopHow(const fs::path& dir) {
   return ReadJsonFile(dir / "stop.json").value("how", "?");
 }
 
+
+// ---- the joint refinement -------------------------------------------------
+
+// One decay sample of one channel: w (A e^{-k t} sinh(ke/2)/(ke/2) + B - y).
+struct JointDecayResidual {
+  double t, e, y, w;
+  template <typename T>
+  bool operator()(const T* log_k, const T* amplitude_background, T* residual) const {
+    const T k = exp(log_k[0]);
+    const T x = k * e / 2.0;
+    const T factor = x > T(1e-8) ? sinh(x) / x : T(1.0);
+    residual[0] = w * (amplitude_background[0] * exp(-k * t) * factor + amplitude_background[1] - y);
+    return true;
+  }
+};
+
+// One excitation sample: w (S r(t_c) D - y), the closed forms of excitation_fit.h.
+struct JointExcitationResidual {
+  double tc, td, te, y, w;
+  template <typename T>
+  bool operator()(const T* log_k, const T* log_a, const T* S, T* residual) const {
+    const T k = exp(log_k[0]), a = exp(log_a[0]);
+    const T r = a / (a + k) * (1.0 - exp(-(a + k) * tc));
+    const T D = te > 0 ? exp(-k * td) * (1.0 - exp(-k * te)) / (k * te) : exp(-k * td);
+    residual[0] = w * (S[0] * r * D - y);
+    return true;
+  }
+};
+
+double PoissonWeight(double value, double exposure, double floor) {
+  return std::sqrt(exposure / std::max(std::fabs(value), floor));
+}
+
+}  // namespace
+
+JointFit JointRefine(const Curve& decay_curve, const DecayFitSummary& decay,
+                     const std::vector<SessionFit::ExcitationLight>& lights) {
+  JointFit joint;
+  const int C = decay_curve.channel_count();
+  double log_k = std::log(decay.components[0].rate);
+  std::vector<std::array<double, 2>> ab(static_cast<std::size_t>(C));
+  for (int c = 0; c < C; ++c) ab[c] = {decay.components[0].amplitude[c], decay.background.empty() ? 0.0 : decay.background[c]};
+  std::map<std::string, double> log_a;
+  double S = 0;
+  for (const auto& light : lights)
+    if (light.fit.a > 0) {
+      log_a[light.light] = std::log(light.fit.a);
+      S = light.fit.scale;
+    }
+  if (log_a.empty()) ThrowUserError("", "joint refinement", "no light excites the sample");
+  std::vector<double> log_a_values;
+  for (auto& [name, value] : log_a) log_a_values.push_back(value);
+
+  ceres::Problem problem;
+  std::vector<ceres::ResidualBlockId> decay_blocks, excitation_blocks;
+  for (int c = 0; c < C; ++c) {
+    double peak = 0;
+    for (double v : decay_curve.channels[c]) peak = std::max(peak, std::fabs(v));
+    for (std::size_t j = 0; j < decay_curve.size(); ++j) {
+      const double e = j < decay_curve.exposure_s.size() ? decay_curve.exposure_s[j] : 1.0;
+      const double y = decay_curve.channels[c][j];
+      decay_blocks.push_back(problem.AddResidualBlock(
+          new ceres::AutoDiffCostFunction<JointDecayResidual, 1, 1, 2>(
+              new JointDecayResidual{decay_curve.t_s[j], e, y, PoissonWeight(y, e, 1e-3 * peak)}),
+          nullptr, &log_k, ab[c].data()));
+    }
+  }
+  std::size_t index = 0;
+  for (auto& [name, value] : log_a) {
+    double* parameter = &log_a_values[index++];
+    for (const auto& light : lights) {
+      if (light.light != name) continue;
+      double peak = 0;
+      for (const ExcitationSample& s : light.samples) peak = std::max(peak, std::fabs(s.value));
+      for (const ExcitationSample& s : light.samples)
+        excitation_blocks.push_back(problem.AddResidualBlock(
+            new ceres::AutoDiffCostFunction<JointExcitationResidual, 1, 1, 1, 1>(new JointExcitationResidual{
+                s.charge_s, s.delay_s, s.exposure_s, s.value,
+                PoissonWeight(s.value, std::max(s.exposure_s, 1e-6), 1e-3 * peak)}),
+            nullptr, &log_k, parameter, &S));
+    }
+  }
+  for (int c = 0; c < C; ++c) problem.SetParameterLowerBound(ab[c].data(), 0, 0.0);
+  auto cost_of = [&](const std::vector<ceres::ResidualBlockId>& blocks) {
+    if (blocks.empty()) return 0.0;
+    ceres::Problem::EvaluateOptions evaluate;
+    evaluate.residual_blocks = blocks;
+    double cost = 0;
+    problem.Evaluate(evaluate, &cost, nullptr, nullptr, nullptr);
+    return 2 * cost;  // Ceres reports half the sum of squares
+  };
+  joint.decay_sequential = cost_of(decay_blocks);
+  joint.excitation_sequential = cost_of(excitation_blocks);
+  ceres::Solver::Options options = SmallDenseSolverOptions(200, 1e-12);
+  ceres::Solver::Summary summary;
+  ceres::Solve(options, &problem, &summary);
+  joint.iterations = static_cast<int>(summary.iterations.size());
+  joint.decay_joint = cost_of(decay_blocks);
+  joint.excitation_joint = cost_of(excitation_blocks);
+  joint.kr = std::exp(log_k);
+  joint.S = S;
+  index = 0;
+  for (auto& [name, value] : log_a) joint.a[name] = std::exp(log_a_values[index++]);
+  for (const auto& light : lights)
+    if (!joint.a.count(light.light)) joint.a[light.light] = 0;  // did not excite: stays 0
+  return joint;
+}
+
+namespace {
 }  // namespace
 
 LvfCalibrationFit FitLvfCalibration(const fs::path& dir) {
@@ -348,8 +458,9 @@ SessionFit FitSession(const fs::path& dir, const SessionFitOptions& options) {
     }
   }
   // 3. Decay.
+  Curve raw_decay;
   if (part_ok("decay")) {
-    Curve curve;
+    Curve& curve = raw_decay;
     std::vector<double> exposures;
     int clipped = 0;
     for (const nlohmann::json& line : ReadJsonLines(dir / "decay" / "frames.jsonl")) {
@@ -537,9 +648,12 @@ SessionFit FitSession(const fs::path& dir, const SessionFitOptions& options) {
   const nlohmann::json sample = top.value("sample", nlohmann::json::object());
   material.name = (sample.contains("material") ? sample["material"].value("name", std::string("sample")) : std::string("sample")) + " (fitted)";
   material.bands = bands;
-  std::vector<double> band_radiance_per_kr_r(static_cast<std::size_t>(nb), 0.0);
-  bool have_lambda = false;
-  if (result.spectrum) {
+  // Lambda per band for a given kr and ke (the sequential fit's, or the
+  // joint refinement's); nullopt when the state during the spectrum is not
+  // known.
+  auto lambda_for = [&](double kr_value, const std::vector<std::optional<double>>& ke_value, bool note)
+      -> std::optional<std::vector<double>> {
+    if (!result.spectrum) return std::nullopt;
     const nlohmann::json spectrum_devices = SessionStart(dir / "spectrum").value("devices", devices);
     const nlohmann::json irradiance = spectrum_devices.value("light_band_irradiance", nlohmann::json::object());
     double a_charge = 0;
@@ -548,45 +662,50 @@ SessionFit FitSession(const fs::path& dir, const SessionFitOptions& options) {
       const std::vector<double> E = irradiance[result.spectrum->charge_light].get<std::vector<double>>();
       for (int b = 0; b < nb && b < static_cast<int>(E.size()); ++b) {
         if (E[b] <= 0) continue;
-        if (!ke[b]) known = false;
-        else a_charge += *ke[b] * E[b];
+        if (!ke_value[b]) known = false;
+        else a_charge += *ke_value[b] * E[b];
       }
     }
     if (!known || a_charge <= 0) {
-      result.notes.push_back("spectrum: the charge light's excitation is not known in every band it reaches, so the "
-                             "state during the spectrum is not, nor Lambda's scale");
-    } else {
-      // The state through the recorded switches (r = 0 before the first: the
-      // calibration before it kept the sample dark), then averaged over
-      // each frame's exposure in the dark.
-      struct Switch {
-        double t_s;
-        bool on;
-      };
-      std::vector<Switch> switches;
-      for (const nlohmann::json& event : ReadJsonLines(dir / "spectrum" / "events.jsonl"))
-        if (event.value("event", "") == "light" && event.value("channel", "") == result.spectrum->charge_light)
-          switches.push_back({event.value("t_s", 0.0), event.value("on", false)});
-      for (const auto& frame : result.spectrum->frames) {
-        double r = 0, t = switches.empty() ? frame.t_start_s : switches.front().t_s;
-        bool on = false;
-        for (const Switch& sw : switches) {
-          if (sw.t_s > frame.t_start_s) break;
-          const double a = on ? a_charge : 0.0, k = a + kr, dt = sw.t_s - t;
-          r = a / k + (r - a / k) * std::exp(-k * dt);  // Eq. 8.1, exact over a constant interval
-          t = sw.t_s;
-          on = sw.on;
-        }
-        const double a = on ? a_charge : 0.0, k = a + kr;
-        r = a / k + (r - a / k) * std::exp(-k * (frame.t_start_s - t));
-        const double e = std::max(frame.exposure_s, 1e-12);
-        const double r_mean = r * -std::expm1(-kr * e) / (kr * e);
-        for (int b = 0; b < nb; ++b)
-          band_radiance_per_kr_r[b] += frame.band_radiance[b] / (kr * r_mean) / result.spectrum->frames.size();
-      }
-      have_lambda = true;
+      if (note)
+        result.notes.push_back("spectrum: the charge light's excitation is not known in every band it reaches, so the "
+                               "state during the spectrum is not, nor Lambda's scale");
+      return std::nullopt;
     }
-  }
+    // The state through the recorded switches (r = 0 before the first: the
+    // calibration before it kept the sample dark), then averaged over each
+    // frame's exposure in the dark.
+    struct Switch {
+      double t_s;
+      bool on;
+    };
+    std::vector<Switch> switches;
+    for (const nlohmann::json& event : ReadJsonLines(dir / "spectrum" / "events.jsonl"))
+      if (event.value("event", "") == "light" && event.value("channel", "") == result.spectrum->charge_light)
+        switches.push_back({event.value("t_s", 0.0), event.value("on", false)});
+    std::vector<double> per_kr_r(static_cast<std::size_t>(nb), 0.0);
+    for (const auto& frame : result.spectrum->frames) {
+      double r = 0, t = switches.empty() ? frame.t_start_s : switches.front().t_s;
+      bool on = false;
+      for (const Switch& sw : switches) {
+        if (sw.t_s > frame.t_start_s) break;
+        const double a = on ? a_charge : 0.0, k = a + kr_value, dt = sw.t_s - t;
+        r = a / k + (r - a / k) * std::exp(-k * dt);  // Eq. 8.1, exact over a constant interval
+        t = sw.t_s;
+        on = sw.on;
+      }
+      const double a = on ? a_charge : 0.0, k = a + kr_value;
+      r = a / k + (r - a / k) * std::exp(-k * (frame.t_start_s - t));
+      const double e = std::max(frame.exposure_s, 1e-12);
+      const double r_mean = r * -std::expm1(-kr_value * e) / (kr_value * e);
+      for (int b = 0; b < nb; ++b)
+        per_kr_r[b] += frame.band_radiance[b] / (kr_value * r_mean) / result.spectrum->frames.size();
+    }
+    return per_kr_r;
+  };
+  const std::optional<std::vector<double>> lambda_sequential = lambda_for(kr, ke, true);
+  const bool have_lambda = lambda_sequential.has_value();
+  const std::vector<double> band_radiance_per_kr_r = have_lambda ? *lambda_sequential : std::vector<double>();
   if (!have_lambda)
     ThrowUserError(dir.string(), "", "no emission spectrum with a known excitation: Lambda cannot be fitted" +
                                          std::string(result.notes.empty() ? "" : " (" + result.notes.back() + ")"));
@@ -605,6 +724,34 @@ SessionFit FitSession(const fs::path& dir, const SessionFitOptions& options) {
   material.source = "phos fit session " + dir.string() + ": nc = " + std::to_string(decay.n_components) + " (" +
                     decay.choice + ")";
   ValidateMaterial(material, dir.string());
+
+  // 6. The joint refinement, beside the sequential fit: one problem over the
+  //    decay and every excitation series at once.
+  if (decay.n_components == 1 && !result.excitation.empty()) {
+    try {
+      result.joint = JointRefine(raw_decay, decay, result.excitation);
+      JointFit& joint = *result.joint;
+      std::vector<std::vector<double>> E_per_light;
+      std::vector<double> a_per_light;
+      for (const auto& light : result.excitation)
+        if (static_cast<int>(light.band_irradiance.size()) == nb && joint.a.count(light.light)) {
+          E_per_light.push_back(light.band_irradiance);
+          a_per_light.push_back(joint.a[light.light]);
+        }
+      if (!E_per_light.empty()) joint.ke = KeFromExcitationRates(E_per_light, a_per_light, dir.string() + " (joint)");
+      else joint.ke = ke;
+      if (auto lambda = lambda_for(joint.kr, joint.ke, false)) joint.Lambda = *lambda;
+      if (options.joint && !joint.Lambda.empty()) {
+        material.states[0].kr = joint.kr;
+        material.states[0].ke = joint.ke;
+        material.states[0].Lambda = joint.Lambda;
+        material.source += "; joint refinement over the decay and excitation";
+        ValidateMaterial(material, dir.string());
+      }
+    } catch (const UserError& e) {
+      result.notes.push_back(std::string("joint refinement: ") + e.what());
+    }
+  }
   result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
   return result;
 }
@@ -752,6 +899,32 @@ std::string SessionReportHtml(const SessionFit& fit, const std::string& title) {
     o.y_label = "signal / exposure (DN/s)";
     o.log_x = true;
     html.append(PlotSvg(series, o)).append("\n");
+  }
+
+  // The joint refinement beside the sequential fit.
+  if (fit.joint) {
+    const JointFit& j = *fit.joint;
+    html.append("<h2>Joint refinement</h2>\n<p>kr, the decay amplitudes and backgrounds, every light's a and the "
+                "shared S fitted at once to the decay and all excitation series (one photon-counting chi-square), "
+                "beside the sequential fit of the paper (kr from the decay alone, then each light). ")
+        .append(std::to_string(j.iterations)).append(" Ceres iterations.</p>\n<table><tr><th></th><th>sequential</th><th>joint</th></tr>\n");
+    html.append("<tr><td>kr (1/s)</td><td>").append(FormatShort(m.states.empty() || !fit.decay ? 0 : fit.decay->components[0].rate))
+        .append("</td><td>").append(FormatShort(j.kr)).append("</td></tr>\n");
+    for (const auto& light : fit.excitation) {
+      const auto it = j.a.find(light.light);
+      html.append("<tr><td>a under ").append(Escape(light.light)).append(" (1/s)</td><td>").append(FormatShort(light.fit.a))
+          .append("</td><td>").append(it == j.a.end() ? "-" : FormatShort(it->second)).append("</td></tr>\n");
+    }
+    html.append("<tr><td>weighted SS, decay</td><td>").append(FormatShort(j.decay_sequential)).append("</td><td>")
+        .append(FormatShort(j.decay_joint)).append("</td></tr>\n<tr><td>weighted SS, excitation</td><td>")
+        .append(FormatShort(j.excitation_sequential)).append("</td><td>").append(FormatShort(j.excitation_joint))
+        .append("</td></tr>\n<tr><th>weighted SS, total</th><th>")
+        .append(FormatShort(j.decay_sequential + j.excitation_sequential)).append("</th><th>")
+        .append(FormatShort(j.decay_joint + j.excitation_joint)).append("</th></tr>\n</table>\n<p>")
+        .append(j.decay_joint + j.excitation_joint < j.decay_sequential + j.excitation_sequential
+                    ? "The joint fit fits the data better (lower total)."
+                    : "The sequential fit is already at the joint optimum.")
+        .append("</p>\n");
   }
 
   // LVF calibration and spectrum.

@@ -43,12 +43,23 @@ TEST_P(FitSessionEndToEnd, RecoversThePresetTheSampleWasMadeOf) {
       EXPECT_TRUE(c["ke_relative_error"][b].is_null()) << "band " << b;  // no light reached it: unknown, not 0
     }
   }
+  // The joint refinement, reported beside the sequential fit, fits the same
+  // data at least as well on the same objective (it starts from the
+  // sequential parameters and only descends).
+  const nlohmann::json& joint = result["joint"];
+  const double sequential = joint["weighted_ss_sequential"]["decay"].get<double>() +
+                            joint["weighted_ss_sequential"]["excitation"].get<double>();
+  const double together = joint["weighted_ss_joint"]["decay"].get<double>() + joint["weighted_ss_joint"]["excitation"].get<double>();
+  EXPECT_LE(together, sequential * (1 + 1e-9));
+  EXPECT_NEAR(joint["kr"].get<double>(), ReadJsonFile(preset)["states"][0]["kr"].get<double>(),
+              0.03 * ReadJsonFile(preset)["states"][0]["kr"].get<double>());
+
   // The material loads as any other, and the report has its plots.
   const nlohmann::json material = ReadJsonFile(dir / "m.json");
   EXPECT_EQ(material["schema"], "phos.material/1");
   const std::string report = testing::ReadText(dir / "r.html");
   EXPECT_GE(std::count(report.begin(), report.end(), '<') , 100);
-  for (const std::string section : {"<h2>Decay</h2>", "<h2>Excitation</h2>", "<h2>LVF calibration</h2>", "<h2>Emission spectrum</h2>"})
+  for (const std::string section : {"<h2>Decay</h2>", "<h2>Excitation</h2>", "<h2>LVF calibration</h2>", "<h2>Emission spectrum</h2>", "<h2>Joint refinement</h2>"})
     EXPECT_NE(report.find(section), std::string::npos) << section;
   EXPECT_NE(report.find("BIC per nc"), std::string::npos);
 }

@@ -25,6 +25,7 @@
 //     Lambda_i = a_i Lambda* / kr_i.
 
 #include <filesystem>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -81,6 +82,27 @@ struct SessionFitOptions {
   int components = 0;      // 0: BIC chooses up to max_components
   int max_components = 3;
   Weighting weighting = Weighting::kPoisson;
+  bool joint = false;      // write the joint refinement's kr, ke, Lambda instead of the sequential ones
+};
+
+// The joint refinement (nc = 1): kr, the decay's amplitude and background
+// per channel, every light's excitation rate a and the shared saturated
+// signal S, fitted at once to the decay frames and every excitation series
+// (Ceres, autodiff through the exact closed forms; each sample weighted for
+// photon counting, scaled by its exposure, so the experiments are on one
+// chi-square). The sequential fit of the paper fixes kr from the decay
+// before the excitation sees it; the joint fit lets the excitation series
+// inform kr too. Both are evaluated on the same objective.
+struct JointFit {
+  double kr = 0;
+  std::map<std::string, double> a;  // per light
+  double S = 0;
+  std::vector<std::optional<double>> ke;
+  std::vector<double> Lambda;
+  // Weighted sums of squares on the joint objective: decay part, excitation
+  // part, total, for the sequential parameters and for the joint ones.
+  double decay_sequential = 0, excitation_sequential = 0, decay_joint = 0, excitation_joint = 0;
+  int iterations = 0;
 };
 
 struct SessionFit {
@@ -96,6 +118,7 @@ struct SessionFit {
     std::vector<double> band_irradiance;
   };
   std::vector<ExcitationLight> excitation;
+  std::optional<JointFit> joint;   // nc = 1 with excitation data
   std::vector<std::string> notes;  // what was left out or could not be fitted, and why
   double seconds = 0;
 };
@@ -104,6 +127,13 @@ struct SessionFit {
 // left out; a material needs at least the decay (kr) and the spectrum
 // (Lambda), else a UserError naming what is missing.
 SessionFit FitSession(const std::filesystem::path& dir, const SessionFitOptions& options);
+
+// The joint refinement alone (FitSession runs it for nc = 1): starts from the
+// sequential decay fit and per-light excitation fits. `decay_curve` is the
+// decay as recorded (per second of exposure at the exposure's middle, with
+// exposure_s), not corrected for the exposure.
+JointFit JointRefine(const Curve& decay_curve, const DecayFitSummary& decay,
+                     const std::vector<SessionFit::ExcitationLight>& lights);
 
 // How close a fitted material is to the one a simulated sample was made of:
 // kr relative error per state, the L1 distance of the normalized emission
