@@ -469,6 +469,7 @@ void RunCaptureAll(AllArgs args) {
   if (!devices.simulated()) {
     calibration.flat_light = devices.lab_config.flat_light;
     calibration.flat_temperature_k = devices.lab_config.flat_temperature_k;
+    calibration.flat_irradiance = devices.lab_config.flat_irradiance;
   }
   SpectrumProtocolOptions spectrum;
   spectrum.charge_light = charge_light;
@@ -675,6 +676,7 @@ void RegisterCapture(CLI::App& app) {
       options.lines = config.calibration_lines;
       options.flat_light = config.flat_light;
       options.flat_temperature_k = config.flat_temperature_k;
+      options.flat_irradiance = config.flat_irradiance;
     } else {
       for (const KnownLine& line : DefaultCalibrationLines()) options.lines.push_back({line.light, line.wavelength_nm});
     }

@@ -7,6 +7,7 @@
 #include <iostream>
 #include <set>
 
+#include "phos/util/csv.h"
 #include "phos/util/error.h"
 #include "phos/util/json.h"
 
@@ -14,7 +15,10 @@ namespace phos {
 
 nlohmann::json LabConfig::ToJson() const {
   nlohmann::json channels_json = nlohmann::json::object();
-  for (const LabChannel& c : channels) channels_json[c.name] = {{"line", c.line}, {"active_low", c.active_low}};
+  for (const LabChannel& c : channels) {
+    channels_json[c.name] = {{"line", c.line}, {"active_low", c.active_low}};
+    if (!c.band_irradiance.empty()) channels_json[c.name]["band_irradiance"] = c.band_irradiance;
+  }
   nlohmann::json lines = nlohmann::json::array();
   for (const CalibrationLine& l : calibration_lines) lines.push_back({{"light", l.light}, {"wavelength_nm", l.wavelength_nm}});
   nlohmann::json camera_json = {{"aravis", camera}, {"binning", {binning_x, binning_y}}, {"timeout_s", timeout_s}};
@@ -32,14 +36,16 @@ nlohmann::json LabConfig::ToJson() const {
           {"lights", {{"backend", lights_backend}, {"chip", chip}, {"channels", channels_json}}},
           {"charge_light", charge_light},
           {"calibration_lines", lines},
-          {"flat_field", {{"light", flat_light}, {"temperature_k", flat_temperature_k}}},
+          {"flat_field", {{"light", flat_light}, {"temperature_k", flat_temperature_k}, {"irradiance", flat_irradiance}}},
+          {"bands_nm", bands.edges_nm},
           {"rig", rig}};
 }
 
 LabConfig LoadLabConfig(const std::filesystem::path& path) {
   const nlohmann::json document = ReadJsonFile(path);
   JsonField root(document, path.string());
-  root.RejectUnknownKeys({"schema", "camera", "lights", "charge_light", "calibration_lines", "flat_field", "rig", "note"});
+  root.RejectUnknownKeys(
+      {"schema", "camera", "lights", "charge_light", "calibration_lines", "flat_field", "rig", "bands_nm", "note"});
   if (root["schema"].String() != "phos.lab/1") root["schema"].Fail("expected \"phos.lab/1\"");
   LabConfig config;
   config.source = path;
@@ -75,6 +81,12 @@ LabConfig LoadLabConfig(const std::filesystem::path& path) {
     }
   }
 
+  if (auto f = root.Optional("bands_nm")) {
+    config.bands.edges_nm = f->NumberArray(0, 100);
+    if (config.bands.edges_nm.size() < 2) f->Fail("expected at least 2 band edges");
+    for (std::size_t i = 1; i < config.bands.edges_nm.size(); ++i)
+      if (!(config.bands.edges_nm[i] > config.bands.edges_nm[i - 1])) f->Fail("band edges must increase");
+  }
   JsonField lights = root["lights"];
   lights.RejectUnknownKeys({"backend", "chip", "channels", "note"});
   if (auto f = lights.Optional("backend")) {
@@ -88,7 +100,7 @@ LabConfig LoadLabConfig(const std::filesystem::path& path) {
   std::set<unsigned> used;
   for (const auto& [name, unused] : channels.value().items()) {
     JsonField channel = channels[name];
-    channel.RejectUnknownKeys({"line", "active_low", "note"});
+    channel.RejectUnknownKeys({"line", "active_low", "irradiance_csv", "note"});
     LabChannel c;
     c.name = name;
     c.line = static_cast<unsigned>(channel["line"].Integer(0, 1023));
@@ -97,6 +109,21 @@ LabConfig LoadLabConfig(const std::filesystem::path& path) {
       c.active_low = f->value().get<bool>();
     }
     if (!used.insert(c.line).second) channel["line"].Fail("GPIO line " + std::to_string(c.line) + " is used by two channels");
+    if (auto f = channel.Optional("irradiance_csv")) {
+      // Relative to the config file, as a user writes it next to the config.
+      std::filesystem::path csv = f->NonEmptyString();
+      if (csv.is_relative()) csv = path.parent_path() / csv;
+      const CsvTable table = ReadCsv(csv);
+      const int nm = table.Find("wavelength_nm"), value = table.Find("irradiance");
+      if (nm < 0 || value < 0) f->Fail("'" + csv.string() + "' needs columns wavelength_nm,irradiance");
+      SampledSpectrum spectrum{table.columns[nm], table.columns[value]};
+      for (std::size_t i = 0; i < spectrum.value.size(); ++i) {
+        if (spectrum.value[i] < 0) f->Fail("'" + csv.string() + "': irradiance must be >= 0");
+        if (i > 0 && !(spectrum.wavelength_nm[i] > spectrum.wavelength_nm[i - 1]))
+          f->Fail("'" + csv.string() + "': wavelength_nm must increase");
+      }
+      c.band_irradiance = IntegrateOverBands(spectrum, config.bands);
+    }
     config.channels.push_back(c);
   }
   auto has_channel = [&](const std::string& name) {
@@ -118,9 +145,10 @@ LabConfig LoadLabConfig(const std::filesystem::path& path) {
     }
   }
   if (auto f = root.Optional("flat_field")) {
-    f->RejectUnknownKeys({"light", "temperature_k"});
+    f->RejectUnknownKeys({"light", "temperature_k", "irradiance"});
     config.flat_light = (*f)["light"].NonEmptyString();
     config.flat_temperature_k = (*f)["temperature_k"].NumberInRange(1000, 10000);
+    if (auto g = f->Optional("irradiance")) config.flat_irradiance = g->NumberAtLeast(1e-12);
   }
   if (auto f = root.Optional("rig")) {
     config.rig = f->String();
@@ -235,7 +263,13 @@ std::unique_ptr<OpenedLab> OpenLab(const LabConfig& config) {
   } else {
     lab->rig = [](const std::string&, bool) {};
   }
+  // What each measured light puts on the sample per band: the fit needs it for ke.
+  nlohmann::json band_irradiance = nlohmann::json::object();
+  for (const LabChannel& c : config.channels)
+    if (!c.band_irradiance.empty()) band_irradiance[c.name] = c.band_irradiance;
   lab->description = {{"camera", camera.description()},
+                      {"light_band_irradiance", band_irradiance},
+                      {"bands_nm", config.bands.edges_nm},
                       {"pixel_format", camera.pixel_format()},
                       {"lights", names},
                       {"lights_backend", config.lights_backend},

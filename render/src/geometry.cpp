@@ -192,6 +192,17 @@ CameraRays::CameraRays(const Scene& scene, double t_s) {
   aspect_ = width_ / height_;
 }
 
+bool CameraRays::Project(const Vec3f& p, float* x, float* y, float* depth) const {
+  const Vec3f d = p - origin_;
+  *depth = d.dot(forward_);
+  if (*depth <= 0) return false;
+  const float sx = d.dot(right_) / *depth, sy = d.dot(up_) / *depth;
+  // The inverse of Direction: sx = (2 x / width - 1) tan_half aspect, sy = (1 - 2 y / height) tan_half.
+  *x = (sx / (tan_half_y_ * aspect_) + 1) * width_ / 2;
+  *y = (1 - sy / tan_half_y_) * height_ / 2;
+  return true;
+}
+
 Vec3f CameraRays::Direction(float x, float y) const {
   const float sx = (2 * x / width_ - 1) * tan_half_y_ * aspect_;
   const float sy = (1 - 2 * y / height_) * tan_half_y_;

@@ -187,13 +187,26 @@ std::string WriteLab(const testing::TempDir& dir, const std::string& camera, con
 
 TEST(CaptureWithALabConfig, DrivesTheFakeCameraInRealTime) {
   testing::TempDir dir;
-  const std::string lab = WriteLab(dir, "Fake_1");
+  // led405's spectroradiometer reading: 0.01 per nm from 400 to 410 nm.
+  testing::WriteText(dir / "led405.csv", "wavelength_nm,irradiance\n399.999,0\n400,0.01\n410,0.01\n410.001,0\n");
+  const std::string lab = WriteLab(dir, "Fake_1", R"(, "bands_nm": [400, 437.5, 475])");
+  {
+    std::string text = testing::ReadText(lab);
+    text.replace(text.find(R"("led405": {"line": 17})"), std::string(R"("led405": {"line": 17})").size(),
+                 R"("led405": {"line": 17, "irradiance_csv": "led405.csv"})");
+    testing::WriteText(lab, text);
+  }
   auto result = RunPhos("capture decay --lab " + lab + " --out " + (dir / "s").string() +
                         " --charge-s 0.2 --interval-s 0.25 --duration-s 1 --initial-exposure-s 0.01 --max-exposure-s 0.05");
   ASSERT_EQ(result.exit_code, 0) << result.err;
   nlohmann::json start = ReadJsonFile(dir / "s" / "session.json");
   EXPECT_EQ(start["devices"]["device"], "lab");
   EXPECT_NE(start["devices"]["camera"].get<std::string>().find("Fake_1"), std::string::npos);
+  // The measured light, integrated over the config's bands (0.1 in the first), for the fit's ke.
+  ASSERT_TRUE(start["devices"]["light_band_irradiance"].contains("led405")) << start["devices"].dump();
+  // (the CSV's 1 pm ramp at 400 nm adds its triangle, 0.5 * 0.001 * 0.01: piecewise-linear integrals are exact)
+  EXPECT_NEAR(start["devices"]["light_band_irradiance"]["led405"][0].get<double>(), 0.1 + 5e-6, 1e-12);
+  EXPECT_NEAR(start["devices"]["light_band_irradiance"]["led405"][1].get<double>(), 0.0, 1e-9);
   const std::vector<nlohmann::json> frames = ReadJsonLines(dir / "s" / "frames.jsonl");
   ASSERT_GE(frames.size(), 4u);
   for (std::size_t m = 0; m < frames.size(); ++m) {

@@ -16,6 +16,7 @@
 #include "phos/acquire/clock.h"
 #include "phos/acquire/lights.h"
 #include "phos/acquire/protocols.h"
+#include "phos/model/spectral.h"
 
 namespace phos {
 
@@ -23,6 +24,11 @@ struct LabChannel {
   std::string name;     // "led365", "shutter", "camera_trigger", ...
   unsigned line = 0;    // offset on the GPIO chip
   bool active_low = false;  // true for the usual relay boards: low = on
+  // What the light puts on the sample, per band of LabConfig::bands, from a
+  // spectroradiometer reading (irradiance_csv: wavelength_nm, irradiance per
+  // nm, in the material's irradiance units). Empty: not measured, and the fit
+  // reports this light's excitation rate but cannot turn it into ke.
+  std::vector<double> band_irradiance;
 };
 
 struct LabConfig {
@@ -46,6 +52,8 @@ struct LabConfig {
   std::vector<CalibrationLine> calibration_lines;
   std::string flat_light = "lamp";
   double flat_temperature_k = 3000;
+  double flat_irradiance = 1;  // on the white reference; 1 = relative (Lambda's scale is then relative too)
+  SpectralGrid bands = SpectralGrid::Paper();  // the grid of band_irradiance and of fitted materials
   // "prompt": the operator moves the LVF and the white reference when asked
   // (Enter on the terminal); "fixed": nothing to move (tests, fixed rigs).
   std::string rig = "prompt";

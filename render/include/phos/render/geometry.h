@@ -111,6 +111,10 @@ class CameraRays {
   CameraRays(const Scene& scene, double t_s);
   Vec3f origin() const { return origin_; }
   Vec3f Direction(float x, float y) const;
+  // The image point (pixels) of a world point and its depth along the view
+  // axis; false when it lies behind the camera.
+  bool Project(const Vec3f& p, float* x, float* y, float* depth) const;
+  float tan_half_y() const { return tan_half_y_; }
 
  private:
   Vec3f origin_, forward_, right_, up_;

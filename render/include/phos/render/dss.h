@@ -1,0 +1,122 @@
+#pragma once
+// Deep screen space on the CPU (the method's earlier chapters): the scene as
+// a view-dependent cloud of surfels, splatted into a hierarchical interleaved
+// framebuffer, so that near, strong interactions are computed precisely and
+// far, weak ones coarsely, without building a hierarchy.
+//
+// Surfelization (every frame): each triangle, back-facing and grazing ones
+// too, becomes surfels of roughly constant projected size, world radius
+// r* = s tan(fov/2) (d + d_near) at distance d: the triangle is split m x m
+// (as the texel atlas does) with m from its longest edge. A triangle smaller
+// than one target surfel is the two-pass case: its fine surfel is kept with
+// probability area / (pi r*^2) and then carries pi r*^2 of area, so the
+// density is the target one and the expected area is exact.
+//
+// The hierarchical interleaved framebuffer: level l covers screen distances
+// [R_{l-1}, R_l) around a surfel's projection, R_l = R_0 2^l pixels. At
+// level l the pixels are split into 2^l x 2^l interleaved sub-buffers (pixel
+// (x, y) belongs to (x mod 2^l, y mod 2^l)); each surfel splats its level-l
+// shell into one sub-buffer only (chosen by a hash of the surfel), with its
+// contribution times 4^l, so every level costs about the same. Shells stop
+// at getMaxDist(surfel, epsilon), where the surfel's largest possible
+// contribution falls below epsilon. Each level is then blurred over its
+// 2^l x 2^l interleaving block, weighting neighbours by depth and normal
+// (geometry-aware), and the levels are summed.
+//
+// On a CPU a splat is a scatter. phos bins the splats by screen tile and
+// lets each thread own whole tiles (a gather per tile): no atomics, no
+// per-thread copies of the framebuffer, and the same result in any thread
+// count.
+//
+// Receivers are the G-buffer's pixels. Per receiver p with normal n, a
+// surfel at q with normal m and area A contributes the point-to-disk form
+// factor F = A cos_p |cos_q| / (pi r^2 + A) (r = |q - p|; only surfels in
+// front of the receiver, cos_p > 0): ambient occlusion is min(1, sum F) over
+// all surfels, and one-bounce diffuse irradiance is sum B F over surfels
+// facing the receiver (cos_q < 0 seen from q), B the surfel's radiosity
+// (for a phosphor, pi Lp: a glowing wall lighting a box in the dark).
+
+#include <cstdint>
+#include <vector>
+
+#include "phos/render/geometry.h"
+
+namespace phos::render {
+
+struct Surfel {
+  Vec3f position = Vec3f::Zero();
+  Vec3f normal = Vec3f::Zero();  // the triangle's front normal
+  float area = 0;
+  int object = -1;
+  int triangle = -1;
+  float b1 = 0, b2 = 0;  // where on the triangle (its centre)
+};
+
+struct SurfelOptions {
+  float s = 0.01f;       // target radius as a fraction of tan(fov/2) per unit of distance
+  float d_near_m = 0.0f; // added to the distance (keeps near surfels from becoming tiny)
+  unsigned seed = 1;     // for the two-pass random discard
+  int max_split = 256;   // at most m x m surfels per triangle
+};
+
+// Surfels of every object at the geometry's current time, seen from `eye`
+// with vertical field of view fov_deg.
+std::vector<Surfel> Surfelize(const SceneGeometry& geometry, const Vec3f& eye, float fov_deg,
+                              const SurfelOptions& options);
+
+// What the camera sees, per pixel: position, normal (facing the camera),
+// depth along the ray; object -1 where the ray escapes.
+struct GBuffer {
+  int width = 0, height = 0;
+  std::vector<Vec3f> position, normal;
+  std::vector<float> depth;
+  std::vector<int> object;
+};
+GBuffer RenderGBuffer(const SceneGeometry& geometry, const Scene& scene, double t_s);
+
+struct DssOptions {
+  int levels = 4;            // l_max + 1 levels
+  float base_radius_px = 6;  // R_0
+  // A single surfel contribution below epsilon is not splatted. Keep it small:
+  // surfels near the camera are tiny, and many tiny contributions add up (a
+  // disk of 60 000 surfels 1 m away lights its axis with 4e-6 each).
+  float epsilon = 1e-7f;
+  bool blur = true;          // geometry-aware blur of the interleaved levels
+  int tile_px = 32;
+  // Radiosity per surfel and channel (B, e.g. pi Lp per band), or empty for
+  // occlusion only.
+  int channels = 0;
+};
+
+struct DssResult {
+  int width = 0, height = 0, channels = 0;
+  std::vector<float> occlusion;   // per pixel, in [0, 1]
+  std::vector<float> irradiance;  // per pixel and channel
+  std::uint64_t splats = 0;       // receiver updates, all levels
+  double seconds = 0;
+};
+
+// `radiosity`: surfels.size() * options.channels values (may be empty when
+// channels == 0).
+DssResult SplatDeepScreenSpace(const GBuffer& gbuffer, const CameraRays& camera, const std::vector<Surfel>& surfels,
+                               const std::vector<float>& radiosity, const DssOptions& options);
+
+// The same sums over every surfel for every pixel, with no hierarchy: the
+// exact gather DSS approximates (O(pixels x surfels), for tests and studies).
+DssResult GatherAllSurfels(const GBuffer& gbuffer, const std::vector<Surfel>& surfels,
+                           const std::vector<float>& radiosity, int channels);
+
+// The point-to-disk form factor above; 0 behind the receiver.
+inline float SurfelFormFactor(const Vec3f& p, const Vec3f& n, const Surfel& s, float* cos_q_out = nullptr) {
+  const Vec3f d = s.position - p;
+  const float r2 = d.squaredNorm();
+  if (r2 <= 0) return 0;
+  const float r = std::sqrt(r2);
+  const float cos_p = n.dot(d) / r;
+  if (cos_p <= 0) return 0;
+  const float cos_q = s.normal.dot(d) / r;  // > 0: the surfel faces away from p
+  if (cos_q_out) *cos_q_out = cos_q;
+  return s.area * cos_p * std::fabs(cos_q) / (3.14159265f * r2 + s.area);
+}
+
+}  // namespace phos::render

@@ -1,0 +1,280 @@
+#include "phos/render/dss.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+
+namespace phos::render {
+namespace {
+
+constexpr float kPi = 3.14159265358979f;
+
+// A reproducible uniform number in [0, 1) from three integers (splitmix64).
+float Hash01(std::uint64_t a, std::uint64_t b, std::uint64_t c) {
+  std::uint64_t x = a * 0x9E3779B97F4A7C15ull ^ (b + 0x632BE59BD9B4E019ull) * 0xBF58476D1CE4E5B9ull ^ c * 0x94D049BB133111EBull;
+  x ^= x >> 30;
+  x *= 0xBF58476D1CE4E5B9ull;
+  x ^= x >> 27;
+  x *= 0x94D049BB133111EBull;
+  x ^= x >> 31;
+  return static_cast<float>(x >> 40) / static_cast<float>(1ull << 24);
+}
+
+}  // namespace
+
+std::vector<Surfel> Surfelize(const SceneGeometry& geometry, const Vec3f& eye, float fov_deg,
+                              const SurfelOptions& options) {
+  const float tan_half = std::tan(fov_deg * kPi / 360.0f);
+  std::vector<Surfel> surfels;
+  for (int o = 0; o < geometry.object_count(); ++o) {
+    for (int t = 0; t < geometry.triangle_count(o); ++t) {
+      const Vec3f a = geometry.Vertex(o, t, 0), b = geometry.Vertex(o, t, 1), c = geometry.Vertex(o, t, 2);
+      const float area = geometry.Area(o, t);
+      if (!(area > 0)) continue;
+      const Vec3f n = geometry.FrontNormal(o, t);
+      const float d = ((a + b + c) / 3.0f - eye).norm();
+      const float r_star = std::max(1e-6f, options.s * tan_half * (d + options.d_near_m));
+      const float target_area = kPi * r_star * r_star;
+      if (area < target_area) {
+        // Two-pass: one fine surfel, kept with probability area / target.
+        if (Hash01(options.seed, static_cast<std::uint64_t>(o), static_cast<std::uint64_t>(t)) >= area / target_area) continue;
+        surfels.push_back({(a + b + c) / 3.0f, n, target_area, o, t, 1.0f / 3, 1.0f / 3});
+        continue;
+      }
+      const float edge = std::max({(b - a).norm(), (c - b).norm(), (a - c).norm()});
+      const int m = std::clamp(static_cast<int>(std::ceil(edge / (2 * r_star))), 1, options.max_split);
+      for (int k = 0; k < m * m; ++k) {
+        float b1 = 0, b2 = 0;
+        SubTriangleCenter(m, k, b1, b2);
+        surfels.push_back({geometry.Point(o, t, b1, b2), n, area / static_cast<float>(m * m), o, t, b1, b2});
+      }
+    }
+  }
+  return surfels;
+}
+
+GBuffer RenderGBuffer(const SceneGeometry& geometry, const Scene& scene, double t_s) {
+  GBuffer g;
+  g.width = scene.camera.width;
+  g.height = scene.camera.height;
+  const std::size_t n = static_cast<std::size_t>(g.width) * g.height;
+  g.position.assign(n, Vec3f::Zero());
+  g.normal.assign(n, Vec3f::Zero());
+  g.depth.assign(n, 0.0f);
+  g.object.assign(n, -1);
+  const CameraRays camera(scene, t_s);
+  tbb::parallel_for(tbb::blocked_range<int>(0, g.height), [&](const tbb::blocked_range<int>& rows) {
+    for (int y = rows.begin(); y != rows.end(); ++y)
+      for (int x = 0; x < g.width; ++x) {
+        const Vec3f direction = camera.Direction(x + 0.5f, y + 0.5f);
+        const Hit hit = geometry.Intersect(camera.origin(), direction);
+        if (!hit) continue;
+        const std::size_t p = static_cast<std::size_t>(y) * g.width + x;
+        g.position[p] = hit.position;
+        g.normal[p] = hit.front ? hit.normal : Vec3f(-hit.normal);  // the side the camera sees
+        g.depth[p] = hit.distance;
+        g.object[p] = hit.object;
+      }
+  });
+  return g;
+}
+
+namespace {
+
+// Accumulates one surfel into one receiver pixel, weighted.
+inline void Accumulate(const GBuffer& g, std::size_t p, const Surfel& s, const float* B, int channels, float weight,
+                       float* occlusion, float* irradiance) {
+  float cos_q = 0;
+  const float F = SurfelFormFactor(g.position[p], g.normal[p], s, &cos_q);
+  if (F <= 0) return;
+  occlusion[p] += weight * F;
+  // Light arrives from the surfel's front only (it faces the receiver).
+  if (channels > 0 && cos_q < 0)
+    for (int c = 0; c < channels; ++c) irradiance[p * channels + c] += weight * F * B[c];
+}
+
+}  // namespace
+
+DssResult GatherAllSurfels(const GBuffer& g, const std::vector<Surfel>& surfels, const std::vector<float>& radiosity,
+                           int channels) {
+  const auto started = std::chrono::steady_clock::now();
+  DssResult r;
+  r.width = g.width;
+  r.height = g.height;
+  r.channels = channels;
+  const std::size_t n = static_cast<std::size_t>(g.width) * g.height;
+  r.occlusion.assign(n, 0.0f);
+  r.irradiance.assign(n * std::max(channels, 0), 0.0f);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n), [&](const tbb::blocked_range<std::size_t>& range) {
+    for (std::size_t p = range.begin(); p != range.end(); ++p) {
+      if (g.object[p] < 0) continue;
+      for (std::size_t s = 0; s < surfels.size(); ++s)
+        Accumulate(g, p, surfels[s], channels > 0 ? &radiosity[s * channels] : nullptr, channels, 1.0f,
+                   r.occlusion.data(), r.irradiance.data());
+    }
+  });
+  for (float& o : r.occlusion) o = std::min(o, 1.0f);
+  r.splats = static_cast<std::uint64_t>(n) * surfels.size();
+  r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+  return r;
+}
+
+DssResult SplatDeepScreenSpace(const GBuffer& g, const CameraRays& camera, const std::vector<Surfel>& surfels,
+                               const std::vector<float>& radiosity, const DssOptions& options) {
+  const auto started = std::chrono::steady_clock::now();
+  const int W = g.width, H = g.height, L = std::max(1, options.levels), C = std::max(0, options.channels);
+  const std::size_t n = static_cast<std::size_t>(W) * H;
+  // One accumulation buffer per level (they are blurred separately).
+  std::vector<std::vector<float>> occlusion(L, std::vector<float>(n, 0.0f));
+  std::vector<std::vector<float>> irradiance(L, std::vector<float>(n * C, 0.0f));
+
+  // Per surfel: its world radius per level and the screen rectangle each
+  // level's shell can reach (conservative: the bounding square of the
+  // sphere's projection; the whole screen when the sphere reaches the eye).
+  const float pixel_scale = H / (2 * camera.tan_half_y());  // pixels per unit of lateral size at depth 1
+  struct Reach {
+    float rho[8];     // shell outer radius per level (world)
+    int rect[8][4];   // x0, y0, x1, y1 per level (inclusive)
+    int offset[8][2]; // interleave offset per level
+    float r_max;
+    bool any;
+  };
+  std::vector<Reach> reach(surfels.size());
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, surfels.size()), [&](const tbb::blocked_range<std::size_t>& range) {
+    for (std::size_t i = range.begin(); i != range.end(); ++i) {
+      const Surfel& s = surfels[i];
+      Reach& R = reach[i];
+      // getMaxDist: F <= A / (pi r^2) < epsilon beyond this distance.
+      R.r_max = std::sqrt(s.area / (kPi * options.epsilon));
+      float x = 0, y = 0, depth = 0;
+      const bool in_front = camera.Project(s.position, &x, &y, &depth);
+      // R_0 pixels at the surfel's depth, in world units.
+      const float rho0 = options.base_radius_px * std::max(depth, 1e-6f) / pixel_scale;
+      R.any = false;
+      for (int l = 0; l < L && l < 8; ++l) {
+        R.rho[l] = l == L - 1 ? R.r_max : std::min(R.r_max, rho0 * static_cast<float>(1 << l));
+        const float inner = l == 0 ? 0.0f : std::min(R.r_max, rho0 * static_cast<float>(1 << (l - 1)));
+        const int block = 1 << l;
+        R.offset[l][0] = static_cast<int>(Hash01(i, static_cast<std::uint64_t>(l), 1) * block);
+        R.offset[l][1] = static_cast<int>(Hash01(i, static_cast<std::uint64_t>(l), 2) * block);
+        if (inner >= R.r_max) {
+          R.rect[l][0] = 1;
+          R.rect[l][2] = 0;  // empty
+          continue;
+        }
+        const float rho = R.rho[l];
+        if (!in_front || depth - rho <= 1e-4f) {
+          R.rect[l][0] = 0;
+          R.rect[l][1] = 0;
+          R.rect[l][2] = W - 1;
+          R.rect[l][3] = H - 1;
+        } else {
+          const float half = rho * pixel_scale / (depth - rho) + 1;
+          R.rect[l][0] = std::max(0, static_cast<int>(std::floor(x - half)));
+          R.rect[l][1] = std::max(0, static_cast<int>(std::floor(y - half)));
+          R.rect[l][2] = std::min(W - 1, static_cast<int>(std::ceil(x + half)));
+          R.rect[l][3] = std::min(H - 1, static_cast<int>(std::ceil(y + half)));
+        }
+        R.any = R.any || (R.rect[l][0] <= R.rect[l][2] && R.rect[l][1] <= R.rect[l][3]);
+      }
+    }
+  });
+
+  // Tiles own their pixels: each thread gathers, for its tile, the shells
+  // that reach it. No two threads write the same pixel.
+  const int T = std::max(8, options.tile_px);
+  const int tiles_x = (W + T - 1) / T, tiles_y = (H + T - 1) / T;
+  std::atomic<std::uint64_t> splats{0};
+  tbb::parallel_for(tbb::blocked_range<int>(0, tiles_x * tiles_y), [&](const tbb::blocked_range<int>& range) {
+    std::uint64_t local = 0;
+    for (int tile = range.begin(); tile != range.end(); ++tile) {
+      const int tx0 = (tile % tiles_x) * T, ty0 = (tile / tiles_x) * T;
+      const int tx1 = std::min(W - 1, tx0 + T - 1), ty1 = std::min(H - 1, ty0 + T - 1);
+      for (std::size_t i = 0; i < surfels.size(); ++i) {
+        const Reach& R = reach[i];
+        if (!R.any) continue;
+        const Surfel& s = surfels[i];
+        const float* B = C > 0 ? &radiosity[i * C] : nullptr;
+        for (int l = 0; l < L && l < 8; ++l) {
+          const int* rect = R.rect[l];
+          const int x0 = std::max(rect[0], tx0), y0 = std::max(rect[1], ty0);
+          const int x1 = std::min(rect[2], tx1), y1 = std::min(rect[3], ty1);
+          if (x0 > x1 || y0 > y1) continue;
+          const int block = 1 << l;
+          const float inner = l == 0 ? 0.0f : R.rho[l - 1];
+          const float inner2 = inner * inner, outer2 = R.rho[l] * R.rho[l];
+          const float weight = static_cast<float>(block * block);
+          // First pixel of this surfel's sub-buffer at or after (x0, y0).
+          const int sx = x0 + ((R.offset[l][0] - x0) % block + block) % block;
+          const int sy = y0 + ((R.offset[l][1] - y0) % block + block) % block;
+          for (int y = sy; y <= y1; y += block)
+            for (int x = sx; x <= x1; x += block) {
+              const std::size_t p = static_cast<std::size_t>(y) * W + x;
+              if (g.object[p] < 0) continue;
+              const float r2 = (s.position - g.position[p]).squaredNorm();
+              if (r2 < inner2 || r2 >= outer2) continue;
+              Accumulate(g, p, s, B, C, weight, occlusion[l].data(), irradiance[l].data());
+              ++local;
+            }
+        }
+      }
+    }
+    splats += local;
+  });
+
+  // Unshuffle and blur: level l's pixels each saw a quarter^l of the shells;
+  // averaging over the 2^l x 2^l block around a pixel (every sub-buffer
+  // once) restores the sum, weighted by depth and normal so it does not
+  // leak across edges.
+  DssResult r;
+  r.width = W;
+  r.height = H;
+  r.channels = C;
+  r.occlusion.assign(n, 0.0f);
+  r.irradiance.assign(n * C, 0.0f);
+  for (int l = 0; l < L; ++l) {
+    const int block = 1 << l;
+    const bool blur = options.blur && l > 0;
+    tbb::parallel_for(tbb::blocked_range<int>(0, H), [&](const tbb::blocked_range<int>& rows) {
+      for (int y = rows.begin(); y != rows.end(); ++y)
+        for (int x = 0; x < W; ++x) {
+          const std::size_t p = static_cast<std::size_t>(y) * W + x;
+          if (g.object[p] < 0) continue;
+          if (!blur) {
+            r.occlusion[p] += occlusion[l][p];
+            for (int c = 0; c < C; ++c) r.irradiance[p * C + c] += irradiance[l][p * C + c];
+            continue;
+          }
+          // The block of 2^l x 2^l pixels around (x, y), clamped inside the image.
+          const int bx = std::clamp(x - block / 2, 0, std::max(0, W - block)), by = std::clamp(y - block / 2, 0, std::max(0, H - block));
+          float wsum = 0, osum = 0;
+          float isum[16] = {};
+          for (int v = by; v < std::min(H, by + block); ++v)
+            for (int u = bx; u < std::min(W, bx + block); ++u) {
+              const std::size_t q = static_cast<std::size_t>(v) * W + u;
+              if (g.object[q] < 0) continue;
+              const float depth_ratio = std::fabs(g.depth[q] - g.depth[p]) / std::max(g.depth[p], 1e-6f);
+              const float w = std::max(0.0f, g.normal[q].dot(g.normal[p])) * (depth_ratio < 0.05f ? 1.0f : 0.0f);
+              if (w <= 0) continue;
+              wsum += w;
+              osum += w * occlusion[l][q];
+              for (int c = 0; c < C && c < 16; ++c) isum[c] += w * irradiance[l][q * C + c];
+            }
+          if (wsum > 0) {
+            r.occlusion[p] += osum / wsum;
+            for (int c = 0; c < C && c < 16; ++c) r.irradiance[p * C + c] += isum[c] / wsum;
+          }
+        }
+    });
+  }
+  for (float& o : r.occlusion) o = std::min(o, 1.0f);
+  r.splats = splats;
+  r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+  return r;
+}
+
+}  // namespace phos::render

@@ -1,0 +1,136 @@
+// Deep screen space against analytic truths (issue 6's "done when"): an
+// unoccluded plane has no occlusion; a closed box seen from inside is fully
+// occluded; a disk of known radiosity gives the known irradiance on its axis,
+// E = B R^2 / (R^2 + h^2). And the hierarchy against the exact gather it
+// approximates (every surfel for every pixel).
+
+#include "phos/render/dss.h"
+
+#include <cmath>
+#include <gtest/gtest.h>
+
+#include "scene_util.h"
+
+namespace phos {
+namespace {
+
+using render::Vec3f;
+
+// Surfels a few pixels wide: the exact gather (every surfel for every pixel)
+// stays affordable under the sanitizers.
+render::SurfelOptions Coarse() {
+  render::SurfelOptions options;
+  options.s = 0.05f;
+  return options;
+}
+
+double Mean(const std::vector<float>& values, const render::GBuffer& g) {
+  double sum = 0;
+  int n = 0;
+  for (std::size_t p = 0; p < values.size(); ++p)
+    if (g.object[p] >= 0) sum += values[p], ++n;
+  return n ? sum / n : 0;
+}
+
+TEST(DeepScreenSpace, AnUnoccludedPlaneHasNoOcclusion) {
+  render::Scene scene = testing::EmptyScene(48, 48);
+  scene.objects.push_back(testing::MakeObject("floor", render::MakeQuad(4, 4), 0.5));
+  scene.camera.keys = {{0.0, render::Vec3(0.3, 1.0, -0.8), render::Vec3(0, 0, 0)}};
+  render::SceneGeometry geometry(scene);
+  const render::CameraRays camera(scene, 0);
+  const auto surfels = render::Surfelize(geometry, camera.origin(), 60, Coarse());
+  ASSERT_GT(surfels.size(), 100u);
+  const render::GBuffer g = render::RenderGBuffer(geometry, scene, 0);
+  const render::DssResult dss = render::SplatDeepScreenSpace(g, camera, surfels, {}, {});
+  const render::DssResult exact = render::GatherAllSurfels(g, surfels, {}, 0);
+  for (std::size_t p = 0; p < dss.occlusion.size(); ++p) {
+    EXPECT_EQ(dss.occlusion[p], 0.0f);
+    EXPECT_EQ(exact.occlusion[p], 0.0f);
+  }
+}
+
+TEST(DeepScreenSpace, AClosedBoxSeenFromInsideIsFullyOccluded) {
+  render::Scene scene = testing::EmptyScene(48, 48);
+  scene.objects.push_back(testing::MakeObject("box", render::MakeBox(render::Vec3(2, 2, 2), true), 0.5));
+  scene.camera.keys = {{0.0, render::Vec3(0.1, -0.2, -0.3), render::Vec3(0.4, 0.1, 1)}};
+  render::SceneGeometry geometry(scene);
+  const render::CameraRays camera(scene, 0);
+  const auto surfels = render::Surfelize(geometry, camera.origin(), 60, Coarse());
+  const render::GBuffer g = render::RenderGBuffer(geometry, scene, 0);
+  const render::DssResult exact = render::GatherAllSurfels(g, surfels, {}, 0);
+  const render::DssResult dss = render::SplatDeepScreenSpace(g, camera, surfels, {}, {});
+  // Every direction above every wall ends on another wall: the form factors
+  // of an enclosure sum to 1.
+  EXPECT_GT(Mean(exact.occlusion, g), 0.97);
+  EXPECT_GT(Mean(dss.occlusion, g), 0.95);
+}
+
+// A disk of radius R in the plane y = h facing down, radiosity B; a floor at
+// y = 0; the camera between them looks straight down at the origin.
+TEST(DeepScreenSpace, ADiskOfKnownRadiosityGivesTheKnownIrradianceOnItsAxis) {
+  const float R = 0.5f, h = 1.0f, B = 2.0f;
+  render::Mesh disk;
+  disk.positions.push_back(Eigen::Vector3f(0, h, 0));
+  const int sides = 96;
+  for (int i = 0; i < sides; ++i) {
+    const float angle = 2 * 3.14159265f * i / sides;
+    disk.positions.push_back(Eigen::Vector3f(R * std::cos(angle), h, R * std::sin(angle)));
+  }
+  for (int i = 0; i < sides; ++i) disk.triangles.push_back(Eigen::Vector3i(0, 1 + i, 1 + (i + 1) % sides));  // normal -y
+  render::Scene scene = testing::EmptyScene(33, 33);
+  scene.objects.push_back(testing::MakeObject("floor", render::MakeQuad(2, 2), 0.5));
+  scene.objects.push_back(testing::MakeObject("disk", disk, 0.5));
+  scene.camera.keys = {{0.0, render::Vec3(0, 0.5, 0), render::Vec3(0, 0, 0.0001)}};
+  scene.camera.up = render::Vec3(0, 0, 1);
+  render::SceneGeometry geometry(scene);
+  ASSERT_LT(geometry.FrontNormal(1, 0).y(), 0);  // the disk faces the floor
+  const render::CameraRays camera(scene, 0);
+  render::SurfelOptions options;
+  options.s = 0.03f;
+  const auto surfels = render::Surfelize(geometry, camera.origin(), 60, options);
+  std::vector<float> radiosity;
+  for (const render::Surfel& s : surfels) radiosity.push_back(s.object == 1 ? B : 0.0f);
+  const render::GBuffer g = render::RenderGBuffer(geometry, scene, 0);
+  const std::size_t centre = 16 * 33 + 16;
+  ASSERT_EQ(g.object[centre], 0);
+  ASSERT_LT(g.position[centre].norm(), 0.05f);
+  const double truth = B * R * R / (R * R + h * h);
+  const render::DssResult exact = render::GatherAllSurfels(g, surfels, radiosity, 1);
+  EXPECT_NEAR(exact.irradiance[centre], truth, 0.02 * truth);
+  render::DssOptions dss_options;
+  dss_options.channels = 1;
+  const render::DssResult dss = render::SplatDeepScreenSpace(g, camera, surfels, radiosity, dss_options);
+  EXPECT_NEAR(dss.irradiance[centre], truth, 0.05 * truth);
+}
+
+TEST(DeepScreenSpace, TheHierarchyFollowsTheExactGatherAndCostsLess) {
+  // The Cornell-like box of the renderer's tests: an open box and two blocks.
+  render::Scene scene = testing::EmptyScene(64, 64);
+  render::Mesh room = render::MakeBox(render::Vec3(2, 2, 2), true);
+  std::vector<Eigen::Vector3i> kept;  // open the wall behind the camera (z = -1)
+  for (const auto& t : room.triangles)
+    if (!(room.positions[t[0]].z() < -0.99f && room.positions[t[1]].z() < -0.99f && room.positions[t[2]].z() < -0.99f))
+      kept.push_back(t);
+  ASSERT_EQ(kept.size(), room.triangles.size() - 2);
+  room.triangles = kept;
+  scene.objects.push_back(testing::MakeObject("room", room, 0.5));
+  render::Mesh block = render::MakeBox(render::Vec3(0.5, 0.8, 0.5), false);
+  for (auto& p : block.positions) p += Eigen::Vector3f(-0.4f, -0.6f, 0.3f);
+  scene.objects.push_back(testing::MakeObject("block", block, 0.5));
+  scene.camera.keys = {{0.0, render::Vec3(0, 0, -0.95), render::Vec3(0, -0.2, 1)}};
+  render::SceneGeometry geometry(scene);
+  const render::CameraRays camera(scene, 0);
+  const auto surfels = render::Surfelize(geometry, camera.origin(), 60, Coarse());
+  const render::GBuffer g = render::RenderGBuffer(geometry, scene, 0);
+  const render::DssResult exact = render::GatherAllSurfels(g, surfels, {}, 0);
+  const render::DssResult dss = render::SplatDeepScreenSpace(g, camera, surfels, {}, {});
+  double error = 0;
+  int n = 0;
+  for (std::size_t p = 0; p < exact.occlusion.size(); ++p)
+    if (g.object[p] >= 0) error += std::fabs(dss.occlusion[p] - exact.occlusion[p]), ++n;
+  EXPECT_LT(error / n, 0.05);
+  EXPECT_LT(dss.splats, exact.splats / 4);  // far shells touch a quarter^l of their pixels
+}
+
+}  // namespace
+}  // namespace phos
