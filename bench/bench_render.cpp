@@ -24,7 +24,9 @@
 
 #include <tbb/parallel_for.h>
 
+#include "phos/render/dss.h"
 #include "phos/render/geometry.h"
+#include <tbb/global_control.h>
 #include "phos/render/renderer.h"
 #include "phos/render/scene.h"
 #include "phos/render/solver.h"
@@ -207,6 +209,53 @@ void BM_FrameAfterLightsOut(benchmark::State& state) {
   state.counters["ratio"] = best_hour / best_second;
 }
 BENCHMARK(BM_FrameAfterLightsOut)->Arg(10)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(2.0);
+
+// Deep screen space, ambient occlusion of the Cornell box at 256 x 256:
+// surfelize + G-buffer + hierarchical splat, against the exact gather it
+// approximates (every surfel for every pixel). Arg: threads (the splat is a
+// tile-owned gather: does it scale?).
+void BM_DeepScreenSpaceAo(benchmark::State& state) {
+  tbb::global_control threads(tbb::global_control::max_allowed_parallelism, static_cast<std::size_t>(state.range(0)));
+  Scene scene = LoadScene(PHOS_FIXTURES_DIR "/scenes/cornell-phosphor.json");
+  scene.camera.width = scene.camera.height = 256;
+  SceneGeometry geometry(scene);
+  const CameraRays camera(scene, 0);
+  std::size_t surfels = 0;
+  std::uint64_t splats = 0;
+  for (auto _ : state) {
+    const auto cloud = Surfelize(geometry, camera.origin(), static_cast<float>(scene.camera.fov_deg), SurfelOptions{});
+    const GBuffer g = RenderGBuffer(geometry, scene, 0);
+    const DssResult r = SplatDeepScreenSpace(g, camera, cloud, {}, DssOptions{});
+    surfels = cloud.size();
+    splats = r.splats;
+    benchmark::ClobberMemory();
+  }
+  state.counters["surfels"] = static_cast<double>(surfels);
+  state.counters["splats"] = static_cast<double>(splats);
+}
+BENCHMARK(BM_DeepScreenSpaceAo)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+void BM_ExactGatherAo(benchmark::State& state) {
+  Scene scene = LoadScene(PHOS_FIXTURES_DIR "/scenes/cornell-phosphor.json");
+  scene.camera.width = scene.camera.height = 256;
+  SceneGeometry geometry(scene);
+  const CameraRays camera(scene, 0);
+  const auto cloud = Surfelize(geometry, camera.origin(), static_cast<float>(scene.camera.fov_deg), SurfelOptions{});
+  const GBuffer g = RenderGBuffer(geometry, scene, 0);
+  const DssResult dss = SplatDeepScreenSpace(g, camera, cloud, {}, DssOptions{});
+  for (auto _ : state) {
+    const DssResult r = GatherAllSurfels(g, cloud, {}, 0);
+    benchmark::ClobberMemory();
+    state.counters["splats"] = static_cast<double>(r.splats);
+    // How far deep screen space (defaults) lands from this exact gather.
+    double error = 0;
+    int n = 0;
+    for (std::size_t p = 0; p < r.occlusion.size(); ++p)
+      if (g.object[p] >= 0) error += std::fabs(r.occlusion[p] - dss.occlusion[p]), ++n;
+    state.counters["dss_mean_abs_error"] = error / std::max(n, 1);
+  }
+}
+BENCHMARK(BM_ExactGatherAo)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(1);
 
 }  // namespace
 }  // namespace phos::render
