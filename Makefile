@@ -32,6 +32,7 @@ study: build
 	@build/bin/phos-integrator-study --out docs
 	@build/bin/phos-glassner-study --out docs
 	@build/bin/phos-nc-study --out docs
+	@build/bin/phos-dss-study --out docs
 
 clean:
 	rm -rf build build-asan results

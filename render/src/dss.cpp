@@ -277,4 +277,44 @@ DssResult SplatDeepScreenSpace(const GBuffer& g, const CameraRays& camera, const
   return r;
 }
 
+std::vector<Surfel> SurfelsFromGBuffer(const GBuffer& g, const CameraRays& camera) {
+  std::vector<Surfel> surfels;
+  const float pixel = 2 * camera.tan_half_y() / g.height;  // lateral size of a pixel at depth 1
+  for (int y = 0; y < g.height; ++y)
+    for (int x = 0; x < g.width; ++x) {
+      const std::size_t p = static_cast<std::size_t>(y) * g.width + x;
+      if (g.object[p] < 0) continue;
+      const Vec3f view = (g.position[p] - camera.origin()).normalized();
+      const float cos_view = std::max(0.05f, std::fabs(view.dot(g.normal[p])));
+      float px = 0, py = 0, depth = 0;
+      camera.Project(g.position[p], &px, &py, &depth);
+      const float side = pixel * depth;
+      surfels.push_back({g.position[p], g.normal[p], side * side / cos_view, g.object[p], -1, 0, 0});
+    }
+  return surfels;
+}
+
+std::vector<float> RayTracedOcclusion(const SceneGeometry& geometry, const GBuffer& g, int rays, unsigned seed) {
+  const std::size_t n = static_cast<std::size_t>(g.width) * g.height;
+  std::vector<float> occlusion(n, 0.0f);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n), [&](const tbb::blocked_range<std::size_t>& range) {
+    for (std::size_t p = range.begin(); p != range.end(); ++p) {
+      if (g.object[p] < 0) continue;
+      const Vec3f nrm = g.normal[p];
+      const Vec3f t = nrm.unitOrthogonal(), b = nrm.cross(t);
+      const Vec3f origin = g.position[p] + geometry.ray_epsilon() * nrm;
+      int hits = 0;
+      for (int k = 0; k < rays; ++k) {
+        // Cosine-distributed (Malley): a uniform disk point lifted to the hemisphere.
+        const float u1 = Hash01(seed, p, 2 * static_cast<std::uint64_t>(k)), u2 = Hash01(seed, p, 2 * static_cast<std::uint64_t>(k) + 1);
+        const float r = std::sqrt(u1), phi = 2 * kPi * u2;
+        const Vec3f d = r * std::cos(phi) * t + r * std::sin(phi) * b + std::sqrt(std::max(0.0f, 1 - u1)) * nrm;
+        hits += geometry.Occluded(origin, d, 1e30f);
+      }
+      occlusion[p] = static_cast<float>(hits) / static_cast<float>(std::max(rays, 1));
+    }
+  });
+  return occlusion;
+}
+
 }  // namespace phos::render

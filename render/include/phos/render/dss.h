@@ -106,6 +106,17 @@ DssResult SplatDeepScreenSpace(const GBuffer& gbuffer, const CameraRays& camera,
 DssResult GatherAllSurfels(const GBuffer& gbuffer, const std::vector<Surfel>& surfels,
                            const std::vector<float>& radiosity, int channels);
 
+// Plain screen space (one depth layer), for the trade study: the surfels are
+// the G-buffer's own pixels, each a disk of the area it covers on its
+// surface; what the camera does not see does not occlude.
+std::vector<Surfel> SurfelsFromGBuffer(const GBuffer& gbuffer, const CameraRays& camera);
+
+// Monte Carlo ambient occlusion with Embree: per pixel, `rays` cosine-
+// distributed rays from the visible point; occlusion is the fraction that
+// hit anything (no distance limit, as DSS has none beyond epsilon). With many
+// rays, the reference; with few, the "same budget" rival.
+std::vector<float> RayTracedOcclusion(const SceneGeometry& geometry, const GBuffer& gbuffer, int rays, unsigned seed);
+
 // The point-to-disk form factor above; 0 behind the receiver.
 inline float SurfelFormFactor(const Vec3f& p, const Vec3f& n, const Surfel& s, float* cos_q_out = nullptr) {
   const Vec3f d = s.position - p;
