@@ -1,5 +1,5 @@
 // phos render: a scene's frames with the coupled solver (DESIGN.md contract):
-//   phos render SCENE.json --out DIR [--times t1,t2,...] [--transport direct|path]
+//   phos render SCENE.json --out DIR [--times t1,t2,...] [--transport direct|path|dss]
 //       [--no-phosphorescence] [--json]
 //   JSON: {"frames":[{"t":..,"exr":path,"png":path,"seconds":..}], ...}
 
@@ -162,7 +162,10 @@ void RegisterRender(CLI::App& app) {
   cmd->add_option("--out", args->out, "Folder for frame-NNNN.exr and frame-NNNN.png")->required();
   cmd->add_option("--times", args->times,
                   "Comma-separated frame times in seconds (default: the scene's time range at its fps)");
-  cmd->add_option("--transport", args->transport, "direct or path")->default_str("direct");
+  cmd->add_option("--transport", args->transport,
+                  "direct (fast, no interreflection), path (the reference: a spectral path tracer) or dss\n"
+                  "(direct plus one diffuse bounce through deep screen space; docs/render.md)")
+      ->default_str("direct");
   cmd->add_flag("--no-phosphorescence", args->no_phosphorescence,
                 "Render phosphors as plain diffuse surfaces (no states, no glow)");
   cmd->add_option("--spp", args->spp, "Samples per pixel (default: the scene's render.spp or direct_spp)")

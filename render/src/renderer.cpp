@@ -7,8 +7,10 @@
 #include <OpenImageIO/imagebuf.h>
 #include <OpenImageIO/imagebufalgo.h>
 #include <OpenImageIO/imageio.h>
+#include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include "phos/render/dss.h"
 #include "phos/util/error.h"
 #include "phos/util/format.h"
 
@@ -266,10 +268,13 @@ double Zbar(double nm) { return 1.217 * Lobe(nm, 437.0, 11.8, 36.0) + 0.681 * Lo
 Transport ParseTransport(const std::string& name) {
   if (name == "direct") return Transport::kDirect;
   if (name == "path") return Transport::kPath;
-  ThrowUserError("--transport", "", "unknown transport '" + name + "' (direct, path)");
+  if (name == "dss") return Transport::kDss;
+  ThrowUserError("--transport", "", "unknown transport '" + name + "' (direct, path, dss)");
 }
 
-const char* TransportName(Transport transport) { return transport == Transport::kPath ? "path" : "direct"; }
+const char* TransportName(Transport transport) {
+  return transport == Transport::kPath ? "path" : transport == Transport::kDss ? "dss" : "direct";
+}
 
 FrameOptions DefaultFrameOptions(const Scene& scene, Transport transport) {
   FrameOptions options;
@@ -309,6 +314,46 @@ Image RenderBands(const SceneGeometry& geometry, const CoupledSolver* solver, co
     }
     total_rays += rays;
   });
+  if (options.transport == Transport::kDss) {
+    // One bounce through deep screen space: the surfels' radiosity, splatted
+    // as irradiance onto what the camera sees, reflected by its albedo.
+    const std::vector<Surfel> surfels =
+        Surfelize(geometry, camera.origin(), static_cast<float>(scene.camera.fov_deg), SurfelOptions{});
+    std::vector<float> radiosity(surfels.size() * nb, 0.0f);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, surfels.size()), [&](const tbb::blocked_range<std::size_t>& range) {
+      std::uint64_t rays = 0;
+      Bands E;
+      for (std::size_t i = range.begin(); i != range.end(); ++i) {
+        const Surfel& s = surfels[i];
+        // The front side sends: what it reflects of the lights, and its glow.
+        tracer.DirectIrradiance(s.position, s.normal, E, rays);
+        Hit hit;
+        hit.object = s.object;
+        hit.triangle = s.triangle;
+        hit.b1 = s.b1;
+        hit.b2 = s.b2;
+        hit.front = true;
+        Bands B = tracer.Albedo(s.object) * E;
+        Bands Le;
+        if (tracer.Emission(hit, Le)) B += kPi * Le;
+        std::copy(B.data(), B.data() + nb, &radiosity[i * nb]);
+      }
+      total_rays += rays;
+    });
+    const GBuffer g = RenderGBuffer(geometry, scene, geometry.time_s());
+    DssOptions dss;
+    dss.channels = nb;
+    const DssResult indirect = SplatDeepScreenSpace(g, camera, surfels, radiosity, dss);
+    tbb::parallel_for(0, height, [&](int y) {
+      for (int x = 0; x < width; ++x) {
+        const std::size_t p = static_cast<std::size_t>(y) * width + x;
+        if (g.object[p] < 0) continue;
+        const Bands albedo = tracer.Albedo(g.object[p]);
+        float* out = image.at(x, y);
+        for (int b = 0; b < nb; ++b) out[b] += albedo[b] * indirect.irradiance[p * nb + b] / kPi;
+      }
+    });
+  }
   if (stats) stats->rays = total_rays.load();
   return image;
 }

@@ -176,5 +176,27 @@ TEST(Regression, CornellPathTracedAfterLightsOutWithinNoise) {
                          "cornell-path-t40", 0.15);
 }
 
+// Deep screen space adds the one bounce direct transport lacks: after
+// lights-out the glowing walls light the white blocks. Against the stored
+// path-traced reference (the truth up to its noise), the dss frame must be
+// far closer than the direct one.
+TEST(Transport, DeepScreenSpaceBringsTheGlowsBounceCloseToThePathTracer) {
+  const Image reference = ReadImage(Fixture("render/cornell-path-t40.exr"));
+  const Image direct = RenderCornell(Transport::kDirect, 40, 1);
+  const Image dss = RenderCornell(Transport::kDss, 40, 1);
+  auto rms = [&](const Image& image) {
+    double e = 0;
+    std::size_t n = 0;
+    for (int y = 0; y < image.height; ++y)
+      for (int x = 0; x < image.width; ++x)
+        for (int b = 0; b < image.channels; ++b, ++n) e += std::pow(image.at(x, y)[b] - reference.at(x, y)[3 + b], 2);
+    return std::sqrt(e / n);
+  };
+  ASSERT_EQ(reference.channels, 3 + dss.channels);  // R, G, B, then the bands
+  EXPECT_LT(rms(dss), 0.5 * rms(direct)) << "dss " << rms(dss) << ", direct " << rms(direct);
+  // And it only adds light: never less than direct.
+  for (std::size_t i = 0; i < dss.pixels.size(); ++i) EXPECT_GE(dss.pixels[i], direct.pixels[i] - 1e-7f);
+}
+
 }  // namespace
 }  // namespace phos::render

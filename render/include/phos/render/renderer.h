@@ -11,6 +11,11 @@
 //    estimation for the lights and for the glowing triangles, combined with
 //    BSDF sampling by multiple importance sampling (power heuristic), so the
 //    glow of one surface lights the others (Fig. 8.15).
+//  - dss: direct, plus one bounce of diffuse light through deep screen space
+//    (dss.h): every surfel sends what it reflects of the lights and what it
+//    glows (B = albedo E + pi Lp), so a glowing wall lights a box in the dark
+//    without a single path. Its speed and its error against the path tracer
+//    are in docs/render.md.
 
 #include <cstdint>
 #include <filesystem>
@@ -23,7 +28,7 @@
 
 namespace phos::render {
 
-enum class Transport { kDirect, kPath };
+enum class Transport { kDirect, kPath, kDss };
 Transport ParseTransport(const std::string& name);  // UserError on an unknown name
 const char* TransportName(Transport transport);
 
