@@ -12,6 +12,7 @@
 #include "phos/model/schedule.h"
 #include "phos/util/error.h"
 #include "phos/util/json.h"
+#include "acquire/lab_util.h"
 #include "test_util.h"
 
 namespace phos {
@@ -19,14 +20,7 @@ namespace {
 
 using testing::ReadJsonLines;
 
-struct Lab {
-  VirtualClock clock;
-  Material material;
-  SimulatedLab lab;
-  explicit Lab(const std::string& name)
-      : material(LoadMaterial(testing::Fixture("materials/" + name + ".json"))),
-        lab(material, std::vector<double>(8, 0.8), DefaultLights(), DefaultCameraModel(), clock) {}
-};
+using testing::Lab;
 
 TEST(SimulatedLab, ChargingFollowsTheModel) {
   Lab lab("orange");

@@ -13,6 +13,7 @@
 #include "phos/acquire/sim_lab.h"
 #include "phos/util/error.h"
 #include "phos/util/json.h"
+#include "acquire/lab_util.h"
 #include "test_util.h"
 
 namespace phos {
@@ -20,25 +21,7 @@ namespace {
 
 using testing::ReadJsonLines;
 
-struct Lab {
-  VirtualClock clock;
-  Material material;
-  SimulatedLab lab;
-  explicit Lab(const std::string& name, unsigned seed = 1)
-      : material(LoadMaterial(testing::Fixture("materials/" + name + ".json"))),
-        lab(material, std::vector<double>(8, 0.8), DefaultLights(), Camera(seed), clock) {}
-  static CameraModel Camera(unsigned seed) {
-    CameraModel camera = DefaultCameraModel();
-    camera.seed = seed;
-    return camera;
-  }
-  RigChange Rig() {
-    return [this](const std::string& what, bool in_place) {
-      if (what == "lvf") lab.SetLvfInPath(in_place);
-      if (what == "white_reference") lab.SetWhiteReferenceInView(in_place);
-    };
-  }
-};
+using testing::Lab;
 
 // Mean signal of each column (all channels summed), black level removed.
 std::vector<double> ColumnProfile(const Frame& frame) {
