@@ -58,6 +58,11 @@ rm -rf "$OUT/still-life" "$OUT/cornell" "$OUT/light-trail"
 # glowing walls light the white blocks.
 "$PHOS" render fixtures/scenes/cornell-phosphor.json --out "$OUT/cornell" --times 20,31,40,90 \
   --transport path --contact-sheet "$OUT/cornell.png"
+# The same box 10 s after lights-out with one bounce through deep screen
+# space instead of paths (docs/render.md compares the two).
+rm -rf "$OUT/cornell-dss"
+"$PHOS" render fixtures/scenes/cornell-phosphor.json --out "$OUT/cornell-dss" --times 40 --transport dss \
+  --contact-sheet "$OUT/cornell-dss.png"
 # A moving 405 nm LED writes a fading trail into a painted floor.
 "$PHOS" render fixtures/scenes/light-trail.json --out "$OUT/light-trail" --times 1,3,5,7,9,10,12,15 \
   --contact-sheet "$OUT/light-trail.png"
@@ -68,5 +73,5 @@ echo "  plots (SVG):                   $OUT/charged.svg, $OUT/decay-only.svg, $O
 echo "  a captured sample (4 protocols): $OUT/capture-orange/{lvf-calibration,spectrum,decay,excitation}"
 echo "    what it captured: $OUT/capture-orange/decay-frames.png (contact sheet), decay-curve.svg, excitation-curves.svg"
 echo "  the material fitted from it:  $OUT/fitted/orange.json, report $OUT/fitted/orange-report.html"
-echo "  rendered scenes (contact sheets): $OUT/still-life.png, $OUT/cornell.png, $OUT/light-trail.png"
+echo "  rendered scenes (contact sheets): $OUT/still-life.png, $OUT/cornell.png, $OUT/cornell-dss.png, $OUT/light-trail.png"
 echo "    frames (EXR data, PNG, night-vision PNG): $OUT/still-life/, $OUT/cornell/, $OUT/light-trail/"
