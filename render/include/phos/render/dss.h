@@ -53,7 +53,11 @@ struct Surfel {
 };
 
 struct SurfelOptions {
-  float s = 0.01f;       // target radius as a fraction of tan(fov/2) per unit of distance
+  // Target radius as a fraction of tan(fov/2) per unit of distance. The
+  // defaults here and in DssOptions are the study's choice (make study,
+  // docs/dss-budget.csv): the lowest error over the fixture views within
+  // 0.1 s at 128 px.
+  float s = 0.04f;
   float d_near_m = 0.0f; // added to the distance (keeps near surfels from becoming tiny)
   unsigned seed = 1;     // for the two-pass random discard
   int max_split = 256;   // at most m x m surfels per triangle
@@ -75,12 +79,13 @@ struct GBuffer {
 GBuffer RenderGBuffer(const SceneGeometry& geometry, const Scene& scene, double t_s);
 
 struct DssOptions {
-  int levels = 4;            // l_max + 1 levels
+  int levels = 3;            // l_max + 1 levels
   float base_radius_px = 6;  // R_0
   // A single surfel contribution below epsilon is not splatted. Keep it small:
   // surfels near the camera are tiny, and many tiny contributions add up (a
-  // disk of 60 000 surfels 1 m away lights its axis with 4e-6 each).
-  float epsilon = 1e-7f;
+  // disk of 60 000 surfels 1 m away lights its axis with 4e-6 each; 1e-5
+  // lost it all).
+  float epsilon = 1e-6f;
   bool blur = true;          // geometry-aware blur of the interleaved levels
   int tile_px = 32;
   // Radiosity per surfel and channel (B, e.g. pi Lp per band), or empty for
