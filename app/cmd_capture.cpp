@@ -6,7 +6,6 @@
 
 #include <algorithm>
 #include <cstdio>
-#include <fstream>
 #include <map>
 #include <optional>
 #include <sstream>
@@ -241,15 +240,7 @@ std::vector<CalibrationLine> CalibrationLinesOf(const Devices& devices) {
 
 // ---- previews: what a session captured, to look at ----------------------
 
-std::vector<nlohmann::json> FrameLines(const fs::path& dir) {
-  std::vector<nlohmann::json> lines;
-  std::ifstream in(dir / "frames.jsonl");
-  for (std::string text; std::getline(in, text);) {
-    nlohmann::json line = nlohmann::json::parse(text, nullptr, false);
-    if (!line.is_discarded() && line.is_object()) lines.push_back(std::move(line));
-  }
-  return lines;
-}
+std::vector<nlohmann::json> FrameLines(const fs::path& dir) { return ReadJsonLines(dir / "frames.jsonl"); }
 
 // A contact sheet of a session's frames, each scaled by its exposure so the
 // fading shows (one brightness scale for all), labelled with the delay.
@@ -523,10 +514,7 @@ void RunCaptureResume(const std::string& dir_text) {
   if (protocol == "all") {
     std::unique_ptr<SessionWriter> top = SessionWriter::Reopen(dir);
     int resumes = 1;
-    {
-      std::ifstream events(dir / "events.jsonl");
-      for (std::string line; std::getline(events, line);) resumes += line.find("\"resume\"") != std::string::npos;
-    }
+    for (const nlohmann::json& event : ReadJsonLines(dir / "events.jsonl")) resumes += event.value("event", "") == "resume";
     Devices devices(start, dir, resumes);
     std::printf("phos capture resume: %s (all)\n", dir.string().c_str());
     try {

@@ -6,7 +6,6 @@
 #include <cstdio>
 #include <memory>
 #include <algorithm>
-#include <fstream>
 #include <atomic>
 #include <optional>
 #include <set>
@@ -287,13 +286,8 @@ void RunFitMap(const MapArgs& args) {
   if (protocol != "decay")
     ThrowUserError(dir.string(), "", "is a '" + protocol + "' session; a decay map needs a decay session");
   std::vector<nlohmann::json> lines;
-  {
-    std::ifstream in(dir / "frames.jsonl");
-    for (std::string text; std::getline(in, text);) {
-      nlohmann::json line = nlohmann::json::parse(text, nullptr, false);
-      if (!line.is_discarded() && line.is_object() && line.contains("file")) lines.push_back(std::move(line));
-    }
-  }
+  for (nlohmann::json& line : ReadJsonLines(dir / "frames.jsonl"))
+    if (line.contains("file")) lines.push_back(std::move(line));
   DecayMapInput input;
   int clipped = 0;
   std::vector<std::string> channel_names;

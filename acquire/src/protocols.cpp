@@ -3,10 +3,9 @@
 #include <algorithm>
 #include <cmath>
 
-#include <fstream>
-
 #include "phos/util/error.h"
 #include "phos/util/format.h"
+#include "phos/util/json.h"
 
 namespace phos {
 
@@ -51,24 +50,23 @@ double RecordFrame(SessionWriter& session, const Frame& frame, nlohmann::json li
   // Through the LVF the light lands in a few columns: judge the exposure by
   // the brightest column, which the frame mean would hide.
   if (line.value("lvf", false)) {
+    // One pass: each column's mean per channel, black removed. The brightest
+    // of those judges the exposure; their sum over channels is the column
+    // profile a spectrum is made of, recorded with the frame so fits need
+    // not decode images (the raw frame stays for reprocessing).
+    std::vector<double> column(static_cast<std::size_t>(frame.width) * frame.channels, -frame.black_level_dn);
+    for (int y = 0; y < frame.height; ++y)
+      for (std::size_t i = 0; i < column.size(); ++i)
+        column[i] += static_cast<double>(frame.pixels[static_cast<std::size_t>(y) * column.size() + i]) / frame.height;
     brightest = 0;
-    for (int c = 0; c < frame.channels; ++c)
-      for (int x = 0; x < frame.width; ++x) {
-        double sum = 0;
-        for (int y = 0; y < frame.height; ++y)
-          sum += frame.pixels[(static_cast<std::size_t>(y) * frame.width + x) * frame.channels + c];
-        brightest = std::max(brightest, (sum / frame.height - frame.black_level_dn) / range);
+    std::vector<double> profile(static_cast<std::size_t>(frame.width), 0.0);
+    for (int x = 0; x < frame.width; ++x)
+      for (int c = 0; c < frame.channels; ++c) {
+        const double mean = column[static_cast<std::size_t>(x) * frame.channels + c];
+        brightest = std::max(brightest, mean / range);
+        profile[x] += mean;
       }
     line["peak_column_fraction"] = brightest;
-    // The column profile (all channels summed, black removed) is what a
-    // spectrum is made of: recorded with the frame so fits need not decode
-    // images (the raw frame stays for reprocessing).
-    std::vector<double> profile(static_cast<std::size_t>(frame.width), 0.0);
-    for (int y = 0; y < frame.height; ++y)
-      for (int x = 0; x < frame.width; ++x)
-        for (int c = 0; c < frame.channels; ++c)
-          profile[x] += (frame.pixels[(static_cast<std::size_t>(y) * frame.width + x) * frame.channels + c] -
-                         frame.black_level_dn) / frame.height;
     line["column_mean_dn"] = profile;
   }
   line["mean_signal_dn"] = means;
@@ -93,18 +91,6 @@ bool WellExposed(const AutoExposure& a, double brightest, const Frame& frame) {
 void RecordRig(SessionWriter& session, const RigChange& rig, const Clock& clock, const std::string& what, bool in_place) {
   rig(what, in_place);
   session.Event({{"t_s", clock.now_s()}, {"event", "rig"}, {"what", what}, {"in_place", in_place}});
-}
-
-// The lines of a session's frames.jsonl that parse (a crash can tear the last).
-std::vector<nlohmann::json> ReadFrameLines(const std::filesystem::path& session_dir) {
-  std::vector<nlohmann::json> lines;
-  std::ifstream in(session_dir / "frames.jsonl");
-  std::string text;
-  while (std::getline(in, text)) {
-    nlohmann::json line = nlohmann::json::parse(text, nullptr, false);
-    if (!line.is_discarded() && line.is_object()) lines.push_back(std::move(line));
-  }
-  return lines;
 }
 
 // Runs a protocol's body; on any error the session is marked failed with the
@@ -228,7 +214,7 @@ ExcitationProtocolResult RunExcitationProtocol(Camera& camera, Lights& lights, C
 
 ExcitationDone ReadExcitationDone(const std::filesystem::path& session_dir) {
   ExcitationDone done;
-  for (const nlohmann::json& line : ReadFrameLines(session_dir)) {
+  for (const nlohmann::json& line : ReadJsonLines(session_dir / "frames.jsonl")) {
     if (!line.contains("light") || !line.contains("charge_s") || !line.contains("mean_signal_dn") ||
         !line.contains("adc_bits") || !line.contains("black_level_dn"))
       continue;
@@ -363,13 +349,8 @@ LvfCalibrationResult RunLvfCalibrationProtocol(Camera& camera, Lights& lights, C
 std::vector<std::string> ReadLvfCalibrationDone(const std::filesystem::path& session_dir) {
   // A source is done once the event "calibrated" names it ("" = the dark frame).
   std::vector<std::string> done;
-  std::ifstream in(session_dir / "events.jsonl");
-  std::string text;
-  while (std::getline(in, text)) {
-    nlohmann::json event = nlohmann::json::parse(text, nullptr, false);
-    if (!event.is_discarded() && event.is_object() && event.value("event", "") == "calibrated")
-      done.push_back(event.value("light", ""));
-  }
+  for (const nlohmann::json& event : ReadJsonLines(session_dir / "events.jsonl"))
+    if (event.value("event", "") == "calibrated") done.push_back(event.value("light", ""));
   return done;
 }
 

@@ -8,7 +8,6 @@
 #include <csignal>
 #include <cstring>
 #include <cstdio>
-#include <fstream>
 #include <random>
 
 #include <OpenImageIO/imageio.h>
@@ -107,12 +106,8 @@ SessionWriter::SessionWriter(ReopenTag, std::filesystem::path dir) : dir_(std::m
       ThrowUserError(dir_.string(), "", "completed already: nothing to resume");
   }
   // Number on from the highest frame recorded or present on disk.
-  std::ifstream lines(dir_ / "frames.jsonl");
-  std::string text;
-  while (std::getline(lines, text)) {
-    nlohmann::json line = nlohmann::json::parse(text, nullptr, false);
-    if (!line.is_discarded() && line.is_object() && line.contains("seq")) frames_ = std::max(frames_, line["seq"].get<int>());
-  }
+  for (const nlohmann::json& line : ReadJsonLines(dir_ / "frames.jsonl"))
+    if (line.contains("seq")) frames_ = std::max(frames_, line["seq"].get<int>());
   for (const auto& entry : std::filesystem::directory_iterator(dir_ / "frames", ec)) {
     const std::string name = entry.path().filename().string();
     if (name.size() >= 10 && name.find_first_not_of("0123456789") == 6) frames_ = std::max(frames_, std::atoi(name.c_str()));

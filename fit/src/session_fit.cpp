@@ -6,7 +6,6 @@
 #include <array>
 #include <chrono>
 #include <cmath>
-#include <fstream>
 #include <map>
 #include <numeric>
 
@@ -21,17 +20,6 @@ namespace phos {
 namespace {
 
 namespace fs = std::filesystem;
-
-std::vector<nlohmann::json> ReadJsonLines(const fs::path& path) {
-  std::vector<nlohmann::json> lines;
-  std::ifstream in(path);
-  for (std::string text; std::getline(in, text);) {
-    // A crash can tear the last line; what parses is what was recorded.
-    nlohmann::json line = nlohmann::json::parse(text, nullptr, false);
-    if (!line.is_discarded() && line.is_object()) lines.push_back(std::move(line));
-  }
-  return lines;
-}
 
 std::vector<double> ColumnRate(const nlohmann::json& line) {
   std::vector<double> profile = line.at("column_mean_dn").get<std::vector<double>>();

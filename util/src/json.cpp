@@ -28,6 +28,16 @@ nlohmann::json ReadJsonFile(const std::filesystem::path& path) {
   }
 }
 
+std::vector<nlohmann::json> ReadJsonLines(const std::filesystem::path& path) {
+  std::vector<nlohmann::json> records;
+  std::ifstream in(path);
+  for (std::string text; std::getline(in, text);) {
+    nlohmann::json record = nlohmann::json::parse(text, nullptr, false);
+    if (!record.is_discarded() && record.is_object()) records.push_back(std::move(record));
+  }
+  return records;
+}
+
 void WriteFileAtomically(const std::filesystem::path& path, std::string_view text) {
   std::filesystem::path temporary = path;
   temporary += ".tmp." + std::to_string(::getpid());

@@ -19,6 +19,11 @@ namespace phos {
 // Reads and parses a JSON file; a missing file or a syntax error is a UserError.
 nlohmann::json ReadJsonFile(const std::filesystem::path& path);
 
+// The records of a JSON Lines file (frames.jsonl, events.jsonl) that parse as
+// objects: a crash can tear the last line, and what parses is what was
+// recorded. A missing file has no records.
+std::vector<nlohmann::json> ReadJsonLines(const std::filesystem::path& path);
+
 // Writes text to path through a temporary file and a rename, so a reader (or a
 // crash) never sees half a file and an existing file is replaced whole.
 void WriteFileAtomically(const std::filesystem::path& path, std::string_view text);
