@@ -135,8 +135,7 @@ void EditSession::AddConstraint(int x, int y, double t_s) {
     for (const render::Light& light : scene_.lights) {
       const double level = light.schedule.LevelAt(mid);
       if (level <= 0) continue;
-      const render::Vec3 at = light.kind == render::Light::Kind::kPoint ? light.PositionAt(mid) : light.DirectionAt(mid);
-      const double unit = render::UnitIrradiance(*geometry_, light.kind, at.cast<float>(), hit.position, hit.normal);
+      const double unit = render::UnitIrradiance(*geometry_, render::PoseAt(light, mid), hit.position, hit.normal);
       for (int b = 0; b < nb; ++b) E[b] += level * light.E_per_band[b] * unit;
     }
     c.irradiance.push_back(E);

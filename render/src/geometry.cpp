@@ -160,11 +160,27 @@ float SceneGeometry::Area(int object, int triangle) const {
   return 0.5f * (Vertex(object, triangle, 1) - v0).cross(Vertex(object, triangle, 2) - v0).norm();
 }
 
-float UnitIrradiance(const SceneGeometry& geometry, Light::Kind kind, const Vec3f& at, const Vec3f& p,
-                     const Vec3f& n, std::uint64_t* rays) {
+LightPose PoseAt(const Light& light, double t_s) {
+  LightPose pose;
+  pose.kind = light.kind;
+  if (light.kind == Light::Kind::kPoint) {
+    pose.at = light.PositionAt(t_s).cast<float>();
+    return pose;
+  }
+  pose.at = light.DirectionAt(t_s).cast<float>();
+  if (light.kind == Light::Kind::kSheet) {
+    pose.sheet_normal = light.sheet_normal.normalized().cast<float>();
+    pose.sheet_offset = pose.sheet_normal.dot(light.PositionAt(t_s).cast<float>());
+    pose.sheet_half_m = static_cast<float>(0.5 * light.sheet_thickness_m);
+  }
+  return pose;
+}
+
+float UnitIrradiance(const SceneGeometry& geometry, const LightPose& light, const Vec3f& p, const Vec3f& n,
+                     std::uint64_t* rays) {
   const Vec3f origin = p + geometry.ray_epsilon() * n;
-  if (kind == Light::Kind::kPoint) {
-    const Vec3f d = at - p;
+  if (light.kind == Light::Kind::kPoint) {
+    const Vec3f d = light.at - p;
     const float distance2 = d.squaredNorm(), distance = std::sqrt(distance2);
     const float cosine = distance > 0 ? n.dot(d) / distance : 0.0f;
     if (!(cosine > 0)) return 0.0f;  // behind the surface: only its front charges and reflects
@@ -172,7 +188,8 @@ float UnitIrradiance(const SceneGeometry& geometry, Light::Kind kind, const Vec3
     if (geometry.Occluded(origin, d / distance, distance * (1 - 1e-4f) - geometry.ray_epsilon())) return 0.0f;
     return cosine / distance2;
   }
-  const Vec3f to_light = -at;
+  if (light.SheetMask(p) == 0) return 0.0f;
+  const Vec3f to_light = -light.at;
   const float cosine = n.dot(to_light);
   if (!(cosine > 0)) return 0.0f;
   if (rays) ++*rays;

@@ -48,8 +48,7 @@ Image ForEachPixel(const SceneGeometry& geometry, PerPixel per_pixel) {
 
 // The light's geometric irradiance factor at a hit (lights are static here).
 double UnitIrradiance(const SceneGeometry& geometry, const Light& light, const Hit& hit) {
-  const Vec3 at = light.kind == Light::Kind::kPoint ? light.PositionAt(0) : light.DirectionAt(0);
-  return render::UnitIrradiance(geometry, light.kind, at.cast<float>(), hit.position, hit.normal);
+  return render::UnitIrradiance(geometry, PoseAt(light, 0), hit.position, hit.normal);
 }
 
 }  // namespace

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <memory>
 
 #include <OpenImageIO/imagebuf.h>
 #include <OpenImageIO/imagebufalgo.h>
@@ -11,6 +12,7 @@
 #include <tbb/parallel_for.h>
 
 #include "phos/render/dss.h"
+#include "phos/render/volume.h"
 #include "phos/util/error.h"
 #include "phos/util/format.h"
 
@@ -33,6 +35,13 @@ struct Random {
   }
   float Uniform() { return static_cast<float>(Next() >> 40) * (1.0f / 16777216.0f); }  // [0, 1)
 };
+
+// A fixed per-pixel offset of the media's step grid (interleaved gradient
+// noise, Jimenez 2014): one sample per pixel shows noise, not banding.
+float PixelJitter(int x, int y) {
+  const float v = 52.9829189f * std::fmod(0.06711056f * static_cast<float>(x) + 0.00583715f * static_cast<float>(y), 1.0f);
+  return v - std::floor(v);
+}
 
 // Radiance or throughput per band, without allocation.
 using Bands = Eigen::Array<float, Eigen::Dynamic, 1, 0, kMaxBands, 1>;
@@ -106,16 +115,15 @@ struct EmitterDistribution {
 
 class Tracer {
  public:
-  Tracer(const SceneGeometry& geometry, const CoupledSolver* solver, const FrameOptions& options)
-      : geometry_(geometry), scene_(geometry.scene()), solver_(solver), options_(options),
+  Tracer(const SceneGeometry& geometry, const CoupledSolver* solver, const VolumeMedia* media, const FrameOptions& options)
+      : geometry_(geometry), scene_(geometry.scene()), solver_(solver), media_(media), options_(options),
         nb_(scene_.bands.band_count()), emitters_(geometry, options.transport == Transport::kPath ? solver : nullptr) {
     const double t = geometry.time_s();
     for (const Light& light : scene_.lights) {
       const double level = light.schedule.LevelAt(t);
       if (level <= 0) continue;
       LitLight lit;
-      lit.kind = light.kind;
-      lit.at = (light.kind == Light::Kind::kPoint ? light.PositionAt(t) : light.DirectionAt(t)).cast<float>();
+      lit.pose = PoseAt(light, t);
       lit.E = Bands(nb_);
       for (int b = 0; b < nb_; ++b) lit.E[b] = static_cast<float>(level * light.E_per_band[b]);
       lights_.push_back(lit);
@@ -145,7 +153,11 @@ class Tracer {
   void DirectIrradiance(const Vec3f& p, const Vec3f& n_s, Bands& E, std::uint64_t& rays) const {
     E.setZero(nb_);
     for (const LitLight& light : lights_) {
-      const float unit = UnitIrradiance(geometry_, light.kind, light.at, p, n_s, &rays);
+      float unit = UnitIrradiance(geometry_, light.pose, p, n_s, &rays);
+      // Media between the point and the light shadow it (a cloud on the floor).
+      if (unit > 0 && media_)
+        unit *= light.pose.kind == Light::Kind::kPoint ? media_->Transmittance(p, light.pose.at)
+                                                        : media_->TransmittanceToInfinity(p, -light.pose.at);
       if (unit > 0) E += light.E * unit;
     }
   }
@@ -156,16 +168,25 @@ class Tracer {
     return a;
   }
 
-  Bands Direct(const Vec3f& origin, const Vec3f& direction, std::uint64_t& rays) const {
+  // The media along a camera ray up to its hit: adds their radiance to L and
+  // returns the transmittance the surface behind them is seen through.
+  float Media(const Vec3f& origin, const Vec3f& direction, const Hit& hit, float jitter, Bands& L) const {
+    if (!media_) return 1.0f;
+    return media_->March(origin, direction, hit ? hit.distance : 1e30f, jitter, L.data());
+  }
+
+  Bands Direct(const Vec3f& origin, const Vec3f& direction, float jitter, std::uint64_t& rays) const {
     Bands L = Bands::Zero(nb_);
     ++rays;
     const Hit hit = geometry_.Intersect(origin, direction);
-    if (!hit) return L;
+    Bands Lm = Bands::Zero(nb_);
+    const float T = Media(origin, direction, hit, jitter, Lm);
+    if (!hit) return Lm;
     AddEmission(hit, L);
     Bands E;
     DirectIrradiance(hit.position, hit.front ? hit.normal : Vec3f(-hit.normal), E, rays);
     L += Albedo(hit.object) * E / kPi;  // Lambertian reflection (Eq. 8.2's reflected term)
-    return L;
+    return Lm + T * L;
   }
 
   Bands Path(Vec3f origin, Vec3f direction, Random& random, std::uint64_t& rays) const {
@@ -174,6 +195,13 @@ class Tracer {
     for (int depth = 0; depth < options_.max_depth; ++depth) {
       ++rays;
       const Hit hit = geometry_.Intersect(origin, direction);
+      if (depth == 0 && media_) {
+        // The camera ray's media (single scattering; later bounces pass
+        // through them unattenuated, see volume.h).
+        Bands Lm = Bands::Zero(nb_);
+        beta *= Media(origin, direction, hit, random.Uniform(), Lm);
+        L += Lm;
+      }
       if (!hit) break;
       const Vec3f n_s = hit.front ? hit.normal : Vec3f(-hit.normal);
       // Emission found by the BSDF sample, weighted against light sampling.
@@ -238,13 +266,13 @@ class Tracer {
 
  private:
   struct LitLight {
-    Light::Kind kind;
-    Vec3f at;
+    LightPose pose;
     Bands E;
   };
   const SceneGeometry& geometry_;
   const Scene& scene_;
   const CoupledSolver* solver_;
+  const VolumeMedia* media_;
   FrameOptions options_;
   int nb_;
   EmitterDistribution emitters_;
@@ -293,7 +321,15 @@ Image RenderBands(const SceneGeometry& geometry, const CoupledSolver* solver, co
   if (nb > kMaxBands) ThrowUserError(scene.source, "bands_nm", "more than " + std::to_string(kMaxBands) + " bands");
   const int width = scene.camera.width, height = scene.camera.height;
   Image image(width, height, nb);
-  const Tracer tracer(geometry, solver, options);
+  // The media: the solver's (with the phosphorescent voxels' states), or this frame's own.
+  std::unique_ptr<VolumeMedia> own_media;
+  VolumeMedia* media = solver ? solver->media() : nullptr;
+  if (!media && !scene.volumes.empty()) {
+    own_media = std::make_unique<VolumeMedia>(scene, geometry);
+    media = own_media.get();
+  }
+  if (media) media->PrepareLighting(geometry.time_s());
+  const Tracer tracer(geometry, solver, media, options);
   const CameraRays camera(scene, geometry.time_s());
   std::atomic<std::uint64_t> total_rays{0};
   const int spp = options.transport == Transport::kPath ? options.spp : options.direct_spp;
@@ -307,7 +343,7 @@ Image RenderBands(const SceneGeometry& geometry, const CoupledSolver* solver, co
         const float jx = spp == 1 ? 0.5f : random.Uniform(), jy = spp == 1 ? 0.5f : random.Uniform();
         const Vec3f direction = camera.Direction(static_cast<float>(x) + jx, static_cast<float>(y) + jy);
         sum += options.transport == Transport::kPath ? tracer.Path(camera.origin(), direction, random, rays)
-                                                     : tracer.Direct(camera.origin(), direction, rays);
+                                                     : tracer.Direct(camera.origin(), direction, spp == 1 ? PixelJitter(x, y) : random.Uniform(), rays);
       }
       sum /= static_cast<float>(spp);
       std::copy(sum.data(), sum.data() + nb, image.at(x, y));

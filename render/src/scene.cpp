@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <random>
 
 #include <nlohmann/json.hpp>
 
@@ -129,6 +130,92 @@ std::shared_ptr<const Mesh> ReadShape(const JsonField& field) {
   field["type"].Fail("unknown shape '" + type + "' (quad, box, sphere)");
 }
 
+using MaterialCache = std::map<std::string, std::shared_ptr<const Material>>;
+
+// "phosphor": a material file on the scene's band grid (loaded once per file).
+void ReadPhosphor(const JsonField& o, const std::filesystem::path& base_dir, const SpectralGrid& bands,
+                  MaterialCache& materials, std::shared_ptr<const Material>& phosphor, std::string& path) {
+  if (!o.Has("phosphor")) return;
+  const std::filesystem::path file = base_dir / o["phosphor"].NonEmptyString();
+  auto& material = materials[file.string()];
+  if (!material) material = std::make_shared<Material>(LoadMaterial(file));
+  if (!(material->bands == bands))
+    o["phosphor"].Fail("the material's bands_nm differ from the scene's; the renderer needs one band grid");
+  phosphor = material;
+  path = file.string();
+}
+
+// "unknown_ke" and "initial", which only a phosphor may have.
+void ReadPhosphorPolicy(const JsonField& o, bool is_phosphor, bool& unknown_ke_as_zero, InitialState& initial) {
+  if (auto f = o.Optional("unknown_ke")) {
+    const std::string policy = f->String();
+    if (policy != "error" && policy != "zero") f->Fail("expected \"error\" or \"zero\", got \"" + policy + "\"");
+    unknown_ke_as_zero = policy == "zero";
+  }
+  if (auto f = o.Optional("initial")) {
+    if (f->value().is_number()) {
+      initial = {InitialState::Kind::kUniform, f->NumberInRange(0, 1)};
+    } else {
+      const std::string kind = f->String();
+      if (kind == "zero") initial.kind = InitialState::Kind::kZero;
+      else if (kind == "equilibrium") initial.kind = InitialState::Kind::kEquilibrium;
+      else f->Fail("expected \"zero\", \"equilibrium\" or a number in [0, 1], got \"" + kind + "\"");
+    }
+    if (!is_phosphor) f->Fail("only a phosphorescent object or volume (with 'phosphor') has an initial state");
+  }
+}
+
+// A volume's density grid: a number (uniform), one value per voxel (x
+// fastest), or a procedural fill {"value", "shape": "box" | "ellipsoid"
+// (inscribed in the bounds), "puffs": N Gaussian puffs of "radius_m" at
+// places drawn with "seed", "below_y_m": empty above a level (a liquid)}.
+std::vector<float> ReadDensity(const JsonField& f, const Volume& v) {
+  const std::size_t n = static_cast<std::size_t>(v.nx) * v.ny * v.nz;
+  if (f.value().is_number()) return std::vector<float>(n, static_cast<float>(f.NumberAtLeast(0)));
+  if (f.value().is_array()) {
+    const std::vector<double> values = f.NumberArray(n, 0.0);
+    return std::vector<float>(values.begin(), values.end());
+  }
+  f.RejectUnknownKeys({"value", "shape", "puffs", "radius_m", "seed", "below_y_m"});
+  const double value = f.Has("value") ? f["value"].NumberAtLeast(0) : 1.0;
+  const std::string shape = f.Has("shape") ? f["shape"].String() : "box";
+  if (shape != "box" && shape != "ellipsoid") f["shape"].Fail("expected \"box\" or \"ellipsoid\", got \"" + shape + "\"");
+  const int puffs = f.Has("puffs") ? f["puffs"].Integer(1, 100000) : 0;
+  const double radius = f.Has("radius_m") ? f["radius_m"].NumberInRange(1e-9, 1e9) : 0.0;
+  if (puffs > 0 && !f.Has("radius_m")) f.Fail("'puffs' needs 'radius_m'");
+  std::mt19937_64 random(f.Has("seed") ? static_cast<unsigned>(f["seed"].Integer(0, 1 << 30)) : 1u);
+  std::vector<Vec3> centres;
+  const Vec3 size = v.max_m - v.min_m, centre = 0.5 * (v.min_m + v.max_m);
+  for (int k = 0; k < puffs; ++k) {
+    // Puffs inside the shape, at least a radius from the bounds where it fits.
+    std::uniform_real_distribution<double> u(0, 1);
+    Vec3 q;
+    for (int attempt = 0; attempt < 1000; ++attempt) {
+      q = v.min_m + Vec3(u(random), u(random), u(random)).cwiseProduct(size);
+      const Vec3 e = (q - centre).cwiseQuotient(0.5 * size);
+      if (shape == "box" || e.squaredNorm() <= 1) break;
+    }
+    centres.push_back(q);
+  }
+  const Vec3 voxel = v.voxel_size_m();
+  std::vector<float> density(n, 0.0f);
+  for (int z = 0; z < v.nz; ++z)
+    for (int y = 0; y < v.ny; ++y)
+      for (int x = 0; x < v.nx; ++x) {
+        const Vec3 p = v.min_m + Vec3(x + 0.5, y + 0.5, z + 0.5).cwiseProduct(voxel);
+        double d = value;
+        if (shape == "ellipsoid" && (p - centre).cwiseQuotient(0.5 * size).squaredNorm() > 1) d = 0;
+        if (f.Has("below_y_m") && p.y() > f["below_y_m"].Number()) d = 0;
+        if (puffs > 0 && d > 0) {
+          double sum = 0;
+          for (const Vec3& c : centres) sum += std::exp(-0.5 * (p - c).squaredNorm() / (radius * radius));
+          d *= std::min(1.0, sum);
+        }
+        density[(static_cast<std::size_t>(z) * v.ny + y) * v.nx + x] = static_cast<float>(d);
+      }
+  return density;
+}
+
 }  // namespace
 
 Eigen::Affine3d RigidMotion::At(double t_s) const {
@@ -200,7 +287,8 @@ std::vector<double> Scene::FrameTimes() const {
 }
 
 bool Scene::HasPhosphors() const {
-  return std::any_of(objects.begin(), objects.end(), [](const Object& o) { return o.phosphor != nullptr; });
+  return std::any_of(objects.begin(), objects.end(), [](const Object& o) { return o.phosphor != nullptr; }) ||
+         std::any_of(volumes.begin(), volumes.end(), [](const Volume& v) { return v.phosphor != nullptr; });
 }
 
 Scene LoadScene(const std::filesystem::path& path) {
@@ -210,7 +298,7 @@ Scene LoadScene(const std::filesystem::path& path) {
 Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& base_dir, const std::string& source) {
   const JsonField root(json, source);
   root.RejectUnknownKeys({"schema", "name", "description", "bands_nm", "time", "texel_size_m", "camera", "render",
-                          "objects", "lights"});
+                          "objects", "lights", "volumes"});
   if (root["schema"].String() != "phos.scene/1")
     root["schema"].Fail("expected \"phos.scene/1\", got " + DescribeJson(root["schema"].value()));
   Scene scene;
@@ -273,7 +361,7 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
 
   // Objects. Meshes and materials used twice are loaded once.
   std::map<std::string, std::shared_ptr<const Mesh>> meshes;
-  std::map<std::string, std::shared_ptr<const Material>> materials;
+  MaterialCache materials;
   const JsonField objects = root["objects"];
   if (objects.ArraySize() == 0) objects.Fail("expected at least one object");
   for (std::size_t i = 0; i < objects.ArraySize(); ++i) {
@@ -295,15 +383,7 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
     }
     if (object.mesh->triangles.empty()) o.Fail("the mesh has no triangles");
     object.motion = ReadMotion(o);
-    if (o.Has("phosphor")) {
-      const std::filesystem::path file = base_dir / o["phosphor"].NonEmptyString();
-      auto& material = materials[file.string()];
-      if (!material) material = std::make_shared<Material>(LoadMaterial(file));
-      if (!(material->bands == scene.bands))
-        o["phosphor"].Fail("the material's bands_nm differ from the scene's; the renderer needs one band grid");
-      object.phosphor = material;
-      object.phosphor_path = file.string();
-    }
+    ReadPhosphor(o, base_dir, scene.bands, materials, object.phosphor, object.phosphor_path);
     if (o.Has("albedo")) {
       object.albedo = ReadAlbedo(o["albedo"], nb);
     } else if (object.phosphor && object.phosphor->albedo) {
@@ -311,22 +391,7 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
     } else {
       o.Fail("missing 'albedo' (a number or one value per band)");
     }
-    if (auto f = o.Optional("unknown_ke")) {
-      const std::string policy = f->String();
-      if (policy != "error" && policy != "zero") f->Fail("expected \"error\" or \"zero\", got \"" + policy + "\"");
-      object.unknown_ke_as_zero = policy == "zero";
-    }
-    if (auto f = o.Optional("initial")) {
-      if (f->value().is_number()) {
-        object.initial = {InitialState::Kind::kUniform, f->NumberInRange(0, 1)};
-      } else {
-        const std::string kind = f->String();
-        if (kind == "zero") object.initial.kind = InitialState::Kind::kZero;
-        else if (kind == "equilibrium") object.initial.kind = InitialState::Kind::kEquilibrium;
-        else f->Fail("expected \"zero\", \"equilibrium\" or a number in [0, 1], got \"" + kind + "\"");
-      }
-      if (!object.phosphor) f->Fail("only a phosphorescent object (with 'phosphor') has an initial state");
-    }
+    ReadPhosphorPolicy(o, object.phosphor != nullptr, object.unknown_ke_as_zero, object.initial);
     if (auto f = o.Optional("texel_size_m")) object.texel_size_m = f->NumberInRange(1e-6, 1e6);
     if (auto f = o.Optional("texels")) {
       object.texels = f->String();
@@ -343,12 +408,12 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
   const JsonField lights = root["lights"];
   for (std::size_t i = 0; i < lights.ArraySize(); ++i) {
     const JsonField l = lights.At(i);
-    l.RejectUnknownKeys({"name", "type", "position", "direction", "intensity", "spectrum", "schedule", "path"});
+    l.RejectUnknownKeys({"name", "type", "position", "direction", "intensity", "spectrum", "schedule", "path",
+                         "normal", "thickness_m"});
     Light light;
     light.name = l.Has("name") ? l["name"].NonEmptyString() : "light " + std::to_string(i);
     const std::string type = l["type"].String();
-    if (type == "point") {
-      light.kind = Light::Kind::kPoint;
+    auto read_place = [&] {  // a position, or a path of positions
       if (l.Has("path")) {
         const JsonField path = l["path"];
         for (std::size_t k = 0; k < path.ArraySize(); ++k) {
@@ -365,14 +430,32 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
       } else {
         light.position = ReadVec3(l["position"]);
       }
-    } else if (type == "directional") {
-      light.kind = Light::Kind::kDirectional;
+    };
+    auto read_direction = [&] {
       light.direction = ReadVec3(l["direction"]);
       if (light.direction.norm() == 0) l["direction"].Fail("must not be zero");
       light.direction.normalize();
+    };
+    if (type == "point") {
+      light.kind = Light::Kind::kPoint;
+      read_place();
+    } else if (type == "directional") {
+      light.kind = Light::Kind::kDirectional;
+      read_direction();
+    } else if (type == "sheet") {
+      light.kind = Light::Kind::kSheet;
+      read_direction();
+      read_place();
+      light.sheet_normal = ReadVec3(l["normal"]);
+      if (light.sheet_normal.norm() == 0) l["normal"].Fail("must not be zero");
+      light.sheet_normal.normalize();
+      light.sheet_thickness_m = l["thickness_m"].NumberInRange(1e-9, 1e9);
     } else {
-      l["type"].Fail("unknown light type '" + type + "' (point, directional)");
+      l["type"].Fail("unknown light type '" + type + "' (point, directional, sheet)");
     }
+    if (type != "sheet")
+      for (const char* key : {"normal", "thickness_m"})
+        if (l.Has(key)) l[key].Fail(std::string("only a sheet light has '").append(key).append("'"));
     light.intensity = l["intensity"].NumberAtLeast(0);
     light.E_per_band = ReadSpectrum(l["spectrum"], scene.bands);
     for (double& e : light.E_per_band) e *= light.intensity;
@@ -386,6 +469,36 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
       RequireIncreasingTimes(*f, light.schedule.keys);
     }
     scene.lights.push_back(std::move(light));
+  }
+  // Volumes.
+  if (auto volumes = root.Optional("volumes")) {
+    for (std::size_t i = 0; i < volumes->ArraySize(); ++i) {
+      const JsonField f = volumes->At(i);
+      f.RejectUnknownKeys({"name", "bounds", "resolution", "density", "sigma_t_per_m", "albedo", "g", "phosphor",
+                           "unknown_ke", "initial"});
+      Volume v;
+      v.name = f.Has("name") ? f["name"].NonEmptyString() : "volume " + std::to_string(i);
+      const JsonField bounds = f["bounds"];
+      bounds.RejectUnknownKeys({"min", "max"});
+      v.min_m = ReadVec3(bounds["min"]);
+      v.max_m = ReadVec3(bounds["max"]);
+      if (!(v.max_m.array() > v.min_m.array()).all()) bounds["max"].Fail("must exceed 'min' on every axis");
+      const JsonField resolution = f["resolution"];
+      if (resolution.ArraySize() != 3) resolution.Fail("expected [nx, ny, nz]");
+      v.nx = resolution.At(0).Integer(1, 4096);
+      v.ny = resolution.At(1).Integer(1, 4096);
+      v.nz = resolution.At(2).Integer(1, 4096);
+      if (static_cast<double>(v.nx) * v.ny * v.nz > 1 << 27) resolution.Fail("more than 134 million voxels");
+      v.density = ReadDensity(f["density"], v);
+      v.sigma_t_per_m = f["sigma_t_per_m"].NumberInRange(0, 1e9);
+      ReadPhosphor(f, base_dir, scene.bands, materials, v.phosphor, v.phosphor_path);
+      if (f.Has("albedo")) v.albedo = ReadAlbedo(f["albedo"], nb);
+      else if (v.phosphor && v.phosphor->albedo) v.albedo = *v.phosphor->albedo;
+      else f.Fail("missing 'albedo' (the single-scattering albedo: a number or one value per band)");
+      if (auto g = f.Optional("g")) v.g = g->NumberInRange(-0.99, 0.99);
+      ReadPhosphorPolicy(f, v.phosphor != nullptr, v.unknown_ke_as_zero, v.initial);
+      scene.volumes.push_back(std::move(v));
+    }
   }
   return scene;
 }

@@ -7,6 +7,7 @@
 
 #include <tbb/parallel_for.h>
 
+#include "phos/render/volume.h"
 #include "phos/util/error.h"
 
 namespace phos::render {
@@ -69,14 +70,20 @@ CoupledSolver::CoupledSolver(const Scene& scene, SceneGeometry& geometry)
     g.Lp.assign(g.emission_bands.size() * texels.count, 0.0f);
     g.E.assign(g.excitation_bands.size() * texels.count, 0.0f);
     g.unit_E.resize(scene.lights.size());
-    g.unit_E_light_at.assign(scene.lights.size(), Eigen::Vector3d::Constant(std::nan("")));
+    g.unit_E_light_at.assign(scene.lights.size(), LightPose{});
     g.unit_E_version.assign(scene.lights.size(), ~std::uint64_t{0});
     stats_.texels += texels.count;
     groups_.push_back(std::move(g));
   }
   if (glow_enabled_) BuildGlowPatches();
   InitialStates();
+  if (!scene.volumes.empty()) {
+    media_ = std::make_unique<VolumeMedia>(scene, geometry);
+    media_->InitialStates();
+  }
 }
+
+CoupledSolver::~CoupledSolver() = default;
 
 void CoupledSolver::BuildGlowPatches() {
   // Patches per triangle: up to 8 x 8, fewer if the scene would have more than
@@ -232,19 +239,18 @@ void CoupledSolver::UpdateTexelFrames(Group& g) {
 const std::vector<float>& CoupledSolver::UnitIrradiance(Group& g, int l) {
   const Light& light = scene_.lights[l];
   const double t = geometry_.time_s();
-  const Eigen::Vector3d at = light.kind == Light::Kind::kPoint ? light.PositionAt(t) : light.DirectionAt(t);
+  const LightPose pose = PoseAt(light, t);
   std::vector<float>& unit = g.unit_E[l];
-  if (!unit.empty() && at == g.unit_E_light_at[l] && g.unit_E_version[l] == geometry_.version())
+  if (!unit.empty() && pose == g.unit_E_light_at[l] && g.unit_E_version[l] == geometry_.version())
     return unit;
   UpdateTexelFrames(g);
   const std::size_t n = g.states.n;
   unit.resize(n);
-  const Vec3f light_at = at.cast<float>();
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 256), [&](const tbb::blocked_range<std::size_t>& range) {
     for (std::size_t j = range.begin(); j != range.end(); ++j)
-      unit[j] = render::UnitIrradiance(geometry_, light.kind, light_at, g.texel_position[j], g.texel_normal[j]);
+      unit[j] = render::UnitIrradiance(geometry_, pose, g.texel_position[j], g.texel_normal[j]);
   });
-  g.unit_E_light_at[l] = at;
+  g.unit_E_light_at[l] = pose;
   g.unit_E_version[l] = geometry_.version();
   ++stats_.irradiance_updates;
   stats_.shadow_rays += n;
@@ -335,6 +341,7 @@ void CoupledSolver::Step(double t0_s, double t1_s, bool moving) {
       ++stats_.dark_jumps;
     }
   }
+  if (media_) media_->Step(t0_s, t1_s);
 }
 
 void CoupledSolver::AdvanceTo(double t_s) {

@@ -9,6 +9,7 @@
 // O(1) arithmetic.
 
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <memory>
 #include <vector>
@@ -94,15 +95,32 @@ struct TexelAnchor {
   float b1, b2;
 };
 
+// A light at one moment, as the irradiance computations need it.
+struct LightPose {
+  Light::Kind kind = Light::Kind::kPoint;
+  Vec3f at = Vec3f::Zero();  // point: position; directional, sheet: travel direction
+  // Sheet: the slab |sheet_normal . p - sheet_offset| <= sheet_half_m.
+  Vec3f sheet_normal = Vec3f::Zero();
+  float sheet_offset = 0, sheet_half_m = 0;
+  float SheetMask(const Vec3f& p) const {
+    return kind != Light::Kind::kSheet || std::fabs(sheet_normal.dot(p) - sheet_offset) <= sheet_half_m ? 1.0f : 0.0f;
+  }
+  bool operator==(const LightPose& o) const {
+    return kind == o.kind && at == o.at && sheet_normal == o.sheet_normal && sheet_offset == o.sheet_offset &&
+           sheet_half_m == o.sheet_half_m;
+  }
+};
+LightPose PoseAt(const Light& light, double t_s);
+
 // Irradiance at point p (front normal n) per unit of a light's band
 // irradiance, shadowed by one Embree ray from just off the surface: cos / d^2
-// for a point light at `at`, cos for a directional light travelling along
-// `at`; 0 behind the surface or in shadow (E = I cos / d^2, Sec. 8.5). If
-// `rays` is given, it counts the shadow rays cast. Used by the coupled solver,
-// both transports, the comparison methods and the editor, so that all of them
-// light a point the same way.
-float UnitIrradiance(const SceneGeometry& geometry, Light::Kind kind, const Vec3f& at, const Vec3f& p,
-                     const Vec3f& n, std::uint64_t* rays = nullptr);
+// for a point light, cos for a directional light or inside a sheet's slab;
+// 0 behind the surface, in shadow or outside the sheet (E = I cos / d^2,
+// Sec. 8.5). If `rays` is given, it counts the shadow rays cast. Used by the
+// coupled solver, every transport, the comparison methods and the editor, so
+// that all of them light a point the same way.
+float UnitIrradiance(const SceneGeometry& geometry, const LightPose& light, const Vec3f& p, const Vec3f& n,
+                     std::uint64_t* rays = nullptr);
 
 // The pinhole camera at one moment: ray directions through image points in
 // pixels ((x + 0.5, y + 0.5) is the centre of pixel x, y).

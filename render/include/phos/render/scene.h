@@ -89,16 +89,45 @@ struct LightSchedule {
 };
 
 struct Light {
-  enum class Kind { kPoint, kDirectional } kind = Kind::kPoint;
+  // kSheet: a laser sheet (Fig. 8.17): a directional beam travelling along
+  // `direction`, confined to the slab of sheet_thickness_m about the plane
+  // with normal sheet_normal through PositionAt(t); a `path` sweeps it.
+  enum class Kind { kPoint, kDirectional, kSheet } kind = Kind::kPoint;
   std::string name;
   std::vector<double> E_per_band;  // spectrum * intensity integrated over the scene's bands
   double intensity = 1.0;
   LightSchedule schedule;
   RigidMotion motion;    // a point light moves with the translation of its keys
   Vec3 position = Vec3::Zero();  // point: object space of `motion`
-  Vec3 direction = Vec3(0, -1, 0);  // directional: the direction light travels
+  Vec3 direction = Vec3(0, -1, 0);  // directional, sheet: the direction light travels
+  Vec3 sheet_normal = Vec3(1, 0, 0);
+  double sheet_thickness_m = 0;
   Vec3 PositionAt(double t_s) const { return motion.At(t_s) * position; }
   Vec3 DirectionAt(double t_s) const { return (motion.At(t_s).linear() * direction).normalized(); }
+};
+
+// A participating medium on a regular grid (Sec. on volumes of the issue's
+// seeds): density per voxel (trilinear between voxel centres), extinction
+// sigma_t = density * sigma_t_per_m, single-scattering albedo per band and a
+// Henyey-Greenstein phase function. A phosphorescent medium (dust, a glowing
+// liquid) carries one rate-equation state per voxel where density > 0: its
+// particles charge under the light that reaches them and glow with radiance
+// Lp, so a ray gains sigma_t Lp per metre (an optically thick cloud looks
+// like a phosphor surface in the same state).
+struct Volume {
+  std::string name;
+  Vec3 min_m = Vec3::Zero(), max_m = Vec3::Ones();
+  int nx = 1, ny = 1, nz = 1;
+  std::vector<float> density;  // [(z * ny + y) * nx + x], >= 0
+  double sigma_t_per_m = 1.0;
+  std::vector<double> albedo;  // per band, single-scattering albedo in [0, 1]
+  double g = 0.0;              // Henyey-Greenstein asymmetry in (-1, 1)
+  std::shared_ptr<const Material> phosphor;
+  std::string phosphor_path;
+  bool unknown_ke_as_zero = false;
+  InitialState initial;
+  std::size_t voxel_count() const { return density.size(); }
+  Vec3 voxel_size_m() const { return (max_m - min_m).cwiseQuotient(Vec3(nx, ny, nz)); }
 };
 
 struct CameraKey {
@@ -133,6 +162,7 @@ struct Scene {
   SpectralGrid bands;
   std::vector<Object> objects;
   std::vector<Light> lights;
+  std::vector<Volume> volumes;
   Camera camera;
   double start_s = 0.0, end_s = 10.0, fps = 1.0;
   double texel_size_m = 0.0;  // default texel edge (0: scene diagonal / 200)

@@ -15,6 +15,7 @@
 //    costs what the first did.
 
 #include <cstddef>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -33,10 +34,13 @@ struct SolverStats {
   std::size_t glow_patches = 0;      // phosphor_irradiance: source/receiver patches
 };
 
+class VolumeMedia;
+
 class CoupledSolver {
  public:
   // Places the geometry at scene.start_s and sets the initial states.
   CoupledSolver(const Scene& scene, SceneGeometry& geometry);
+  ~CoupledSolver();
 
   // Advances every state from time_s() to t_s (>= time_s()), splitting steps at
   // light switches and, while something moves, at the scene's max_step_s.
@@ -57,6 +61,9 @@ class CoupledSolver {
   const std::vector<int>& excitation_bands(int slot) const { return groups_[slot].excitation_bands; }
   const std::vector<int>& emission_bands(int slot) const { return groups_[slot].emission_bands; }
   const SolverStats& stats() const { return stats_; }
+  // The scene's media (volume.h), with the phosphorescent voxels' states;
+  // null without volumes. Non-const: it caches the voxels' light per frame.
+  VolumeMedia* media() const { return media_.get(); }
 
   // The irradiance (per scene band) that the lights put on texel j of slot s now.
   std::vector<double> TexelIrradiance(int slot, std::size_t texel);
@@ -76,7 +83,7 @@ class CoupledSolver {
     // Per light: irradiance per unit of the light's band irradiance (geometry
     // only: cos / d^2 and visibility), and where it was computed.
     std::vector<std::vector<float>> unit_E;
-    std::vector<Eigen::Vector3d> unit_E_light_at;
+    std::vector<LightPose> unit_E_light_at;
     std::vector<std::uint64_t> unit_E_version;  // the geometry's version() it was computed at
     std::vector<Eigen::Vector3f> texel_position, texel_normal;  // at texel_version
     std::uint64_t texel_version = ~std::uint64_t{0};
@@ -118,6 +125,7 @@ class CoupledSolver {
   SolverStats stats_;
   GlowPatches glow_;
   bool glow_enabled_ = false;
+  std::unique_ptr<VolumeMedia> media_;
 };
 
 }  // namespace phos::render
