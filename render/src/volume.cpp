@@ -295,11 +295,13 @@ void VolumeMedia::StepVolume(int vi, double h) {
       if (levels_[l] <= 0) continue;
       const Light& light = scene_.lights[l];
       const std::vector<float>& unit = caches_[vi][l].unit;
+      // A voxel's half extent along the sheet's normal.
+      const float half = 0.5f * grid.voxel_m().cwiseProduct(poses_[l].sheet_normal).cwiseAbs().sum();
       for (std::size_t bi = 0; bi < p->excitation_bands.size(); ++bi) {
         const float scale = static_cast<float>(levels_[l] * light.E_per_band[p->excitation_bands[bi]]);
         float* E = p->E.data() + bi * n;
         for (std::size_t j = 0; j < n; ++j) {
-          const float u = unit[p->voxels[j]] * poses_[l].SheetMask(grid.VoxelCentre(p->voxels[j]));
+          const float u = unit[p->voxels[j]] * poses_[l].SheetCoverage(grid.VoxelCentre(p->voxels[j]), half);
           E[j] = (lit ? E[j] : 0.0f) + scale * u;
         }
       }

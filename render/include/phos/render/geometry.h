@@ -105,6 +105,16 @@ struct LightPose {
   float SheetMask(const Vec3f& p) const {
     return kind != Light::Kind::kSheet || std::fabs(sheet_normal.dot(p) - sheet_offset) <= sheet_half_m ? 1.0f : 0.0f;
   }
+  // The fraction of a cell around p, extending half_extent_m either way along
+  // the sheet's normal, that lies inside the slab (a voxel's share of a sweep
+  // without aliasing on the voxel grid).
+  float SheetCoverage(const Vec3f& p, float half_extent_m) const {
+    if (kind != Light::Kind::kSheet) return 1.0f;
+    if (!(half_extent_m > 0)) return SheetMask(p);
+    const float c = sheet_normal.dot(p) - sheet_offset;
+    const float overlap = std::min(c + half_extent_m, sheet_half_m) - std::max(c - half_extent_m, -sheet_half_m);
+    return std::clamp(overlap / (2 * half_extent_m), 0.0f, 1.0f);
+  }
   bool operator==(const LightPose& o) const {
     return kind == o.kind && at == o.at && sheet_normal == o.sheet_normal && sheet_offset == o.sheet_offset &&
            sheet_half_m == o.sheet_half_m;

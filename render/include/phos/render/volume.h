@@ -51,6 +51,7 @@ class VolumeGrid {
   bool Clip(const Vec3f& origin, const Vec3f& direction, float t_max, float* t0, float* t1) const;
   Vec3f VoxelCentre(std::size_t index) const;
   float min_voxel_m() const { return min_voxel_; }
+  const Vec3f& voxel_m() const { return voxel_; }
 
  private:
   const Volume* volume_;
