@@ -19,6 +19,7 @@
 #include "phos/render/renderer.h"
 #include "phos/render/scene.h"
 #include "phos/render/solver.h"
+#include "phos/render/volume.h"
 #include "phos/util/error.h"
 #include "phos/util/format.h"
 #include "phos/util/progress.h"
@@ -134,14 +135,24 @@ void Run(const RenderArgs& args) {
     const SolverStats& s = solver->stats();
     result["solver"] = {{"texels", s.texels}, {"lit_steps", s.steps}, {"dark_jumps", s.dark_jumps},
                         {"irradiance_updates", s.irradiance_updates}, {"shadow_rays", s.shadow_rays}};
+    if (const VolumeMedia* media = solver->media()) {
+      const VolumeStats& v = media->stats();
+      result["solver"]["volumes"] = {{"voxels", v.voxels}, {"phosphor_voxels", v.phosphor_voxels},
+                                     {"lit_voxels", v.lit_voxels}, {"lit_steps", v.steps},
+                                     {"dark_jumps", v.dark_jumps}, {"light_updates", v.light_updates}};
+    }
   }
   if (args.json) {
     std::cout << result.dump() << "\n";
     return;
   }
+  std::string states = "no phosphorescence";
+  if (solver) {
+    states = std::to_string(solver->stats().texels) + " phosphor texels";
+    if (solver->media()) states += ", " + std::to_string(solver->media()->stats().phosphor_voxels) + " phosphor voxels";
+  }
   std::printf("%s: %zu frame(s), %dx%d, transport %s, %s\n", scene.name.c_str(), times.size(), scene.camera.width,
-              scene.camera.height, TransportName(transport),
-              solver ? (std::to_string(solver->stats().texels) + " phosphor texels").c_str() : "no phosphorescence");
+              scene.camera.height, TransportName(transport), states.c_str());
   for (const auto& frame : frames)
     std::printf("  t = %8s s  %7.3f s  %s\n", FormatDouble(frame["t"].get<double>()).c_str(),
                 frame["seconds"].get<double>(), frame["png"].get<std::string>().c_str());

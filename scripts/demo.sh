@@ -66,6 +66,24 @@ rm -rf "$OUT/cornell-dss"
 # A moving 405 nm LED writes a fading trail into a painted floor.
 "$PHOS" render fixtures/scenes/light-trail.json --out "$OUT/light-trail" --times 1,3,5,7,9,10,12,15 \
   --contact-sheet "$OUT/light-trail.png"
+# Phosphorescent media: a dust cloud swept by laser sheets (Fig. 8.17) and a
+# glowing liquid charged from above (Fig. 8.18), one state per voxel.
+rm -rf "$OUT/dust-sheets" "$OUT/glowing-liquid"
+"$PHOS" render fixtures/scenes/dust-sheets.json --out "$OUT/dust-sheets" --times 1.5,3,3.55,5,8 \
+  --contact-sheet "$OUT/dust-sheets.png"
+"$PHOS" render fixtures/scenes/glowing-liquid.json --out "$OUT/glowing-liquid" --times 10,20,40,80 \
+  --contact-sheet "$OUT/glowing-liquid.png"
+
+# The gallery: every fixture scene's contact sheet on one page.
+{
+  echo '<!doctype html><meta charset="utf-8"><title>phos gallery</title>'
+  echo '<style>body{background:#222;color:#ddd;font-family:sans-serif;margin:2em}img{max-width:100%}</style>'
+  echo '<h1>phos: the fixture scenes (make demo)</h1>'
+  for sheet in still-life cornell cornell-dss light-trail dust-sheets glowing-liquid; do
+    scene=${sheet%-dss}
+    echo "<h2>$sheet</h2><p>fixtures/scenes/$scene.json</p><img src=\"$sheet.png\">"
+  done
+} > "$OUT/gallery.html.tmp" && mv "$OUT/gallery.html.tmp" "$OUT/gallery.html"
 
 echo "phos demo: simulated 11 Table 8.1 presets (60 s charge, 300 s dark, exact integrator)"
 echo "  curves (CSV: t,r_1,L_1..L_8):  $OUT/<material>.csv"
@@ -73,5 +91,6 @@ echo "  plots (SVG):                   $OUT/charged.svg, $OUT/decay-only.svg, $O
 echo "  a captured sample (4 protocols): $OUT/capture-orange/{lvf-calibration,spectrum,decay,excitation}"
 echo "    what it captured: $OUT/capture-orange/decay-frames.png (contact sheet), decay-curve.svg, excitation-curves.svg"
 echo "  the material fitted from it:  $OUT/fitted/orange.json, report $OUT/fitted/orange-report.html"
-echo "  rendered scenes (contact sheets): $OUT/still-life.png, $OUT/cornell.png, $OUT/cornell-dss.png, $OUT/light-trail.png"
-echo "    frames (EXR data, PNG, night-vision PNG): $OUT/still-life/, $OUT/cornell/, $OUT/light-trail/"
+echo "  rendered scenes (contact sheets): $OUT/still-life.png, $OUT/cornell.png, $OUT/cornell-dss.png, $OUT/light-trail.png,"
+echo "    $OUT/dust-sheets.png, $OUT/glowing-liquid.png; all on one page: $OUT/gallery.html"
+echo "    frames (EXR data, PNG, night-vision PNG): $OUT/still-life/, $OUT/cornell/, $OUT/light-trail/, ..."

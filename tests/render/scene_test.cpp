@@ -129,6 +129,49 @@ std::string ErrorAfterEdit(const std::function<void(nlohmann::json&)>& edit) {
       [&] { SceneFromJson(json, Fixture("scenes"), "cornell-phosphor.json"); });
 }
 
+// Loads the dust-sheets fixture (volumes, sheet lights) with one change.
+std::string MediaErrorAfterEdit(const std::function<void(nlohmann::json&)>& edit) {
+  nlohmann::json json = ReadJsonFile(Fixture("scenes/dust-sheets.json"));
+  edit(json);
+  return ErrorOfType<UserError>([&] { SceneFromJson(json, Fixture("scenes"), "dust-sheets.json"); });
+}
+
+TEST(Scenes, VolumesAndSheetsLoadAndBadOnesNameTheField) {
+  const Scene scene = LoadScene(Fixture("scenes/dust-sheets.json"));
+  ASSERT_EQ(scene.volumes.size(), 1u);
+  const Volume& dust = scene.volumes[0];
+  EXPECT_EQ(dust.voxel_count(), 48u * 28 * 32);
+  EXPECT_TRUE(dust.phosphor != nullptr);
+  // The ellipsoid leaves its corners empty; the puffs vary inside.
+  EXPECT_EQ(dust.density[0], 0.0f);
+  const float max_density = *std::max_element(dust.density.begin(), dust.density.end());
+  EXPECT_GT(max_density, 0.5f);
+  EXPECT_LE(max_density, 1.0f);
+  EXPECT_EQ(scene.lights[0].kind, Light::Kind::kSheet);
+  EXPECT_TRUE(scene.HasPhosphors());
+
+  EXPECT_EQ(MediaErrorAfterEdit([](nlohmann::json&) {}), "(no error)");
+  auto error_has = [](const std::string& error, const std::string& part) { return error.find(part) != std::string::npos; };
+  EXPECT_TRUE(error_has(MediaErrorAfterEdit([](nlohmann::json& j) { j["volumes"][0]["bounds"]["max"] = {-1, 1, 1}; }),
+                        "volumes[0].bounds.max"));
+  EXPECT_TRUE(error_has(MediaErrorAfterEdit([](nlohmann::json& j) { j["volumes"][0]["resolution"] = {4, 4}; }),
+                        "resolution"));
+  EXPECT_TRUE(error_has(MediaErrorAfterEdit([](nlohmann::json& j) { j["volumes"][0]["density"] = {1, 2, 3}; }),
+                        "density"));
+  EXPECT_TRUE(error_has(MediaErrorAfterEdit([](nlohmann::json& j) { j["volumes"][0]["density"]["shape"] = "torus"; }),
+                        "torus"));
+  EXPECT_TRUE(error_has(MediaErrorAfterEdit([](nlohmann::json& j) { j["volumes"][0]["g"] = 1.0; }), "volumes[0].g"));
+  EXPECT_TRUE(error_has(MediaErrorAfterEdit([](nlohmann::json& j) { j["volumes"][0]["sigma_t_per_m"] = -1; }),
+                        "sigma_t_per_m"));
+  EXPECT_TRUE(error_has(MediaErrorAfterEdit([](nlohmann::json& j) { j["volumes"][0].erase("albedo"); j["volumes"][0].erase("phosphor"); }),
+                        "albedo"));
+  EXPECT_TRUE(error_has(MediaErrorAfterEdit([](nlohmann::json& j) { j["lights"][0]["thickness_m"] = 0; }),
+                        "thickness_m"));
+  EXPECT_TRUE(error_has(MediaErrorAfterEdit([](nlohmann::json& j) { j["lights"][0]["normal"] = {0, 0, 0}; }), "normal"));
+  EXPECT_TRUE(error_has(MediaErrorAfterEdit([](nlohmann::json& j) { j["lights"][0]["type"] = "point"; }),
+                        "only a sheet light"));
+}
+
 TEST(Scenes, BadInputNamesTheFileAndField) {
   EXPECT_EQ(ErrorAfterEdit([](nlohmann::json&) {}), "(no error)");
   EXPECT_NE(ErrorAfterEdit([](nlohmann::json& j) { j["lights"][0]["colour"] = 1; }).find("lights[0]"), std::string::npos);
