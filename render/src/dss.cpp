@@ -258,7 +258,9 @@ DssResult SplatDeepScreenSpace(const GBuffer& g, const CameraRays& camera, const
               const std::size_t q = static_cast<std::size_t>(v) * W + u;
               if (g.object[q] < 0) continue;
               const float depth_ratio = std::fabs(g.depth[q] - g.depth[p]) / std::max(g.depth[p], 1e-6f);
-              const float w = std::max(0.0f, g.normal[q].dot(g.normal[p])) * (depth_ratio < 0.05f ? 1.0f : 0.0f);
+              // Points in a medium (no normal) are weighted by depth only.
+              const float normal_w = g.normal[p].squaredNorm() == 0 ? 1.0f : std::max(0.0f, g.normal[q].dot(g.normal[p]));
+              const float w = normal_w * (depth_ratio < 0.05f ? 1.0f : 0.0f);
               if (w <= 0) continue;
               wsum += w;
               osum += w * occlusion[l][q];

@@ -376,19 +376,50 @@ Image RenderBands(const SceneGeometry& geometry, const CoupledSolver* solver, co
       }
       total_rays += rays;
     });
+    // Only surfels that send light matter to either receiver (the occlusion
+    // is not used here): a dark scene's unlit floor costs nothing.
+    std::vector<Surfel> senders;
+    std::vector<float> sent;
+    for (std::size_t i = 0; i < surfels.size(); ++i) {
+      bool sends = false;
+      for (int b = 0; b < nb; ++b) sends = sends || radiosity[i * nb + b] > 0;
+      if (!sends) continue;
+      senders.push_back(surfels[i]);
+      sent.insert(sent.end(), &radiosity[i * nb], &radiosity[i * nb] + nb);
+    }
     const GBuffer g = RenderGBuffer(geometry, scene, geometry.time_s());
     DssOptions dss;
     dss.channels = nb;
-    const DssResult indirect = SplatDeepScreenSpace(g, camera, surfels, radiosity, dss);
+    const DssResult indirect = SplatDeepScreenSpace(g, camera, senders, sent, dss);
+    // The media between the camera and the surfaces dim the bounce as they
+    // dim the surface, and receive the surfels' light themselves.
+    IntervalMap intervals;
+    if (media) intervals = BuildIntervalMap(*media, g, camera, options.interval_layers);
     tbb::parallel_for(0, height, [&](int y) {
       for (int x = 0; x < width; ++x) {
         const std::size_t p = static_cast<std::size_t>(y) * width + x;
         if (g.object[p] < 0) continue;
         const Bands albedo = tracer.Albedo(g.object[p]);
+        const float T = media ? intervals.T_end[p] : 1.0f;
         float* out = image.at(x, y);
-        for (int b = 0; b < nb; ++b) out[b] += albedo[b] * indirect.irradiance[p * nb + b] / kPi;
+        for (int b = 0; b < nb; ++b) out[b] += T * albedo[b] * indirect.irradiance[p * nb + b] / kPi;
       }
     });
+    for (const GBuffer& layer : intervals.layer) {
+      if (senders.empty()) break;
+      const DssResult in_medium = SplatDeepScreenSpace(layer, camera, senders, sent, dss);
+      tbb::parallel_for(0, height, [&](int y) {
+        for (int x = 0; x < width; ++x) {
+          const std::size_t p = static_cast<std::size_t>(y) * width + x;
+          const int v = layer.object[p];
+          if (v < 0) continue;
+          const std::vector<double>& albedo = scene.volumes[v].albedo;
+          float* out = image.at(x, y);
+          for (int b = 0; b < nb; ++b)
+            out[b] += intervals.delta_T[p] * static_cast<float>(albedo[b]) * in_medium.irradiance[p * nb + b] / (4 * kPi);
+        }
+      });
+    }
   }
   if (stats) stats->rays = total_rays.load();
   return image;

@@ -274,6 +274,91 @@ float VolumeMedia::March(const Vec3f& origin, const Vec3f& direction, float t_ma
   return T;
 }
 
+float VolumeMedia::FindTransmittanceDepths(const Vec3f& origin, const Vec3f& direction, float t_max,
+                                           const float* targets, int count, float* distance, int* volume) const {
+  struct Segment {
+    float t0, t1;
+    int volume;
+  };
+  Segment segments[16];
+  int n_segments = 0;
+  for (std::size_t v = 0; v < grids_.size() && n_segments < 16; ++v) {
+    float t0, t1;
+    if (grids_[v].Clip(origin, direction, t_max, &t0, &t1)) segments[n_segments++] = {t0, t1, static_cast<int>(v)};
+  }
+  std::sort(segments, segments + n_segments, [](const Segment& a, const Segment& b) { return a.t0 < b.t0; });
+  for (int k = 0; k < count; ++k) volume[k] = -1;
+  int next = 0;  // the next target to reach
+  float tau = 0;
+  for (int s = 0; s < n_segments; ++s) {
+    const VolumeGrid& grid = grids_[segments[s].volume];
+    const float sigma_scale = static_cast<float>(grid.volume().sigma_t_per_m);
+    const float step = options_.step_scale * grid.min_voxel_m();
+    const float t0 = segments[s].t0, t1 = segments[s].t1;
+    const int n = std::max(1, static_cast<int>(std::ceil((t1 - t0) / step)));
+    const float ds = (t1 - t0) / static_cast<float>(n);
+    for (int k = 0; k < n; ++k) {
+      const float a = t0 + static_cast<float>(k) * ds;
+      const float dtau = grid.Density(origin + (a + 0.5f * ds) * direction) * sigma_scale * ds;
+      // Targets crossed inside this step: tau grows linearly across it.
+      while (next < count && dtau > 0 && tau + dtau >= -std::log(targets[next])) {
+        const float need = -std::log(targets[next]) - tau;
+        distance[next] = a + ds * std::clamp(need / dtau, 0.0f, 1.0f);
+        volume[next] = segments[s].volume;
+        ++next;
+      }
+      tau += dtau;
+    }
+  }
+  return std::exp(-tau);
+}
+
+IntervalMap BuildIntervalMap(const VolumeMedia& media, const GBuffer& g, const CameraRays& camera, int layers) {
+  IntervalMap map;
+  map.layers = std::clamp(layers, 1, 64);
+  const std::size_t n = static_cast<std::size_t>(g.width) * g.height;
+  map.layer.resize(map.layers);
+  for (GBuffer& layer : map.layer) {
+    layer.width = g.width;
+    layer.height = g.height;
+    layer.position.assign(n, Vec3f::Zero());
+    layer.normal.assign(n, Vec3f::Zero());  // a point in a medium: no normal
+    layer.depth.assign(n, 0.0f);
+    layer.object.assign(n, -1);
+  }
+  map.delta_T.assign(n, 0.0f);
+  map.T_end.assign(n, 1.0f);
+  tbb::parallel_for(tbb::blocked_range<int>(0, g.height), [&](const tbb::blocked_range<int>& rows) {
+    float targets[64], distance[64];
+    int volume[64];
+    for (int y = rows.begin(); y != rows.end(); ++y)
+      for (int x = 0; x < g.width; ++x) {
+        const std::size_t p = static_cast<std::size_t>(y) * g.width + x;
+        const Vec3f d = camera.Direction(x + 0.5f, y + 0.5f);
+        const float t_max = g.object[p] >= 0 ? g.depth[p] : 1e30f;
+        // Pass 1: the transmittance to the end; pass 2: the points.
+        const float T_end = media.FindTransmittanceDepths(camera.origin(), d, t_max, targets, 0, distance, volume);
+        map.T_end[p] = T_end;
+        if (!(T_end < 1.0f - 1e-6f)) continue;
+        const float dT = (1 - T_end) / static_cast<float>(map.layers);
+        // Interleaved gradient noise: a per-pixel offset of the points.
+        const float ign = 52.9829189f * std::fmod(0.06711056f * static_cast<float>(x) + 0.00583715f * static_cast<float>(y), 1.0f);
+        const float xi = ign - std::floor(ign);
+        for (int k = 0; k < map.layers; ++k) targets[k] = std::max(1 - (static_cast<float>(k) + xi) * dT, 1e-30f);
+        media.FindTransmittanceDepths(camera.origin(), d, t_max, targets, map.layers, distance, volume);
+        map.delta_T[p] = dT;
+        for (int k = 0; k < map.layers; ++k) {
+          if (volume[k] < 0) continue;
+          GBuffer& layer = map.layer[k];
+          layer.position[p] = camera.origin() + distance[k] * d;
+          layer.depth[p] = distance[k];
+          layer.object[p] = volume[k];
+        }
+      }
+  });
+  return map;
+}
+
 void VolumeMedia::Step(double t0_s, double t1_s) {
   const double h = t1_s - t0_s;
   if (!(h > 0)) return;

@@ -236,3 +236,92 @@ TEST(Media, ACloudShadowsTheFloorByItsTransmittance) {
 
 }  // namespace
 }  // namespace phos::render
+
+namespace phos::render {
+namespace {
+
+TEST(IntervalMap, ADiskLightsAPointInAMediumWithItsSolidAngle) {
+  // A disk of radius R at height h facing down with radiosity B: at a point
+  // of a medium on its axis at distance z the radiance over the sphere
+  // integrates to Phi = (B / pi) 2 pi (1 - z / sqrt(z^2 + R^2)).
+  const float R = 0.5f, h = 1.0f, B = 2.0f;
+  Mesh disk;
+  disk.positions.push_back(Eigen::Vector3f(0, h, 0));
+  const int sides = 96;
+  for (int i = 0; i < sides; ++i) {
+    const float angle = 2 * 3.14159265f * i / sides;
+    disk.positions.push_back(Eigen::Vector3f(R * std::cos(angle), h, R * std::sin(angle)));
+  }
+  for (int i = 0; i < sides; ++i) disk.triangles.push_back(Eigen::Vector3i(0, 1 + i, 1 + (i + 1) % sides));
+  Scene scene = testing::EmptyScene(33, 33);
+  scene.objects.push_back(testing::MakeObject("floor", MakeQuad(2, 2), 0.5));
+  scene.objects.push_back(testing::MakeObject("disk", disk, 0.5));
+  scene.camera.keys = {{0.0, Vec3(0, 0.5, 0), Vec3(0, 0, 0.0001)}};
+  scene.camera.up = Vec3(0, 0, 1);
+  SceneGeometry geometry(scene);
+  const CameraRays camera(scene, 0);
+  SurfelOptions options;
+  options.s = 0.03f;
+  const auto surfels = Surfelize(geometry, camera.origin(), 60, options);
+  std::vector<float> radiosity;
+  for (const Surfel& s : surfels) radiosity.push_back(s.object == 1 ? B : 0.0f);
+  const std::size_t centre = 16 * 33 + 16;
+  for (float y : {0.1f, 0.3f}) {
+    // Receivers: points in a medium (no normal) along each pixel's ray.
+    GBuffer g = RenderGBuffer(geometry, scene, 0);
+    for (std::size_t p = 0; p < g.normal.size(); ++p) g.normal[p] = Vec3f::Zero();
+    g.position[centre] = Vec3f(0, y, 0);
+    g.depth[centre] = 0.5f - y;
+    const double z = h - y, truth = 2 * B * (1 - z / std::sqrt(z * z + R * R));
+    const DssResult exact = GatherAllSurfels(g, surfels, radiosity, 1);
+    EXPECT_NEAR(exact.irradiance[centre], truth, 0.02 * truth) << y;
+    DssOptions dss_options;
+    dss_options.channels = 1;
+    const DssResult dss = SplatDeepScreenSpace(g, camera, surfels, radiosity, dss_options);
+    EXPECT_NEAR(dss.irradiance[centre], truth, 0.05 * truth) << y;
+  }
+}
+
+TEST(IntervalMap, AGlowingWallLightsTheMediumInFrontOfIt) {
+  // A glowing square (half-size a, radiance Lp) behind a slab of medium
+  // (z in [0.2, 0.4], sigma, albedo): the centre pixel sees
+  //   T Lp + albedo / (4 pi) int Lp Omega(z) sigma e^{-sigma (0.4 - z)} dz,
+  // Omega(z) = 4 asin(a^2 / (a^2 + z^2)) the square's solid angle on its axis.
+  const double a = 1.0, sigma = 2.0, albedo = 0.8, kr = 0.2, Lambda = 0.5, r0 = 0.5;
+  Scene scene = testing::EmptyScene(33, 33);
+  scene.camera.keys = {{0.0, Vec3(0, 0, 3), Vec3(0, 0, 0)}};
+  scene.camera.fov_deg = 20;
+  Object wall = testing::MakeObject("wall", MakeQuad(2 * a, 2 * a), 0.0,
+                                    testing::UniformPhosphor(kr, {0, 1, 0, 0, 0, 0, 0, 0}, {0, 0, 0, 0, Lambda, 0, 0, 0}));
+  RigidKey upright;
+  upright.rotate = Eigen::Quaterniond(Eigen::AngleAxisd(kPi / 2, Vec3::UnitX()));  // normal +y -> +z
+  wall.motion.keys = {upright};
+  wall.initial = {InitialState::Kind::kUniform, r0};
+  scene.objects.push_back(wall);
+  Volume slab = UniformBox(sigma, 12, albedo);
+  slab.min_m = Vec3(-0.3, -0.3, 0.2);
+  slab.max_m = Vec3(0.3, 0.3, 0.4);
+  scene.volumes.push_back(slab);
+  SceneGeometry geometry(scene);
+  CoupledSolver solver(scene, geometry);
+  FrameOptions options;
+  options.transport = Transport::kDss;
+  options.interval_layers = 16;
+  const Image image = RenderBands(geometry, &solver, options);
+  const double Lp = Lambda * kr * r0;
+  double in_medium = 0;
+  const int n = 4000;
+  for (int i = 0; i < n; ++i) {
+    const double z = 0.2 + 0.2 * (i + 0.5) / n;
+    in_medium += albedo / (4 * kPi) * Lp * 4 * std::asin(a * a / (a * a + z * z)) * sigma * std::exp(-sigma * (0.4 - z)) * 0.2 / n;
+  }
+  const double T = std::exp(-0.2 * sigma);
+  const float centre = image.at(16, 16)[4];
+  EXPECT_NEAR((centre - T * Lp) / in_medium, 1.0, 0.05);
+  // Without the interval map (direct), the medium only dims the wall.
+  options.transport = Transport::kDirect;
+  EXPECT_NEAR(RenderBands(geometry, &solver, options).at(16, 16)[4], T * Lp, 1e-3 * Lp);
+}
+
+}  // namespace
+}  // namespace phos::render

@@ -128,7 +128,10 @@ inline float SurfelFormFactor(const Vec3f& p, const Vec3f& n, const Surfel& s, f
   const float r2 = d.squaredNorm();
   if (r2 <= 0) return 0;
   const float r = std::sqrt(r2);
-  const float cos_p = n.dot(d) / r;
+  // A receiver with no normal is a point in a medium (volume.h's interval
+  // map): it receives from every direction, F_iso = A |cos_q| / (pi r^2 + A),
+  // and sum B F_iso is the radiance integrated over the sphere.
+  const float cos_p = n.squaredNorm() == 0 ? 1.0f : n.dot(d) / r;
   if (cos_p <= 0) return 0;
   const float cos_q = s.normal.dot(d) / r;  // > 0: the surfel faces away from p
   if (cos_q_out) *cos_q_out = cos_q;

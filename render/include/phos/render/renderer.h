@@ -14,8 +14,14 @@
 //  - dss: direct, plus one bounce of diffuse light through deep screen space
 //    (dss.h): every surfel sends what it reflects of the lights and what it
 //    glows (B = albedo E + pi Lp), so a glowing wall lights a box in the dark
-//    without a single path. Its speed and its error against the path tracer
-//    are in docs/render.md.
+//    without a single path; with media, the surfels also light the media
+//    through the transmittance interval map (volume.h). Its speed and its
+//    error against the path tracer are in docs/render.md.
+//
+// Media (volume.h) are ray marched on camera rays in every transport
+// (single scattering of the lights, the phosphorescent voxels' glow) and
+// shadow the lights; light scattered more than once inside them, and the
+// path tracer's bounce rays through them, are not modelled.
 
 #include <cstdint>
 #include <filesystem>
@@ -48,6 +54,7 @@ struct FrameOptions {
   int direct_spp = 1;  // direct: jittered samples per pixel
   int max_depth = 8;   // path: bounces
   unsigned seed = 1;
+  int interval_layers = 4;  // dss with media: points per pixel of the transmittance interval map
 };
 FrameOptions DefaultFrameOptions(const Scene& scene, Transport transport);
 

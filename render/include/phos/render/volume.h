@@ -25,6 +25,7 @@
 #include <vector>
 
 #include "phos/model/batch.h"
+#include "phos/render/dss.h"
 #include "phos/render/geometry.h"
 #include "phos/render/scene.h"
 
@@ -94,6 +95,14 @@ class VolumeMedia {
   // random number: noise instead of banding).
   float March(const Vec3f& origin, const Vec3f& direction, float t_max, float jitter, float* L) const;
 
+  // Points along the ray where the transmittance from its origin falls to
+  // each of `targets` (decreasing, in (0, 1)); the march's optical depth is
+  // linear inside a step, so the points are placed within it. Writes the
+  // distance and the volume of each point reached (volume -1: the ray left
+  // the media first) and returns the transmittance over [0, t_max).
+  float FindTransmittanceDepths(const Vec3f& origin, const Vec3f& direction, float t_max, const float* targets,
+                                int count, float* distance, int* volume) const;
+
   // The light (per unit of each light's band irradiance) reaching voxel j of
   // volume v from light l, as last prepared: transmittance, visibility, 1/d^2
   // for point lights. Particles see light from every side: no cosine.
@@ -134,5 +143,27 @@ class VolumeMedia {
   std::vector<std::unique_ptr<Phosphor>> phosphors_;  // per volume, null if not phosphorescent
   VolumeStats stats_;
 };
+
+// The transmittance interval map (surface-to-volume light, the volume paper
+// of the method's seeds): per pixel, `layers` points along the camera ray at
+// equal steps of transmittance, T(s_k) = 1 - (k + xi) dT with
+// dT = (1 - T_end) / layers and xi a per-pixel jitter. Since the in-scattered
+// radiance is  int T sigma_s J ds = int albedo J (-dT),  each point stands
+// for the same share dT of the ray's scattering: where the medium is dense
+// the points crowd, where it is empty there are none. Surfels are then
+// splatted onto the points as onto any receivers (dss.h; a point in a medium
+// has no normal: its receivers' normal is zero) and
+//
+//   L_pixel += sum_k dT albedo(s_k) Phi(s_k) / (4 pi),  Phi = sum B F_iso,
+//
+// with an isotropic phase function (Phi: the radiance arriving from every
+// direction, integrated over the sphere).
+struct IntervalMap {
+  int layers = 0;
+  std::vector<GBuffer> layer;  // receivers: object = volume index, -1 where the pixel has no point
+  std::vector<float> delta_T;  // per pixel
+  std::vector<float> T_end;    // per pixel: transmittance to the surface the pixel sees (or through)
+};
+IntervalMap BuildIntervalMap(const VolumeMedia& media, const GBuffer& gbuffer, const CameraRays& camera, int layers);
 
 }  // namespace phos::render
