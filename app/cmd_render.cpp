@@ -33,6 +33,8 @@ struct RenderArgs {
   int spp = 0, width = 0, height = 0;
   double exposure = 0;
   double night_vision_cd = 0;
+  double budget_s = 0, quality = 0;
+  bool transport_given = false;
   std::string contact_sheet;
   std::vector<std::string> materials;
 };
@@ -43,7 +45,13 @@ double Seconds(std::chrono::steady_clock::time_point since) {
 
 void Run(const RenderArgs& args) {
   using namespace phos::render;
-  const Transport transport = ParseTransport(args.transport);
+  Transport transport = ParseTransport(args.transport);
+  const bool choose = args.budget_s > 0 || args.quality > 0;
+  if (args.budget_s > 0 && args.quality > 0)
+    ThrowUserError("", "--budget-s", "give a time budget or a quality (--quality), not both");
+  if (choose && (args.transport_given || args.spp > 0))
+    ThrowUserError("", args.budget_s > 0 ? "--budget-s" : "--quality",
+                   "picks the transport and its samples itself: leave out --transport and --spp");
   Scene scene = LoadScene(args.scene);
   if (args.width > 0) scene.camera.width = args.width;
   if (args.height > 0) scene.camera.height = args.height;
@@ -83,6 +91,34 @@ void Run(const RenderArgs& args) {
   if (!args.no_phosphorescence && scene.HasPhosphors()) solver = std::make_unique<CoupledSolver>(scene, geometry);
   FrameOptions options = DefaultFrameOptions(scene, transport);
   if (args.spp > 0) options.spp = options.direct_spp = args.spp;
+  nlohmann::json choice_json;
+  std::string choice_line;
+  if (choose) {
+    // Measure each transport's cost on this scene at the first frame, then pick.
+    if (solver) solver->AdvanceTo(times.front());
+    else geometry.SetTime(times.front());
+    const TransportChoice choice =
+        ChooseTransport(MeasureTransportCandidates(geometry, solver.get(), options), args.budget_s, args.quality);
+    options = choice.chosen.options;
+    transport = options.transport;
+    nlohmann::json candidates = nlohmann::json::array();
+    std::string costs;
+    for (const TransportCandidate& c : choice.candidates) {
+      candidates.push_back({{"transport", c.label}, {"estimated_s", c.estimated_s}, {"expected_ssim", c.expected_ssim}});
+      if (c.label != "path 16 spp" && c.label != "path 256 spp" && c.label != "path 1024 spp")
+        costs += (costs.empty() ? "" : ", ") + c.label + " " + FormatShort(c.estimated_s, 2) + " s";
+    }
+    choice_json = {{"chosen", choice.chosen.label}, {"estimated_s", choice.chosen.estimated_s},
+                   {"expected_ssim", choice.chosen.expected_ssim}, {"fits", choice.fits}, {"candidates", candidates}};
+    if (args.budget_s > 0) choice_json["budget_s"] = args.budget_s;
+    else choice_json["quality"] = args.quality;
+    choice_line = std::string(args.budget_s > 0 ? "budget " + FormatShort(args.budget_s) + " s per frame"
+                                                : "quality (SSIM) " + FormatShort(args.quality)) +
+                  ": " + choice.chosen.label + " (estimated " + FormatShort(choice.chosen.estimated_s, 2) +
+                  " s, expected SSIM " + FormatShort(choice.chosen.expected_ssim, 3) + ")" +
+                  (choice.fits ? "" : args.budget_s > 0 ? " - nothing fits, the fastest" : " - nothing reaches it, the best") +
+                  "; measured: " + costs;
+  }
 
   nlohmann::json frames = nlohmann::json::array();
   std::vector<Image> sheet_frames;
@@ -131,6 +167,7 @@ void Run(const RenderArgs& args) {
   nlohmann::json result = {{"scene", args.scene}, {"transport", TransportName(transport)},
                            {"phosphorescence", solver != nullptr}, {"width", scene.camera.width},
                            {"height", scene.camera.height}, {"frames", frames}};
+  if (choose) result["transport_choice"] = choice_json;
   if (solver) {
     const SolverStats& s = solver->stats();
     result["solver"] = {{"texels", s.texels}, {"lit_steps", s.steps}, {"dark_jumps", s.dark_jumps},
@@ -153,6 +190,7 @@ void Run(const RenderArgs& args) {
   }
   std::printf("%s: %zu frame(s), %dx%d, transport %s, %s\n", scene.name.c_str(), times.size(), scene.camera.width,
               scene.camera.height, TransportName(transport), states.c_str());
+  if (choose) std::printf("  transport for the %s\n", choice_line.c_str());
   for (const auto& frame : frames)
     std::printf("  t = %8s s  %7.3f s  %s\n", FormatDouble(frame["t"].get<double>()).c_str(),
                 frame["seconds"].get<double>(), frame["png"].get<std::string>().c_str());
@@ -167,8 +205,10 @@ void RegisterRender(CLI::App& app) {
       "Render a scene's frames: the coupled solver charges and drains every phosphorescent\n"
       "texel through the scene's light schedule, then each frame is rendered per band and\n"
       "written as linear EXR (R,G,B and one channel per band) and tone-mapped PNG.\n"
-      "Transports: direct (lights + glow, fast) or path (spectral path tracer, the reference:\n"
-      "glowing surfaces light the others). Scenes: phos.scene/1, see docs/render.md.");
+      "Transports: direct (lights + glow, fast), path (spectral path tracer, the reference:\n"
+      "glowing surfaces light the others) or dss (direct + one bounce through deep screen space);\n"
+      "--budget-s or --quality picks one. Media (volumes) are ray marched in every transport.\n"
+      "Scenes: phos.scene/1, see docs/render.md.");
   cmd->add_option("scene", args->scene, "Scene file (phos.scene/1)")->required();
   cmd->add_option("--out", args->out, "Folder for frame-NNNN.exr and frame-NNNN.png")->required();
   cmd->add_option("--times", args->times,
@@ -176,7 +216,16 @@ void RegisterRender(CLI::App& app) {
   cmd->add_option("--transport", args->transport,
                   "direct (fast, no interreflection), path (the reference: a spectral path tracer) or dss\n"
                   "(direct plus one diffuse bounce through deep screen space; docs/render.md)")
-      ->default_str("direct");
+      ->default_str("direct")
+      ->each([args](const std::string&) { args->transport_given = true; });
+  cmd->add_option("--budget-s", args->budget_s,
+                  "Pick the transport for a time budget per frame: each is timed on this scene, and the best\n"
+                  "expected quality that fits is used (direct, dss, path 4 to 1024 spp; the qualities are the\n"
+                  "trade study's SSIM against the path tracer, docs/dss-trade.md)")
+      ->check(CLI::PositiveNumber);
+  cmd->add_option("--quality", args->quality,
+                  "Pick the cheapest transport whose expected SSIM reaches this (0 to 1; e.g. 0.9)")
+      ->check(CLI::Range(1e-9, 1.0));
   cmd->add_flag("--no-phosphorescence", args->no_phosphorescence,
                 "Render phosphors as plain diffuse surfaces (no states, no glow)");
   cmd->add_option("--spp", args->spp, "Samples per pixel (default: the scene's render.spp or direct_spp)")

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <memory>
 
@@ -423,6 +424,58 @@ Image RenderBands(const SceneGeometry& geometry, const CoupledSolver* solver, co
   }
   if (stats) stats->rays = total_rays.load();
   return image;
+}
+
+std::vector<TransportCandidate> MeasureTransportCandidates(const SceneGeometry& geometry, const CoupledSolver* solver,
+                                                          const FrameOptions& base) {
+  auto time_of = [&](const FrameOptions& options) {
+    const auto start = std::chrono::steady_clock::now();
+    RenderBands(geometry, solver, options);
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  };
+  std::vector<TransportCandidate> candidates;
+  FrameOptions direct = base;
+  direct.transport = Transport::kDirect;
+  direct.direct_spp = 1;
+  candidates.push_back({direct, 0.44, time_of(direct), "direct"});
+  FrameOptions dss = direct;
+  dss.transport = Transport::kDss;
+  candidates.push_back({dss, 0.90, time_of(dss), "dss"});
+  FrameOptions path = base;
+  path.transport = Transport::kPath;
+  path.spp = 1;
+  const double path_1spp_s = time_of(path);
+  for (const auto& [spp, ssim] : std::vector<std::pair<int, double>>{{4, 0.59}, {16, 0.80}, {64, 0.93}, {256, 0.965}, {1024, 0.9825}}) {
+    path.spp = spp;
+    candidates.push_back({path, ssim, path_1spp_s * spp, "path " + std::to_string(spp) + " spp"});
+  }
+  return candidates;
+}
+
+TransportChoice ChooseTransport(std::vector<TransportCandidate> candidates, double budget_s, double min_ssim) {
+  PHOS_CHECK(!candidates.empty());
+  TransportChoice choice;
+  choice.candidates = candidates;
+  const TransportCandidate* best = nullptr;
+  if (budget_s > 0) {
+    for (const TransportCandidate& c : candidates)
+      if (c.estimated_s <= budget_s && (!best || c.expected_ssim > best->expected_ssim)) best = &c;
+    if (!best) {  // nothing fits: the fastest
+      choice.fits = false;
+      for (const TransportCandidate& c : candidates)
+        if (!best || c.estimated_s < best->estimated_s) best = &c;
+    }
+  } else {
+    for (const TransportCandidate& c : candidates)
+      if (c.expected_ssim >= min_ssim && (!best || c.estimated_s < best->estimated_s)) best = &c;
+    if (!best) {  // nothing is that good: the best there is
+      choice.fits = false;
+      for (const TransportCandidate& c : candidates)
+        if (!best || c.expected_ssim > best->expected_ssim) best = &c;
+    }
+  }
+  choice.chosen = *best;
+  return choice;
 }
 
 std::vector<double> BandToXyzWeights(const SpectralGrid& grid) {

@@ -151,6 +151,12 @@ VolumeMedia::VolumeMedia(const Scene& scene, const SceneGeometry& geometry, Marc
 
 VolumeMedia::~VolumeMedia() = default;
 
+void VolumeMedia::set_march_options(const MarchOptions& options) {
+  options_ = options;
+  for (auto& per_light : caches_)
+    for (LightCache& cache : per_light) cache.valid = false;
+}
+
 float VolumeMedia::MediaOpticalDepth(const Vec3f& origin, const Vec3f& direction, float t_max) const {
   float tau = 0;
   for (const VolumeGrid& grid : grids_) {

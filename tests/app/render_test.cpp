@@ -62,6 +62,34 @@ TEST(RenderCommand, PathTransportRenders) {
   EXPECT_GT(ImageSum((dir / "frame-0000.exr").string()), 0.0);
 }
 
+TEST(RenderCommand, ABudgetPicksTheBestTransportThatFits) {
+  TempDir dir;
+  auto run = [&](const std::string& extra) {
+    const CommandResult r = RunPhos("render " + kCornell + " --out " + dir.path().string() +
+                                    " --times 40 --width 10 --height 10 --json " + extra);
+    EXPECT_EQ(r.exit_code, 0) << r.err;
+    return nlohmann::json::parse(r.out);
+  };
+  // Nothing fits a nanosecond: the fastest (direct), said so.
+  const nlohmann::json tiny = run("--budget-s 1e-9");
+  EXPECT_EQ(tiny["transport"], "direct");
+  EXPECT_FALSE(tiny["transport_choice"]["fits"].get<bool>());
+  // An hour fits everything: the best expected quality.
+  const nlohmann::json hour = run("--budget-s 3600");
+  EXPECT_EQ(hour["transport_choice"]["chosen"], "path 1024 spp");
+  EXPECT_EQ(hour["transport"], "path");
+  // In between, the choice fits its budget and nothing better does.
+  const nlohmann::json candidates = hour["transport_choice"]["candidates"];
+  const double dss_s = candidates[1]["estimated_s"].get<double>();
+  const nlohmann::json mid = run("--budget-s " + std::to_string(dss_s * 1.5));
+  EXPECT_LE(mid["transport_choice"]["estimated_s"].get<double>(), dss_s * 1.5 * 1.0001);
+  EXPECT_GE(mid["transport_choice"]["expected_ssim"].get<double>(), 0.9 - 1e-9);
+  // A quality asks for the cheapest transport that reaches it.
+  const nlohmann::json good = run("--quality 0.95");
+  EXPECT_GE(good["transport_choice"]["expected_ssim"].get<double>(), 0.95);
+  EXPECT_EQ(good["transport"], "path");
+}
+
 TEST(RenderCommand, BadInputIsOneLineAndExitTwo) {
   TempDir dir;
   const std::string out = " --out " + dir.path().string();
@@ -70,6 +98,9 @@ TEST(RenderCommand, BadInputIsOneLineAndExitTwo) {
   EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + kCornell + out + " --times 5,x"), "--times"));
   EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + kCornell + out + " --times -1"), "before the scene's start"));
   EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + kCornell + out + " --spp 0"), "--spp"));
+  EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + kCornell + out + " --budget-s 1 --transport dss"), "--budget-s"));
+  EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + kCornell + out + " --budget-s 1 --quality 0.5"), "not both"));
+  EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + kCornell + out + " --quality 2"), "--quality"));
   WriteText(dir / "bad.json", R"({"schema": "phos.scene/1", "camera": {"position": [0,0,0], "look_at": [0,0,1]},
     "objects": [{"shape": {"type": "cone"}, "albedo": 0.5}], "lights": []})");
   EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + (dir / "bad.json").string() + out), "objects[0].shape.type"));

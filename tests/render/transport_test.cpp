@@ -198,5 +198,27 @@ TEST(Transport, DeepScreenSpaceBringsTheGlowsBounceCloseToThePathTracer) {
   for (std::size_t i = 0; i < dss.pixels.size(); ++i) EXPECT_GE(dss.pixels[i], direct.pixels[i] - 1e-7f);
 }
 
+TEST(Transport, ChoosingForABudgetOrAQuality) {
+  // Synthetic costs: the choice depends only on them and the expected qualities.
+  std::vector<TransportCandidate> c(4);
+  c[0].label = "direct", c[0].estimated_s = 0.01, c[0].expected_ssim = 0.44;
+  c[1].label = "dss", c[1].estimated_s = 0.05, c[1].expected_ssim = 0.90;
+  c[2].label = "path 16 spp", c[2].estimated_s = 0.2, c[2].expected_ssim = 0.80;
+  c[3].label = "path 64 spp", c[3].estimated_s = 0.8, c[3].expected_ssim = 0.93;
+  EXPECT_EQ(ChooseTransport(c, 0.001, 0).chosen.label, "direct");
+  EXPECT_FALSE(ChooseTransport(c, 0.001, 0).fits);
+  EXPECT_EQ(ChooseTransport(c, 0.03, 0).chosen.label, "direct");
+  EXPECT_EQ(ChooseTransport(c, 0.5, 0).chosen.label, "dss");  // path 16 fits too but looks worse
+  EXPECT_EQ(ChooseTransport(c, 1.0, 0).chosen.label, "path 64 spp");
+  EXPECT_EQ(ChooseTransport(c, 0, 0.85).chosen.label, "dss");  // the cheapest of >= 0.85
+  EXPECT_EQ(ChooseTransport(c, 0, 0.92).chosen.label, "path 64 spp");
+  const TransportChoice unreachable = ChooseTransport(c, 0, 0.99);
+  EXPECT_FALSE(unreachable.fits);
+  EXPECT_EQ(unreachable.chosen.label, "path 64 spp");  // the best there is
+  // If dss became slower than the path tracer at 64 spp, a quality of 0.85 takes the path tracer.
+  c[1].estimated_s = 2.0;
+  EXPECT_EQ(ChooseTransport(c, 0, 0.85).chosen.label, "path 64 spp");
+}
+
 }  // namespace
 }  // namespace phos::render

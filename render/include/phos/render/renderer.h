@@ -58,6 +58,31 @@ struct FrameOptions {
 };
 FrameOptions DefaultFrameOptions(const Scene& scene, Transport transport);
 
+// Choosing a transport for the user's budget. The candidates are direct,
+// dss and the path tracer at 4 to 1024 spp; each carries the perceptual
+// quality (mean SSIM against the path tracer at 1024 spp) that the trade
+// study measured for the glow's light in the Cornell box after lights-out
+// (docs/dss-trade.md: direct 0.44, dss 0.90, path 4/16/64 spp 0.59/0.80/0.93;
+// beyond 64 spp 1 - SSIM is taken to halve per 4x samples, as noise does).
+// Costs are measured on this scene now: one frame each of direct, dss and
+// the path tracer at 1 spp (path time scales with spp).
+struct TransportCandidate {
+  FrameOptions options;
+  double expected_ssim = 0;
+  double estimated_s = 0;
+  std::string label;  // "direct", "dss", "path 64 spp"
+};
+struct TransportChoice {
+  TransportCandidate chosen;
+  std::vector<TransportCandidate> candidates;
+  bool fits = true;  // false: nothing met the budget or the quality; the nearest was chosen
+};
+std::vector<TransportCandidate> MeasureTransportCandidates(const SceneGeometry& geometry, const CoupledSolver* solver,
+                                                          const FrameOptions& base);
+// Best expected quality within budget_s seconds per frame (budget_s > 0), or
+// the cheapest candidate of at least min_ssim (min_ssim > 0).
+TransportChoice ChooseTransport(std::vector<TransportCandidate> candidates, double budget_s, double min_ssim);
+
 struct FrameStats {
   std::uint64_t rays = 0;  // every ray cast (primary, shadow, bounce)
 };

@@ -79,6 +79,9 @@ class VolumeMedia {
   VolumeMedia(const Scene& scene, const SceneGeometry& geometry, MarchOptions options = {});
   ~VolumeMedia();
   bool empty() const { return grids_.empty(); }
+  // The march's step (studies trade it against error); the voxels' light is
+  // recomputed with it at the next PrepareLighting.
+  void set_march_options(const MarchOptions& options);
   const std::vector<VolumeGrid>& grids() const { return grids_; }
 
   // Brings the voxels' light up to date for the lights' poses at t_s (call
