@@ -87,7 +87,17 @@ namespace {
 
 // Accumulates one surfel into one receiver pixel, weighted.
 inline void Accumulate(const GBuffer& g, std::size_t p, const Surfel& s, const float* B, int channels, float weight,
-                       float* occlusion, float* irradiance) {
+                       float* occlusion, float* irradiance, const std::vector<Dipole>* dipoles = nullptr,
+                       const std::vector<float>* near_m = nullptr) {
+  if (dipoles) {
+    // Subsurface: light that entered at the surfel leaves at the receiver.
+    if (g.object[p] != s.object) return;
+    const float r = (s.position - g.position[p]).norm();
+    const Dipole* d = &(*dipoles)[static_cast<std::size_t>(s.object) * channels];
+    const float near = near_m ? (*near_m)[p] : 0.0f;
+    for (int c = 0; c < channels; ++c) irradiance[p * channels + c] += weight * d[c].SurfelKernel(r, s.area, near) * B[c];
+    return;
+  }
   float cos_q = 0;
   const float F = SurfelFormFactor(g.position[p], g.normal[p], s, &cos_q);
   if (F <= 0) return;
@@ -100,7 +110,7 @@ inline void Accumulate(const GBuffer& g, std::size_t p, const Surfel& s, const f
 }  // namespace
 
 DssResult GatherAllSurfels(const GBuffer& g, const std::vector<Surfel>& surfels, const std::vector<float>& radiosity,
-                           int channels) {
+                           int channels, const std::vector<Dipole>* dipoles, const std::vector<float>* near_m) {
   const auto started = std::chrono::steady_clock::now();
   DssResult r;
   r.width = g.width;
@@ -114,7 +124,7 @@ DssResult GatherAllSurfels(const GBuffer& g, const std::vector<Surfel>& surfels,
       if (g.object[p] < 0) continue;
       for (std::size_t s = 0; s < surfels.size(); ++s)
         Accumulate(g, p, surfels[s], channels > 0 ? &radiosity[s * channels] : nullptr, channels, 1.0f,
-                   r.occlusion.data(), r.irradiance.data());
+                   r.occlusion.data(), r.irradiance.data(), dipoles, near_m);
     }
   });
   for (float& o : r.occlusion) o = std::min(o, 1.0f);
@@ -148,8 +158,17 @@ DssResult SplatDeepScreenSpace(const GBuffer& g, const CameraRays& camera, const
     for (std::size_t i = range.begin(); i != range.end(); ++i) {
       const Surfel& s = surfels[i];
       Reach& R = reach[i];
-      // getMaxDist: F <= A / (pi r^2) < epsilon beyond this distance.
+      // getMaxDist: F <= A / (pi r^2) < epsilon beyond this distance; for
+      // the dipole, where Rd(r) A falls below epsilon (per unit of E).
       R.r_max = std::sqrt(s.area / (kPi * options.epsilon));
+      if (options.dipoles) {
+        R.r_max = 0;
+        for (int c = 0; c < C; ++c) {
+          const float E = radiosity[i * C + c];
+          if (E > 0)
+            R.r_max = std::max(R.r_max, (*options.dipoles)[static_cast<std::size_t>(s.object) * C + c].MaxDistance(s.area * E, options.epsilon));
+        }
+      }
       float x = 0, y = 0, depth = 0;
       const bool in_front = camera.Project(s.position, &x, &y, &depth);
       // R_0 pixels at the surfel's depth, in world units.
@@ -217,7 +236,7 @@ DssResult SplatDeepScreenSpace(const GBuffer& g, const CameraRays& camera, const
               if (g.object[p] < 0) continue;
               const float r2 = (s.position - g.position[p]).squaredNorm();
               if (r2 < inner2 || r2 >= outer2) continue;
-              Accumulate(g, p, s, B, C, weight, occlusion[l].data(), irradiance[l].data());
+              Accumulate(g, p, s, B, C, weight, occlusion[l].data(), irradiance[l].data(), options.dipoles, options.near_m);
               ++local;
             }
         }
@@ -260,7 +279,8 @@ DssResult SplatDeepScreenSpace(const GBuffer& g, const CameraRays& camera, const
               const float depth_ratio = std::fabs(g.depth[q] - g.depth[p]) / std::max(g.depth[p], 1e-6f);
               // Points in a medium (no normal) are weighted by depth only.
               const float normal_w = g.normal[p].squaredNorm() == 0 ? 1.0f : std::max(0.0f, g.normal[q].dot(g.normal[p]));
-              const float w = normal_w * (depth_ratio < 0.05f ? 1.0f : 0.0f);
+              const bool same = !options.dipoles || g.object[q] == g.object[p];  // translucency stays in its object
+              const float w = normal_w * (depth_ratio < 0.05f && same ? 1.0f : 0.0f);
               if (w <= 0) continue;
               wsum += w;
               osum += w * occlusion[l][q];

@@ -13,6 +13,7 @@
 #include <tbb/parallel_for.h>
 
 #include "phos/render/dss.h"
+#include "phos/render/subsurface.h"
 #include "phos/render/volume.h"
 #include "phos/util/error.h"
 #include "phos/util/format.h"
@@ -184,6 +185,9 @@ class Tracer {
     const float T = Media(origin, direction, hit, jitter, Lm);
     if (!hit) return Lm;
     AddEmission(hit, L);
+    // A translucent object under dss: its reflection comes from the dipole
+    // splat instead (RenderBands).
+    if (options_.transport == Transport::kDss && scene_.objects[hit.object].subsurface) return Lm + T * L;
     Bands E;
     DirectIrradiance(hit.position, hit.front ? hit.normal : Vec3f(-hit.normal), E, rays);
     L += Albedo(hit.object) * E / kPi;  // Lambertian reflection (Eq. 8.2's reflected term)
@@ -406,6 +410,56 @@ Image RenderBands(const SceneGeometry& geometry, const CoupledSolver* solver, co
         for (int b = 0; b < nb; ++b) out[b] += T * albedo[b] * indirect.irradiance[p * nb + b] / kPi;
       }
     });
+    // Translucent objects: the lights' irradiance on their surfels, carried
+    // beneath the surface by the dipole (subsurface.h) to the pixels of the
+    // same object.
+    std::vector<Dipole> dipoles(scene.objects.size() * nb);
+    bool translucent = false;
+    for (std::size_t o = 0; o < scene.objects.size(); ++o) {
+      const auto& sss = scene.objects[o].subsurface;
+      if (!sss) continue;
+      translucent = true;
+      for (int b = 0; b < nb; ++b)
+        dipoles[o * nb + b] = Dipole::From(sss->sigma_a_per_m[b], sss->sigma_s_prime_per_m[b], sss->eta);
+    }
+    if (translucent) {
+      std::vector<Surfel> entering;
+      std::vector<float> E_in;
+      Bands E;
+      std::uint64_t rays = 0;
+      for (const Surfel& s : surfels) {
+        if (!scene.objects[s.object].subsurface) continue;
+        tracer.DirectIrradiance(s.position, s.normal, E, rays);
+        if (E.maxCoeff() <= 0) continue;
+        entering.push_back(s);
+        E_in.insert(E_in.end(), E.data(), E.data() + nb);
+      }
+      total_rays += rays;
+      // The near field of each receiver (two target surfel radii at its
+      // depth) from its own irradiance in closed form; the surfels send the rest.
+      const float tan_half = std::tan(static_cast<float>(scene.camera.fov_deg) * kPi / 360.0f);
+      std::vector<float> near(g.depth.size(), 0.0f);
+      for (std::size_t p = 0; p < near.size(); ++p) near[p] = 2 * SurfelOptions{}.s * tan_half * g.depth[p];
+      DssOptions sss_options = dss;
+      sss_options.dipoles = &dipoles;
+      sss_options.near_m = &near;
+      const DssResult exitance = SplatDeepScreenSpace(g, camera, entering, E_in, sss_options);
+      tbb::parallel_for(0, height, [&](int y) {
+        std::uint64_t rays = 0;
+        Bands E;
+        for (int x = 0; x < width; ++x) {
+          const std::size_t p = static_cast<std::size_t>(y) * width + x;
+          if (g.object[p] < 0 || !scene.objects[g.object[p]].subsurface) continue;
+          const float T = media ? intervals.T_end[p] : 1.0f;
+          tracer.DirectIrradiance(g.position[p], g.normal[p], E, rays);
+          const Dipole* d = &dipoles[static_cast<std::size_t>(g.object[p]) * nb];
+          float* out = image.at(x, y);
+          for (int b = 0; b < nb; ++b)
+            out[b] += T * (E[b] * static_cast<float>(d[b].AnnulusIntegral(0, near[p])) + exitance.irradiance[p * nb + b]) / kPi;
+        }
+        total_rays += rays;
+      });
+    }
     for (const GBuffer& layer : intervals.layer) {
       if (senders.empty()) break;
       const DssResult in_medium = SplatDeepScreenSpace(layer, camera, senders, sent, dss);

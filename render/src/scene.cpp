@@ -7,6 +7,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "phos/render/subsurface.h"
 #include "phos/util/error.h"
 #include "phos/util/format.h"
 #include "phos/util/json.h"
@@ -367,7 +368,7 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
   for (std::size_t i = 0; i < objects.ArraySize(); ++i) {
     const JsonField o = objects.At(i);
     o.RejectUnknownKeys({"name", "mesh", "group", "shape", "albedo", "phosphor", "unknown_ke", "initial",
-                         "texel_size_m", "texels", "uv_resolution", "transform", "animation"});
+                         "texel_size_m", "texels", "uv_resolution", "transform", "animation", "subsurface"});
     Object object;
     object.name = o.Has("name") ? o["name"].NonEmptyString() : "object " + std::to_string(i);
     if (o.Has("mesh") == o.Has("shape")) o.Fail("give exactly one of 'mesh' (a file) or 'shape'");
@@ -384,7 +385,24 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
     if (object.mesh->triangles.empty()) o.Fail("the mesh has no triangles");
     object.motion = ReadMotion(o);
     ReadPhosphor(o, base_dir, scene.bands, materials, object.phosphor, object.phosphor_path);
-    if (o.Has("albedo")) {
+    if (auto f = o.Optional("subsurface")) {
+      f->RejectUnknownKeys({"sigma_a_per_m", "sigma_s_prime_per_m", "eta"});
+      if (o.Has("albedo")) o["albedo"].Fail("a translucent object's albedo follows from 'subsurface'; give one of them");
+      auto per_band = [&](const JsonField& field, double lower) {
+        if (field.value().is_number()) return std::vector<double>(nb, field.NumberInRange(lower, 1e9));
+        std::vector<double> values = field.NumberArray(static_cast<std::size_t>(nb), lower);
+        for (std::size_t b = 0; b < values.size(); ++b)
+          if (!(values[b] > 0)) field.At(b).Fail("must be above zero");
+        return values;
+      };
+      Subsurface sss;
+      sss.sigma_a_per_m = per_band((*f)["sigma_a_per_m"], 1e-9);
+      sss.sigma_s_prime_per_m = per_band((*f)["sigma_s_prime_per_m"], 1e-9);
+      if (f->Has("eta")) sss.eta = (*f)["eta"].NumberInRange(1.0, 3.0);
+      for (int b = 0; b < nb; ++b)
+        object.albedo.push_back(Dipole::From(sss.sigma_a_per_m[b], sss.sigma_s_prime_per_m[b], sss.eta).TotalReflectance());
+      object.subsurface = sss;
+    } else if (o.Has("albedo")) {
       object.albedo = ReadAlbedo(o["albedo"], nb);
     } else if (object.phosphor && object.phosphor->albedo) {
       object.albedo = *object.phosphor->albedo;

@@ -12,6 +12,7 @@
 #include "phos/render/geometry.h"
 #include "phos/render/solver.h"
 #include "phos/render/scene.h"
+#include "phos/render/subsurface.h"
 #include "phos/util/error.h"
 #include "phos/util/json.h"
 #include "render/scene_util.h"
@@ -170,6 +171,26 @@ TEST(Scenes, VolumesAndSheetsLoadAndBadOnesNameTheField) {
   EXPECT_TRUE(error_has(MediaErrorAfterEdit([](nlohmann::json& j) { j["lights"][0]["normal"] = {0, 0, 0}; }), "normal"));
   EXPECT_TRUE(error_has(MediaErrorAfterEdit([](nlohmann::json& j) { j["lights"][0]["type"] = "point"; }),
                         "only a sheet light"));
+}
+
+TEST(Scenes, TranslucentObjectsTakeTheDipolesReflectanceAsAlbedo) {
+  const Scene scene = LoadScene(Fixture("scenes/translucent-shadow.json"));
+  const Object& wax = scene.objects[1];
+  ASSERT_TRUE(wax.subsurface.has_value());
+  for (int b = 0; b < 8; ++b)
+    EXPECT_DOUBLE_EQ(wax.albedo[b], Dipole::From(wax.subsurface->sigma_a_per_m[b], wax.subsurface->sigma_s_prime_per_m[b],
+                                                  wax.subsurface->eta).TotalReflectance());
+  EXPECT_LT(wax.albedo[0], wax.albedo[7]);  // absorbs blue: a warm wax
+  auto edit = [](const std::function<void(nlohmann::json&)>& change) {
+    nlohmann::json json = ReadJsonFile(Fixture("scenes/translucent-shadow.json"));
+    change(json);
+    return ErrorOfType<UserError>([&] { SceneFromJson(json, Fixture("scenes"), "translucent-shadow.json"); });
+  };
+  EXPECT_NE(edit([](nlohmann::json& j) { j["objects"][1]["albedo"] = 0.5; }).find("objects[1].albedo"), std::string::npos);
+  EXPECT_NE(edit([](nlohmann::json& j) { j["objects"][1]["subsurface"]["sigma_a_per_m"] = 0; }).find("sigma_a_per_m"),
+            std::string::npos);
+  EXPECT_NE(edit([](nlohmann::json& j) { j["objects"][1]["subsurface"]["eta"] = 0.5; }).find("eta"), std::string::npos);
+  EXPECT_NE(edit([](nlohmann::json& j) { j["objects"][1]["subsurface"]["g"] = 0.5; }).find("subsurface"), std::string::npos);
 }
 
 TEST(Scenes, BadInputNamesTheFileAndField) {

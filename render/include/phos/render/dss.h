@@ -40,6 +40,7 @@
 #include <vector>
 
 #include "phos/render/geometry.h"
+#include "phos/render/subsurface.h"
 
 namespace phos::render {
 
@@ -91,6 +92,14 @@ struct DssOptions {
   // Radiosity per surfel and channel (B, e.g. pi Lp per band), or empty for
   // occlusion only.
   int channels = 0;
+  // Subsurface scattering instead of form factors (subsurface.h): the
+  // surfels carry irradiance E per channel, only receivers of the surfel's
+  // own object receive, with Rd(r) A per channel from dipoles[object *
+  // channels + c]; `irradiance` is then the radiant exitance M.
+  const std::vector<Dipole>* dipoles = nullptr;
+  // With dipoles: per receiver pixel, the radius of its near field (the
+  // caller adds E(x) AnnulusIntegral(0, near) itself; subsurface.h).
+  const std::vector<float>* near_m = nullptr;
 };
 
 struct DssResult {
@@ -109,7 +118,8 @@ DssResult SplatDeepScreenSpace(const GBuffer& gbuffer, const CameraRays& camera,
 // The same sums over every surfel for every pixel, with no hierarchy: the
 // exact gather DSS approximates (O(pixels x surfels), for tests and studies).
 DssResult GatherAllSurfels(const GBuffer& gbuffer, const std::vector<Surfel>& surfels,
-                           const std::vector<float>& radiosity, int channels);
+                           const std::vector<float>& radiosity, int channels,
+                           const std::vector<Dipole>* dipoles = nullptr, const std::vector<float>* near_m = nullptr);
 
 // Plain screen space (one depth layer), for the trade study: the surfels are
 // the G-buffer's own pixels, each a disk of the area it covers on its

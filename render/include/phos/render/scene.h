@@ -59,6 +59,13 @@ struct InitialState {
   double r0 = 0.0;  // kUniform: every state of every texel
 };
 
+// A translucent material (subsurface.h): absorption and reduced scattering
+// per band, relative index of refraction.
+struct Subsurface {
+  std::vector<double> sigma_a_per_m, sigma_s_prime_per_m;  // per band
+  double eta = 1.3;
+};
+
 struct Object {
   std::string name;
   std::shared_ptr<const Mesh> mesh;
@@ -74,6 +81,9 @@ struct Object {
   // unit along each axis (0: from the texel size and the surface area).
   std::string texels;
   int uv_resolution = 0;
+  // Translucent: the dss transport scatters light beneath the surface with
+  // the dipole; albedo is then the dipole's total diffuse reflectance.
+  std::optional<Subsurface> subsurface;
 };
 
 // Piecewise-constant level of a light: level of the last key at or before t.
