@@ -87,7 +87,7 @@ namespace {
 
 // Accumulates one surfel into one receiver pixel, weighted.
 inline void Accumulate(const GBuffer& g, std::size_t p, const Surfel& s, const float* B, int channels, float weight,
-                       float* occlusion, float* irradiance, const std::vector<Dipole>* dipoles = nullptr,
+                       float* occlusion, float* occlusion_y, float* irradiance, const std::vector<Dipole>* dipoles = nullptr,
                        const std::vector<float>* near_m = nullptr) {
   if (dipoles) {
     // Subsurface: light that entered at the surfel leaves at the receiver.
@@ -102,9 +102,20 @@ inline void Accumulate(const GBuffer& g, std::size_t p, const Surfel& s, const f
   const float F = SurfelFormFactor(g.position[p], g.normal[p], s, &cos_q);
   if (F <= 0) return;
   occlusion[p] += weight * F;
+  occlusion_y[p] += weight * F * (s.position.y() - g.position[p].y()) / (s.position - g.position[p]).norm();
   // Light arrives from the surfel's front only (it faces the receiver).
   if (channels > 0 && cos_q < 0)
     for (int c = 0; c < channels; ++c) irradiance[p * channels + c] += weight * F * B[c];
+}
+
+// Occlusion above 1 (surfels behind surfels) is scaled back to 1, and the
+// directional sum with it.
+void ClampOcclusion(DssResult& r) {
+  for (std::size_t p = 0; p < r.occlusion.size(); ++p)
+    if (r.occlusion[p] > 1) {
+      r.occlusion_y[p] /= r.occlusion[p];
+      r.occlusion[p] = 1;
+    }
 }
 
 }  // namespace
@@ -118,16 +129,17 @@ DssResult GatherAllSurfels(const GBuffer& g, const std::vector<Surfel>& surfels,
   r.channels = channels;
   const std::size_t n = static_cast<std::size_t>(g.width) * g.height;
   r.occlusion.assign(n, 0.0f);
+  r.occlusion_y.assign(n, 0.0f);
   r.irradiance.assign(n * std::max(channels, 0), 0.0f);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n), [&](const tbb::blocked_range<std::size_t>& range) {
     for (std::size_t p = range.begin(); p != range.end(); ++p) {
       if (g.object[p] < 0) continue;
       for (std::size_t s = 0; s < surfels.size(); ++s)
         Accumulate(g, p, surfels[s], channels > 0 ? &radiosity[s * channels] : nullptr, channels, 1.0f,
-                   r.occlusion.data(), r.irradiance.data(), dipoles, near_m);
+                   r.occlusion.data(), r.occlusion_y.data(), r.irradiance.data(), dipoles, near_m);
     }
   });
-  for (float& o : r.occlusion) o = std::min(o, 1.0f);
+  ClampOcclusion(r);
   r.splats = static_cast<std::uint64_t>(n) * surfels.size();
   r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
   return r;
@@ -140,6 +152,7 @@ DssResult SplatDeepScreenSpace(const GBuffer& g, const CameraRays& camera, const
   const std::size_t n = static_cast<std::size_t>(W) * H;
   // One accumulation buffer per level (they are blurred separately).
   std::vector<std::vector<float>> occlusion(L, std::vector<float>(n, 0.0f));
+  std::vector<std::vector<float>> occlusion_y(L, std::vector<float>(n, 0.0f));
   std::vector<std::vector<float>> irradiance(L, std::vector<float>(n * C, 0.0f));
 
   // Per surfel: its world radius per level and the screen rectangle each
@@ -236,7 +249,8 @@ DssResult SplatDeepScreenSpace(const GBuffer& g, const CameraRays& camera, const
               if (g.object[p] < 0) continue;
               const float r2 = (s.position - g.position[p]).squaredNorm();
               if (r2 < inner2 || r2 >= outer2) continue;
-              Accumulate(g, p, s, B, C, weight, occlusion[l].data(), irradiance[l].data(), options.dipoles, options.near_m);
+              Accumulate(g, p, s, B, C, weight, occlusion[l].data(), occlusion_y[l].data(), irradiance[l].data(),
+                         options.dipoles, options.near_m);
               ++local;
             }
         }
@@ -254,6 +268,7 @@ DssResult SplatDeepScreenSpace(const GBuffer& g, const CameraRays& camera, const
   r.height = H;
   r.channels = C;
   r.occlusion.assign(n, 0.0f);
+  r.occlusion_y.assign(n, 0.0f);
   r.irradiance.assign(n * C, 0.0f);
   for (int l = 0; l < L; ++l) {
     const int block = 1 << l;
@@ -265,12 +280,13 @@ DssResult SplatDeepScreenSpace(const GBuffer& g, const CameraRays& camera, const
           if (g.object[p] < 0) continue;
           if (!blur) {
             r.occlusion[p] += occlusion[l][p];
+            r.occlusion_y[p] += occlusion_y[l][p];
             for (int c = 0; c < C; ++c) r.irradiance[p * C + c] += irradiance[l][p * C + c];
             continue;
           }
           // The block of 2^l x 2^l pixels around (x, y), clamped inside the image.
           const int bx = std::clamp(x - block / 2, 0, std::max(0, W - block)), by = std::clamp(y - block / 2, 0, std::max(0, H - block));
-          float wsum = 0, osum = 0;
+          float wsum = 0, osum = 0, oysum = 0;
           float isum[16] = {};
           for (int v = by; v < std::min(H, by + block); ++v)
             for (int u = bx; u < std::min(W, bx + block); ++u) {
@@ -284,16 +300,18 @@ DssResult SplatDeepScreenSpace(const GBuffer& g, const CameraRays& camera, const
               if (w <= 0) continue;
               wsum += w;
               osum += w * occlusion[l][q];
+              oysum += w * occlusion_y[l][q];
               for (int c = 0; c < C && c < 16; ++c) isum[c] += w * irradiance[l][q * C + c];
             }
           if (wsum > 0) {
             r.occlusion[p] += osum / wsum;
+            r.occlusion_y[p] += oysum / wsum;
             for (int c = 0; c < C && c < 16; ++c) r.irradiance[p * C + c] += isum[c] / wsum;
           }
         }
     });
   }
-  for (float& o : r.occlusion) o = std::min(o, 1.0f);
+  ClampOcclusion(r);
   r.splats = splats;
   r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
   return r;

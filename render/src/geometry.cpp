@@ -196,6 +196,31 @@ float UnitIrradiance(const SceneGeometry& geometry, const LightPose& light, cons
   return geometry.Occluded(origin, to_light, 1e30f) ? 0.0f : cosine;
 }
 
+float UnitSkyIrradiance(const SceneGeometry& geometry, const Environment& environment, const Vec3f& p,
+                        const Vec3f& n, int rays, std::uint64_t seed, std::uint64_t* count) {
+  const int side = std::max(1, static_cast<int>(std::lround(std::sqrt(static_cast<double>(rays)))));
+  const Vec3f t = n.unitOrthogonal(), b = n.cross(t);
+  const Vec3f origin = p + geometry.ray_epsilon() * n;
+  std::uint64_t state = seed * 0x9E3779B97F4A7C15ull + 0x632BE59BD9B4E019ull;
+  auto uniform = [&] {  // splitmix64
+    std::uint64_t z = (state += 0x9E3779B97F4A7C15ull);
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+    return static_cast<float>((z ^ (z >> 31)) >> 40) * (1.0f / 16777216.0f);
+  };
+  float sum = 0;
+  for (int i = 0; i < side; ++i)
+    for (int j = 0; j < side; ++j) {
+      const float u1 = (static_cast<float>(i) + uniform()) / static_cast<float>(side);
+      const float u2 = (static_cast<float>(j) + uniform()) / static_cast<float>(side);
+      const float r = std::sqrt(u1), phi = 6.28318530718f * u2;
+      const Vec3f w = r * std::cos(phi) * t + r * std::sin(phi) * b + std::sqrt(std::max(0.0f, 1 - u1)) * n;
+      if (count) ++*count;
+      if (!geometry.Occluded(origin, w, 1e30f)) sum += environment.Shape(w.y());
+    }
+  return 3.14159265f * sum / static_cast<float>(side * side);
+}
+
 CameraRays::CameraRays(const Scene& scene, double t_s) {
   const CameraKey key = scene.camera.At(t_s);
   origin_ = key.position.cast<float>();

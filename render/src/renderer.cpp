@@ -1,6 +1,7 @@
 #include "phos/render/renderer.h"
 
 #include <algorithm>
+#include <bit>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -121,6 +122,11 @@ class Tracer {
       : geometry_(geometry), scene_(geometry.scene()), solver_(solver), media_(media), options_(options),
         nb_(scene_.bands.band_count()), emitters_(geometry, options.transport == Transport::kPath ? solver : nullptr) {
     const double t = geometry.time_s();
+    if (scene_.environment) {
+      sky_level_ = static_cast<float>(scene_.environment->schedule.LevelAt(t));
+      sky_L_ = Bands(nb_);
+      for (int b = 0; b < nb_; ++b) sky_L_[b] = static_cast<float>(sky_level_ * scene_.environment->L_per_band[b]);
+    }
     for (const Light& light : scene_.lights) {
       const double level = light.schedule.LevelAt(t);
       if (level <= 0) continue;
@@ -151,9 +157,17 @@ class Tracer {
     return true;
   }
 
-  // Irradiance from the scene's lights at p on the side of n_s (shadow rays).
-  void DirectIrradiance(const Vec3f& p, const Vec3f& n_s, Bands& E, std::uint64_t& rays) const {
+  // Irradiance from the scene's lights at p on the side of n_s (shadow rays),
+  // and from the sky unless `sky` is false (the path tracer finds the sky
+  // by its bounces; dss shades its pixels' sky by directional occlusion).
+  void DirectIrradiance(const Vec3f& p, const Vec3f& n_s, Bands& E, std::uint64_t& rays, bool sky = true) const {
     E.setZero(nb_);
+    if (sky && sky_level_ > 0) {
+      const std::uint64_t seed = (std::uint64_t(std::bit_cast<std::uint32_t>(p.x())) * 73856093u) ^
+                                 (std::uint64_t(std::bit_cast<std::uint32_t>(p.y())) * 19349663u) ^
+                                 (std::uint64_t(std::bit_cast<std::uint32_t>(p.z())) * 83492791u);
+      E += sky_L_ * UnitSkyIrradiance(geometry_, *scene_.environment, p, n_s, options_.sky_rays, seed, &rays);
+    }
     for (const LitLight& light : lights_) {
       float unit = UnitIrradiance(geometry_, light.pose, p, n_s, &rays);
       // Media between the point and the light shadow it (a cloud on the floor).
@@ -183,13 +197,14 @@ class Tracer {
     const Hit hit = geometry_.Intersect(origin, direction);
     Bands Lm = Bands::Zero(nb_);
     const float T = Media(origin, direction, hit, jitter, Lm);
-    if (!hit) return Lm;
+    if (!hit) return sky_level_ > 0 ? Bands(Lm + T * sky_L_ * scene_.environment->Shape(direction.y())) : Lm;
     AddEmission(hit, L);
     // A translucent object under dss: its reflection comes from the dipole
     // splat instead (RenderBands).
     if (options_.transport == Transport::kDss && scene_.objects[hit.object].subsurface) return Lm + T * L;
     Bands E;
-    DirectIrradiance(hit.position, hit.front ? hit.normal : Vec3f(-hit.normal), E, rays);
+    DirectIrradiance(hit.position, hit.front ? hit.normal : Vec3f(-hit.normal), E, rays,
+                     options_.transport != Transport::kDss);
     L += Albedo(hit.object) * E / kPi;  // Lambertian reflection (Eq. 8.2's reflected term)
     return Lm + T * L;
   }
@@ -207,7 +222,12 @@ class Tracer {
         beta *= Media(origin, direction, hit, random.Uniform(), Lm);
         L += Lm;
       }
-      if (!hit) break;
+      if (!hit) {
+        // The sky, found by the camera ray or a bounce (cosine sampling; no
+        // light sampling for it, so no weight).
+        if (sky_level_ > 0) L += beta * sky_L_ * scene_.environment->Shape(direction.y());
+        break;
+      }
       const Vec3f n_s = hit.front ? hit.normal : Vec3f(-hit.normal);
       // Emission found by the BSDF sample, weighted against light sampling.
       if (Emission(hit, Le)) {
@@ -224,7 +244,7 @@ class Tracer {
       const Bands albedo = Albedo(hit.object);
       if (albedo.maxCoeff() <= 0) break;
       // Next-event estimation: the lights (delta: no MIS) ...
-      DirectIrradiance(hit.position, n_s, E, rays);
+      DirectIrradiance(hit.position, n_s, E, rays, /*sky=*/false);
       L += beta * albedo * E / kPi;
       // ... and one point on a glowing triangle.
       const Vec3f origin_s = hit.position + geometry_.ray_epsilon() * n_s;
@@ -282,6 +302,11 @@ class Tracer {
   int nb_;
   EmitterDistribution emitters_;
   std::vector<LitLight> lights_;
+  float sky_level_ = 0;  // the sky's level now (0: none)
+  Bands sky_L_;          // its band radiance times the level
+ public:
+  float sky_level() const { return sky_level_; }
+  const Bands& sky_L() const { return sky_L_; }
 };
 
 // CIE 1931 2-degree colour matching functions: the multi-lobe fit of Wyman,
@@ -385,8 +410,9 @@ Image RenderBands(const SceneGeometry& geometry, const CoupledSolver* solver, co
     // is not used here): a dark scene's unlit floor costs nothing.
     std::vector<Surfel> senders;
     std::vector<float> sent;
+    const bool sky = tracer.sky_level() > 0;  // the sky needs every surfel: they occlude it
     for (std::size_t i = 0; i < surfels.size(); ++i) {
-      bool sends = false;
+      bool sends = sky;
       for (int b = 0; b < nb; ++b) sends = sends || radiosity[i * nb + b] > 0;
       if (!sends) continue;
       senders.push_back(surfels[i]);
@@ -408,6 +434,13 @@ Image RenderBands(const SceneGeometry& geometry, const CoupledSolver* solver, co
         const float T = media ? intervals.T_end[p] : 1.0f;
         float* out = image.at(x, y);
         for (int b = 0; b < nb; ++b) out[b] += T * albedo[b] * indirect.irradiance[p * nb + b] / kPi;
+        if (sky && !scene.objects[g.object[p]].subsurface) {
+          // Directional occlusion: the sky less what the surfels hide of it.
+          const float gradient = static_cast<float>(scene.environment->gradient);
+          const float unit = std::max(0.0f, kPi * (1 - indirect.occlusion[p]) +
+                                                gradient * (2 * kPi / 3 * g.normal[p].y() - kPi * indirect.occlusion_y[p]));
+          for (int b = 0; b < nb; ++b) out[b] += T * albedo[b] * tracer.sky_L()[b] * unit / kPi;
+        }
       }
     });
     // Translucent objects: the lights' irradiance on their surfels, carried

@@ -299,7 +299,7 @@ Scene LoadScene(const std::filesystem::path& path) {
 Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& base_dir, const std::string& source) {
   const JsonField root(json, source);
   root.RejectUnknownKeys({"schema", "name", "description", "bands_nm", "time", "texel_size_m", "camera", "render",
-                          "objects", "lights", "volumes"});
+                          "objects", "lights", "volumes", "environment"});
   if (root["schema"].String() != "phos.scene/1")
     root["schema"].Fail("expected \"phos.scene/1\", got " + DescribeJson(root["schema"].value()));
   Scene scene;
@@ -488,6 +488,26 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
     }
     scene.lights.push_back(std::move(light));
   }
+  // The sky.
+  if (auto f = root.Optional("environment")) {
+    f->RejectUnknownKeys({"spectrum", "radiance", "gradient", "schedule"});
+    Environment env;
+    env.L_per_band = ReadSpectrum((*f)["spectrum"], scene.bands);
+    const double radiance = (*f)["radiance"].NumberAtLeast(0);
+    for (double& l : env.L_per_band) l *= radiance;
+    if (f->Has("gradient")) env.gradient = (*f)["gradient"].NumberInRange(-1, 1);
+    if (auto sf = f->Optional("schedule")) {
+      for (std::size_t k = 0; k < sf->ArraySize(); ++k) {
+        const JsonField key = sf->At(k);
+        key.RejectUnknownKeys({"t_s", "level"});
+        env.schedule.keys.push_back({key["t_s"].Number(), key["level"].NumberAtLeast(0)});
+      }
+      if (env.schedule.keys.empty()) sf->Fail("expected at least one {t_s, level}");
+      RequireIncreasingTimes(*sf, env.schedule.keys);
+    }
+    scene.environment = env;
+  }
+
   // Volumes.
   if (auto volumes = root.Optional("volumes")) {
     for (std::size_t i = 0; i < volumes->ArraySize(); ++i) {

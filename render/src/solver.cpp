@@ -5,6 +5,7 @@
 #include <array>
 #include <set>
 
+#include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
 #include "phos/render/volume.h"
@@ -31,6 +32,12 @@ CoupledSolver::CoupledSolver(const Scene& scene, SceneGeometry& geometry)
   for (const Light& light : scene.lights)
     if (EverOn(light))
       for (int b = 0; b < nb; ++b) lit[b] = lit[b] || light.E_per_band[b] > 0;
+  if (scene.environment) {
+    Light sky;  // EverOn reads only the schedule
+    sky.schedule = scene.environment->schedule;
+    if (EverOn(sky))
+      for (int b = 0; b < nb; ++b) lit[b] = lit[b] || scene.environment->L_per_band[b] > 0;
+  }
   // With phosphor_irradiance, whatever a phosphor emits also lights the others.
   glow_enabled_ = scene.settings.phosphor_irradiance && scene.HasPhosphors();
   if (glow_enabled_) {
@@ -283,6 +290,34 @@ bool CoupledSolver::GatherIrradiance(Group& g, double t_s) {
     }
     any = true;
   }
+  // The sky (Environment): its irradiance per texel by kSkyRays shadow rays,
+  // computed once per geometry (a level change only rescales it).
+  if (scene_.environment) {
+    const Environment& env = *scene_.environment;
+    const double level = env.schedule.LevelAt(t_s);
+    bool reaches = false;
+    for (int b : g.excitation_bands) reaches = reaches || env.L_per_band[b] > 0;
+    if (level > 0 && reaches) {
+      constexpr int kSkyRays = 64;
+      if (g.unit_sky.empty() || g.unit_sky_version != geometry_.version()) {
+        UpdateTexelFrames(g);
+        g.unit_sky.resize(n);
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 256), [&](const tbb::blocked_range<std::size_t>& range) {
+          for (std::size_t j = range.begin(); j != range.end(); ++j)
+            g.unit_sky[j] = UnitSkyIrradiance(geometry_, env, g.texel_position[j], g.texel_normal[j], kSkyRays, j);
+        });
+        g.unit_sky_version = geometry_.version();
+        ++stats_.irradiance_updates;
+        stats_.shadow_rays += n * kSkyRays;
+      }
+      for (int bi = 0; bi < n_exc; ++bi) {
+        const float scale = static_cast<float>(level * env.L_per_band[g.excitation_bands[bi]]);
+        float* E = g.E.data() + static_cast<std::size_t>(bi) * n;
+        for (std::size_t j = 0; j < n; ++j) E[j] = (any ? E[j] : 0.0f) + scale * g.unit_sky[j];
+      }
+      any = true;
+    }
+  }
   return any;
 }
 
@@ -295,6 +330,10 @@ std::vector<double> CoupledSolver::TexelIrradiance(int slot, std::size_t texel) 
     if (level <= 0) continue;
     const double unit = UnitIrradiance(g, static_cast<int>(l))[texel];
     for (int b = 0; b < band_count_; ++b) E[b] += level * light.E_per_band[b] * unit;
+  }
+  if (scene_.environment && !g.unit_sky.empty()) {
+    const double level = scene_.environment->schedule.LevelAt(time_s_);
+    for (int b = 0; b < band_count_; ++b) E[b] += level * scene_.environment->L_per_band[b] * g.unit_sky[texel];
   }
   return E;
 }
@@ -349,6 +388,8 @@ void CoupledSolver::AdvanceTo(double t_s) {
   if (t_s == time_s_) return;
   // Break points: light switches and keyframes inside (time_s_, t_s).
   std::set<double> breaks = {t_s};
+  if (scene_.environment)
+    for (double t : scene_.environment->schedule.ChangesBetween(time_s_, t_s)) breaks.insert(t);
   for (const Light& light : scene_.lights) {
     for (double t : light.schedule.ChangesBetween(time_s_, t_s)) breaks.insert(t);
     for (const RigidKey& key : light.motion.keys)

@@ -105,6 +105,11 @@ struct DssOptions {
 struct DssResult {
   int width = 0, height = 0, channels = 0;
   std::vector<float> occlusion;   // per pixel, in [0, 1]
+  // Directional occlusion: per pixel, sum of F w_y (w the unit direction to
+  // each surfel), scaled like `occlusion` where that sum exceeded 1. The sky
+  // L(w) = L (1 + g w_y) then gives E = L [pi (1 - occlusion) + g (2 pi / 3 n_y
+  // - pi occlusion_y)] (renderer.h's dss transport; scene.h's Environment).
+  std::vector<float> occlusion_y;
   std::vector<float> irradiance;  // per pixel and channel
   std::uint64_t splats = 0;       // receiver updates, all levels
   double seconds = 0;

@@ -132,6 +132,13 @@ LightPose PoseAt(const Light& light, double t_s);
 float UnitIrradiance(const SceneGeometry& geometry, const LightPose& light, const Vec3f& p, const Vec3f& n,
                      std::uint64_t* rays = nullptr);
 
+// The sky's irradiance at p (normal n) per unit of its band radiance, by
+// `rays` cosine-distributed shadow rays, stratified on a sqrt(rays) grid
+// (E = pi mean of Shape(w) over the unblocked rays); `seed` decorrelates
+// neighbouring points.
+float UnitSkyIrradiance(const SceneGeometry& geometry, const Environment& environment, const Vec3f& p,
+                        const Vec3f& n, int rays, std::uint64_t seed, std::uint64_t* count = nullptr);
+
 // The pinhole camera at one moment: ray directions through image points in
 // pixels ((x + 0.5, y + 0.5) is the centre of pixel x, y).
 class CameraRays {

@@ -55,6 +55,7 @@ struct FrameOptions {
   int max_depth = 8;   // path: bounces
   unsigned seed = 1;
   int interval_layers = 4;  // dss with media: points per pixel of the transmittance interval map
+  int sky_rays = 16;        // direct (and what dss surfels receive): shadow rays per point for the sky
 };
 FrameOptions DefaultFrameOptions(const Scene& scene, Transport transport);
 

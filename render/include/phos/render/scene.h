@@ -140,6 +140,18 @@ struct Volume {
   Vec3 voxel_size_m() const { return (max_m - min_m).cwiseQuotient(Vec3(nx, ny, nz)); }
 };
 
+// A sky: radiance L(w) = L_per_band (1 + gradient w_y) from every direction
+// no surface blocks (a sign at dusk, a painted wall by a window); its level
+// follows a schedule like a light's. The unoccluded irradiance on a surface
+// with normal n is L_per_band (pi + 2 pi / 3 gradient n_y).
+struct Environment {
+  std::vector<double> L_per_band;
+  double gradient = 0.0;  // in [-1, 1]: brighter overhead when > 0
+  LightSchedule schedule;
+  float Shape(float w_y) const { return static_cast<float>(1 + gradient * w_y); }
+  double UnoccludedIrradiance(double n_y) const { return 3.14159265358979 * (1 + 2.0 / 3.0 * gradient * n_y); }
+};
+
 struct CameraKey {
   double t_s = 0.0;
   Vec3 position = Vec3(0, 0, 5);
@@ -173,6 +185,7 @@ struct Scene {
   std::vector<Object> objects;
   std::vector<Light> lights;
   std::vector<Volume> volumes;
+  std::optional<Environment> environment;
   Camera camera;
   double start_s = 0.0, end_s = 10.0, fps = 1.0;
   double texel_size_m = 0.0;  // default texel edge (0: scene diagonal / 200)

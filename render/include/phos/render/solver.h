@@ -10,6 +10,8 @@
 //  - the geometric part of each light's irradiance at each texel (cosine,
 //    distance, shadow ray) is cached and recomputed only when that light or
 //    the geometry moved; a light switching or dimming only rescales it;
+//  - a sky (Environment) charges them too, by shadow rays computed once per
+//    geometry;
 //  - while every light is off the state jumps in closed form (DecayBatch), at
 //    no cost in the length of the interval: a frame an hour after lights-out
 //    costs what the first did.
@@ -88,6 +90,8 @@ class CoupledSolver {
     std::vector<Eigen::Vector3f> texel_position, texel_normal;  // at texel_version
     std::uint64_t texel_version = ~std::uint64_t{0};
     std::vector<std::uint32_t> texel_patch;  // phosphor_irradiance: the glow patch of each texel
+    std::vector<float> unit_sky;  // the sky's irradiance per unit of its radiance, per texel
+    std::uint64_t unit_sky_version = ~std::uint64_t{0};
   };
 
   // phosphor_irradiance (Sec. 8.5's optional term): every phosphorescent

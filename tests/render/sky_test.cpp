@@ -1,0 +1,154 @@
+// The sky (Environment) and directional occlusion through deep screen space:
+// closed forms for an open floor and under a disk, ray-traced sky as the
+// reference in a corner, and a phosphor charged by the sky.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "phos/render/dss.h"
+#include "phos/render/renderer.h"
+#include "phos/render/solver.h"
+#include "scene_util.h"
+
+namespace phos::render {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+Environment Sky(double L, double gradient) {
+  Environment env;
+  env.L_per_band.assign(8, L);
+  env.gradient = gradient;
+  return env;
+}
+
+Scene FloorUnderSky(double gradient) {
+  Scene scene = testing::EmptyScene(11, 11);
+  scene.camera.keys = {{0.0, Vec3(0, 1, 0.0001), Vec3(0, 0, 0)}};
+  scene.camera.fov_deg = 20;
+  scene.objects.push_back(testing::MakeObject("floor", MakeQuad(4, 4), 0.5));
+  scene.environment = Sky(2.0, gradient);
+  return scene;
+}
+
+TEST(Sky, AnOpenFloorReceivesTheClosedForm) {
+  // E = L (pi + 2 pi / 3 g n_y): radiance albedo E / pi, in every transport.
+  for (double gradient : {0.0, 0.6, -0.5}) {
+    const Scene scene = FloorUnderSky(gradient);
+    SceneGeometry geometry(scene);
+    const double expected = 0.5 * 2.0 * (kPi + 2 * kPi / 3 * gradient) / kPi;
+    FrameOptions options;
+    options.transport = Transport::kDirect;
+    options.sky_rays = 256;
+    EXPECT_NEAR(RenderBands(geometry, nullptr, options).at(5, 5)[2] / expected, 1.0, 0.01) << gradient;
+    options.transport = Transport::kDss;
+    EXPECT_NEAR(RenderBands(geometry, nullptr, options).at(5, 5)[2] / expected, 1.0, 1e-4) << gradient;  // nothing occludes
+    options.transport = Transport::kPath;
+    options.spp = 256;
+    options.max_depth = 2;
+    EXPECT_NEAR(RenderBands(geometry, nullptr, options).at(5, 5)[2] / expected, 1.0, 0.03) << gradient;
+  }
+}
+
+TEST(Sky, DirectionalOcclusionUnderADiskIsTheClosedForm) {
+  // A disk of angular radius theta0 straight above the receiver hides
+  // 2 pi L [sin^2(theta0) / 2 + g (1 - cos^3(theta0)) / 3] of the sky's irradiance.
+  const float R = 0.5f, h = 1.0f;
+  const double g = 0.8;
+  Mesh disk;
+  disk.positions.push_back(Eigen::Vector3f(0, h, 0));
+  const int sides = 96;
+  for (int i = 0; i < sides; ++i) {
+    const float angle = 2 * 3.14159265f * i / sides;
+    disk.positions.push_back(Eigen::Vector3f(R * std::cos(angle), h, R * std::sin(angle)));
+  }
+  for (int i = 0; i < sides; ++i) disk.triangles.push_back(Eigen::Vector3i(0, 1 + i, 1 + (i + 1) % sides));
+  Scene scene = testing::EmptyScene(33, 33);
+  scene.objects.push_back(testing::MakeObject("floor", MakeQuad(2, 2), 0.5));
+  scene.objects.push_back(testing::MakeObject("disk", disk, 0.5));
+  scene.camera.keys = {{0.0, Vec3(0, 0.5, 0), Vec3(0, 0, 0.0001)}};
+  scene.camera.up = Vec3(0, 0, 1);
+  SceneGeometry geometry(scene);
+  const CameraRays camera(scene, 0);
+  SurfelOptions options;
+  options.s = 0.03f;
+  const auto surfels = Surfelize(geometry, camera.origin(), 60, options);
+  const GBuffer gb = RenderGBuffer(geometry, scene, 0);
+  const std::size_t centre = 16 * 33 + 16;
+  const double cos0 = h / std::sqrt(h * h + R * R), sin2 = 1 - cos0 * cos0;
+  const double truth = kPi + 2 * kPi / 3 * g - 2 * kPi * (sin2 / 2 + g * (1 - cos0 * cos0 * cos0) / 3);
+  auto sky_irradiance = [&](const DssResult& r) {
+    return kPi * (1 - r.occlusion[centre]) + g * (2 * kPi / 3 * gb.normal[centre].y() - kPi * r.occlusion_y[centre]);
+  };
+  // The disk seen from below also hides its own floor's sky; the blocked part is what matters.
+  const double blocked = kPi + 2 * kPi / 3 * g - truth;
+  EXPECT_NEAR(kPi + 2 * kPi / 3 * g - sky_irradiance(GatherAllSurfels(gb, surfels, {}, 0)), blocked, 0.02 * blocked);
+  EXPECT_NEAR(kPi + 2 * kPi / 3 * g - sky_irradiance(SplatDeepScreenSpace(gb, camera, surfels, {}, {})), blocked, 0.05 * blocked);
+  // The gradient matters: ambient occlusion times the open sky's irradiance
+  // (what a uniform treatment gives) misses the blocked part by far more.
+  const double ao_estimate = sin2 * (kPi + 2 * kPi / 3 * g);
+  EXPECT_GT(std::fabs(ao_estimate - blocked), 0.1 * blocked);
+}
+
+TEST(Sky, DssDarkensACornerAsRayTracingDoes) {
+  // A floor and a wall under a sky: near their corner the wall hides half the
+  // sky. Direct with many sky rays is the reference for the shading of the
+  // camera's pixels (one bounce off the wall aside, which dss adds and
+  // direct does not); dss's directional occlusion must follow it.
+  Scene scene = testing::EmptyScene(48, 32);
+  scene.camera.keys = {{0.0, Vec3(0.0, 0.6, 1.2), Vec3(0, 0.1, 0)}};
+  scene.camera.fov_deg = 50;
+  scene.objects.push_back(testing::MakeObject("floor", MakeQuad(3, 3), 0.5));
+  Object wall = testing::MakeObject("wall", MakeQuad(3, 1.5), 0.0);  // black: no bounce
+  RigidKey up;
+  up.rotate = Eigen::Quaterniond(Eigen::AngleAxisd(kPi / 2, Vec3::UnitX()));
+  up.translate = Vec3(0, 0.75, -0.2);
+  wall.motion.keys = {up};
+  scene.objects.push_back(wall);
+  scene.environment = Sky(1.0, 0.5);
+  SceneGeometry geometry(scene);
+  FrameOptions options;
+  options.transport = Transport::kDirect;
+  options.sky_rays = 1024;
+  const Image reference = RenderBands(geometry, nullptr, options);
+  options.transport = Transport::kDss;
+  const Image dss = RenderBands(geometry, nullptr, options);
+  const Image open = [&] {
+    Scene no_wall = scene;
+    no_wall.objects.pop_back();
+    SceneGeometry g2(no_wall);
+    options.transport = Transport::kDss;
+    return RenderBands(g2, nullptr, options);
+  }();
+  // Over the floor's pixels: dss is much closer to the reference than the open sky is.
+  double err_dss = 0, err_open = 0;
+  int n = 0;
+  const GBuffer gb = RenderGBuffer(geometry, scene, 0);
+  for (int y = 0; y < 32; ++y)
+    for (int x = 0; x < 48; ++x) {
+      if (gb.object[static_cast<std::size_t>(y) * 48 + x] != 0) continue;
+      err_dss += std::fabs(dss.at(x, y)[2] - reference.at(x, y)[2]);
+      err_open += std::fabs(open.at(x, y)[2] - reference.at(x, y)[2]);
+      ++n;
+    }
+  ASSERT_GT(n, 300);
+  EXPECT_LT(err_dss, 0.35 * err_open) << err_dss / n << " vs " << err_open / n;
+}
+
+TEST(Sky, APhosphorUnderTheSkyChargesAsTheClosedForm) {
+  Scene scene = FloorUnderSky(0.4);
+  scene.objects[0].phosphor = testing::UniformPhosphor(0.05, {0, 0.2, 0, 0, 0, 0, 0, 0}, {0, 0, 0, 0, 0.3, 0, 0, 0});
+  scene.environment->schedule.keys = {{0.0, 1.0}, {10.0, 0.0}};
+  SceneGeometry geometry(scene);
+  CoupledSolver solver(scene, geometry);
+  solver.AdvanceTo(10);
+  const double E = 2.0 * (kPi + 2 * kPi / 3 * 0.4), a = 0.2 * E, k = a + 0.05;
+  const double r = a / k * (1 - std::exp(-k * 10));
+  EXPECT_NEAR(solver.State(0, 0, 0) / r, 1.0, 0.01);
+  EXPECT_NEAR(solver.TexelIrradiance(0, 0)[1], 0.0, 1e-12);  // off at 10 s
+  solver.AdvanceTo(30);
+  EXPECT_NEAR(solver.State(0, 0, 0) / (r * std::exp(-0.05 * 20)), 1.0, 0.01);
+}
+
+}  // namespace
+}  // namespace phos::render
