@@ -78,13 +78,18 @@ rm -rf "$OUT/dust-sheets" "$OUT/glowing-liquid"
 rm -rf "$OUT/translucent-shadow"
 "$PHOS" render fixtures/scenes/translucent-shadow.json --out "$OUT/translucent-shadow" --times 2,8 --transport dss \
   --contact-sheet "$OUT/translucent-shadow.png"
+# A sign charged by the sky through the afternoon glows at dusk; the porch
+# roof's shadow of the sky is directional occlusion through deep space.
+rm -rf "$OUT/dusk-sign"
+"$PHOS" render fixtures/scenes/dusk-sign.json --out "$OUT/dusk-sign" --times 30,45,55,62,90 --transport dss \
+  --contact-sheet "$OUT/dusk-sign.png"
 
 # The gallery: every fixture scene's contact sheet on one page.
 {
   echo '<!doctype html><meta charset="utf-8"><title>phos gallery</title>'
   echo '<style>body{background:#222;color:#ddd;font-family:sans-serif;margin:2em}img{max-width:100%}</style>'
   echo '<h1>phos: the fixture scenes (make demo)</h1>'
-  for sheet in still-life cornell cornell-dss light-trail dust-sheets glowing-liquid translucent-shadow; do
+  for sheet in still-life cornell cornell-dss light-trail dust-sheets glowing-liquid translucent-shadow dusk-sign; do
     scene=${sheet%-dss}
     echo "<h2>$sheet</h2><p>fixtures/scenes/$scene.json</p><img src=\"$sheet.png\">"
   done
@@ -97,5 +102,5 @@ echo "  a captured sample (4 protocols): $OUT/capture-orange/{lvf-calibration,sp
 echo "    what it captured: $OUT/capture-orange/decay-frames.png (contact sheet), decay-curve.svg, excitation-curves.svg"
 echo "  the material fitted from it:  $OUT/fitted/orange.json, report $OUT/fitted/orange-report.html"
 echo "  rendered scenes (contact sheets): $OUT/still-life.png, $OUT/cornell.png, $OUT/cornell-dss.png, $OUT/light-trail.png,"
-echo "    $OUT/dust-sheets.png, $OUT/glowing-liquid.png, $OUT/translucent-shadow.png; all on one page: $OUT/gallery.html"
+echo "    $OUT/dust-sheets.png, $OUT/glowing-liquid.png, $OUT/translucent-shadow.png, $OUT/dusk-sign.png; all on one page: $OUT/gallery.html"
 echo "    frames (EXR data, PNG, night-vision PNG): $OUT/still-life/, $OUT/cornell/, $OUT/light-trail/, ..."

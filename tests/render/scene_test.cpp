@@ -193,6 +193,24 @@ TEST(Scenes, TranslucentObjectsTakeTheDipolesReflectanceAsAlbedo) {
   EXPECT_NE(edit([](nlohmann::json& j) { j["objects"][1]["subsurface"]["g"] = 0.5; }).find("subsurface"), std::string::npos);
 }
 
+TEST(Scenes, TheSkyLoadsAndBadOnesNameTheField) {
+  const Scene scene = LoadScene(Fixture("scenes/dusk-sign.json"));
+  ASSERT_TRUE(scene.environment.has_value());
+  EXPECT_DOUBLE_EQ(scene.environment->gradient, 0.6);
+  EXPECT_EQ(scene.environment->schedule.LevelAt(70), 0.0);
+  auto edit = [](const std::function<void(nlohmann::json&)>& change) {
+    nlohmann::json json = ReadJsonFile(Fixture("scenes/dusk-sign.json"));
+    change(json);
+    return ErrorOfType<UserError>([&] { SceneFromJson(json, Fixture("scenes"), "dusk-sign.json"); });
+  };
+  EXPECT_EQ(edit([](nlohmann::json&) {}), "(no error)");
+  EXPECT_NE(edit([](nlohmann::json& j) { j["environment"]["gradient"] = 2; }).find("environment.gradient"), std::string::npos);
+  EXPECT_NE(edit([](nlohmann::json& j) { j["environment"]["radiance"] = -1; }).find("environment.radiance"), std::string::npos);
+  EXPECT_NE(edit([](nlohmann::json& j) { j["environment"]["colour"] = 1; }).find("colour"), std::string::npos);
+  EXPECT_NE(edit([](nlohmann::json& j) { j["environment"]["schedule"] = nlohmann::json::array(); }).find("schedule"),
+            std::string::npos);
+}
+
 TEST(Scenes, BadInputNamesTheFileAndField) {
   EXPECT_EQ(ErrorAfterEdit([](nlohmann::json&) {}), "(no error)");
   EXPECT_NE(ErrorAfterEdit([](nlohmann::json& j) { j["lights"][0]["colour"] = 1; }).find("lights[0]"), std::string::npos);
