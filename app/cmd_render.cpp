@@ -34,7 +34,7 @@ struct RenderArgs {
   double exposure = 0;
   double night_vision_cd = 0;
   double budget_s = 0, quality = 0;
-  bool transport_given = false;
+  bool transport_given = false, indirect_visibility = false;
   std::string contact_sheet;
   std::vector<std::string> materials;
 };
@@ -91,6 +91,9 @@ void Run(const RenderArgs& args) {
   if (!args.no_phosphorescence && scene.HasPhosphors()) solver = std::make_unique<CoupledSolver>(scene, geometry);
   FrameOptions options = DefaultFrameOptions(scene, transport);
   if (args.spp > 0) options.spp = options.direct_spp = args.spp;
+  if (args.indirect_visibility && transport != Transport::kDss)
+    ThrowUserError("", "--indirect-visibility", "is for --transport dss");
+  options.indirect_visibility = args.indirect_visibility;
   nlohmann::json choice_json;
   std::string choice_line;
   if (choose) {
@@ -218,6 +221,9 @@ void RegisterRender(CLI::App& app) {
                   "(direct plus one diffuse bounce through deep screen space; docs/render.md)")
       ->default_str("direct")
       ->each([args](const std::string&) { args->transport_given = true; });
+  cmd->add_flag("--indirect-visibility", args->indirect_visibility,
+                "dss: keep the nearest surfel per direction (the bounced z-buffer) instead of blending them:\n"
+                "no light leaks through occluders and nothing occludes twice; slower (docs/dss-trade.md)");
   cmd->add_option("--budget-s", args->budget_s,
                   "Pick the transport for a time budget per frame: each is timed on this scene, and the best\n"
                   "expected quality that fits is used (direct, dss, path 4 to 1024 spp; the qualities are the\n"

@@ -245,6 +245,17 @@ int main(int argc, char** argv) {
                             "s=" + FormatShort(s) + " levels=" + std::to_string(levels) + " epsilon=" + FormatShort(epsilon),
                             seconds, Compare(r.occlusion, truth, g), levels, epsilon, s});
           }
+      for (float s : {0.04f, 0.02f}) {
+        const auto t0 = std::chrono::steady_clock::now();
+        const GBuffer g = RenderGBuffer(geometry, scene, 0);
+        SurfelOptions surfel_options;
+        surfel_options.s = s;
+        const std::vector<Surfel> surfels = Surfelize(geometry, camera.origin(), fov, surfel_options);
+        const DssResult r = SplatBouncedZBuffer(g, camera, surfels, {}, {});
+        const double seconds = Seconds(t0);
+        runs.push_back({name, "bounced z-buffer", "s=" + FormatShort(s) + " levels=3", seconds, Compare(r.occlusion, truth, g),
+                        3, 1e-6f, s});
+      }
       progress.Advance();
     }
     progress.Finish();
@@ -261,11 +272,11 @@ int main(int argc, char** argv) {
       CoupledSolver solver(scene, geometry);
       solver.AdvanceTo(40);
       geometry.SetTime(40);
-      auto render = [&](Transport transport, int spp, int levels, double* seconds) {
+      auto render = [&](Transport transport, int spp, int visibility, double* seconds) {
         FrameOptions options = DefaultFrameOptions(scene, transport);
         options.spp = spp;
         options.seed = 5;
-        (void)levels;
+        options.indirect_visibility = visibility != 0;
         const auto t0 = std::chrono::steady_clock::now();
         Image image = RenderBands(geometry, &solver, options);
         *seconds = Seconds(t0);
@@ -294,6 +305,8 @@ int main(int argc, char** argv) {
       add("direct (no bounce)", "-", direct, seconds);
       const Image dss = render(Transport::kDss, 1, 0, &seconds);
       add("deep screen space (direct + one bounce)", "defaults", dss, seconds);
+      const Image dss_z = render(Transport::kDss, 1, 1, &seconds);
+      add("deep screen space + bounced z-buffer", "defaults", dss_z, seconds);
       for (int spp : {1, 4, 16, 64}) {
         const Image path = render(Transport::kPath, spp, 0, &seconds);
         add("path tracer", "spp=" + std::to_string(spp), path, seconds);

@@ -7,6 +7,7 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <limits>
 
 namespace phos::render {
 namespace {
@@ -145,27 +146,25 @@ DssResult GatherAllSurfels(const GBuffer& g, const std::vector<Surfel>& surfels,
   return r;
 }
 
-DssResult SplatDeepScreenSpace(const GBuffer& g, const CameraRays& camera, const std::vector<Surfel>& surfels,
-                               const std::vector<float>& radiosity, const DssOptions& options) {
-  const auto started = std::chrono::steady_clock::now();
-  const int W = g.width, H = g.height, L = std::max(1, options.levels), C = std::max(0, options.channels);
-  const std::size_t n = static_cast<std::size_t>(W) * H;
-  // One accumulation buffer per level (they are blurred separately).
-  std::vector<std::vector<float>> occlusion(L, std::vector<float>(n, 0.0f));
-  std::vector<std::vector<float>> occlusion_y(L, std::vector<float>(n, 0.0f));
-  std::vector<std::vector<float>> irradiance(L, std::vector<float>(n * C, 0.0f));
+namespace {
 
+// Per surfel: its world radius per level and the screen rectangle each
+// level's shell can reach.
+struct Reach {
+  float rho[8];     // shell outer radius per level (world)
+  int rect[8][4];   // x0, y0, x1, y1 per level (inclusive)
+  int offset[8][2]; // interleave offset per level
+  float r_max;
+  bool any;
+};
+
+std::vector<Reach> ComputeReach(const GBuffer& g, const CameraRays& camera, const std::vector<Surfel>& surfels,
+                                const std::vector<float>& radiosity, const DssOptions& options) {
   // Per surfel: its world radius per level and the screen rectangle each
   // level's shell can reach (conservative: the bounding square of the
   // sphere's projection; the whole screen when the sphere reaches the eye).
+  const int W = g.width, H = g.height, L = std::max(1, options.levels), C = std::max(0, options.channels);
   const float pixel_scale = H / (2 * camera.tan_half_y());  // pixels per unit of lateral size at depth 1
-  struct Reach {
-    float rho[8];     // shell outer radius per level (world)
-    int rect[8][4];   // x0, y0, x1, y1 per level (inclusive)
-    int offset[8][2]; // interleave offset per level
-    float r_max;
-    bool any;
-  };
   std::vector<Reach> reach(surfels.size());
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, surfels.size()), [&](const tbb::blocked_range<std::size_t>& range) {
     for (std::size_t i = range.begin(); i != range.end(); ++i) {
@@ -215,6 +214,23 @@ DssResult SplatDeepScreenSpace(const GBuffer& g, const CameraRays& camera, const
       }
     }
   });
+
+  return reach;
+}
+
+}  // namespace
+
+DssResult SplatDeepScreenSpace(const GBuffer& g, const CameraRays& camera, const std::vector<Surfel>& surfels,
+                               const std::vector<float>& radiosity, const DssOptions& options) {
+  const auto started = std::chrono::steady_clock::now();
+  const int W = g.width, H = g.height, L = std::max(1, options.levels), C = std::max(0, options.channels);
+  const std::size_t n = static_cast<std::size_t>(W) * H;
+  // One accumulation buffer per level (they are blurred separately).
+  std::vector<std::vector<float>> occlusion(L, std::vector<float>(n, 0.0f));
+  std::vector<std::vector<float>> occlusion_y(L, std::vector<float>(n, 0.0f));
+  std::vector<std::vector<float>> irradiance(L, std::vector<float>(n * C, 0.0f));
+
+  const std::vector<Reach> reach = ComputeReach(g, camera, surfels, radiosity, options);
 
   // Tiles own their pixels: each thread gathers, for its tile, the shells
   // that reach it. No two threads write the same pixel.
@@ -312,6 +328,198 @@ DssResult SplatDeepScreenSpace(const GBuffer& g, const CameraRays& camera, const
     });
   }
   ClampOcclusion(r);
+  r.splats = splats;
+  r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+  return r;
+}
+
+namespace {
+
+constexpr int kRings = 8, kSectors = 8, kCells = kRings * kSectors;
+
+// One direction cell of a receiver's bounced z-buffer.
+struct ZCell {
+  float distance = std::numeric_limits<float>::infinity();
+  float cover = 0;
+  std::int32_t surfel = -1;
+};
+
+// The cell of a point (x, y) of the unit disk: equal-area rings (r^2 in
+// steps of 1 / kRings) and equal sectors.
+inline int CellOf(float x, float y) {
+  const int ring = std::min(kRings - 1, static_cast<int>((x * x + y * y) * kRings));
+  float angle = std::atan2(y, x);
+  if (angle < 0) angle += 2 * kPi;
+  const int sector = std::min(kSectors - 1, static_cast<int>(angle / (2 * kPi) * kSectors));
+  return ring * kSectors + sector;
+}
+
+struct CellCentres {
+  float x[kCells], y[kCells];
+  CellCentres() {
+    for (int ring = 0; ring < kRings; ++ring)
+      for (int sector = 0; sector < kSectors; ++sector) {
+        const float r = std::sqrt((ring + 0.5f) / kRings), a = (sector + 0.5f) * 2 * kPi / kSectors;
+        x[ring * kSectors + sector] = r * std::cos(a);
+        y[ring * kSectors + sector] = r * std::sin(a);
+      }
+  }
+};
+
+// Two surfels lie on one surface (one layer of the z-buffer) when each is
+// within its neighbour's tangent plane by less than the larger radius: the
+// parts of one wall that fall into one cell add up instead of hiding each
+// other; a surfel behind that surface is hidden.
+inline bool SameLayer(const Surfel& a, const Surfel& b) {
+  const float reach = std::sqrt(std::max(a.area, b.area) / kPi) * 1.5f;
+  const Vec3f d = b.position - a.position;
+  return std::fabs(d.dot(a.normal)) < reach && std::fabs(d.dot(b.normal)) < reach;
+}
+
+inline void Cover(ZCell& cell, float distance, float cover, std::int32_t surfel, const std::vector<Surfel>& surfels) {
+  if (cell.surfel < 0) {
+    cell = {distance, std::min(1.0f, cover), surfel};
+    return;
+  }
+  const bool same = SameLayer(surfels[cell.surfel], surfels[surfel]);
+  if (distance < cell.distance) {
+    cell = {distance, std::min(1.0f, cover + (same ? cell.cover : 0.0f)), surfel};
+  } else if (same) {
+    cell.cover = std::min(1.0f, cell.cover + cover);
+  }
+}
+
+// Splats one surfel into one receiver's map.
+inline void SplatIntoMap(const GBuffer& g, std::size_t p, const Vec3f& t, const Vec3f& b, const std::vector<Surfel>& surfels,
+                         std::int32_t index, float weight, const CellCentres& centres, ZCell* map) {
+  const Surfel& s = surfels[index];
+  const Vec3f d = s.position - g.position[p];
+  const float r2 = d.squaredNorm();
+  if (!(r2 > 0)) return;
+  const float r = std::sqrt(r2);
+  const Vec3f w = d / r;
+  const float cos_p = g.normal[p].dot(w);
+  if (cos_p <= 0) return;
+  const float F = s.area * cos_p * std::fabs(s.normal.dot(w)) / (kPi * r2 + s.area);
+  if (!(F > 0)) return;
+  const float x = w.dot(t), y = w.dot(b);  // the direction's point in the unit disk
+  const float radius = std::sqrt(F);       // footprint of area pi F
+  constexpr float kCellRadius = 0.125f;    // sqrt(1 / kCells): a cell's equal-area radius
+  if (radius < kCellRadius) {
+    Cover(map[CellOf(x, y)], r, weight * F * kCells, index, surfels);
+    return;
+  }
+  bool any = false;
+  for (int c = 0; c < kCells; ++c) {
+    const float dx = centres.x[c] - x, dy = centres.y[c] - y;
+    if (dx * dx + dy * dy <= radius * radius) Cover(map[c], r, 1.0f, index, surfels), any = true;
+  }
+  if (!any) Cover(map[CellOf(x, y)], r, weight * F * kCells, index, surfels);
+}
+
+}  // namespace
+
+DssResult SplatBouncedZBuffer(const GBuffer& g, const CameraRays& camera, const std::vector<Surfel>& surfels,
+                              const std::vector<float>& radiosity, const DssOptions& options) {
+  const auto started = std::chrono::steady_clock::now();
+  const int W = g.width, H = g.height, L = std::max(1, std::min(options.levels, 8)), C = std::max(0, options.channels);
+  const std::size_t n = static_cast<std::size_t>(W) * H;
+  const std::vector<Reach> reach = ComputeReach(g, camera, surfels, radiosity, options);
+  const CellCentres centres;
+  // Per level, per pixel: its z-buffer of directions. And per pixel a frame.
+  std::vector<std::vector<ZCell>> maps(L, std::vector<ZCell>(n * kCells));
+  std::vector<Vec3f> tangent(n), bitangent(n);
+  for (std::size_t p = 0; p < n; ++p) {
+    if (g.object[p] < 0 || g.normal[p].squaredNorm() == 0) continue;
+    tangent[p] = g.normal[p].unitOrthogonal();
+    bitangent[p] = g.normal[p].cross(tangent[p]);
+  }
+  const int T = std::max(8, options.tile_px);
+  const int tiles_x = (W + T - 1) / T, tiles_y = (H + T - 1) / T;
+  std::atomic<std::uint64_t> splats{0};
+  tbb::parallel_for(tbb::blocked_range<int>(0, tiles_x * tiles_y), [&](const tbb::blocked_range<int>& range) {
+    std::uint64_t local = 0;
+    for (int tile = range.begin(); tile != range.end(); ++tile) {
+      const int tx0 = (tile % tiles_x) * T, ty0 = (tile / tiles_x) * T;
+      const int tx1 = std::min(W - 1, tx0 + T - 1), ty1 = std::min(H - 1, ty0 + T - 1);
+      for (std::size_t i = 0; i < surfels.size(); ++i) {
+        const Reach& R = reach[i];
+        if (!R.any) continue;
+        const Surfel& s = surfels[i];
+        for (int l = 0; l < L; ++l) {
+          const int* rect = R.rect[l];
+          const int x0 = std::max(rect[0], tx0), y0 = std::max(rect[1], ty0);
+          const int x1 = std::min(rect[2], tx1), y1 = std::min(rect[3], ty1);
+          if (x0 > x1 || y0 > y1) continue;
+          const int block = 1 << l;
+          const float inner = l == 0 ? 0.0f : R.rho[l - 1];
+          const float inner2 = inner * inner, outer2 = R.rho[l] * R.rho[l];
+          const int sx = x0 + ((R.offset[l][0] - x0) % block + block) % block;
+          const int sy = y0 + ((R.offset[l][1] - y0) % block + block) % block;
+          for (int y = sy; y <= y1; y += block)
+            for (int x = sx; x <= x1; x += block) {
+              const std::size_t p = static_cast<std::size_t>(y) * W + x;
+              if (g.object[p] < 0) continue;
+              const float r2 = (s.position - g.position[p]).squaredNorm();
+              if (r2 < inner2 || r2 >= outer2) continue;
+              // A pixel of level l sees a quarter^l of the surfels: their
+              // partial covers count 4^l (as the blending's weights do).
+              SplatIntoMap(g, p, tangent[p], bitangent[p], surfels, static_cast<std::int32_t>(i),
+                           static_cast<float>(block * block), centres, &maps[l][p * kCells]);
+              ++local;
+            }
+        }
+      }
+    }
+    splats += local;
+  });
+
+  // Merge: level l's pixel saw a quarter^l of the shells; the nearest per
+  // cell over its 2^l x 2^l block (neighbours of like depth and normal)
+  // stands for all of them. Then the nearest per cell over the levels.
+  DssResult r;
+  r.width = W;
+  r.height = H;
+  r.channels = C;
+  r.occlusion.assign(n, 0.0f);
+  r.occlusion_y.assign(n, 0.0f);
+  r.irradiance.assign(n * C, 0.0f);
+  tbb::parallel_for(tbb::blocked_range<int>(0, H), [&](const tbb::blocked_range<int>& rows) {
+    ZCell merged[kCells];
+    for (int y = rows.begin(); y != rows.end(); ++y)
+      for (int x = 0; x < W; ++x) {
+        const std::size_t p = static_cast<std::size_t>(y) * W + x;
+        if (g.object[p] < 0) continue;
+        for (ZCell& c : merged) c = ZCell{};
+        for (int l = 0; l < L; ++l) {
+          const int block = 1 << l;
+          const int bx = std::clamp(x - block / 2, 0, std::max(0, W - block)), by = std::clamp(y - block / 2, 0, std::max(0, H - block));
+          for (int v = by; v < std::min(H, by + block); ++v)
+            for (int u = bx; u < std::min(W, bx + block); ++u) {
+              const std::size_t q = static_cast<std::size_t>(v) * W + u;
+              if (g.object[q] < 0) continue;
+              if (q != p && (std::fabs(g.depth[q] - g.depth[p]) > 0.05f * g.depth[p] || g.normal[q].dot(g.normal[p]) < 0.9f))
+                continue;
+              const ZCell* map = &maps[l][q * kCells];
+              for (int c = 0; c < kCells; ++c)
+                if (map[c].surfel >= 0 && map[c].distance < merged[c].distance) merged[c] = map[c];
+            }
+        }
+        float occlusion = 0, occlusion_y = 0;
+        for (int c = 0; c < kCells; ++c) {
+          if (merged[c].surfel < 0) continue;
+          const Surfel& s = surfels[merged[c].surfel];
+          const Vec3f w = (s.position - g.position[p]).normalized();
+          const float share = merged[c].cover / kCells;
+          occlusion += share;
+          occlusion_y += share * w.y();
+          if (C > 0 && s.normal.dot(w) < 0)  // it faces the receiver
+            for (int k = 0; k < C; ++k) r.irradiance[p * C + k] += share * radiosity[merged[c].surfel * C + k];
+        }
+        r.occlusion[p] = std::min(1.0f, occlusion);
+        r.occlusion_y[p] = occlusion_y;
+      }
+  });
   r.splats = splats;
   r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
   return r;

@@ -421,7 +421,9 @@ Image RenderBands(const SceneGeometry& geometry, const CoupledSolver* solver, co
     const GBuffer g = RenderGBuffer(geometry, scene, geometry.time_s());
     DssOptions dss;
     dss.channels = nb;
-    const DssResult indirect = SplatDeepScreenSpace(g, camera, senders, sent, dss);
+    // With indirect visibility every surfel counts (the dark ones hide the glowing ones behind them).
+    const DssResult indirect = options.indirect_visibility ? SplatBouncedZBuffer(g, camera, surfels, radiosity, dss)
+                                                           : SplatDeepScreenSpace(g, camera, senders, sent, dss);
     // The media between the camera and the surfaces dim the bounce as they
     // dim the surface, and receive the surfels' light themselves.
     IntervalMap intervals;

@@ -134,3 +134,71 @@ TEST(DeepScreenSpace, TheHierarchyFollowsTheExactGatherAndCostsLess) {
 
 }  // namespace
 }  // namespace phos
+
+namespace phos {
+namespace {
+
+// A receiver on the floor under two stacked disks (radius R at heights h1 <
+// h2): the upper one glows with radiosity B, the lower one is dark and wider.
+struct StackedDisks {
+  render::Scene scene = testing::EmptyScene(33, 33);
+  static render::Mesh Disk(float R, float h) {
+    render::Mesh disk;
+    disk.positions.push_back(Eigen::Vector3f(0, h, 0));
+    const int sides = 64;
+    for (int i = 0; i < sides; ++i) {
+      const float angle = 2 * 3.14159265f * i / sides;
+      disk.positions.push_back(Eigen::Vector3f(R * std::cos(angle), h, R * std::sin(angle)));
+    }
+    for (int i = 0; i < sides; ++i) disk.triangles.push_back(Eigen::Vector3i(0, 1 + i, 1 + (i + 1) % sides));
+    return disk;
+  }
+  StackedDisks(float R_low, float h_low, float R_high, float h_high) {
+    scene.objects.push_back(testing::MakeObject("floor", render::MakeQuad(2, 2), 0.5));
+    scene.objects.push_back(testing::MakeObject("low", Disk(R_low, h_low), 0.5));
+    scene.objects.push_back(testing::MakeObject("high", Disk(R_high, h_high), 0.5));
+    scene.camera.keys = {{0.0, render::Vec3(0, 0.2, 0), render::Vec3(0, 0, 0.0001)}};
+    scene.camera.up = render::Vec3(0, 0, 1);
+  }
+};
+
+TEST(BouncedZBuffer, HidesLightBehindANearerSurfelAndCountsNothingTwice) {
+  // Disks of equal angular size at 0.5 m and 1 m: the upper glows (B = 2),
+  // the lower is dark. Truth: occlusion F = R^2 / (R^2 + h^2) of one disk;
+  // no light arrives. Blending sums both (2F) and lets the glow through.
+  const float h1 = 0.5f, h2 = 1.0f, R1 = 0.25f, R2 = 0.5f, B = 2.0f;
+  StackedDisks stack(R1, h1, R2, h2);
+  render::SceneGeometry geometry(stack.scene);
+  const render::CameraRays camera(stack.scene, 0);
+  render::SurfelOptions options;
+  options.s = 0.03f;
+  const auto surfels = render::Surfelize(geometry, camera.origin(), 60, options);
+  std::vector<float> radiosity;
+  for (const render::Surfel& s : surfels) radiosity.push_back(s.object == 2 ? B : 0.0f);
+  const render::GBuffer g = render::RenderGBuffer(geometry, stack.scene, 0);
+  const std::size_t centre = 16 * 33 + 16;
+  ASSERT_EQ(g.object[centre], 0);
+  const double F = R1 * R1 / (R1 * R1 + h1 * h1);
+  render::DssOptions dss_options;
+  dss_options.channels = 1;
+  const render::DssResult blend = render::SplatDeepScreenSpace(g, camera, surfels, radiosity, dss_options);
+  const render::DssResult z = render::SplatBouncedZBuffer(g, camera, surfels, radiosity, dss_options);
+  EXPECT_NEAR(blend.occlusion[centre], 2 * F, 0.1 * F);                 // over-occlusion
+  EXPECT_NEAR(blend.irradiance[centre], B * F, 0.1 * B * F);            // leaking
+  EXPECT_NEAR(z.occlusion[centre], F, 0.1 * F);
+  EXPECT_LT(z.irradiance[centre], 0.05 * B * F);
+  // Without the dark disk the glow arrives: B F within 10%.
+  StackedDisks open(R1, h1, R2, h2);
+  open.scene.objects.erase(open.scene.objects.begin() + 1);
+  render::SceneGeometry open_geometry(open.scene);
+  const auto open_surfels = render::Surfelize(open_geometry, camera.origin(), 60, options);
+  std::vector<float> open_radiosity;
+  for (const render::Surfel& s : open_surfels) open_radiosity.push_back(s.object == 1 ? B : 0.0f);
+  const render::GBuffer og = render::RenderGBuffer(open_geometry, open.scene, 0);
+  const render::DssResult lit = render::SplatBouncedZBuffer(og, camera, open_surfels, open_radiosity, dss_options);
+  EXPECT_NEAR(lit.irradiance[centre], B * F, 0.1 * B * F);
+  EXPECT_NEAR(lit.occlusion[centre], F, 0.1 * F);
+}
+
+}  // namespace
+}  // namespace phos

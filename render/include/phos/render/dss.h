@@ -120,6 +120,22 @@ struct DssResult {
 DssResult SplatDeepScreenSpace(const GBuffer& gbuffer, const CameraRays& camera, const std::vector<Surfel>& surfels,
                                const std::vector<float>& radiosity, const DssOptions& options);
 
+// Indirect visibility, the bounced z-buffer: every receiver keeps a small
+// z-buffer of directions instead of sums. Its cosine-weighted hemisphere is
+// projected onto the unit disk (Nusselt's analogue: a surfel covers pi F of
+// it) and cut into 64 cells of equal area (8 rings x 8 sectors). A surfel
+// covers the cells its footprint (radius sqrt F about its direction) holds,
+// or, smaller than a cell, its share of the one it falls in; a cell keeps
+// its nearest surfel (surfels within 5% of that distance add their
+// coverage). Splats go through the same hierarchical interleaved shells;
+// level l's maps are then merged over the 2^l x 2^l block (nearest per
+// cell, geometry-aware) and the levels by nearest per cell. Occlusion is
+// the covered share of the hemisphere, irradiance sum cover B / 64 over the
+// cells whose surfel faces the receiver: nothing counts twice (no
+// over-occlusion) and light behind a nearer surfel is hidden (no leaking).
+DssResult SplatBouncedZBuffer(const GBuffer& gbuffer, const CameraRays& camera, const std::vector<Surfel>& surfels,
+                              const std::vector<float>& radiosity, const DssOptions& options);
+
 // The same sums over every surfel for every pixel, with no hierarchy: the
 // exact gather DSS approximates (O(pixels x surfels), for tests and studies).
 DssResult GatherAllSurfels(const GBuffer& gbuffer, const std::vector<Surfel>& surfels,

@@ -56,6 +56,7 @@ struct FrameOptions {
   unsigned seed = 1;
   int interval_layers = 4;  // dss with media: points per pixel of the transmittance interval map
   int sky_rays = 16;        // direct (and what dss surfels receive): shadow rays per point for the sky
+  bool indirect_visibility = false;  // dss: the bounced z-buffer (no leaking, no over-occlusion) instead of blending
 };
 FrameOptions DefaultFrameOptions(const Scene& scene, Transport transport);
 
