@@ -257,6 +257,59 @@ void BM_ExactGatherAo(benchmark::State& state) {
 }
 BENCHMARK(BM_ExactGatherAo)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(1);
 
+// The bounced z-buffer on the same view as BM_DeepScreenSpaceAo (its cost
+// against blending's, same surfels and levels).
+void BM_BouncedZBufferAo(benchmark::State& state) {
+  Scene scene = LoadScene(PHOS_FIXTURES_DIR "/scenes/cornell-phosphor.json");
+  scene.camera.width = scene.camera.height = 256;
+  SceneGeometry geometry(scene);
+  const CameraRays camera(scene, 0);
+  for (auto _ : state) {
+    const auto cloud = Surfelize(geometry, camera.origin(), static_cast<float>(scene.camera.fov_deg), SurfelOptions{});
+    const GBuffer g = RenderGBuffer(geometry, scene, 0);
+    const DssResult r = SplatBouncedZBuffer(g, camera, cloud, {}, DssOptions{});
+    benchmark::ClobberMemory();
+    state.counters["splats"] = static_cast<double>(r.splats);
+  }
+}
+BENCHMARK(BM_BouncedZBufferAo)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// Media: a frame of the dust-sheets fixture (Fig. 8.17) at 256 x 192 while a
+// sheet sweeps the cloud (t = 1.5 s): the direct transport's ray march
+// (single scattering of both sheets, the voxels' glow) and the solver's
+// step to the next frame (0.5 s in 10 ms steps, 32 256 phosphor voxels).
+void BM_DustSheetsFrame(benchmark::State& state) {
+  const Scene scene = LoadScene(PHOS_FIXTURES_DIR "/scenes/dust-sheets.json");
+  SceneGeometry geometry(scene);
+  CoupledSolver solver(scene, geometry);
+  solver.AdvanceTo(1.5);
+  const FrameOptions options = DefaultFrameOptions(scene, Transport::kDirect);
+  for (auto _ : state) {
+    const Image image = RenderBands(geometry, &solver, options);
+    benchmark::ClobberMemory();
+  }
+}
+BENCHMARK(BM_DustSheetsFrame)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+void BM_DustSheetsSolverHalfSecond(benchmark::State& state) {
+  const Scene scene = LoadScene(PHOS_FIXTURES_DIR "/scenes/dust-sheets.json");
+  SceneGeometry geometry(scene);
+  double t = 0;
+  auto solver = std::make_unique<CoupledSolver>(scene, geometry);
+  for (auto _ : state) {
+    if (t + 0.5 > 3.0) {  // stay inside the sweep
+      state.PauseTiming();
+      solver = std::make_unique<CoupledSolver>(scene, geometry);
+      t = 0;
+      state.ResumeTiming();
+    }
+    t += 0.5;
+    solver->AdvanceTo(t);
+    benchmark::ClobberMemory();
+  }
+}
+BENCHMARK(BM_DustSheetsSolverHalfSecond)->Unit(benchmark::kMillisecond)->UseRealTime();
+
 }  // namespace
 }  // namespace phos::render
 
