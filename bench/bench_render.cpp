@@ -277,7 +277,7 @@ BENCHMARK(BM_BouncedZBufferAo)->Unit(benchmark::kMillisecond)->UseRealTime();
 // Media: a frame of the dust-sheets fixture (Fig. 8.17) at 256 x 192 while a
 // sheet sweeps the cloud (t = 1.5 s): the direct transport's ray march
 // (single scattering of both sheets, the voxels' glow) and the solver's
-// step to the next frame (0.5 s in 10 ms steps, 32 256 phosphor voxels).
+// step to the next frame (0.5 s in 10 ms steps, 22 584 phosphor voxels).
 void BM_DustSheetsFrame(benchmark::State& state) {
   const Scene scene = LoadScene(PHOS_FIXTURES_DIR "/scenes/dust-sheets.json");
   SceneGeometry geometry(scene);

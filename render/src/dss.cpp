@@ -218,23 +218,15 @@ std::vector<Reach> ComputeReach(const GBuffer& g, const CameraRays& camera, cons
   return reach;
 }
 
-}  // namespace
-
-DssResult SplatDeepScreenSpace(const GBuffer& g, const CameraRays& camera, const std::vector<Surfel>& surfels,
-                               const std::vector<float>& radiosity, const DssOptions& options) {
-  const auto started = std::chrono::steady_clock::now();
-  const int W = g.width, H = g.height, L = std::max(1, options.levels), C = std::max(0, options.channels);
-  const std::size_t n = static_cast<std::size_t>(W) * H;
-  // One accumulation buffer per level (they are blurred separately).
-  std::vector<std::vector<float>> occlusion(L, std::vector<float>(n, 0.0f));
-  std::vector<std::vector<float>> occlusion_y(L, std::vector<float>(n, 0.0f));
-  std::vector<std::vector<float>> irradiance(L, std::vector<float>(n * C, 0.0f));
-
-  const std::vector<Reach> reach = ComputeReach(g, camera, surfels, radiosity, options);
-
-  // Tiles own their pixels: each thread gathers, for its tile, the shells
-  // that reach it. No two threads write the same pixel.
-  const int T = std::max(8, options.tile_px);
+// Tiles own their pixels: each thread gathers, for its tile, the shells
+// that reach it, so no two threads write the same pixel. Calls
+// visit(p, i, l, weight) for every receiver pixel p inside level l's shell
+// of surfel i and in its sub-buffer (weight 4^l); returns the count.
+template <typename Visit>
+std::uint64_t GatherShells(const GBuffer& g, const std::vector<Surfel>& surfels, const std::vector<Reach>& reach,
+                           int levels, int tile_px, Visit&& visit) {
+  const int W = g.width, H = g.height, L = std::min(levels, 8);
+  const int T = std::max(8, tile_px);
   const int tiles_x = (W + T - 1) / T, tiles_y = (H + T - 1) / T;
   std::atomic<std::uint64_t> splats{0};
   tbb::parallel_for(tbb::blocked_range<int>(0, tiles_x * tiles_y), [&](const tbb::blocked_range<int>& range) {
@@ -246,8 +238,7 @@ DssResult SplatDeepScreenSpace(const GBuffer& g, const CameraRays& camera, const
         const Reach& R = reach[i];
         if (!R.any) continue;
         const Surfel& s = surfels[i];
-        const float* B = C > 0 ? &radiosity[i * C] : nullptr;
-        for (int l = 0; l < L && l < 8; ++l) {
+        for (int l = 0; l < L; ++l) {
           const int* rect = R.rect[l];
           const int x0 = std::max(rect[0], tx0), y0 = std::max(rect[1], ty0);
           const int x1 = std::min(rect[2], tx1), y1 = std::min(rect[3], ty1);
@@ -265,14 +256,34 @@ DssResult SplatDeepScreenSpace(const GBuffer& g, const CameraRays& camera, const
               if (g.object[p] < 0) continue;
               const float r2 = (s.position - g.position[p]).squaredNorm();
               if (r2 < inner2 || r2 >= outer2) continue;
-              Accumulate(g, p, s, B, C, weight, occlusion[l].data(), occlusion_y[l].data(), irradiance[l].data(),
-                         options.dipoles, options.near_m);
+              visit(p, i, l, weight);
               ++local;
             }
         }
       }
     }
     splats += local;
+  });
+  return splats;
+}
+
+}  // namespace
+
+DssResult SplatDeepScreenSpace(const GBuffer& g, const CameraRays& camera, const std::vector<Surfel>& surfels,
+                               const std::vector<float>& radiosity, const DssOptions& options) {
+  const auto started = std::chrono::steady_clock::now();
+  const int W = g.width, H = g.height, L = std::max(1, options.levels), C = std::max(0, options.channels);
+  const std::size_t n = static_cast<std::size_t>(W) * H;
+  // One accumulation buffer per level (they are blurred separately).
+  std::vector<std::vector<float>> occlusion(L, std::vector<float>(n, 0.0f));
+  std::vector<std::vector<float>> occlusion_y(L, std::vector<float>(n, 0.0f));
+  std::vector<std::vector<float>> irradiance(L, std::vector<float>(n * C, 0.0f));
+
+  const std::vector<Reach> reach = ComputeReach(g, camera, surfels, radiosity, options);
+
+  const std::uint64_t splats = GatherShells(g, surfels, reach, L, options.tile_px, [&](std::size_t p, std::size_t i, int l, float weight) {
+    Accumulate(g, p, surfels[i], C > 0 ? &radiosity[i * C] : nullptr, C, weight, occlusion[l].data(),
+               occlusion_y[l].data(), irradiance[l].data(), options.dipoles, options.near_m);
   });
 
   // Unshuffle and blur: level l's pixels each saw a quarter^l of the shells;
@@ -434,44 +445,10 @@ DssResult SplatBouncedZBuffer(const GBuffer& g, const CameraRays& camera, const 
     tangent[p] = g.normal[p].unitOrthogonal();
     bitangent[p] = g.normal[p].cross(tangent[p]);
   }
-  const int T = std::max(8, options.tile_px);
-  const int tiles_x = (W + T - 1) / T, tiles_y = (H + T - 1) / T;
-  std::atomic<std::uint64_t> splats{0};
-  tbb::parallel_for(tbb::blocked_range<int>(0, tiles_x * tiles_y), [&](const tbb::blocked_range<int>& range) {
-    std::uint64_t local = 0;
-    for (int tile = range.begin(); tile != range.end(); ++tile) {
-      const int tx0 = (tile % tiles_x) * T, ty0 = (tile / tiles_x) * T;
-      const int tx1 = std::min(W - 1, tx0 + T - 1), ty1 = std::min(H - 1, ty0 + T - 1);
-      for (std::size_t i = 0; i < surfels.size(); ++i) {
-        const Reach& R = reach[i];
-        if (!R.any) continue;
-        const Surfel& s = surfels[i];
-        for (int l = 0; l < L; ++l) {
-          const int* rect = R.rect[l];
-          const int x0 = std::max(rect[0], tx0), y0 = std::max(rect[1], ty0);
-          const int x1 = std::min(rect[2], tx1), y1 = std::min(rect[3], ty1);
-          if (x0 > x1 || y0 > y1) continue;
-          const int block = 1 << l;
-          const float inner = l == 0 ? 0.0f : R.rho[l - 1];
-          const float inner2 = inner * inner, outer2 = R.rho[l] * R.rho[l];
-          const int sx = x0 + ((R.offset[l][0] - x0) % block + block) % block;
-          const int sy = y0 + ((R.offset[l][1] - y0) % block + block) % block;
-          for (int y = sy; y <= y1; y += block)
-            for (int x = sx; x <= x1; x += block) {
-              const std::size_t p = static_cast<std::size_t>(y) * W + x;
-              if (g.object[p] < 0) continue;
-              const float r2 = (s.position - g.position[p]).squaredNorm();
-              if (r2 < inner2 || r2 >= outer2) continue;
-              // A pixel of level l sees a quarter^l of the surfels: their
-              // partial covers count 4^l (as the blending's weights do).
-              SplatIntoMap(g, p, tangent[p], bitangent[p], surfels, static_cast<std::int32_t>(i),
-                           static_cast<float>(block * block), centres, &maps[l][p * kCells]);
-              ++local;
-            }
-        }
-      }
-    }
-    splats += local;
+  // A pixel of level l sees a quarter^l of the surfels: their partial
+  // covers count 4^l (as the blending's weights do).
+  const std::uint64_t splats = GatherShells(g, surfels, reach, L, options.tile_px, [&](std::size_t p, std::size_t i, int l, float weight) {
+    SplatIntoMap(g, p, tangent[p], bitangent[p], surfels, static_cast<std::int32_t>(i), weight, centres, &maps[l][p * kCells]);
   });
 
   // Merge: level l's pixel saw a quarter^l of the shells; the nearest per

@@ -131,6 +131,19 @@ std::shared_ptr<const Mesh> ReadShape(const JsonField& field) {
   field["type"].Fail("unknown shape '" + type + "' (quad, box, sphere)");
 }
 
+// [{"t_s", "level"}, ...]: a light's or the sky's levels over time.
+LightSchedule ReadSchedule(const JsonField& f) {
+  LightSchedule schedule;
+  for (std::size_t k = 0; k < f.ArraySize(); ++k) {
+    const JsonField key = f.At(k);
+    key.RejectUnknownKeys({"t_s", "level"});
+    schedule.keys.push_back({key["t_s"].Number(), key["level"].NumberAtLeast(0)});
+  }
+  if (schedule.keys.empty()) f.Fail("expected at least one {t_s, level}");
+  RequireIncreasingTimes(f, schedule.keys);
+  return schedule;
+}
+
 using MaterialCache = std::map<std::string, std::shared_ptr<const Material>>;
 
 // "phosphor": a material file on the scene's band grid (loaded once per file).
@@ -477,15 +490,7 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
     light.intensity = l["intensity"].NumberAtLeast(0);
     light.E_per_band = ReadSpectrum(l["spectrum"], scene.bands);
     for (double& e : light.E_per_band) e *= light.intensity;
-    if (auto f = l.Optional("schedule")) {
-      for (std::size_t k = 0; k < f->ArraySize(); ++k) {
-        const JsonField key = f->At(k);
-        key.RejectUnknownKeys({"t_s", "level"});
-        light.schedule.keys.push_back({key["t_s"].Number(), key["level"].NumberAtLeast(0)});
-      }
-      if (light.schedule.keys.empty()) f->Fail("expected at least one {t_s, level}");
-      RequireIncreasingTimes(*f, light.schedule.keys);
-    }
+    if (auto f = l.Optional("schedule")) light.schedule = ReadSchedule(*f);
     scene.lights.push_back(std::move(light));
   }
   // The sky.
@@ -496,15 +501,7 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
     const double radiance = (*f)["radiance"].NumberAtLeast(0);
     for (double& l : env.L_per_band) l *= radiance;
     if (f->Has("gradient")) env.gradient = (*f)["gradient"].NumberInRange(-1, 1);
-    if (auto sf = f->Optional("schedule")) {
-      for (std::size_t k = 0; k < sf->ArraySize(); ++k) {
-        const JsonField key = sf->At(k);
-        key.RejectUnknownKeys({"t_s", "level"});
-        env.schedule.keys.push_back({key["t_s"].Number(), key["level"].NumberAtLeast(0)});
-      }
-      if (env.schedule.keys.empty()) sf->Fail("expected at least one {t_s, level}");
-      RequireIncreasingTimes(*sf, env.schedule.keys);
-    }
+    if (auto sf = f->Optional("schedule")) env.schedule = ReadSchedule(*sf);
     scene.environment = env;
   }
 

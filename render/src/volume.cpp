@@ -227,19 +227,20 @@ void VolumeMedia::PrepareLighting(double t_s) {
   }
 }
 
-float VolumeMedia::March(const Vec3f& origin, const Vec3f& direction, float t_max, float jitter, float* L) const {
-  struct Segment {
-    float t0, t1;
-    int volume;
-  };
-  Segment segments[16];
+int VolumeMedia::Segments(const Vec3f& origin, const Vec3f& direction, float t_max, Segment* segments) const {
   int count = 0;
-  for (std::size_t v = 0; v < grids_.size() && count < 16; ++v) {
+  for (std::size_t v = 0; v < grids_.size() && count < kMaxSegments; ++v) {
     float t0, t1;
     if (grids_[v].Clip(origin, direction, t_max, &t0, &t1)) segments[count++] = {t0, t1, static_cast<int>(v)};
   }
   // Front to back (overlapping media are marched one after the other).
   std::sort(segments, segments + count, [](const Segment& a, const Segment& b) { return a.t0 < b.t0; });
+  return count;
+}
+
+float VolumeMedia::March(const Vec3f& origin, const Vec3f& direction, float t_max, float jitter, float* L) const {
+  Segment segments[kMaxSegments];
+  const int count = Segments(origin, direction, t_max, segments);
   float T = 1;
   float J[64];
   for (int s = 0; s < count && T > 1e-7f; ++s) {
@@ -282,17 +283,8 @@ float VolumeMedia::March(const Vec3f& origin, const Vec3f& direction, float t_ma
 
 float VolumeMedia::FindTransmittanceDepths(const Vec3f& origin, const Vec3f& direction, float t_max,
                                            const float* targets, int count, float* distance, int* volume) const {
-  struct Segment {
-    float t0, t1;
-    int volume;
-  };
-  Segment segments[16];
-  int n_segments = 0;
-  for (std::size_t v = 0; v < grids_.size() && n_segments < 16; ++v) {
-    float t0, t1;
-    if (grids_[v].Clip(origin, direction, t_max, &t0, &t1)) segments[n_segments++] = {t0, t1, static_cast<int>(v)};
-  }
-  std::sort(segments, segments + n_segments, [](const Segment& a, const Segment& b) { return a.t0 < b.t0; });
+  Segment segments[kMaxSegments];
+  const int n_segments = Segments(origin, direction, t_max, segments);
   for (int k = 0; k < count; ++k) volume[k] = -1;
   int next = 0;  // the next target to reach
   float tau = 0;

@@ -78,12 +78,19 @@ TEST(RenderCommand, ABudgetPicksTheBestTransportThatFits) {
   const nlohmann::json hour = run("--budget-s 3600");
   EXPECT_EQ(hour["transport_choice"]["chosen"], "path 1024 spp");
   EXPECT_EQ(hour["transport"], "path");
-  // In between, the choice fits its budget and nothing better does.
-  const nlohmann::json candidates = hour["transport_choice"]["candidates"];
-  const double dss_s = candidates[1]["estimated_s"].get<double>();
-  const nlohmann::json mid = run("--budget-s " + std::to_string(dss_s * 1.5));
-  EXPECT_LE(mid["transport_choice"]["estimated_s"].get<double>(), dss_s * 1.5 * 1.0001);
-  EXPECT_GE(mid["transport_choice"]["expected_ssim"].get<double>(), 0.9 - 1e-9);
+  // In between, the choice fits its budget and nothing that fits (by that
+  // run's own timings: the machine's noise moves them) looks better.
+  const double dss_s = hour["transport_choice"]["candidates"][1]["estimated_s"].get<double>();
+  const double budget = dss_s * 1.5;
+  const nlohmann::json mid = run("--budget-s " + std::to_string(budget))["transport_choice"];
+  if (mid["fits"].get<bool>()) {
+    EXPECT_LE(mid["estimated_s"].get<double>(), budget);
+  }
+  for (const auto& candidate : mid["candidates"]) {
+    if (candidate["estimated_s"].get<double>() <= budget) {
+      EXPECT_LE(candidate["expected_ssim"].get<double>(), mid["expected_ssim"].get<double>()) << candidate["transport"];
+    }
+  }
   // A quality asks for the cheapest transport that reaches it.
   const nlohmann::json good = run("--quality 0.95");
   EXPECT_GE(good["transport_choice"]["expected_ssim"].get<double>(), 0.95);

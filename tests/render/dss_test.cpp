@@ -69,14 +69,7 @@ TEST(DeepScreenSpace, AClosedBoxSeenFromInsideIsFullyOccluded) {
 // y = 0; the camera between them looks straight down at the origin.
 TEST(DeepScreenSpace, ADiskOfKnownRadiosityGivesTheKnownIrradianceOnItsAxis) {
   const float R = 0.5f, h = 1.0f, B = 2.0f;
-  render::Mesh disk;
-  disk.positions.push_back(Eigen::Vector3f(0, h, 0));
-  const int sides = 96;
-  for (int i = 0; i < sides; ++i) {
-    const float angle = 2 * 3.14159265f * i / sides;
-    disk.positions.push_back(Eigen::Vector3f(R * std::cos(angle), h, R * std::sin(angle)));
-  }
-  for (int i = 0; i < sides; ++i) disk.triangles.push_back(Eigen::Vector3i(0, 1 + i, 1 + (i + 1) % sides));  // normal -y
+  const render::Mesh disk = testing::DiskFacingDown(R, h);
   render::Scene scene = testing::EmptyScene(33, 33);
   scene.objects.push_back(testing::MakeObject("floor", render::MakeQuad(2, 2), 0.5));
   scene.objects.push_back(testing::MakeObject("disk", disk, 0.5));
@@ -142,17 +135,7 @@ namespace {
 // h2): the upper one glows with radiosity B, the lower one is dark and wider.
 struct StackedDisks {
   render::Scene scene = testing::EmptyScene(33, 33);
-  static render::Mesh Disk(float R, float h) {
-    render::Mesh disk;
-    disk.positions.push_back(Eigen::Vector3f(0, h, 0));
-    const int sides = 64;
-    for (int i = 0; i < sides; ++i) {
-      const float angle = 2 * 3.14159265f * i / sides;
-      disk.positions.push_back(Eigen::Vector3f(R * std::cos(angle), h, R * std::sin(angle)));
-    }
-    for (int i = 0; i < sides; ++i) disk.triangles.push_back(Eigen::Vector3i(0, 1 + i, 1 + (i + 1) % sides));
-    return disk;
-  }
+  static render::Mesh Disk(float R, float h) { return testing::DiskFacingDown(R, h, 64); }
   StackedDisks(float R_low, float h_low, float R_high, float h_high) {
     scene.objects.push_back(testing::MakeObject("floor", render::MakeQuad(2, 2), 0.5));
     scene.objects.push_back(testing::MakeObject("low", Disk(R_low, h_low), 0.5));

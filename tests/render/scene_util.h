@@ -1,6 +1,7 @@
 #pragma once
 // Small scenes built in code for the renderer's analytic tests.
 
+#include <cmath>
 #include <memory>
 #include <vector>
 
@@ -20,6 +21,18 @@ inline std::shared_ptr<Material> UniformPhosphor(double kr, std::vector<double> 
   state.Lambda = std::move(Lambda);
   material->states.push_back(state);
   return material;
+}
+
+// A disk of radius R in the plane y = h, its front facing down (-y), as a fan of `sides` triangles.
+inline render::Mesh DiskFacingDown(float R, float h, int sides = 96) {
+  render::Mesh disk;
+  disk.positions.push_back(Eigen::Vector3f(0, h, 0));
+  for (int i = 0; i < sides; ++i) {
+    const float angle = 2 * 3.14159265f * static_cast<float>(i) / static_cast<float>(sides);
+    disk.positions.push_back(Eigen::Vector3f(R * std::cos(angle), h, R * std::sin(angle)));
+  }
+  for (int i = 0; i < sides; ++i) disk.triangles.push_back(Eigen::Vector3i(0, 1 + i, 1 + (i + 1) % sides));
+  return disk;
 }
 
 inline render::Scene EmptyScene(int width = 16, int height = 16) {

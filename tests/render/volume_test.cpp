@@ -251,14 +251,7 @@ TEST(IntervalMap, ADiskLightsAPointInAMediumWithItsSolidAngle) {
   // of a medium on its axis at distance z the radiance over the sphere
   // integrates to Phi = (B / pi) 2 pi (1 - z / sqrt(z^2 + R^2)).
   const float R = 0.5f, h = 1.0f, B = 2.0f;
-  Mesh disk;
-  disk.positions.push_back(Eigen::Vector3f(0, h, 0));
-  const int sides = 96;
-  for (int i = 0; i < sides; ++i) {
-    const float angle = 2 * 3.14159265f * i / sides;
-    disk.positions.push_back(Eigen::Vector3f(R * std::cos(angle), h, R * std::sin(angle)));
-  }
-  for (int i = 0; i < sides; ++i) disk.triangles.push_back(Eigen::Vector3i(0, 1 + i, 1 + (i + 1) % sides));
+  const Mesh disk = testing::DiskFacingDown(R, h);
   Scene scene = testing::EmptyScene(33, 33);
   scene.objects.push_back(testing::MakeObject("floor", MakeQuad(2, 2), 0.5));
   scene.objects.push_back(testing::MakeObject("disk", disk, 0.5));
@@ -268,9 +261,11 @@ TEST(IntervalMap, ADiskLightsAPointInAMediumWithItsSolidAngle) {
   const CameraRays camera(scene, 0);
   SurfelOptions options;
   options.s = 0.03f;
-  const auto surfels = Surfelize(geometry, camera.origin(), 60, options);
-  std::vector<float> radiosity;
-  for (const Surfel& s : surfels) radiosity.push_back(s.object == 1 ? B : 0.0f);
+  // Only the disk sends light to a point in a medium: its surfels alone.
+  std::vector<Surfel> surfels;
+  for (const Surfel& s : Surfelize(geometry, camera.origin(), 60, options))
+    if (s.object == 1) surfels.push_back(s);
+  const std::vector<float> radiosity(surfels.size(), B);
   const std::size_t centre = 16 * 33 + 16;
   for (float y : {0.1f, 0.3f}) {
     // Receivers: points in a medium (no normal) along each pixel's ray.

@@ -134,6 +134,13 @@ class VolumeMedia {
     bool valid = false;
   };
   struct Phosphor;
+  // The ray's intervals inside each volume, front to back (at most kMaxSegments).
+  struct Segment {
+    float t0, t1;
+    int volume;
+  };
+  static constexpr int kMaxSegments = 16;
+  int Segments(const Vec3f& origin, const Vec3f& direction, float t_max, Segment* segments) const;
   void UpdateLight(int volume, int light, const LightPose& pose);
   void StepVolume(int volume, double h_s);  // at the lights as last prepared
   float MediaOpticalDepth(const Vec3f& origin, const Vec3f& direction, float t_max) const;
