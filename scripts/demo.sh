@@ -89,9 +89,12 @@ rm -rf "$OUT/dusk-sign"
   echo '<!doctype html><meta charset="utf-8"><title>phos gallery</title>'
   echo '<style>body{background:#222;color:#ddd;font-family:sans-serif;margin:2em}img{max-width:100%}</style>'
   echo '<h1>phos: the fixture scenes (make demo)</h1>'
-  for sheet in still-life cornell cornell-dss light-trail dust-sheets glowing-liquid translucent-shadow dusk-sign; do
-    scene=${sheet%-dss}
-    echo "<h2>$sheet</h2><p>fixtures/scenes/$scene.json</p><img src=\"$sheet.png\">"
+  # sheet:scene file:how it was rendered
+  for entry in still-life:still-life:direct cornell:cornell-phosphor:path cornell-dss:cornell-phosphor:dss \
+               light-trail:light-trail:direct dust-sheets:dust-sheets:direct glowing-liquid:glowing-liquid:direct \
+               translucent-shadow:translucent-shadow:dss dusk-sign:dusk-sign:dss; do
+    IFS=: read -r sheet scene transport <<< "$entry"
+    echo "<h2>$sheet</h2><p>fixtures/scenes/$scene.json, --transport $transport</p><img src=\"$sheet.png\">"
   done
 } > "$OUT/gallery.html.tmp" && mv "$OUT/gallery.html.tmp" "$OUT/gallery.html"
 
