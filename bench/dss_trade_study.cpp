@@ -540,7 +540,7 @@ int main(int argc, char** argv) {
       std::vector<float> truth = exitance(0.02f, true, &seconds);
       const float peak = *std::max_element(truth.begin(), truth.end());
       for (float& v : truth) v /= peak;
-      const std::string view = "translucent-shadow t=2 s (wax exitance, 550 nm band)";
+      const std::string view = "translucent-shadow t=2 s (wax exitance in the 550 nm band)";
       auto add = [&](const std::string& method, const std::string& parameters, std::vector<float> M, double t) {
         for (float& v : M) v /= peak;
         effect_runs.push_back({view, method, parameters, t, Compare(M, truth, mask), 0, 0, 0});
@@ -656,9 +656,44 @@ int main(int argc, char** argv) {
     plot.title = "The default search: lowest RMSE within a time budget";
     plot.x_label = "time budget (s)";
     WriteFileAtomically(fs::path(out) / "dss-budget.svg", PlotSvg({dss_curve, mc_curve}, plot));
+
+    // The other effects: one plot each, RMSE against seconds per method
+    // (docs/dss-trade-<effect>.svg).
+    const std::vector<std::pair<std::string, std::string>> effect_plots = {
+        {"cornell-phosphor t=40 s (glow only)", "glow-bounce"},
+        {"cornell fog t=40 s (glow in the medium)", "fog"},
+        {"dusk-sign t=30 s (sky irradiance)", "sky"},
+        {"translucent-shadow t=2 s (wax exitance in the 550 nm band)", "wax"},
+        {"glowing-liquid t=10 s (media)", "march"}};
+    std::string plots_md = "\nPlots of RMSE against time per effect: ";
+    for (const auto& [view, file] : effect_plots) {
+      std::map<std::string, std::vector<std::pair<double, double>>> by_method;
+      for (const Run& r : runs)
+        if (r.view == view) by_method[r.method].push_back({r.seconds, r.error.rmse});
+      std::vector<PlotSeries> effect_series;
+      int c = 0;
+      for (auto& [method, points] : by_method) {
+        std::sort(points.begin(), points.end());
+        PlotSeries series(method);
+        series.markers = true;
+        series.color = PaletteColor(c++);
+        for (const auto& [t, e] : points) series.x.push_back(t), series.y.push_back(e);
+        effect_series.push_back(series);
+      }
+      PlotOptions effect_plot;
+      effect_plot.title = view + ": RMSE vs time";
+      effect_plot.x_label = "seconds per frame, " + std::to_string(size) + " px high";
+      effect_plot.y_label = "RMSE (relative to the brightest pixel)";
+      effect_plot.log_x = effect_plot.log_y = true;
+      const std::string name = "dss-trade-" + file + ".svg";
+      WriteFileAtomically(fs::path(out) / name, PlotSvg(effect_series, effect_plot));
+      plots_md.append("[").append(file).append("](").append(name).append(") ");
+    }
+    plots_md += "\n";
     md += glow_md;
     md += media_md;
     md += effects_md;
+    md += plots_md;
     WriteFileAtomically(fs::path(out) / "dss-trade.md", md);
     std::printf("%s", md.c_str());
   } catch (const std::exception& e) {

@@ -109,6 +109,19 @@ inline void Accumulate(const GBuffer& g, std::size_t p, const Surfel& s, const f
     for (int c = 0; c < channels; ++c) irradiance[p * channels + c] += weight * F * B[c];
 }
 
+// A result of zeros for W x H receivers and C channels.
+DssResult EmptyResult(int width, int height, int channels) {
+  DssResult r;
+  r.width = width;
+  r.height = height;
+  r.channels = channels;
+  const std::size_t n = static_cast<std::size_t>(width) * height;
+  r.occlusion.assign(n, 0.0f);
+  r.occlusion_y.assign(n, 0.0f);
+  r.irradiance.assign(n * std::max(channels, 0), 0.0f);
+  return r;
+}
+
 // Occlusion above 1 (surfels behind surfels) is scaled back to 1, and the
 // directional sum with it.
 void ClampOcclusion(DssResult& r) {
@@ -124,14 +137,8 @@ void ClampOcclusion(DssResult& r) {
 DssResult GatherAllSurfels(const GBuffer& g, const std::vector<Surfel>& surfels, const std::vector<float>& radiosity,
                            int channels, const std::vector<Dipole>* dipoles, const std::vector<float>* near_m) {
   const auto started = std::chrono::steady_clock::now();
-  DssResult r;
-  r.width = g.width;
-  r.height = g.height;
-  r.channels = channels;
+  DssResult r = EmptyResult(g.width, g.height, channels);
   const std::size_t n = static_cast<std::size_t>(g.width) * g.height;
-  r.occlusion.assign(n, 0.0f);
-  r.occlusion_y.assign(n, 0.0f);
-  r.irradiance.assign(n * std::max(channels, 0), 0.0f);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n), [&](const tbb::blocked_range<std::size_t>& range) {
     for (std::size_t p = range.begin(); p != range.end(); ++p) {
       if (g.object[p] < 0) continue;
@@ -290,13 +297,7 @@ DssResult SplatDeepScreenSpace(const GBuffer& g, const CameraRays& camera, const
   // averaging over the 2^l x 2^l block around a pixel (every sub-buffer
   // once) restores the sum, weighted by depth and normal so it does not
   // leak across edges.
-  DssResult r;
-  r.width = W;
-  r.height = H;
-  r.channels = C;
-  r.occlusion.assign(n, 0.0f);
-  r.occlusion_y.assign(n, 0.0f);
-  r.irradiance.assign(n * C, 0.0f);
+  DssResult r = EmptyResult(W, H, C);
   for (int l = 0; l < L; ++l) {
     const int block = 1 << l;
     const bool blur = options.blur && l > 0;
@@ -454,13 +455,7 @@ DssResult SplatBouncedZBuffer(const GBuffer& g, const CameraRays& camera, const 
   // Merge: level l's pixel saw a quarter^l of the shells; the nearest per
   // cell over its 2^l x 2^l block (neighbours of like depth and normal)
   // stands for all of them. Then the nearest per cell over the levels.
-  DssResult r;
-  r.width = W;
-  r.height = H;
-  r.channels = C;
-  r.occlusion.assign(n, 0.0f);
-  r.occlusion_y.assign(n, 0.0f);
-  r.irradiance.assign(n * C, 0.0f);
+  DssResult r = EmptyResult(W, H, C);
   tbb::parallel_for(tbb::blocked_range<int>(0, H), [&](const tbb::blocked_range<int>& rows) {
     ZCell merged[kCells];
     for (int y = rows.begin(); y != rows.end(); ++y)

@@ -69,12 +69,7 @@ TEST(DeepScreenSpace, AClosedBoxSeenFromInsideIsFullyOccluded) {
 // y = 0; the camera between them looks straight down at the origin.
 TEST(DeepScreenSpace, ADiskOfKnownRadiosityGivesTheKnownIrradianceOnItsAxis) {
   const float R = 0.5f, h = 1.0f, B = 2.0f;
-  const render::Mesh disk = testing::DiskFacingDown(R, h);
-  render::Scene scene = testing::EmptyScene(33, 33);
-  scene.objects.push_back(testing::MakeObject("floor", render::MakeQuad(2, 2), 0.5));
-  scene.objects.push_back(testing::MakeObject("disk", disk, 0.5));
-  scene.camera.keys = {{0.0, render::Vec3(0, 0.5, 0), render::Vec3(0, 0, 0.0001)}};
-  scene.camera.up = render::Vec3(0, 0, 1);
+  render::Scene scene = testing::DiskOverFloor(R, h);
   render::SceneGeometry geometry(scene);
   ASSERT_LT(geometry.FrontNormal(1, 0).y(), 0);  // the disk faces the floor
   const render::CameraRays camera(scene, 0);

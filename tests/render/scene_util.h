@@ -69,4 +69,17 @@ inline render::Light PointLight(const render::Vec3& position, std::vector<double
   return light;
 }
 
+// A floor 2 m wide at y = 0 (object 0) under a disk of radius R at height h
+// facing down (object 1, DiskFacingDown), seen from
+// 0.5 m above the floor looking straight down, 33 x 33 pixels: the centre
+// pixel sees the floor on the disk's axis.
+inline render::Scene DiskOverFloor(float R, float h) {
+  render::Scene scene = EmptyScene(33, 33);
+  scene.objects.push_back(MakeObject("floor", render::MakeQuad(2, 2), 0.5));
+  scene.objects.push_back(MakeObject("disk", DiskFacingDown(R, h), 0.5));
+  scene.camera.keys = {{0.0, render::Vec3(0, 0.5, 0), render::Vec3(0, 0, 0.0001)}};
+  scene.camera.up = render::Vec3(0, 0, 1);
+  return scene;
+}
+
 }  // namespace phos::testing

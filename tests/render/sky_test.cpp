@@ -55,12 +55,7 @@ TEST(Sky, DirectionalOcclusionUnderADiskIsTheClosedForm) {
   // 2 pi L [sin^2(theta0) / 2 + g (1 - cos^3(theta0)) / 3] of the sky's irradiance.
   const float R = 0.5f, h = 1.0f;
   const double g = 0.8;
-  const Mesh disk = testing::DiskFacingDown(R, h);
-  Scene scene = testing::EmptyScene(33, 33);
-  scene.objects.push_back(testing::MakeObject("floor", MakeQuad(2, 2), 0.5));
-  scene.objects.push_back(testing::MakeObject("disk", disk, 0.5));
-  scene.camera.keys = {{0.0, Vec3(0, 0.5, 0), Vec3(0, 0, 0.0001)}};
-  scene.camera.up = Vec3(0, 0, 1);
+  Scene scene = testing::DiskOverFloor(R, h);
   SceneGeometry geometry(scene);
   const CameraRays camera(scene, 0);
   SurfelOptions options;

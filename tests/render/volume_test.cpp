@@ -251,12 +251,7 @@ TEST(IntervalMap, ADiskLightsAPointInAMediumWithItsSolidAngle) {
   // of a medium on its axis at distance z the radiance over the sphere
   // integrates to Phi = (B / pi) 2 pi (1 - z / sqrt(z^2 + R^2)).
   const float R = 0.5f, h = 1.0f, B = 2.0f;
-  const Mesh disk = testing::DiskFacingDown(R, h);
-  Scene scene = testing::EmptyScene(33, 33);
-  scene.objects.push_back(testing::MakeObject("floor", MakeQuad(2, 2), 0.5));
-  scene.objects.push_back(testing::MakeObject("disk", disk, 0.5));
-  scene.camera.keys = {{0.0, Vec3(0, 0.5, 0), Vec3(0, 0, 0.0001)}};
-  scene.camera.up = Vec3(0, 0, 1);
+  Scene scene = testing::DiskOverFloor(R, h);
   SceneGeometry geometry(scene);
   const CameraRays camera(scene, 0);
   SurfelOptions options;
