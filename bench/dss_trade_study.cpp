@@ -138,13 +138,7 @@ std::vector<float> MediumGlow(const Scene& scene, const SceneGeometry& geometry,
     std::vector<Surfel> senders;
     std::vector<float> B, L(nb);
     for (const Surfel& s : all) {
-      Hit hit;
-      hit.object = s.object;
-      hit.triangle = s.triangle;
-      hit.b1 = s.b1;
-      hit.b2 = s.b2;
-      hit.front = true;
-      Lp_at(hit, L);
+      Lp_at(FrontHit(s), L);
       if (*std::max_element(L.begin(), L.end()) <= 0) continue;
       senders.push_back(s);
       for (float l : L) B.push_back(3.14159265f * l);

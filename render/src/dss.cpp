@@ -99,11 +99,11 @@ inline void Accumulate(const GBuffer& g, std::size_t p, const Surfel& s, const f
     for (int c = 0; c < channels; ++c) irradiance[p * channels + c] += weight * d[c].SurfelKernel(r, s.area, near) * B[c];
     return;
   }
-  float cos_q = 0;
-  const float F = SurfelFormFactor(g.position[p], g.normal[p], s, &cos_q);
+  float cos_q = 0, w_y = 0;
+  const float F = SurfelFormFactor(g.position[p], g.normal[p], s, &cos_q, &w_y);
   if (F <= 0) return;
   occlusion[p] += weight * F;
-  occlusion_y[p] += weight * F * (s.position.y() - g.position[p].y()) / (s.position - g.position[p]).norm();
+  occlusion_y[p] += weight * F * w_y;
   // Light arrives from the surfel's front only (it faces the receiver).
   if (channels > 0 && cos_q < 0)
     for (int c = 0; c < channels; ++c) irradiance[p * channels + c] += weight * F * B[c];

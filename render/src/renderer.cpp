@@ -385,7 +385,19 @@ Image RenderBands(const SceneGeometry& geometry, const CoupledSolver* solver, co
     // as irradiance onto what the camera sees, reflected by its albedo.
     const std::vector<Surfel> surfels =
         Surfelize(geometry, camera.origin(), static_cast<float>(scene.camera.fov_deg), SurfelOptions{});
+    // Translucent objects' dipoles (subsurface.h), per object and band.
+    std::vector<Dipole> dipoles(scene.objects.size() * nb);
+    bool translucent = false;
+    for (std::size_t o = 0; o < scene.objects.size(); ++o) {
+      const auto& sss = scene.objects[o].subsurface;
+      if (!sss) continue;
+      translucent = true;
+      for (int b = 0; b < nb; ++b)
+        dipoles[o * nb + b] = Dipole::From(sss->sigma_a_per_m[b], sss->sigma_s_prime_per_m[b], sss->eta);
+    }
     std::vector<float> radiosity(surfels.size() * nb, 0.0f);
+    // The irradiance on translucent objects' surfels, kept for the dipole.
+    std::vector<float> surfel_E(translucent ? surfels.size() * nb : 0, 0.0f);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, surfels.size()), [&](const tbb::blocked_range<std::size_t>& range) {
       std::uint64_t rays = 0;
       Bands E;
@@ -393,31 +405,30 @@ Image RenderBands(const SceneGeometry& geometry, const CoupledSolver* solver, co
         const Surfel& s = surfels[i];
         // The front side sends: what it reflects of the lights, and its glow.
         tracer.DirectIrradiance(s.position, s.normal, E, rays);
-        Hit hit;
-        hit.object = s.object;
-        hit.triangle = s.triangle;
-        hit.b1 = s.b1;
-        hit.b2 = s.b2;
-        hit.front = true;
         Bands B = tracer.Albedo(s.object) * E;
         Bands Le;
-        if (tracer.Emission(hit, Le)) B += kPi * Le;
+        if (tracer.Emission(FrontHit(s), Le)) B += kPi * Le;
         std::copy(B.data(), B.data() + nb, &radiosity[i * nb]);
+        if (translucent && scene.objects[s.object].subsurface) std::copy(E.data(), E.data() + nb, &surfel_E[i * nb]);
       }
       total_rays += rays;
     });
     // Only surfels that send light matter to either receiver (the occlusion
-    // is not used here): a dark scene's unlit floor costs nothing.
-    std::vector<Surfel> senders;
-    std::vector<float> sent;
-    const bool sky = tracer.sky_level() > 0;  // the sky needs every surfel: they occlude it
-    for (std::size_t i = 0; i < surfels.size(); ++i) {
-      bool sends = sky;
-      for (int b = 0; b < nb; ++b) sends = sends || radiosity[i * nb + b] > 0;
-      if (!sends) continue;
-      senders.push_back(surfels[i]);
-      sent.insert(sent.end(), &radiosity[i * nb], &radiosity[i * nb] + nb);
-    }
+    // is not used here): a dark scene's unlit floor costs nothing. The sky
+    // needs every surfel (they occlude it).
+    const bool sky = tracer.sky_level() > 0;
+    std::vector<Surfel> sending;
+    std::vector<float> sending_B;
+    if (!sky)
+      for (std::size_t i = 0; i < surfels.size(); ++i) {
+        bool sends = false;
+        for (int b = 0; b < nb; ++b) sends = sends || radiosity[i * nb + b] > 0;
+        if (!sends) continue;
+        sending.push_back(surfels[i]);
+        sending_B.insert(sending_B.end(), &radiosity[i * nb], &radiosity[i * nb] + nb);
+      }
+    const std::vector<Surfel>& senders = sky ? surfels : sending;
+    const std::vector<float>& sent = sky ? radiosity : sending_B;
     const GBuffer g = RenderGBuffer(geometry, scene, geometry.time_s());
     DssOptions dss;
     dss.channels = nb;
@@ -448,28 +459,15 @@ Image RenderBands(const SceneGeometry& geometry, const CoupledSolver* solver, co
     // Translucent objects: the lights' irradiance on their surfels, carried
     // beneath the surface by the dipole (subsurface.h) to the pixels of the
     // same object.
-    std::vector<Dipole> dipoles(scene.objects.size() * nb);
-    bool translucent = false;
-    for (std::size_t o = 0; o < scene.objects.size(); ++o) {
-      const auto& sss = scene.objects[o].subsurface;
-      if (!sss) continue;
-      translucent = true;
-      for (int b = 0; b < nb; ++b)
-        dipoles[o * nb + b] = Dipole::From(sss->sigma_a_per_m[b], sss->sigma_s_prime_per_m[b], sss->eta);
-    }
     if (translucent) {
       std::vector<Surfel> entering;
       std::vector<float> E_in;
-      Bands E;
-      std::uint64_t rays = 0;
-      for (const Surfel& s : surfels) {
-        if (!scene.objects[s.object].subsurface) continue;
-        tracer.DirectIrradiance(s.position, s.normal, E, rays);
-        if (E.maxCoeff() <= 0) continue;
-        entering.push_back(s);
-        E_in.insert(E_in.end(), E.data(), E.data() + nb);
+      for (std::size_t i = 0; i < surfels.size(); ++i) {
+        const float* E = &surfel_E[i * nb];
+        if (!scene.objects[surfels[i].object].subsurface || *std::max_element(E, E + nb) <= 0) continue;
+        entering.push_back(surfels[i]);
+        E_in.insert(E_in.end(), E, E + nb);
       }
-      total_rays += rays;
       // The near field of each receiver (two target surfel radii at its
       // depth) from its own irradiance in closed form; the surfels send the rest.
       const float tan_half = std::tan(static_cast<float>(scene.camera.fov_deg) * kPi / 360.0f);

@@ -68,6 +68,7 @@ struct VolumeMedia::Phosphor {
   BatchCoefficients<float> coefficients;
   StateBatch<float> states;
   std::vector<float> E;          // [n_exc * n]
+  std::vector<float> unit;       // [n]: one light's, scratch
   std::vector<float> Lp;         // [n_em * n]
   std::vector<float> Lp_grid;    // [n_em * voxels of the grid]: sampled by the marches
   std::vector<std::int32_t> state_of;  // per grid voxel: index into voxels, or -1
@@ -369,38 +370,44 @@ void VolumeMedia::Step(double t0_s, double t1_s) {
 }
 
 void VolumeMedia::StepVolume(int vi, double h) {
-  {
-    Phosphor* p = phosphors_[vi].get();
-    const std::size_t n = p->voxels.size();
-    const VolumeGrid& grid = grids_[vi];
-    bool lit = false;
-    for (std::size_t l = 0; l < scene_.lights.size() && !p->excitation_bands.empty(); ++l) {
-      if (levels_[l] <= 0) continue;
-      const Light& light = scene_.lights[l];
-      const std::vector<float>& unit = caches_[vi][l].unit;
-      // A voxel's half extent along the sheet's normal.
-      const float half = 0.5f * grid.voxel_m().cwiseProduct(poses_[l].sheet_normal).cwiseAbs().sum();
-      for (std::size_t bi = 0; bi < p->excitation_bands.size(); ++bi) {
-        const float scale = static_cast<float>(levels_[l] * light.E_per_band[p->excitation_bands[bi]]);
-        float* E = p->E.data() + bi * n;
-        for (std::size_t j = 0; j < n; ++j) {
-          const float u = unit[p->voxels[j]] * poses_[l].SheetCoverage(grid.VoxelCentre(p->voxels[j]), half);
-          E[j] = (lit ? E[j] : 0.0f) + scale * u;
-        }
-      }
-      lit = true;
+  Phosphor* p = phosphors_[vi].get();
+  const std::size_t n = p->voxels.size();
+  const VolumeGrid& grid = grids_[vi];
+  bool lit = false;
+  for (std::size_t l = 0; l < scene_.lights.size() && !p->excitation_bands.empty(); ++l) {
+    if (levels_[l] <= 0) continue;
+    const Light& light = scene_.lights[l];
+    const std::vector<float>& unit = caches_[vi][l].unit;
+    // Each voxel's light from this light, the sheet's covered fraction
+    // included (a voxel's half extent along the sheet's normal), once for
+    // all bands.
+    const float half = 0.5f * grid.voxel_m().cwiseProduct(poses_[l].sheet_normal).cwiseAbs().sum();
+    p->unit.resize(n);
+    for (std::size_t j = 0; j < n; ++j)
+      p->unit[j] = unit[p->voxels[j]] * poses_[l].SheetCoverage(grid.VoxelCentre(p->voxels[j]), half);
+    for (std::size_t bi = 0; bi < p->excitation_bands.size(); ++bi) {
+      const float scale = static_cast<float>(levels_[l] * light.E_per_band[p->excitation_bands[bi]]);
+      float* E = p->E.data() + bi * n;
+      for (std::size_t j = 0; j < n; ++j) E[j] = (lit ? E[j] : 0.0f) + scale * p->unit[j];
     }
-    if (lit) {
-      AdvanceBatch(Integrator::kExact, p->coefficients, p->E.data(), n, static_cast<float>(h), p->states, p->Lp.data(), n);
-      ++stats_.steps;
-    } else {
-      DecayBatch(p->coefficients, static_cast<float>(h), p->states, p->Lp.data(), n);  // closed form, any length
-      ++stats_.dark_jumps;
-    }
-    const std::size_t voxels = grid.volume().voxel_count();
-    for (std::size_t e = 0; e < p->emission_bands.size(); ++e)
-      for (std::size_t j = 0; j < n; ++j) p->Lp_grid[e * voxels + p->voxels[j]] = p->Lp[e * n + j];
+    lit = true;
   }
+  if (lit) {
+    AdvanceBatch(Integrator::kExact, p->coefficients, p->E.data(), n, static_cast<float>(h), p->states, p->Lp.data(), n);
+    ++stats_.steps;
+  } else {
+    DecayBatch(p->coefficients, static_cast<float>(h), p->states, p->Lp.data(), n);  // closed form, any length
+    ++stats_.dark_jumps;
+  }
+  ScatterLp(vi);
+}
+
+// The voxels' Lp into the grids the marches sample.
+void VolumeMedia::ScatterLp(int vi) {
+  Phosphor* p = phosphors_[vi].get();
+  const std::size_t n = p->voxels.size(), voxels = grids_[vi].volume().voxel_count();
+  for (std::size_t e = 0; e < p->emission_bands.size(); ++e)
+    for (std::size_t j = 0; j < n; ++j) p->Lp_grid[e * voxels + p->voxels[j]] = p->Lp[e * n + j];
 }
 
 void VolumeMedia::InitialStates() {
@@ -418,9 +425,7 @@ void VolumeMedia::InitialStates() {
       StepVolume(static_cast<int>(vi), 1e30);
     }
     EmitBatch(p->coefficients, p->states, p->Lp.data(), n);
-    const std::size_t voxels = v.voxel_count();
-    for (std::size_t e = 0; e < p->emission_bands.size(); ++e)
-      for (std::size_t j = 0; j < n; ++j) p->Lp_grid[e * voxels + p->voxels[j]] = p->Lp[e * n + j];
+    ScatterLp(static_cast<int>(vi));
   }
 }
 

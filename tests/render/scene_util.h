@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "phos/model/material.h"
+#include "phos/render/dss.h"
 #include "phos/render/scene.h"
 
 namespace phos::testing {
@@ -80,6 +81,18 @@ inline render::Scene DiskOverFloor(float R, float h) {
   scene.camera.keys = {{0.0, render::Vec3(0, 0.5, 0), render::Vec3(0, 0, 0.0001)}};
   scene.camera.up = render::Vec3(0, 0, 1);
   return scene;
+}
+
+// The disk's surfels alone (s = 0.03) in a DiskOverFloor scene: what reaches
+// points of the floor or of a medium on its axis (the floor's own surfels lie
+// in the floor's plane).
+inline std::vector<render::Surfel> DiskSurfels(const render::SceneGeometry& geometry, const render::CameraRays& camera) {
+  render::SurfelOptions options;
+  options.s = 0.03f;
+  std::vector<render::Surfel> surfels;
+  for (const render::Surfel& s : render::Surfelize(geometry, camera.origin(), 60, options))
+    if (s.object == 1) surfels.push_back(s);
+  return surfels;
 }
 
 }  // namespace phos::testing

@@ -58,13 +58,8 @@ TEST(Sky, DirectionalOcclusionUnderADiskIsTheClosedForm) {
   Scene scene = testing::DiskOverFloor(R, h);
   SceneGeometry geometry(scene);
   const CameraRays camera(scene, 0);
-  SurfelOptions options;
-  options.s = 0.03f;
-  // The floor's own surfels cannot hide the sky from a floor point (they
-  // lie in its plane): the disk's alone.
-  std::vector<Surfel> surfels;
-  for (const Surfel& s : Surfelize(geometry, camera.origin(), 60, options))
-    if (s.object == 1) surfels.push_back(s);
+  // The floor's own surfels cannot hide the sky from a floor point: the disk's alone.
+  const std::vector<Surfel> surfels = testing::DiskSurfels(geometry, camera);
   const GBuffer gb = RenderGBuffer(geometry, scene, 0);
   const std::size_t centre = 16 * 33 + 16;
   const double cos0 = h / std::sqrt(h * h + R * R), sin2 = 1 - cos0 * cos0;

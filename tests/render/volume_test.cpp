@@ -254,12 +254,8 @@ TEST(IntervalMap, ADiskLightsAPointInAMediumWithItsSolidAngle) {
   Scene scene = testing::DiskOverFloor(R, h);
   SceneGeometry geometry(scene);
   const CameraRays camera(scene, 0);
-  SurfelOptions options;
-  options.s = 0.03f;
   // Only the disk sends light to a point in a medium: its surfels alone.
-  std::vector<Surfel> surfels;
-  for (const Surfel& s : Surfelize(geometry, camera.origin(), 60, options))
-    if (s.object == 1) surfels.push_back(s);
+  const std::vector<Surfel> surfels = testing::DiskSurfels(geometry, camera);
   const std::vector<float> radiosity(surfels.size(), B);
   const std::size_t centre = 16 * 33 + 16;
   for (float y : {0.1f, 0.3f}) {

@@ -53,6 +53,20 @@ struct Surfel {
   float b1 = 0, b2 = 0;  // where on the triangle (its centre)
 };
 
+// The surfel's point as a hit on the front of its triangle (for looking up
+// what it glows or how it is lit).
+inline Hit FrontHit(const Surfel& s) {
+  Hit hit;
+  hit.object = s.object;
+  hit.triangle = s.triangle;
+  hit.b1 = s.b1;
+  hit.b2 = s.b2;
+  hit.position = s.position;
+  hit.normal = s.normal;
+  hit.front = true;
+  return hit;
+}
+
 struct SurfelOptions {
   // Target radius as a fraction of tan(fov/2) per unit of distance. The
   // defaults here and in DssOptions are the study's choice (make study,
@@ -153,8 +167,10 @@ std::vector<Surfel> SurfelsFromGBuffer(const GBuffer& gbuffer, const CameraRays&
 // rays, the reference; with few, the "same budget" rival.
 std::vector<float> RayTracedOcclusion(const SceneGeometry& geometry, const GBuffer& gbuffer, int rays, unsigned seed);
 
-// The point-to-disk form factor above; 0 behind the receiver.
-inline float SurfelFormFactor(const Vec3f& p, const Vec3f& n, const Surfel& s, float* cos_q_out = nullptr) {
+// The point-to-disk form factor above; 0 behind the receiver. Optionally
+// the cosine at the surfel and the y component of the unit direction to it.
+inline float SurfelFormFactor(const Vec3f& p, const Vec3f& n, const Surfel& s, float* cos_q_out = nullptr,
+                              float* direction_y_out = nullptr) {
   const Vec3f d = s.position - p;
   const float r2 = d.squaredNorm();
   if (r2 <= 0) return 0;
@@ -166,6 +182,7 @@ inline float SurfelFormFactor(const Vec3f& p, const Vec3f& n, const Surfel& s, f
   if (cos_p <= 0) return 0;
   const float cos_q = s.normal.dot(d) / r;  // > 0: the surfel faces away from p
   if (cos_q_out) *cos_q_out = cos_q;
+  if (direction_y_out) *direction_y_out = d.y() / r;
   return s.area * cos_p * std::fabs(cos_q) / (3.14159265f * r2 + s.area);
 }
 

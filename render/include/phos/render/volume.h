@@ -143,6 +143,7 @@ class VolumeMedia {
   int Segments(const Vec3f& origin, const Vec3f& direction, float t_max, Segment* segments) const;
   void UpdateLight(int volume, int light, const LightPose& pose);
   void StepVolume(int volume, double h_s);  // at the lights as last prepared
+  void ScatterLp(int volume);
   float MediaOpticalDepth(const Vec3f& origin, const Vec3f& direction, float t_max) const;
 
   const Scene& scene_;
