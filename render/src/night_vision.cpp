@@ -6,6 +6,7 @@
 
 #include <opencv2/imgproc.hpp>
 
+#include "phos/util/colour.h"
 #include "phos/util/error.h"
 
 namespace phos::render {
@@ -35,7 +36,7 @@ Image NightVision(const Image& bands, const Image& rgb, const SpectralGrid& grid
   double mean_share = 0;
   for (std::size_t p = 0; p < pixels; ++p) {
     const float* c = &rgb.pixels[3 * p];
-    const double Y = std::max(0.0, 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]);
+    const double Y = std::max(0.0, LinearSrgbLuminance(c[0], c[1], c[2]));
     double v = 0;
     for (int b = 0; b < nb; ++b) v += v_weight[b] * bands.pixels[p * nb + b];
     V.at<float>(static_cast<int>(p)) = static_cast<float>(std::max(0.0, v) * options.exposure);
@@ -57,8 +58,7 @@ Image NightVision(const Image& bands, const Image& rgb, const SpectralGrid& grid
   std::mt19937_64 random(options.seed);
   std::normal_distribution<float> noise(0.0f, static_cast<float>(options.noise_sigma));
   // The bluish grey of chromaticity (x, y) = (0.25, 0.25): XYZ = (1, 1, 2) in linear sRGB.
-  const double tint[3] = {3.2404542 - 1.5371385 - 2 * 0.4985314, -0.9692660 + 1.8760108 + 2 * 0.0415560,
-                          0.0556434 - 0.2040259 + 2 * 1.0572252};
+  const Tristimulus tint = XyzToLinearSrgb({1, 1, 2});
   Image out(width, height, 3);
   for (std::size_t p = 0; p < pixels; ++p) {
     const int i = static_cast<int>(p);

@@ -16,6 +16,7 @@
 #include "phos/render/dss.h"
 #include "phos/render/subsurface.h"
 #include "phos/render/volume.h"
+#include "phos/util/colour.h"
 #include "phos/util/error.h"
 #include "phos/util/format.h"
 
@@ -309,18 +310,6 @@ class Tracer {
   const Bands& sky_L() const { return sky_L_; }
 };
 
-// CIE 1931 2-degree colour matching functions: the multi-lobe fit of Wyman,
-// Sloan and Shirley (JCGT 2013), within a few percent of the tables.
-double Lobe(double nm, double mu, double sigma_low, double sigma_high) {
-  const double s = (nm - mu) / (nm < mu ? sigma_low : sigma_high);
-  return std::exp(-0.5 * s * s);
-}
-double Xbar(double nm) {
-  return 1.056 * Lobe(nm, 599.8, 37.9, 31.0) + 0.362 * Lobe(nm, 442.0, 16.0, 26.7) - 0.065 * Lobe(nm, 501.1, 20.4, 26.2);
-}
-double Ybar(double nm) { return 0.821 * Lobe(nm, 568.8, 46.9, 40.5) + 0.286 * Lobe(nm, 530.9, 16.3, 31.1); }
-double Zbar(double nm) { return 1.217 * Lobe(nm, 437.0, 11.8, 36.0) + 0.681 * Lobe(nm, 459.0, 26.0, 13.8); }
-
 }  // namespace
 
 Transport ParseTransport(const std::string& name) {
@@ -571,13 +560,8 @@ std::vector<double> BandToXyzWeights(const SpectralGrid& grid) {
   double y_total = 0;
   for (int b = 0; b < nb; ++b) {
     // Band averages of the matching functions (radiance is uniform inside a band).
-    const int steps = std::max(8, static_cast<int>(grid.width_nm(b)));
-    for (int k = 0; k < steps; ++k) {
-      const double nm = grid.lower_nm(b) + (k + 0.5) * grid.width_nm(b) / steps;
-      w[b] += Xbar(nm) / steps;
-      w[nb + b] += Ybar(nm) / steps;
-      w[2 * nb + b] += Zbar(nm) / steps;
-    }
+    const Tristimulus mean = Cie1931CmfBandMean(grid.lower_nm(b), grid.upper_nm(b));
+    for (int c = 0; c < 3; ++c) w[c * nb + b] = mean[c];
     y_total += w[nb + b];
   }
   for (double& v : w) v /= y_total;
@@ -591,13 +575,11 @@ Image BandsToLinearSrgb(const Image& bands, const SpectralGrid& grid) {
   Image rgb(bands.width, bands.height, 3);
   const std::size_t pixels = std::size_t(bands.width) * bands.height;
   for (std::size_t p = 0; p < pixels; ++p) {
-    double xyz[3] = {0, 0, 0};
+    Tristimulus xyz = {0, 0, 0};
     for (int c = 0; c < 3; ++c)
       for (int b = 0; b < nb; ++b) xyz[c] += w[c * nb + b] * bands.pixels[p * nb + b];
-    // XYZ to linear sRGB (IEC 61966-2-1, D65).
-    rgb.pixels[3 * p + 0] = static_cast<float>(3.2404542 * xyz[0] - 1.5371385 * xyz[1] - 0.4985314 * xyz[2]);
-    rgb.pixels[3 * p + 1] = static_cast<float>(-0.9692660 * xyz[0] + 1.8760108 * xyz[1] + 0.0415560 * xyz[2]);
-    rgb.pixels[3 * p + 2] = static_cast<float>(0.0556434 * xyz[0] - 0.2040259 * xyz[1] + 1.0572252 * xyz[2]);
+    const Tristimulus linear = XyzToLinearSrgb(xyz);
+    for (int c = 0; c < 3; ++c) rgb.pixels[3 * p + c] = static_cast<float>(linear[c]);
   }
   return rgb;
 }
@@ -652,7 +634,7 @@ Image ToneMap(const Image& rgb, double exposure) {
     // a hundred times dimmer than the lit scene stays visible, and lit
     // highlights roll off instead of clipping. Hue is kept.
     const float* c = &rgb.pixels[3 * p];
-    const double Y = std::max(0.0, exposure * (0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]));
+    const double Y = std::max(0.0, exposure * LinearSrgbLuminance(c[0], c[1], c[2]));
     const double scale = exposure / (1 + Y);
     for (int k = 0; k < 3; ++k) {
       const double v = std::clamp(c[k] * scale, 0.0, 1.0);
