@@ -36,5 +36,52 @@ TEST(ReadCsv, BadCellsNameTheLineAndColumn) {
   EXPECT_THROW(ReadCsv(dir / "c.csv"), UserError);
 }
 
+TEST(ReadCsv, DetectsTheSeparator) {
+  testing::TempDir dir;
+  struct Case {
+    std::string name, text;
+    char separator;
+  } cases[] = {
+      {"comma.csv", "t (s),red,green\n0,1.5,2\n0.5,1,-3e-2\n", ','},
+      {"semicolon.csv", "t (s);red;green\r\n0;1.5;2\r\n0.5;1;-3e-2\r\n", ';'},
+      {"tab.txt", "t (s)\tred\tgreen\n0\t1.5\t2\n0.5 \t 1\t-3e-2\n", '\t'},
+      {"spaces.dat", "# aligned\n  t_s    red   green\n  0      1.5   2\n  0.5\t  1    -3e-2\n", ' '},
+  };
+  for (const Case& c : cases) {
+    testing::WriteText(dir / c.name, c.text);
+    const CsvTable table = ReadCsv(dir / c.name);
+    EXPECT_EQ(table.separator, c.separator) << c.name;
+    EXPECT_TRUE(table.has_header) << c.name;
+    ASSERT_EQ(table.header.size(), 3u) << c.name;
+    EXPECT_EQ(table.header[1], "red") << c.name;
+    EXPECT_EQ(table.columns[0], (std::vector<double>{0, 0.5})) << c.name;
+    EXPECT_EQ(table.columns[2], (std::vector<double>{2, -0.03})) << c.name;
+  }
+  EXPECT_EQ(ReadCsv(dir / "comma.csv").header[0], "t (s)");
+  EXPECT_EQ(ReadCsv(dir / "spaces.dat").header[0], "t_s");
+}
+
+TEST(ReadCsv, AFirstLineOfNumbersIsData) {
+  testing::TempDir dir;
+  testing::WriteText(dir / "a.csv", "0;1\n1;0.5\n");
+  const CsvTable table = ReadCsv(dir / "a.csv");
+  EXPECT_FALSE(table.has_header);
+  EXPECT_EQ(table.header, (std::vector<std::string>{"column 1", "column 2"}));
+  EXPECT_EQ(table.row_count(), 2u);
+  EXPECT_EQ(table.columns[1][0], 1);
+}
+
+TEST(ReadCsv, ADecimalCommaIsNamed) {
+  testing::TempDir dir;
+  testing::WriteText(dir / "a.csv", "t;value\n0;1\n0,5;2\n");
+  EXPECT_NE(testing::ErrorOfType<UserError>([&] { ReadCsv(dir / "a.csv"); })
+                .find("a.csv: line 3, column t: expected a finite number, got \"0,5\" (decimal commas"),
+            std::string::npos);
+  // A line of another width names its line.
+  testing::WriteText(dir / "b.txt", "t value\n0 1\n1 2 3\n");
+  EXPECT_NE(testing::ErrorOfType<UserError>([&] { ReadCsv(dir / "b.txt"); }).find("b.txt: line 3: expected 2 columns, got 3"),
+            std::string::npos);
+}
+
 }  // namespace
 }  // namespace phos

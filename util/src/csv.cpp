@@ -1,5 +1,6 @@
 #include "phos/util/csv.h"
 
+#include <algorithm>
 #include <fstream>
 
 #include "phos/util/error.h"
@@ -8,18 +9,48 @@
 namespace phos {
 namespace {
 
-std::vector<std::string> SplitFields(const std::string& line) {
+constexpr const char* kBlank = " \t\r";
+
+// The separator of a table, from its first line (see ReadCsv).
+char DetectSeparator(const std::string& line) {
+  char best = ' ';
+  std::ptrdiff_t best_count = 0;
+  for (char candidate : {',', ';', '\t'}) {
+    const std::ptrdiff_t count = std::count(line.begin(), line.end(), candidate);
+    if (count > best_count) {
+      best = candidate;
+      best_count = count;
+    }
+  }
+  return best;
+}
+
+std::vector<std::string> SplitFields(const std::string& line, char separator) {
   std::vector<std::string> fields;
+  if (separator == ' ') {
+    // Runs of spaces and tabs are one separator (aligned columns).
+    for (std::size_t a = line.find_first_not_of(kBlank); a != std::string::npos; a = line.find_first_not_of(kBlank, a)) {
+      const std::size_t b = line.find_first_of(kBlank, a);
+      fields.push_back(line.substr(a, b == std::string::npos ? std::string::npos : b - a));
+      a = b;
+    }
+    return fields;
+  }
   std::size_t start = 0;
   while (true) {
-    std::size_t comma = line.find(',', start);
-    std::string field = line.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+    std::size_t end = line.find(separator, start);
+    std::string field = line.substr(start, end == std::string::npos ? std::string::npos : end - start);
     // Trim spaces and a trailing carriage return (files from Windows instruments).
-    std::size_t a = field.find_first_not_of(" \t\r"), b = field.find_last_not_of(" \t\r");
+    std::size_t a = field.find_first_not_of(kBlank), b = field.find_last_not_of(kBlank);
     fields.push_back(a == std::string::npos ? "" : field.substr(a, b - a + 1));
-    if (comma == std::string::npos) return fields;
-    start = comma + 1;
+    if (end == std::string::npos) return fields;
+    start = end + 1;
   }
+}
+
+bool AllNumbers(const std::vector<std::string>& fields) {
+  double v = 0;
+  return std::all_of(fields.begin(), fields.end(), [&](const std::string& f) { return ParseDouble(f, &v); });
 }
 
 }  // namespace
@@ -39,21 +70,29 @@ CsvTable ReadCsv(const std::filesystem::path& path) {
   int line_number = 0;
   while (std::getline(in, line)) {
     ++line_number;
-    if (line.find_first_not_of(" \t\r") == std::string::npos || line[0] == '#') continue;
-    std::vector<std::string> fields = SplitFields(line);
+    if (line.find_first_not_of(kBlank) == std::string::npos || line[0] == '#') continue;
+    if (table.header.empty()) table.separator = DetectSeparator(line);
+    std::vector<std::string> fields = SplitFields(line, table.separator);
     if (table.header.empty()) {
-      table.header = fields;
       table.columns.resize(fields.size());
-      continue;
+      if (!AllNumbers(fields)) {
+        table.header = fields;
+        continue;
+      }
+      table.has_header = false;
+      for (std::size_t c = 0; c < fields.size(); ++c) table.header.push_back("column " + std::to_string(c + 1));
     }
     if (fields.size() != table.header.size())
       ThrowUserError(table.source, "line " + std::to_string(line_number),
                      "expected " + std::to_string(table.header.size()) + " columns, got " + std::to_string(fields.size()));
     for (std::size_t c = 0; c < fields.size(); ++c) {
       double v = 0;
-      if (!ParseDouble(fields[c], &v))
+      if (!ParseDouble(fields[c], &v)) {
+        const bool decimal_comma = table.separator != ',' && fields[c].find(',') != std::string::npos;
         ThrowUserError(table.source, "line " + std::to_string(line_number) + ", column " + table.header[c],
-                       "expected a finite number, got \"" + fields[c] + "\"");
+                       "expected a finite number, got \"" + fields[c] + "\"" +
+                           (decimal_comma ? " (decimal commas are not read: write 0.5, not 0,5)" : ""));
+      }
       table.columns[c].push_back(v);
     }
   }
