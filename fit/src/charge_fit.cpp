@@ -1,5 +1,6 @@
 #include "phos/fit/charge_fit.h"
 
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -13,8 +14,9 @@
 namespace phos {
 namespace {
 
-// L(t) = Linf - (Linf - L0) e^{-kt} = L0 e^{-kt} + Linf (1 - e^{-kt}); blocks: [log k, L0, Linf].
-class ChargeCost final : public ceres::SizedCostFunction<ceres::DYNAMIC, 3> {
+// One channel: L(t) = Linf - (Linf - L0) e^{-kt} = L0 e^{-kt} + Linf (1 - e^{-kt});
+// blocks: [log k] (shared by the channels), [L0, Linf] (this channel's).
+class ChargeCost final : public ceres::SizedCostFunction<ceres::DYNAMIC, 1, 2> {
  public:
   ChargeCost(const Eigen::ArrayXd& t, const Eigen::ArrayXd& y, const Eigen::ArrayXd& w)
       : t_(t), y_(y), w_(w) {
@@ -22,14 +24,15 @@ class ChargeCost final : public ceres::SizedCostFunction<ceres::DYNAMIC, 3> {
   }
 
   bool Evaluate(double const* const* p, double* residuals, double** jacobians) const override {
-    const double k = std::exp(p[0][0]), L0 = p[0][1], Linf = p[0][2];
+    const double k = std::exp(p[0][0]), L0 = p[1][0], Linf = p[1][1];
     for (int j = 0; j < t_.size(); ++j) {
       const double e = std::exp(-k * t_[j]);
       residuals[j] = w_[j] * (y_[j] - (L0 * e + Linf * (1 - e)));
-      if (jacobians != nullptr && jacobians[0] != nullptr) {
-        jacobians[0][3 * j + 0] = w_[j] * (L0 - Linf) * t_[j] * k * e;  // d/d log k of -(model)
-        jacobians[0][3 * j + 1] = -w_[j] * e;
-        jacobians[0][3 * j + 2] = -w_[j] * (1 - e);
+      if (jacobians == nullptr) continue;
+      if (jacobians[0] != nullptr) jacobians[0][j] = w_[j] * (L0 - Linf) * t_[j] * k * e;  // d/d log k of -(model)
+      if (jacobians[1] != nullptr) {
+        jacobians[1][2 * j + 0] = -w_[j] * e;
+        jacobians[1][2 * j + 1] = -w_[j] * (1 - e);
       }
     }
     return true;
@@ -41,52 +44,81 @@ class ChargeCost final : public ceres::SizedCostFunction<ceres::DYNAMIC, 3> {
   const Eigen::ArrayXd& w_;
 };
 
+// One channel in the fit's units: values divided by their largest |value|
+// (parameters of order 1 for Ceres), weights multiplied by it (the objective
+// stays in the data's units).
+struct Channel {
+  Eigen::ArrayXd y, w;
+  Eigen::ArrayXd w2, w2y;  // w^2 and w^2 y, for the scan
+  double sum_w2 = 0, sum_w2y = 0;
+  double scale = 1;
+  double levels[2] = {0, 0};  // L0, Linf in fit units
+};
+
+// For rate k, a channel's L0 and Linf from the 2 x 2 normal equations of the
+// columns e^{-kt} and 1 - e^{-kt} (weighted): three dot products, no
+// factorization. Returns the weighted cost, or infinity when k leaves the
+// columns indistinguishable.
+double SolveLevels(const Eigen::ArrayXd& t, double k, Channel* channel) {
+  const Eigen::ArrayXd e = (-k * t).exp();
+  const Eigen::ArrayXd &w2 = channel->w2, &w2y = channel->w2y;
+  const double ee = (w2 * e * e).sum(), e1 = (w2 * e).sum(), ey = (w2y * e).sum();
+  // Columns u = e, v = 1 - e: u'u = ee, u'v = e1 - ee, v'v = sum_w2 - 2 e1 + ee.
+  const double uu = ee, uv = e1 - ee, vv = channel->sum_w2 - 2 * e1 + ee, uy = ey, vy = channel->sum_w2y - ey;
+  const double det = uu * vv - uv * uv;
+  if (!(std::fabs(det) > 1e-14 * uu * vv)) return std::numeric_limits<double>::infinity();
+  const double L0 = (vv * uy - uv * vy) / det, Linf = (uu * vy - uv * uy) / det;
+  channel->levels[0] = L0;
+  channel->levels[1] = Linf;
+  return (w2 * (channel->y - L0 * e - Linf * (1 - e)).square()).sum();
+}
+
 }  // namespace
 
 ChargeFitSummary FitCharge(const Curve& curve, const ChargeFitOptions& options, const std::string& where) {
   const auto start = std::chrono::steady_clock::now();
   ValidateCurve(curve, 4, where);
-  const int m = static_cast<int>(curve.size());
-  Eigen::ArrayXd t = Eigen::Map<const Eigen::ArrayXd>(curve.t_s.data(), m);
-  const Eigen::ArrayXd raw = Eigen::Map<const Eigen::ArrayXd>(curve.channels[0].data(), m);
-  const double scale = raw.abs().maxCoeff();
-  if (!(scale > 0) || raw.maxCoeff() - raw.minCoeff() <= 1e-12 * scale)
-    ThrowUserError(where, "", "every value is the same: there is no growth to fit");
-  const Eigen::ArrayXd y = raw / scale;
-  std::vector<double> weights = SampleWeights(curve.channels[0], options.weighting);
-  const Eigen::ArrayXd w = Eigen::Map<const Eigen::ArrayXd>(weights.data(), m) * scale;
+  const int m = static_cast<int>(curve.size()), C = curve.channel_count();
+  const Eigen::ArrayXd t = Eigen::Map<const Eigen::ArrayXd>(curve.t_s.data(), m);
+  std::vector<Channel> channels(C);
+  bool any_variation = false;
+  for (int c = 0; c < C; ++c) {
+    const Eigen::ArrayXd raw = Eigen::Map<const Eigen::ArrayXd>(curve.channels[c].data(), m);
+    const double scale = raw.abs().maxCoeff();
+    any_variation = any_variation || (scale > 0 && raw.maxCoeff() - raw.minCoeff() > 1e-12 * scale);
+    channels[c].scale = scale > 0 ? scale : 1.0;
+    channels[c].y = raw / channels[c].scale;
+    const std::vector<double> weights = SampleWeights(curve.channels[c], options.weighting);
+    channels[c].w = Eigen::Map<const Eigen::ArrayXd>(weights.data(), m) * channels[c].scale;
+    channels[c].w2 = channels[c].w.square();
+    channels[c].w2y = channels[c].w2 * channels[c].y;
+    channels[c].sum_w2 = channels[c].w2.sum();
+    channels[c].sum_w2y = channels[c].w2y.sum();
+  }
+  if (!any_variation) ThrowUserError(where, "", "every value is the same: there is no growth to fit");
 
-  // Scan log k; L0 and Linf by linear least squares for each.
+  // Scan log k; the levels of every channel by linear least squares for each.
   const double span = curve.t_s.back() - curve.t_s.front();
-  double spacing = span;
-  for (int j = 1; j < m; ++j) spacing = std::min(spacing, curve.t_s[j] - curve.t_s[j - 1]);
-  const double k_lo = 0.02 / span, k_hi = std::max(3.0 / spacing, 10 * k_lo);
-  double best_cost = std::numeric_limits<double>::infinity();
-  double params[3] = {0, 0, 0};
-  // For each k, L0 and Linf from the 2 x 2 normal equations of the columns
-  // e^{-kt} and 1 - e^{-kt} (weighted): three dot products, no factorization.
-  const Eigen::ArrayXd w2 = w.square(), w2y = w2 * y;
-  const double sum_w2 = w2.sum(), sum_w2y = w2y.sum();
+  const double k_lo = 0.02 / span, k_hi = std::max(3.0 / SmallestTimeStep(curve), 10 * k_lo);
+  double best_cost = std::numeric_limits<double>::infinity(), log_k = 0;
+  std::vector<std::array<double, 2>> best_levels(C, {0.0, 0.0});
   for (int g = 0; g < options.rate_grid_size; ++g) {
     const double k = k_lo * std::pow(k_hi / k_lo, static_cast<double>(g) / (options.rate_grid_size - 1));
-    const Eigen::ArrayXd e = (-k * t).exp();
-    const double ee = (w2 * e * e).sum(), e1 = (w2 * e).sum(), ey = (w2y * e).sum();
-    // Columns u = e, v = 1 - e: u'u = ee, u'v = e1 - ee, v'v = sum_w2 - 2 e1 + ee.
-    const double uu = ee, uv = e1 - ee, vv = sum_w2 - 2 * e1 + ee, uy = ey, vy = sum_w2y - ey;
-    const double det = uu * vv - uv * uv;
-    if (!(std::fabs(det) > 1e-14 * uu * vv)) continue;
-    const double L0 = (vv * uy - uv * vy) / det, Linf = (uu * vy - uv * uy) / det;
-    const double cost = (w2 * (y - L0 * e - Linf * (1 - e)).square()).sum();
+    double cost = 0;
+    for (Channel& channel : channels) cost += SolveLevels(t, k, &channel);
     if (cost < best_cost) {
       best_cost = cost;
-      params[0] = std::log(k);
-      params[1] = L0;
-      params[2] = Linf;
+      log_k = std::log(k);
+      for (int c = 0; c < C; ++c) best_levels[c] = {channels[c].levels[0], channels[c].levels[1]};
     }
   }
 
   ceres::Problem problem;
-  problem.AddResidualBlock(new ChargeCost(t, y, w), nullptr, params);
+  for (int c = 0; c < C; ++c) {
+    channels[c].levels[0] = best_levels[c][0];
+    channels[c].levels[1] = best_levels[c][1];
+    problem.AddResidualBlock(new ChargeCost(t, channels[c].y, channels[c].w), nullptr, &log_k, channels[c].levels);
+  }
   // No bounds on log k (they would make Ceres project every step with a
   // line search); a rate at the edge of what the samples resolve is caught below.
   const ceres::Solver::Options solver_options = SmallDenseSolverOptions(options.max_iterations, 1e-14);
@@ -94,34 +126,49 @@ ChargeFitSummary FitCharge(const Curve& curve, const ChargeFitOptions& options, 
   ceres::Solve(solver_options, &problem, &solver_summary);
 
   ChargeFitSummary summary;
-  summary.rate = std::exp(params[0]);
-  summary.L0 = params[1] * scale;
-  summary.Linf = params[2] * scale;
+  summary.rate = std::exp(log_k);
   summary.iterations = static_cast<int>(solver_summary.iterations.size());
   // A level that is not reached and a rate at the edge of what the samples
   // resolve mean the curve shows no saturating growth.
   const double edge = std::log(1.05);
-  if (params[0] <= std::log(k_lo) + edge || params[0] >= std::log(k_hi) - edge)
+  if (!std::isfinite(log_k) || log_k <= std::log(k_lo) + edge || log_k >= std::log(k_hi) - edge)
     ThrowUserError(where, "", "the curve does not approach a level within its time span (no saturating growth or fall)");
 
+  std::vector<double> level_var(2 * C, 0.0);
+  double log_k_var = 0;
   ceres::Covariance::Options covariance_options;
   covariance_options.algorithm_type = ceres::DENSE_SVD;
   covariance_options.null_space_rank = -1;
   ceres::Covariance covariance(covariance_options);
-  std::vector<std::pair<const double*, const double*>> pairs = {{params, params}};
+  std::vector<std::pair<const double*, const double*>> pairs = {{&log_k, &log_k}};
+  for (const Channel& channel : channels) pairs.push_back({channel.levels, channel.levels});
   if (covariance.Compute(pairs, &problem)) {
-    double block[9];
-    covariance.GetCovarianceBlock(params, params, block);
-    const double reduced_chi2 = 2 * solver_summary.final_cost / std::max(1, m - 3);
-    summary.rate_stderr = summary.rate * std::sqrt(std::max(0.0, block[0] * reduced_chi2));
-    summary.L0_stderr = scale * std::sqrt(std::max(0.0, block[4] * reduced_chi2));
-    summary.Linf_stderr = scale * std::sqrt(std::max(0.0, block[8] * reduced_chi2));
+    const double reduced_chi2 = 2 * solver_summary.final_cost / std::max(1, m * C - (1 + 2 * C));
+    covariance.GetCovarianceBlock(&log_k, &log_k, &log_k_var);
+    log_k_var *= reduced_chi2;
+    for (int c = 0; c < C; ++c) {
+      double block[4];
+      covariance.GetCovarianceBlock(channels[c].levels, channels[c].levels, block);
+      level_var[2 * c] = block[0] * reduced_chi2;
+      level_var[2 * c + 1] = block[3] * reduced_chi2;
+    }
   }
-  for (int j = 0; j < m; ++j) {
-    const double e = std::exp(-summary.rate * t[j]);
-    const double r = raw[j] - (summary.L0 * e + summary.Linf * (1 - e));
-    summary.rss += r * r;
+  summary.rate_stderr = summary.rate * std::sqrt(std::max(0.0, log_k_var));
+  for (int c = 0; c < C; ++c) {
+    const double s = channels[c].scale;
+    ChargeLevels levels{channels[c].levels[0] * s, channels[c].levels[1] * s, s * std::sqrt(std::max(0.0, level_var[2 * c])),
+                        s * std::sqrt(std::max(0.0, level_var[2 * c + 1]))};
+    for (int j = 0; j < m; ++j) {
+      const double e = std::exp(-summary.rate * t[j]);
+      const double r = curve.channels[c][j] - (levels.L0 * e + levels.Linf * (1 - e));
+      summary.rss += r * r;
+    }
+    summary.levels.push_back(levels);
   }
+  summary.L0 = summary.levels[0].L0;
+  summary.Linf = summary.levels[0].Linf;
+  summary.L0_stderr = summary.levels[0].L0_stderr;
+  summary.Linf_stderr = summary.levels[0].Linf_stderr;
   summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return summary;
 }

@@ -332,11 +332,10 @@ DecayFitSummary FitDecay(const Curve& curve, const DecayFitOptions& options, con
   if (!any_variation) ThrowUserError(where, "", "every value is the same: there is no decay to fit");
 
   // Rates the data can resolve: from a twentieth of one per span (slower
-  // looks constant) to three per smallest spacing (faster is over before
-  // the second sample).
+  // looks constant) to three per smallest step between distinct times
+  // (faster is over before the second one; replicates are no step).
   const double span = curve.t_s.back() - curve.t_s.front();
-  double spacing = span;
-  for (int j = 1; j < d.m; ++j) spacing = std::min(spacing, curve.t_s[j] - curve.t_s[j - 1]);
+  const double spacing = SmallestTimeStep(curve);
   const double k_lo = 0.02 / span, k_hi = std::max(3.0 / spacing, 10 * k_lo);
   Eigen::ArrayXd grid(options.rate_grid_size);
   for (int g = 0; g < grid.size(); ++g)

@@ -4,7 +4,9 @@
 #include "phos/fit/decay_fit.h"
 
 #include <cmath>
+#include <algorithm>
 #include <functional>
+#include <optional>
 #include <gtest/gtest.h>
 #include <random>
 
@@ -174,14 +176,146 @@ TEST(DecayFit, BadCurvesAreClearErrors) {
   for (int j = 0; j < 21; ++j) curve.channels[0][j] = j;  // rising
   EXPECT_EQ(ErrorOf([&] { FitDecay(curve, options, "up.csv"); }),
             "up.csv: no decaying component: the values do not decrease over time (beyond their scatter)");
-  curve.t_s[5] = curve.t_s[4];
+  curve.t_s[5] = curve.t_s[3];
   EXPECT_EQ(ErrorOf([&] { FitDecay(curve, options, "t.csv"); }),
-            "t.csv: t: times must increase strictly (4 follows 4 at sample 6)");
+            "t.csv: t: times must not decrease (3 follows 4 at sample 6): sort the samples by time first");
+  curve.t_s[5] = curve.t_s[4];  // a replicate of sample 5: accepted (the curve still rises)
+  EXPECT_EQ(ErrorOf([&] { FitDecay(curve, options, "up.csv"); }),
+            "up.csv: no decaying component: the values do not decrease over time (beyond their scatter)");
+  curve.t_s[0] = -0.5;
+  EXPECT_EQ(ErrorOf([&] { FitDecay(curve, options, "neg.csv"); }),
+            "neg.csv: t: sample 1 is at a negative time (-0.5 s); time counts from the start of the charge or the "
+            "decay (keep t >= 0, e.g. with --from 0)");
+  curve.t_s[0] = 0;
   curve.t_s[5] = 4.5;
   curve.channels[0][3] = std::nan("");
   EXPECT_EQ(ErrorOf([&] { FitDecay(curve, options, "nan.csv"); }), "nan.csv: v: sample 4 is not finite");
   options.components = 7;
   EXPECT_THROW(FitDecay(curve, options, "x"), UserError);
+}
+
+// Every sample of `curve` `copies` times, each copy with its own noise.
+Curve WithReplicates(const Truth& truth, int points, double dt, int copies, double noise, unsigned seed) {
+  Curve curve;
+  for (int r = 0; r < copies; ++r) {
+    const Curve copy = Synthesize(truth, points, dt, noise, seed + r);
+    if (curve.channels.empty()) {
+      curve.channels.resize(copy.channels.size());
+      curve.names = copy.names;
+    }
+    curve.t_s.insert(curve.t_s.end(), copy.t_s.begin(), copy.t_s.end());
+    for (std::size_t c = 0; c < copy.channels.size(); ++c)
+      curve.channels[c].insert(curve.channels[c].end(), copy.channels[c].begin(), copy.channels[c].end());
+  }
+  return curve;
+}
+
+TEST(DecayFit, ReplicatesAreAccepted) {
+  Truth truth{{0.8, 0.05}, {{300, 100}}};
+  DecayFitOptions options;
+  options.components = 2;
+  // Exact copies: every residual counts twice, so the minimum is where it was
+  // and the rss doubles.
+  Curve once = Synthesize(truth, 40, 1.0, 1.0, 5);
+  Curve twice = once;
+  twice.t_s.insert(twice.t_s.end(), once.t_s.begin(), once.t_s.end());
+  twice.channels[0].insert(twice.channels[0].end(), once.channels[0].begin(), once.channels[0].end());
+  const TimeOrder order = SortByTime(&twice, "twice");
+  EXPECT_TRUE(order.reordered);
+  EXPECT_EQ(order.samples, 80u);
+  EXPECT_EQ(order.distinct_times, 40u);
+  EXPECT_EQ(order.repeated_times, 40u);
+  const DecayFitSummary a = FitDecay(once, options, "once"), b = FitDecay(twice, options, "twice");
+  for (int i = 0; i < 2; ++i) {
+    EXPECT_NEAR(b.components[i].rate, a.components[i].rate, 1e-7 * a.components[i].rate);
+    EXPECT_NEAR(b.components[i].amplitude[0], a.components[i].amplitude[0], 1e-6 * a.components[i].amplitude[0]);
+  }
+  EXPECT_NEAR(b.rss, 2 * a.rss, 1e-8 * a.rss);
+  // Three aliquots with their own noise: the rates come back within their
+  // (smaller) uncertainty, and replicates are not a time step (the scanned
+  // rates stay finite).
+  Curve aliquots = WithReplicates(truth, 40, 1.0, 3, 1.0, 7);
+  SortByTime(&aliquots, "aliquots");
+  EXPECT_EQ(SmallestTimeStep(aliquots), 1.0);
+  options.components = 0;
+  const DecayFitSummary fit = FitDecay(aliquots, options, "aliquots");
+  ASSERT_EQ(fit.n_components, 2) << fit.choice;
+  for (int i = 0; i < 2; ++i) {
+    EXPECT_NEAR(fit.components[i].rate, truth.rates[i], 4 * fit.components[i].rate_stderr);
+    EXPECT_LT(fit.components[i].rate_stderr, 0.02 * truth.rates[i]);
+  }
+  // Exact replicates give the exact rates.
+  Curve exact = WithReplicates(truth, 40, 1.0, 3, 0.0, 7);
+  SortByTime(&exact, "exact");
+  const DecayFitSummary e = FitDecay(exact, options, "exact");
+  for (int i = 0; i < 2; ++i) EXPECT_NEAR(e.components[i].rate, truth.rates[i], 1e-6 * truth.rates[i]);
+}
+
+TEST(DecayFit, ShuffledSamplesSortedGiveTheSortedFit) {
+  Truth truth{{1.2, 0.07}, {{400, 150}}};
+  const Curve sorted = WithReplicates(truth, 60, 0.5, 2, 0.5, 21);
+  Curve ordered = sorted, shuffled = sorted;
+  SortByTime(&ordered, "ordered");
+  std::vector<std::size_t> index(shuffled.size());
+  for (std::size_t j = 0; j < index.size(); ++j) index[j] = j;
+  std::shuffle(index.begin(), index.end(), std::mt19937(3));
+  for (std::size_t j = 0; j < index.size(); ++j) {
+    shuffled.t_s[j] = sorted.t_s[index[j]];
+    shuffled.channels[0][j] = sorted.channels[0][index[j]];
+  }
+  EXPECT_TRUE(SortByTime(&shuffled, "shuffled").reordered);
+  EXPECT_TRUE(std::is_sorted(shuffled.t_s.begin(), shuffled.t_s.end()));
+  // Each time holds the same values (replicates may differ in order).
+  const DecayFitSummary a = FitDecay(ordered, {}, "ordered"), b = FitDecay(shuffled, {}, "shuffled");
+  ASSERT_EQ(a.n_components, b.n_components);
+  for (int i = 0; i < a.n_components; ++i) EXPECT_NEAR(a.components[i].rate, b.components[i].rate, 1e-9 * a.components[i].rate);
+  EXPECT_NEAR(a.rss, b.rss, 1e-9 * a.rss);
+}
+
+TEST(DecayFit, TooFewDistinctTimesAreAnError) {
+  Curve curve{{0, 0, 0, 1, 1, 1, 2, 2, 2, 3}, {{9, 9.1, 8.9, 5, 5.1, 4.9, 3, 3.1, 2.9, 2}}, {"v"}};
+  DecayFitOptions options;
+  options.components = 2;  // 4 parameters: 5 distinct times needed
+  EXPECT_EQ(ErrorOf([&] { FitDecay(curve, options, "few.csv"); }),
+            "few.csv: t: has 10 samples at only 4 distinct times; this fit needs at least 5");
+}
+
+TEST(CurveWindow, KeepsTheInclusiveWindow) {
+  Curve curve{{0, 1, 2, 2, 3, 4}, {{6, 5, 4, 4.1, 3, 2}}, {"v"}, {1, 1, 1, 1, 1, 2}};
+  KeepTimeWindow(&curve, 1, 3);
+  EXPECT_EQ(curve.t_s, (std::vector<double>{1, 2, 2, 3}));
+  EXPECT_EQ(curve.channels[0], (std::vector<double>{5, 4, 4.1, 3}));
+  EXPECT_EQ(curve.exposure_s.size(), 4u);
+}
+
+TEST(PeakAfterRise, FindsTheChargeBeforeTheDecay) {
+  std::mt19937 rng(4);
+  std::normal_distribution<double> noise(0, 1);
+  Curve both{{}, {{}}, {"L"}};
+  for (int j = 0; j <= 150; ++j) {
+    const double t = j, peak = 500 * (1 - std::exp(-0.05 * 60));
+    both.t_s.push_back(t);
+    both.channels[0].push_back((t <= 60 ? 500 * (1 - std::exp(-0.05 * t)) : peak * std::exp(-0.05 * (t - 60))) + noise(rng));
+  }
+  const std::optional<double> peak = PeakAfterRise(both);
+  ASSERT_TRUE(peak.has_value());
+  EXPECT_NEAR(*peak, 60, 3);
+  // From the peak on it is a decay; a decay (noisy, with replicates, or with
+  // several channels) never warns.
+  KeepTimeWindow(&both, 60, 150);
+  EXPECT_FALSE(PeakAfterRise(both).has_value());
+  for (unsigned seed = 1; seed <= 20; ++seed) {
+    Curve decay = WithReplicates(Truth{{1.2, 0.07}, {{400, 150}, {50, 20}}}, 100, 0.2, 2, 2.0, seed);
+    SortByTime(&decay, "decay");
+    EXPECT_FALSE(PeakAfterRise(decay).has_value()) << seed;
+  }
+  // A charge alone only rises: it is not a charge before a decay.
+  Curve charge{{}, {{}}, {"L"}};
+  for (int j = 0; j < 60; ++j) {
+    charge.t_s.push_back(j);
+    charge.channels[0].push_back(500 * (1 - std::exp(-0.05 * j)));
+  }
+  EXPECT_FALSE(PeakAfterRise(charge).has_value());
 }
 
 }  // namespace

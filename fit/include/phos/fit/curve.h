@@ -11,7 +11,9 @@
 namespace phos {
 
 struct Curve {
-  std::vector<double> t_s;                    // strictly increasing
+  // Non-decreasing for the fits (SortByTime orders a file's samples); equal
+  // times are replicates: several aliquots measured at the same time or dose.
+  std::vector<double> t_s;
   std::vector<std::vector<double>> channels;  // channels[c][j], same length as t_s
   std::vector<std::string> names;             // one per channel (for reports)
   // Optional, per sample: how long each value integrated (a frame's
@@ -33,10 +35,38 @@ enum class Weighting {
 std::optional<Weighting> ParseWeighting(std::string_view name);
 const char* WeightingName(Weighting weighting);
 
-// Checks that a curve can be fitted at all: at least `min_points` samples,
-// strictly increasing finite times, finite values, channels of equal length.
+// Checks that a curve can be fitted at all: finite, non-negative,
+// non-decreasing times (the fits count time from the start of the charge or
+// the decay; e^{-kt} of a negative time overflows at the rates they scan), at
+// least `min_times` distinct ones, finite values, channels of equal length.
 // Problems are UserErrors naming `where`.
-void ValidateCurve(const Curve& curve, std::size_t min_points, const std::string& where);
+void ValidateCurve(const Curve& curve, std::size_t min_times, const std::string& where);
+
+// What SortByTime found: whether it had to move samples, and how many times
+// carry replicates (occur more than once).
+struct TimeOrder {
+  bool reordered = false;
+  std::size_t samples = 0, distinct_times = 0, repeated_times = 0;
+};
+// Orders the samples by time, stably (replicates keep the file's order).
+// Non-finite times are UserErrors naming `where` (they cannot be ordered).
+TimeOrder SortByTime(Curve* curve, const std::string& where);
+
+// Keeps the samples with from_s <= t <= to_s.
+void KeepTimeWindow(Curve* curve, double from_s, double to_s);
+
+// The smallest step between consecutive distinct times of a sorted curve
+// (replicates are not a step), or 0 if all times are equal: the fastest rate
+// the samples resolve is a few per step.
+double SmallestTimeStep(const Curve& curve);
+
+// When a sorted curve first rises clearly and then falls (a charge followed
+// by its decay, fed to a decay fit), the time of its peak; otherwise none.
+// "Clearly": the mean of the channels' sum over a run of samples (a
+// twentieth of them, at least 3) climbs above the first run's by more than
+// 5 standard errors of such a mean (noise from the median step between
+// neighbours) and by more than 2% of the peak.
+std::optional<double> PeakAfterRise(const Curve& curve);
 
 // Per-sample weights of one channel (1 for kNone). For kPoisson the floor is
 // 1e-3 of the channel's largest |value| (so a zero or slightly negative
