@@ -184,6 +184,7 @@ void FitEachFile(const CurveArgs& args, const std::vector<std::string>& table_he
     }
   }
   if (!rows.empty()) PrintTable(table_header, rows);
+  std::fflush(stdout);  // the table before the error line, even through a pipe
   if (failure) ThrowUserError("", "", *failure);
 }
 
