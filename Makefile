@@ -33,6 +33,7 @@ study: build
 	@build/bin/phos-glassner-study --out docs
 	@build/bin/phos-nc-study --out docs
 	@build/bin/phos-dss-study --out docs
+	@build/bin/phos-appearance-study --out docs
 
 clean:
 	rm -rf build build-asan results
