@@ -130,6 +130,11 @@ ChargeFitSummary FitCharge(const Curve& curve, const ChargeFitOptions& options, 
   const ceres::Solver::Options solver_options = SmallDenseSolverOptions(options.max_iterations, 1e-14);
   ceres::Solver::Summary solver_summary;
   ceres::Solve(solver_options, &problem, &solver_summary);
+  // A failed solve (non-finite residuals) must not reach the covariance:
+  // ceres::Covariance dereferenced null on the non-finite Jacobian of
+  // negative times (e^{-kt} overflowing) and crashed.
+  if (!solver_summary.IsSolutionUsable())
+    ThrowUserError(where, "", "the fit failed: " + solver_summary.message);
 
   ChargeFitSummary summary;
   log_k = params[0];
