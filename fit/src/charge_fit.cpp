@@ -29,6 +29,9 @@ class ChargeCost final : public ceres::CostFunction {
 
   bool Evaluate(double const* const* p, double* residuals, double** jacobians) const override {
     const double k = std::exp(p[0][0]), L0 = p[0][1 + 2 * c_], Linf = p[0][2 + 2 * c_];
+    // A step to an overflowing rate is refused quietly (false), not
+    // evaluated to e^{-inf * 0} = NaN, which Ceres reports in a page on stderr.
+    if (!std::isfinite(k)) return false;
     double* J = jacobians != nullptr ? jacobians[0] : nullptr;
     if (J != nullptr) std::fill(J, J + t_.size() * n_, 0.0);
     for (int j = 0; j < t_.size(); ++j) {
