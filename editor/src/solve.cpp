@@ -6,6 +6,7 @@
 #include <cmath>
 #include <limits>
 #include <numeric>
+#include <type_traits>
 
 #include <ceres/ceres.h>
 #include <nlohmann/json.hpp>
@@ -22,10 +23,48 @@ constexpr double kPi = 3.14159265358979323846;
 
 // The moments the cost looks at, per point: every target's time and every
 // frame start inside a bound's range (and its ends), sorted, with who uses each.
+// The irradiance is piecewise constant, and the exact update (Eq. 8.1) over
+// an interval of constant irradiance depends on its length only, so runs of
+// frames with equal irradiance and no sample inside are one step: a lit
+// stretch or a dark stretch costs one exponential, not one per frame.
+struct Step {
+  int frame = 0;     // a frame of the run (its irradiance holds throughout)
+  double h_s = 0;    // the run's length
+  int sample = -1;   // the sample that ends the step, or -1
+};
 struct PointSamples {
   std::vector<double> t;    // sorted, unique
   std::vector<int> frame;   // frame whose irradiance shows at t
+  std::vector<Step> steps;  // from t = 0 to the last sample
 };
+
+std::vector<Step> MakeSteps(const Point& point, double dt_s, const std::vector<double>& t_samples) {
+  std::vector<Step> steps;
+  const int frames = static_cast<int>(point.irradiance.size());
+  double t = 0;
+  int frame = 0;
+  for (std::size_t m = 0; m < t_samples.size(); ++m) {
+    bool stepped = false;
+    while (t < t_samples[m] - 1e-12) {
+      const double frame_end = dt_s * (frame + 1);
+      const double until = std::min(frame_end, t_samples[m]);
+      const int f = std::min(frame, frames - 1);
+      const bool ends_sample = until >= t_samples[m] - 1e-12;
+      const bool joins = !steps.empty() && steps.back().sample < 0 && point.irradiance[steps.back().frame] == point.irradiance[f];
+      if (joins) {
+        steps.back().h_s += until - t;
+      } else {
+        steps.push_back({f, until - t, -1});
+      }
+      if (ends_sample) steps.back().sample = static_cast<int>(m);
+      stepped = true;
+      t = until;
+      if (t >= frame_end - 1e-12) ++frame;
+    }
+    if (!stepped) steps.push_back({std::min(frame, frames - 1), 0.0, static_cast<int>(m)});  // a sample at t = 0
+  }
+  return steps;
+}
 struct Samples {
   std::vector<PointSamples> points;
   std::vector<int> target_sample;               // per constraint (targets): index into its point's t
@@ -51,6 +90,7 @@ Samples MakeSamples(const Problem& p) {
     for (double t : times[q])
       if (ps.t.empty() || t > ps.t.back() + 1e-9 * p.dt_s) ps.t.push_back(t);
     for (double t : ps.t) ps.frame.push_back(std::clamp(static_cast<int>(std::floor(t / p.dt_s + 1e-9)), 0, frames - 1));
+    ps.steps = MakeSteps(p.points[q], p.dt_s, ps.t);
   }
   auto index_of = [&](int q, double t) {
     const std::vector<double>& ts = s.points[q].t;
@@ -68,30 +108,18 @@ Samples MakeSamples(const Problem& p) {
   return s;
 }
 
-// r(t) at the samples for decay rate kr and excitation rate a[frame] (Eq. 8.1
-// with the exact update, irradiance constant over each frame). T: double or a Ceres Jet.
+// r(t) at the samples for decay rate kr and excitation rate a[step] (Eq. 8.1
+// with the exact update, irradiance constant over each step). T: double or a Ceres Jet.
 template <typename T>
-void StateAtSamples(const PointSamples& s, double dt_s, const std::vector<T>& a, const T& kr, std::vector<T>& r_out) {
-  using std::exp;
+void StateAtSamples(const PointSamples& s, const std::vector<T>& a, const T& kr, std::vector<T>& r_out) {
   using std::expm1;
   r_out.resize(s.t.size());
   T r(0.0);
-  double t = 0;
-  int frame = 0;
-  auto step = [&](const T& a_frame, double h) {
-    const T k = a_frame + kr;
-    const T rise = -expm1(-k * h);
-    r = r * (T(1.0) - rise) + a_frame / k * rise;
-  };
-  for (std::size_t m = 0; m < s.t.size(); ++m) {
-    while (t < s.t[m] - 1e-12) {
-      const double frame_end = dt_s * (frame + 1);
-      const double until = std::min(frame_end, s.t[m]);
-      step(a[std::min<std::size_t>(frame, a.size() - 1)], until - t);
-      t = until;
-      if (t >= frame_end - 1e-12) ++frame;
-    }
-    r_out[m] = r;
+  for (std::size_t j = 0; j < s.steps.size(); ++j) {
+    const T k = a[j] + kr;
+    const T rise = -expm1(-k * s.steps[j].h_s);
+    r = r * (T(1.0) - rise) + a[j] / k * rise;
+    if (s.steps[j].sample >= 0) r_out[s.steps[j].sample] = r;
   }
 }
 
@@ -169,13 +197,226 @@ Material ToMaterial(const Problem& p, const std::vector<int>& lit, const Paramet
   return m;
 }
 
-// Excitation rate per frame of a state at a point: a = sum_b ke_b E_b.
+// Excitation rate per step of a state at a point: a = sum_b ke_b E_b.
 template <typename T>
-std::vector<T> ExcitationPerFrame(const Point& point, const std::vector<int>& lit, const T* ke) {
-  std::vector<T> a(point.irradiance.size(), T(0.0));
-  for (std::size_t f = 0; f < a.size(); ++f)
-    for (std::size_t l = 0; l < lit.size(); ++l) a[f] += ke[l] * point.irradiance[f][lit[l]];
+std::vector<T> ExcitationPerStep(const Point& point, const PointSamples& s, const std::vector<int>& lit, const T* ke) {
+  std::vector<T> a(s.steps.size(), T(0.0));
+  for (std::size_t j = 0; j < a.size(); ++j)
+    for (std::size_t l = 0; l < lit.size(); ++l) a[j] += ke[l] * point.irradiance[s.steps[j].frame][lit[l]];
   return a;
+}
+
+// One state's curve g = kr r(t) at every point's samples ([point][sample]):
+// what Lambda multiplies in Eq. 8.2.
+template <typename T>
+using StateCurve = std::vector<std::vector<T>>;
+
+template <typename T>
+StateCurve<T> CurveOf(const Problem& p, const Samples& s, const std::vector<int>& lit, const T& kr, const T* ke) {
+  StateCurve<T> g(p.points.size());
+  for (std::size_t q = 0; q < p.points.size(); ++q) {
+    StateAtSamples(s.points[q], ExcitationPerStep(p.points[q], s.points[q], lit, ke), kr, g[q]);
+    for (T& v : g[q]) v *= kr;
+  }
+  return g;
+}
+
+// Lp = sum_i Lambda_i g_i into `Lp` (resized and reused: the beam search calls this thousands of times).
+template <typename T>
+void EmitInto(const Problem& p, const Samples& s, const std::vector<const StateCurve<T>*>& g,
+              const std::vector<std::vector<T>>& Lambda, Emitted<T>& Lp) {
+  const int nb = p.bands.band_count();
+  Lp.resize(p.points.size());
+  for (std::size_t q = 0; q < p.points.size(); ++q) {
+    Lp[q].resize(s.points[q].t.size());
+    for (std::size_t m = 0; m < s.points[q].t.size(); ++m) {
+      Lp[q][m].assign(nb, T(0.0));
+      for (std::size_t i = 0; i < g.size(); ++i)
+        for (int b = 0; b < nb; ++b) Lp[q][m][b] += Lambda[i][b] * (*g[i])[q][m];
+    }
+  }
+}
+
+// The value of a double or of a Ceres Jet.
+inline double ValueOf(double x) { return x; }
+template <typename T, int N>
+double ValueOf(const ceres::Jet<T, N>& x) { return x.a; }
+
+// Solves G x = b in place for a small symmetric positive definite G (n <= 5,
+// by Cholesky), in T, so that a Jet's derivatives follow G's and b's.
+template <typename T>
+void SolveSpdInPlace(T (&G)[5][5], T (&b)[5], int n) {
+  using std::sqrt;
+  for (int j = 0; j < n; ++j) {
+    for (int k = 0; k < j; ++k) G[j][j] -= G[j][k] * G[j][k];
+    G[j][j] = sqrt(G[j][j]);
+    for (int i = j + 1; i < n; ++i) {
+      for (int k = 0; k < j; ++k) G[i][j] -= G[i][k] * G[j][k];
+      G[i][j] /= G[j][j];
+    }
+  }
+  for (int i = 0; i < n; ++i) {
+    for (int k = 0; k < i; ++k) b[i] -= G[i][k] * b[k];
+    b[i] /= G[i][i];
+  }
+  for (int i = n - 1; i >= 0; --i) {
+    for (int k = i + 1; k < n; ++k) b[i] -= G[k][i] * b[k];
+    b[i] /= G[i][i];
+  }
+}
+
+// The non-negative x minimizing 0.5 x'Gx - rhs'x, G symmetric positive
+// definite (lower triangle read), n <= 5. Most often the unconstrained
+// optimum is already non-negative, and then it is the answer (the problem is
+// convex): one Cholesky solve. Otherwise fit/'s exact subset solver picks the
+// support on values, and for a Jet x is solved again on that support in T,
+// which is the exact derivative of the projected problem (variable
+// projection, Golub and Pereyra 1973).
+template <typename T>
+void NonNegativeSolve(const T (&G)[5][5], const T (&rhs)[5], int n, T (&x)[5]) {
+  T L[5][5];
+  for (int i = 0; i < n; ++i) {
+    x[i] = rhs[i];
+    for (int j = 0; j <= i; ++j) L[i][j] = G[i][j];
+  }
+  SolveSpdInPlace(L, x, n);
+  bool feasible = true;
+  for (int i = 0; i < n; ++i) feasible = feasible && ValueOf(x[i]) >= 0;  // also false on NaN
+  if (feasible) return;
+  if (n == 2) {
+    // The optimum is then on an edge, x_j = 0 and x_i = max(0, rhs_i / G_ii):
+    // the better edge, in closed form (the beam search's common case).
+    const int i = ValueOf(rhs[0] * rhs[0] / G[0][0]) >= ValueOf(rhs[1] * rhs[1] / G[1][1]) ? 0 : 1;
+    x[0] = x[1] = T(0.0);
+    if (ValueOf(rhs[i]) > 0) x[i] = rhs[i] / G[i][i];
+    else if (ValueOf(rhs[1 - i]) > 0) x[1 - i] = rhs[1 - i] / G[1 - i][1 - i];
+    return;
+  }
+  SmallMatrix G_value(n, n);
+  SmallVector rhs_value(n);
+  for (int i = 0; i < n; ++i) {
+    rhs_value[i] = ValueOf(rhs[i]);
+    for (int j = 0; j <= i; ++j) G_value(i, j) = G_value(j, i) = ValueOf(G[i][j]);
+  }
+  const SmallNnlsResult nnls = SolveSmallNnls(G_value, rhs_value, n);
+  int support[5], m = 0;
+  for (int i = 0; i < n; ++i) {
+    x[i] = T(0.0);
+    if (nnls.ok && nnls.x[i] > 0) support[m++] = i;
+  }
+  T x_support[5];
+  for (int i = 0; i < m; ++i) {
+    x_support[i] = rhs[support[i]];
+    for (int j = 0; j <= i; ++j) L[i][j] = G[support[i]][support[j]];
+  }
+  SolveSpdInPlace(L, x_support, m);
+  for (int i = 0; i < m; ++i) x[support[i]] = x_support[i];
+}
+
+// The targets' side of Eq. 8.7 for Lambda: per target its weight and its
+// radiance less the reflected light (what the emission must supply), per band.
+struct TargetSystem {
+  std::vector<int> constraint;          // per target: index into Problem::constraints
+  std::vector<double> weight;           // per target
+  std::vector<std::vector<double>> y;   // per target, per band
+  std::vector<double> wyy;              // per band: sum_targets w y^2
+};
+
+TargetSystem MakeTargetSystem(const Problem& p, const Samples& s) {
+  TargetSystem t;
+  const int nb = p.bands.band_count();
+  t.wyy.assign(nb, 0.0);
+  for (std::size_t c = 0; c < p.constraints.size(); ++c) {
+    const Constraint& con = p.constraints[c];
+    if (con.kind != Constraint::Kind::kTarget) continue;
+    const int m = s.target_sample[c];
+    const Point& point = p.points[con.point];
+    std::vector<double> y(nb);
+    for (int b = 0; b < nb; ++b) {
+      y[b] = con.radiance[b] - point.albedo[b] * point.irradiance[s.points[con.point].frame[m]][b] / kPi;
+      t.wyy[b] += con.weight * y[b] * y[b];
+    }
+    t.constraint.push_back(static_cast<int>(c));
+    t.weight.push_back(con.weight);
+    t.y.push_back(std::move(y));
+  }
+  return t;
+}
+
+// A state curve at the targets (g_k = kr r at target k), for the normal equations.
+template <typename T>
+std::vector<T> AtTargets(const Problem& p, const Samples& s, const TargetSystem& t, const StateCurve<T>& g) {
+  std::vector<T> out;
+  for (int c : t.constraint) out.push_back(g[p.constraints[c].point][s.target_sample[c]]);
+  return out;
+}
+
+// The normal equations of Lambda_b for curves given at the targets: G_ij =
+// sum_k w_k g_i,k g_j,k (shared by all bands; a tiny ridge keeps a state no
+// target sees solvable) and rhs_b,i = sum_k w_k g_i,k y_k,b.
+template <typename T>
+void NormalMatrix(const TargetSystem& t, const std::vector<const std::vector<T>*>& g, T (&G)[5][5]) {
+  const int nc = static_cast<int>(g.size());
+  PHOS_CHECK(nc <= 5);
+  double diagonal_max = 0;
+  for (int i = 0; i < nc; ++i)
+    for (int j = 0; j <= i; ++j) {
+      G[i][j] = T(0.0);
+      for (std::size_t k = 0; k < t.weight.size(); ++k) G[i][j] += t.weight[k] * (*g[i])[k] * (*g[j])[k];
+      if (i == j) diagonal_max = std::max(diagonal_max, ValueOf(G[i][i]));
+    }
+  for (int i = 0; i < nc; ++i) G[i][i] += 1e-14 * (diagonal_max + 1e-300);
+}
+
+template <typename T>
+void NormalRhs(const TargetSystem& t, const std::vector<const std::vector<T>*>& g, int b, T (&rhs)[5]) {
+  for (std::size_t i = 0; i < g.size(); ++i) {
+    rhs[i] = T(0.0);
+    for (std::size_t k = 0; k < t.weight.size(); ++k) rhs[i] += t.weight[k] * (*g[i])[k] * t.y[k][b];
+  }
+}
+
+// Lambda for given state curves g_i: per band, non-negative least squares on
+// the targets (bounds are left to the refinement).
+template <typename T>
+std::vector<std::vector<T>> BestLambda(const Problem& p, const Samples& s, const TargetSystem& t,
+                                       const std::vector<const StateCurve<T>*>& g) {
+  const int nc = static_cast<int>(g.size()), nb = p.bands.band_count();
+  std::vector<std::vector<T>> at_targets;
+  for (const StateCurve<T>* curve : g) at_targets.push_back(AtTargets(p, s, t, *curve));
+  std::vector<const std::vector<T>*> g_targets;
+  for (const std::vector<T>& v : at_targets) g_targets.push_back(&v);
+  T G[5][5], rhs[5], x[5];
+  NormalMatrix(t, g_targets, G);
+  std::vector<std::vector<T>> Lambda(nc, std::vector<T>(nb, T(0.0)));
+  for (int b = 0; b < nb; ++b) {
+    NormalRhs(t, g_targets, b, rhs);
+    NonNegativeSolve(G, rhs, nc, x);
+    for (int i = 0; i < nc; ++i) Lambda[i][b] = x[i];
+  }
+  return Lambda;
+}
+
+// The state curves of log kr and log ke (lit bands), all states: the Ceres parameters.
+template <typename T>
+std::vector<StateCurve<T>> CurvesOfLogs(const Problem& p, const Samples& s, const std::vector<int>& lit, int nc,
+                                        const T* log_kr, const T* log_ke) {
+  using std::exp;
+  const int n_lit = static_cast<int>(lit.size());
+  std::vector<StateCurve<T>> g;
+  std::vector<T> ke(n_lit);
+  for (int i = 0; i < nc; ++i) {
+    for (int l = 0; l < n_lit; ++l) ke[l] = exp(log_ke[i * n_lit + l]);
+    g.push_back(CurveOf(p, s, lit, T(exp(log_kr[i])), ke.data()));
+  }
+  return g;
+}
+
+template <typename T>
+std::vector<const StateCurve<T>*> Pointers(const std::vector<StateCurve<T>>& g) {
+  std::vector<const StateCurve<T>*> out;
+  for (const StateCurve<T>& c : g) out.push_back(&c);
+  return out;
 }
 
 // Ceres functor over log kr, log ke (lit bands), Lambda (all bands), all states.
@@ -186,50 +427,53 @@ struct EditCost {
   int nc, nb;
   template <typename T>
   bool operator()(T const* const* parameters, T* residuals) const {
-    using std::exp;
-    const T* log_kr = parameters[0];
-    const T* log_ke = parameters[1];
-    const T* Lambda = parameters[2];
-    Emitted<T> Lp(p->points.size());
-    for (std::size_t q = 0; q < p->points.size(); ++q)
-      Lp[q].assign(s->points[q].t.size(), std::vector<T>(nb, T(0.0)));
-    std::vector<T> r;
-    const int n_lit = static_cast<int>(lit->size());
-    for (int i = 0; i < nc; ++i) {
-      std::vector<T> ke(n_lit);
-      for (int l = 0; l < n_lit; ++l) ke[l] = exp(log_ke[i * n_lit + l]);
-      const T kr = exp(log_kr[i]);
-      for (std::size_t q = 0; q < p->points.size(); ++q) {
-        StateAtSamples(s->points[q], p->dt_s, ExcitationPerFrame(p->points[q], *lit, ke.data()), kr, r);
-        for (std::size_t m = 0; m < r.size(); ++m)
-          for (int b = 0; b < nb; ++b) Lp[q][m][b] += Lambda[i * nb + b] * kr * r[m];
-      }
-    }
+    const std::vector<StateCurve<T>> g = CurvesOfLogs(*p, *s, *lit, nc, parameters[0], parameters[1]);
+    std::vector<std::vector<T>> Lambda(nc);
+    for (int i = 0; i < nc; ++i) Lambda[i].assign(parameters[2] + i * nb, parameters[2] + (i + 1) * nb);
+    Emitted<T> Lp;
+    EmitInto(*p, *s, Pointers(g), Lambda, Lp);
     Residuals(*p, *s, Lp, residuals);
     return true;
   }
 };
 
-double CostOf(const Problem& p, const Samples& s, const Emitted<double>& Lp) {
-  std::vector<double> residuals(ResidualCount(p, s));
+// Ceres functor over log kr and log ke only, Lambda projected out (BestLambda).
+struct ProjectedEditCost {
+  const Problem* p;
+  const Samples* s;
+  const TargetSystem* t;
+  const std::vector<int>* lit;
+  int nc;
+  template <typename T>
+  bool operator()(T const* const* parameters, T* residuals) const {
+    const std::vector<StateCurve<T>> g = CurvesOfLogs(*p, *s, *lit, nc, parameters[0], parameters[1]);
+    const std::vector<const StateCurve<T>*> curves = Pointers(g);
+    Emitted<T> Lp;
+    EmitInto(*p, *s, curves, BestLambda(*p, *s, *t, curves), Lp);
+    Residuals(*p, *s, Lp, residuals);
+    return true;
+  }
+};
+
+// The cost of Eq. 8.7 from the emitted radiance; `residuals` is scratch.
+double CostOf(const Problem& p, const Samples& s, const Emitted<double>& Lp, std::vector<double>& residuals) {
+  residuals.resize(ResidualCount(p, s));
   Residuals(p, s, Lp, residuals.data());
   double cost = 0;
   for (double r : residuals) cost += r * r;
   return cost;
 }
 
+double CostOf(const Problem& p, const Samples& s, const Emitted<double>& Lp) {
+  std::vector<double> residuals;
+  return CostOf(p, s, Lp, residuals);
+}
+
 Emitted<double> EmittedAtSamples(const Problem& p, const Samples& s, const std::vector<int>& lit, const Parameters& x) {
-  const int nb = p.bands.band_count();
-  Emitted<double> Lp(p.points.size());
-  std::vector<double> r;
-  for (std::size_t q = 0; q < p.points.size(); ++q) {
-    Lp[q].assign(s.points[q].t.size(), std::vector<double>(nb, 0.0));
-    for (std::size_t i = 0; i < x.kr.size(); ++i) {
-      StateAtSamples(s.points[q], p.dt_s, ExcitationPerFrame(p.points[q], lit, x.ke[i].data()), x.kr[i], r);
-      for (std::size_t m = 0; m < r.size(); ++m)
-        for (int b = 0; b < nb; ++b) Lp[q][m][b] += x.Lambda[i][b] * x.kr[i] * r[m];
-    }
-  }
+  std::vector<StateCurve<double>> g;
+  for (std::size_t i = 0; i < x.kr.size(); ++i) g.push_back(CurveOf(p, s, lit, x.kr[i], x.ke[i].data()));
+  Emitted<double> Lp;
+  EmitInto(p, s, Pointers(g), x.Lambda, Lp);
   return Lp;
 }
 
@@ -237,34 +481,6 @@ std::vector<double> LogSpace(double lo, double hi, int n) {
   std::vector<double> v(n);
   for (int k = 0; k < n; ++k) v[k] = lo * std::pow(hi / lo, n == 1 ? 0.0 : double(k) / (n - 1));
   return v;
-}
-
-// Lambda for given state curves g_i(sample) = kr_i r_i: per band, non-negative
-// least squares on the targets (bounds are left to the refinement).
-std::vector<std::vector<double>> BestLambda(const Problem& p, const Samples& s,
-                                            const std::vector<const std::vector<std::vector<double>>*>& g) {
-  const int nc = static_cast<int>(g.size()), nb = p.bands.band_count();
-  std::vector<std::vector<double>> Lambda(nc, std::vector<double>(nb, 0.0));
-  for (int b = 0; b < nb; ++b) {
-    SmallMatrix G = SmallMatrix::Zero(nc, nc);
-    SmallVector rhs = SmallVector::Zero(nc);
-    for (std::size_t c = 0; c < p.constraints.size(); ++c) {
-      const Constraint& con = p.constraints[c];
-      if (con.kind != Constraint::Kind::kTarget) continue;
-      const int m = s.target_sample[c], q = con.point;
-      const Point& point = p.points[q];
-      const double y = con.radiance[b] - point.albedo[b] * point.irradiance[s.points[q].frame[m]][b] / kPi;
-      for (int i = 0; i < nc; ++i) {
-        const double gi = (*g[i])[q][m];
-        rhs[i] += con.weight * gi * y;
-        for (int j = 0; j < nc; ++j) G(i, j) += con.weight * gi * (*g[j])[q][m];
-      }
-    }
-    G.diagonal().array() += 1e-14 * (G.diagonal().maxCoeff() + 1e-300);  // a state unseen by any target
-    const SmallNnlsResult x = SolveSmallNnls(G, rhs, nc);
-    for (int i = 0; i < nc; ++i) Lambda[i][b] = x.ok ? std::max(0.0, x.x[i]) : 0.0;
-  }
-  return Lambda;
 }
 
 // What the solution cannot do, in words: constraints it misses, and pairs of
@@ -354,17 +570,10 @@ Solution Finish(const Problem& p, const Samples& s, const std::vector<int>& lit,
   return solution;
 }
 
-}  // namespace
-
-Solution Solve(const Problem& p, const SolveOptions& options) {
-  const auto start = std::chrono::steady_clock::now();
-  const Samples s = MakeSamples(p);
-  const std::vector<int> lit = LitBands(p);
-  const int nb = p.bands.band_count(), nc = p.states, n_lit = static_cast<int>(lit.size());
-  int evaluations = 0;
-
-  // The excitation direction: ke = kappa * e, e the mean irradiance over the
-  // lit frames scaled so that e . E_mean = 1 (kappa: the rate under the mean light).
+// The excitation direction: ke = kappa * e, e the mean irradiance over the
+// lit frames scaled so that e . E_mean = 1 (kappa: the rate under the mean light).
+std::vector<double> ExcitationDirection(const Problem& p, const std::vector<int>& lit) {
+  const int n_lit = static_cast<int>(lit.size());
   std::vector<double> mean(n_lit, 0.0), direction(n_lit, 0.0);
   int lit_frames = 0;
   for (const Point& point : p.points)
@@ -381,139 +590,281 @@ Solution Solve(const Problem& p, const SolveOptions& options) {
     norm2 += mean[l] * mean[l];
   }
   for (int l = 0; l < n_lit; ++l) direction[l] = norm2 > 0 ? mean[l] / norm2 : 0.0;
+  return direction;
+}
+
+// A curve of the library: one state with kr and ke = kappa e.
+struct LibraryCurve {
+  double kr, kappa;
+  StateCurve<double> g;
+  std::vector<double> at_targets;  // g at the targets (TargetSystem's order)
+};
+
+// Whether two curves have one shape (one is a multiple of the other, to
+// about 1e-3 relative: 1 - cos^2 below 1e-6): Lambda scales them alike, so
+// they look the same.
+bool SameShape(const StateCurve<double>& a, const StateCurve<double>& b) {
+  double ab = 0, aa = 0, bb = 0;
+  for (std::size_t q = 0; q < a.size(); ++q)
+    for (std::size_t m = 0; m < a[q].size(); ++m) {
+      ab += a[q][m] * b[q][m];
+      aa += a[q][m] * a[q][m];
+      bb += b[q][m] * b[q][m];
+    }
+  return ab * ab >= (1 - 1e-6) * aa * bb;
+}
+
+// The curve whose kappa is nearest `kappa` (in log).
+int NearestKappa(const std::vector<LibraryCurve>& row, double kappa) {
+  int best = 0;
+  for (int k = 1; k < static_cast<int>(row.size()); ++k)
+    if (std::abs(std::log(row[k].kappa / kappa)) < std::abs(std::log(row[best].kappa / kappa))) best = k;
+  return best;
+}
+
+// The curves of one kr worth keeping, kappa ascending. Under weak light
+// (a << kr, a t << 1) r grows in proportion to ke, so every small kappa gives
+// one shape; past saturation r is full before the first target and every
+// large kappa gives another. Such a run is one curve, and the one kept is at
+// its end nearest the informative middle: a start deep inside a plateau
+// cannot be refined (its look does not change with ke, so neither does the
+// cost) while a start at its edge can. When every kappa gives one shape (a
+// fast state, full before the first target whatever the light), the one kept
+// has a = kr, where r_inf = a / (a + kr) still moves with both.
+std::vector<int> DistinctShapes(const std::vector<LibraryCurve>& row) {
+  const int n = static_cast<int>(row.size());
+  std::vector<int> keep;
+  for (int start = 0; start < n;) {
+    int end = start;
+    while (end + 1 < n && SameShape(row[end].g, row[end + 1].g)) ++end;
+    if (start == end) keep.push_back(start);
+    else if (start == 0 && end == n - 1) keep.push_back(NearestKappa(row, row[0].kr));  // one shape for every kappa
+    else if (start == 0) keep.push_back(end);   // the weak-light plateau: its strongest
+    else if (end == n - 1) keep.push_back(start);  // the saturated plateau: its weakest
+    else
+      for (int k = start; k <= end; ++k) keep.push_back(k);
+    start = end + 1;
+  }
+  return keep;
+}
+
+bool HasBounds(const Problem& p) {
+  for (const Constraint& c : p.constraints)
+    if (c.kind != Constraint::Kind::kTarget) return true;
+  return false;
+}
+
+// The full cost (Eq. 8.7) of a combination of library curves with its
+// closed-form Lambda. Without bounds it comes from the normal equations
+// alone, sum_b (sum w y_b^2 - 2 rhs_b . x_b + x_b' G x_b): no radiance to
+// assemble, thousands of combinations in a millisecond. Holds its scratch.
+class CombinationCost {
+ public:
+  CombinationCost(const Problem& p, const Samples& s, const TargetSystem& t, const std::vector<LibraryCurve>& library)
+      : p_(p), s_(s), t_(t), library_(library), bounds_(HasBounds(p)) {}
+  double operator()(const std::vector<int>& combination) {
+    const int n = static_cast<int>(combination.size()), nb = p_.bands.band_count();
+    g_targets_.clear();
+    for (int k : combination) g_targets_.push_back(&library_[k].at_targets);
+    double G[5][5], rhs[5], x[5];
+    NormalMatrix(t_, g_targets_, G);
+    Lambda_.resize(n);
+    double cost = 0;
+    for (int b = 0; b < nb; ++b) {
+      NormalRhs(t_, g_targets_, b, rhs);
+      NonNegativeSolve(G, rhs, n, x);
+      cost += t_.wyy[b];
+      for (int i = 0; i < n; ++i) {
+        Lambda_[i].resize(nb);
+        Lambda_[i][b] = x[i];
+        cost -= 2 * rhs[i] * x[i];
+        for (int j = 0; j < n; ++j) cost += x[i] * (i >= j ? G[i][j] : G[j][i]) * x[j];
+      }
+    }
+    if (!bounds_) return std::max(cost, 0.0);
+    g_.clear();
+    for (int k : combination) g_.push_back(&library_[k].g);
+    EmitInto(p_, s_, g_, Lambda_, Lp_);
+    return CostOf(p_, s_, Lp_, residuals_);
+  }
+
+ private:
+  const Problem& p_;
+  const Samples& s_;
+  const TargetSystem& t_;
+  const std::vector<LibraryCurve>& library_;
+  const bool bounds_;
+  Emitted<double> Lp_;  // scratch, reused
+  std::vector<double> residuals_;
+  std::vector<const std::vector<double>*> g_targets_;
+  std::vector<const StateCurve<double>*> g_;
+  std::vector<std::vector<double>> Lambda_;
+};
+
+// Candidates for the refinement: combinations of nc library curves (indices),
+// best full cost (bounds included) first. nc = 1: every curve. nc > 1: a beam
+// search, the best `beam` combinations of k curves each extended by every
+// curve of the library, so that a slow state that looks poor on its own (its
+// singles rank low) is still found as the partner of a fast one.
+std::vector<std::pair<double, std::vector<int>>> RankCombinations(const std::vector<LibraryCurve>& library, int nc,
+                                                                  CombinationCost& cost_of) {
+  std::vector<std::pair<double, std::vector<int>>> ranked;
+  for (int k = 0; k < static_cast<int>(library.size()); ++k) ranked.emplace_back(cost_of({k}), std::vector<int>{k});
+  std::sort(ranked.begin(), ranked.end());
+  const int beam = 16;
+  for (int depth = 2; depth <= nc; ++depth) {
+    std::vector<std::pair<double, std::vector<int>>> next;
+    for (int c = 0; c < std::min<int>(beam, static_cast<int>(ranked.size())); ++c)
+      for (int k = 0; k < static_cast<int>(library.size()); ++k) {
+        const std::vector<int>& combination = ranked[c].second;
+        if (std::find(combination.begin(), combination.end(), k) != combination.end()) continue;
+        std::vector<int> extended = combination;
+        extended.push_back(k);
+        std::sort(extended.begin(), extended.end());
+        next.emplace_back(cost_of(extended), extended);
+      }
+    std::sort(next.begin(), next.end());
+    next.erase(std::unique(next.begin(), next.end(), [](const auto& a, const auto& b) { return a.second == b.second; }),
+               next.end());
+    ranked = std::move(next);
+  }
+  return ranked;
+}
+
+// Bounds on the refinement's log parameters: kr and ke within the library's range, widened.
+void BoundLogRates(ceres::Problem& problem, std::vector<double>& log_kr, std::vector<double>& log_ke) {
+  for (std::size_t i = 0; i < log_kr.size(); ++i) {
+    problem.SetParameterLowerBound(log_kr.data(), static_cast<int>(i), std::log(1e-5));
+    problem.SetParameterUpperBound(log_kr.data(), static_cast<int>(i), std::log(1e3));
+  }
+  for (std::size_t q = 0; q < log_ke.size(); ++q) {
+    problem.SetParameterLowerBound(log_ke.data(), static_cast<int>(q), std::log(1e-12));
+    problem.SetParameterUpperBound(log_ke.data(), static_cast<int>(q), std::log(1e6));
+  }
+}
+
+// Refines one candidate with Ceres. First over log kr and log ke with Lambda
+// projected out (ProjectedEditCost: fewer parameters, and Lambda is optimal at
+// every step, so a few iterations reach what the full problem reaches). That
+// optimum is a stationary point of the full cost when only targets count;
+// bounds also pull on Lambda, so then every parameter is refined after it.
+Parameters Refine(const Problem& p, const Samples& s, const TargetSystem& t, const std::vector<int>& lit,
+                  const Parameters& x0, int* evaluations) {
+  const int nc = static_cast<int>(x0.kr.size()), nb = p.bands.band_count(), n_lit = static_cast<int>(lit.size());
+  const int residuals = ResidualCount(p, s);
+  std::vector<double> log_kr(nc), log_ke(nc * n_lit), Lambda(nc * nb);
+  for (int i = 0; i < nc; ++i) {
+    log_kr[i] = std::log(x0.kr[i]);
+    for (int l = 0; l < n_lit; ++l) log_ke[i * n_lit + l] = std::log(std::max(x0.ke[i][l], 1e-12));
+  }
+  ceres::Solver::Options solver;
+  solver.linear_solver_type = ceres::DENSE_QR;
+  solver.max_num_iterations = 60;
+  solver.function_tolerance = 1e-12;
+  solver.gradient_tolerance = 0;  // absolute, and the cost's scale is the targets': a faint glow's gradient is tiny
+  solver.parameter_tolerance = 1e-12;
+  solver.logging_type = ceres::SILENT;
+  ceres::Solver::Summary summary;
+  {
+    auto* cost = new ceres::DynamicAutoDiffCostFunction<ProjectedEditCost, 8>(new ProjectedEditCost{&p, &s, &t, &lit, nc});
+    cost->AddParameterBlock(nc);
+    cost->AddParameterBlock(nc * n_lit);
+    cost->SetNumResiduals(residuals);
+    ceres::Problem problem;
+    problem.AddResidualBlock(cost, nullptr, {log_kr.data(), log_ke.data()});
+    BoundLogRates(problem, log_kr, log_ke);
+    ceres::Solve(solver, &problem, &summary);
+    *evaluations += summary.num_residual_evaluations + summary.num_jacobian_evaluations;
+  }
+  Parameters x;
+  for (int i = 0; i < nc; ++i) {
+    x.kr.push_back(std::exp(log_kr[i]));
+    x.ke.emplace_back();
+    for (int l = 0; l < n_lit; ++l) x.ke[i].push_back(std::exp(log_ke[i * n_lit + l]));
+  }
+  std::vector<StateCurve<double>> g;
+  for (int i = 0; i < nc; ++i) g.push_back(CurveOf(p, s, lit, x.kr[i], x.ke[i].data()));
+  x.Lambda = BestLambda(p, s, t, Pointers(g));
+  if (!HasBounds(p)) return x;
+
+  for (int i = 0; i < nc; ++i)
+    for (int b = 0; b < nb; ++b) Lambda[i * nb + b] = x.Lambda[i][b];
+  auto* cost = new ceres::DynamicAutoDiffCostFunction<EditCost, 8>(new EditCost{&p, &s, &lit, nc, nb});
+  cost->AddParameterBlock(nc);
+  cost->AddParameterBlock(nc * n_lit);
+  cost->AddParameterBlock(nc * nb);
+  cost->SetNumResiduals(residuals);
+  ceres::Problem problem;
+  problem.AddResidualBlock(cost, nullptr, {log_kr.data(), log_ke.data(), Lambda.data()});
+  for (int q = 0; q < nc * nb; ++q) problem.SetParameterLowerBound(Lambda.data(), q, 0.0);
+  BoundLogRates(problem, log_kr, log_ke);
+  ceres::Solve(solver, &problem, &summary);
+  *evaluations += summary.num_residual_evaluations + summary.num_jacobian_evaluations;
+  for (int i = 0; i < nc; ++i) {
+    x.kr[i] = std::exp(log_kr[i]);
+    for (int l = 0; l < n_lit; ++l) x.ke[i][l] = std::exp(log_ke[i * n_lit + l]);
+    x.Lambda[i].assign(Lambda.begin() + i * nb, Lambda.begin() + (i + 1) * nb);
+  }
+  return x;
+}
+
+}  // namespace
+
+Solution Solve(const Problem& p, const SolveOptions& options) {
+  const auto start = std::chrono::steady_clock::now();
+  const Samples s = MakeSamples(p);
+  const std::vector<int> lit = LitBands(p);
+  const int nc = p.states, n_lit = static_cast<int>(lit.size());
+  int evaluations = 0;
+  const std::vector<double> direction = ExcitationDirection(p, lit);
+  const TargetSystem t = MakeTargetSystem(p, s);
 
   // 1. The curve library: g = kr r(t) at the samples for a log grid of (kr, kappa).
-  struct Curve {
-    double kr, kappa;
-    std::vector<std::vector<double>> g;  // [point][sample]
-  };
-  std::vector<Curve> library;
-  const std::vector<double> kr_grid = LogSpace(1e-3, 10.0, options.library_kr);
-  const std::vector<double> kappa_grid = LogSpace(1e-4, 1e2, options.library_excitation);
-  std::vector<double> r;
-  for (double kappa : kappa_grid) {
-    std::vector<double> ke(n_lit);
-    for (int l = 0; l < n_lit; ++l) ke[l] = kappa * direction[l];
-    std::vector<std::vector<double>> a;
-    for (const Point& point : p.points) a.push_back(ExcitationPerFrame(point, lit, ke.data()));
-    for (double kr : kr_grid) {
-      Curve curve{kr, kappa, {}};
-      for (std::size_t q = 0; q < p.points.size(); ++q) {
-        StateAtSamples(s.points[q], p.dt_s, a[q], kr, r);
-        for (double& v : r) v *= kr;
-        curve.g.push_back(r);
-      }
-      library.push_back(std::move(curve));
+  std::vector<LibraryCurve> library;
+  for (double kr : LogSpace(1e-3, 10.0, options.library_kr)) {
+    std::vector<LibraryCurve> row;
+    for (double kappa : LogSpace(1e-4, 1e2, options.library_excitation)) {
+      std::vector<double> ke(n_lit);
+      for (int l = 0; l < n_lit; ++l) ke[l] = kappa * direction[l];
+      StateCurve<double> g = CurveOf(p, s, lit, kr, ke.data());
+      std::vector<double> at_targets = AtTargets(p, s, t, g);
+      row.push_back({kr, kappa, std::move(g), std::move(at_targets)});
       ++evaluations;
     }
+    for (int k : DistinctShapes(row)) library.push_back(std::move(row[k]));
   }
-  // 2. Candidates: single curves (nc = 1) or combinations of the best singles,
-  // each with its closed-form Lambda, ranked by the full cost.
-  auto params_of = [&](const std::vector<const Curve*>& curves) {
-    std::vector<const std::vector<std::vector<double>>*> g;
-    for (const Curve* c : curves) g.push_back(&c->g);
+  // 2. Candidates, ranked by the full cost with the closed-form Lambda.
+  CombinationCost cost_of(p, s, t, library);
+  const std::vector<std::pair<double, std::vector<int>>> ranked = RankCombinations(library, nc, cost_of);
+  evaluations += static_cast<int>(ranked.size());
+  auto params_of = [&](const std::vector<int>& combination) {
     Parameters x;
-    x.Lambda = BestLambda(p, s, g);
-    for (const Curve* c : curves) {
-      x.kr.push_back(c->kr);
+    std::vector<const StateCurve<double>*> g;
+    for (int k : combination) {
+      g.push_back(&library[k].g);
+      x.kr.push_back(library[k].kr);
       std::vector<double> ke(n_lit);
-      for (int l = 0; l < n_lit; ++l) ke[l] = c->kappa * direction[l];
+      for (int l = 0; l < n_lit; ++l) ke[l] = library[k].kappa * direction[l];
       x.ke.push_back(ke);
     }
+    x.Lambda = BestLambda(p, s, t, g);
     return x;
   };
-  std::vector<std::pair<double, Parameters>> ranked;
-  auto evaluate = [&](const std::vector<const Curve*>& curves) {
-    Parameters x = params_of(curves);
-    Emitted<double> Lp(p.points.size());
-    for (std::size_t q = 0; q < p.points.size(); ++q) {
-      Lp[q].assign(s.points[q].t.size(), std::vector<double>(nb, 0.0));
-      for (std::size_t i = 0; i < curves.size(); ++i)
-        for (std::size_t m = 0; m < s.points[q].t.size(); ++m)
-          for (int b = 0; b < nb; ++b) Lp[q][m][b] += x.Lambda[i][b] * curves[i]->g[q][m];
-    }
-    ranked.emplace_back(CostOf(p, s, Lp), std::move(x));
-  };
-  std::vector<std::pair<double, int>> singles;
-  for (std::size_t k = 0; k < library.size(); ++k) {
-    evaluate({&library[k]});
-    singles.emplace_back(ranked.back().first, static_cast<int>(k));
-  }
-  if (nc > 1) {
-    // Beam search: the best `beam` combinations of k curves, each extended by
-    // every curve of the library. A slow state that looks poor on its own
-    // (its singles rank low) is still found as the partner of a fast one.
-    const int beam = 16;
-    std::sort(singles.begin(), singles.end());
-    std::vector<std::vector<int>> combinations;
-    for (int k = 0; k < std::min<int>(beam, static_cast<int>(singles.size())); ++k) combinations.push_back({singles[k].second});
-    for (int depth = 2; depth <= nc; ++depth) {
-      ranked.clear();
-      std::vector<std::pair<double, std::vector<int>>> next;
-      for (const std::vector<int>& combination : combinations)
-        for (int k = 0; k < static_cast<int>(library.size()); ++k) {
-          if (std::find(combination.begin(), combination.end(), k) != combination.end()) continue;
-          std::vector<int> extended = combination;
-          extended.push_back(k);
-          std::sort(extended.begin(), extended.end());
-          std::vector<const Curve*> curves;
-          for (int q : extended) curves.push_back(&library[q]);
-          evaluate(curves);
-          next.emplace_back(ranked.back().first, extended);
-        }
-      std::sort(next.begin(), next.end());
-      next.erase(std::unique(next.begin(), next.end(), [](const auto& a, const auto& b) { return a.second == b.second; }),
-                 next.end());
-      combinations.clear();
-      for (int k = 0; k < std::min<int>(beam, static_cast<int>(next.size())); ++k) combinations.push_back(next[k].second);
-    }
-  }
-  std::sort(ranked.begin(), ranked.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
 
-  // 3. Refine the best candidates with Ceres over every parameter.
-  Parameters best = ranked.front().second;
-  double best_cost = ranked.front().first;
+  // 3. Refine the best candidates with Ceres; the best result wins. Starts
+  // differ in their set of kr: curves that differ only in kappa past
+  // saturation look the same, and would start the refinement from one place.
+  Parameters best = params_of(ranked.front().second);
+  double best_cost = CostOf(p, s, EmittedAtSamples(p, s, lit, best));
   if (options.refine && n_lit > 0) {
-    const int residuals = ResidualCount(p, s);
-    for (int k = 0; k < std::min<int>(options.refine_starts, static_cast<int>(ranked.size())); ++k) {
-      const Parameters& x0 = ranked[k].second;
-      std::vector<double> log_kr(nc), log_ke(nc * n_lit), Lambda(nc * nb);
-      for (int i = 0; i < nc; ++i) {
-        log_kr[i] = std::log(x0.kr[i]);
-        for (int l = 0; l < n_lit; ++l) log_ke[i * n_lit + l] = std::log(std::max(x0.ke[i][l], 1e-12));
-        for (int b = 0; b < nb; ++b) Lambda[i * nb + b] = x0.Lambda[i][b];
-      }
-      auto* cost = new ceres::DynamicAutoDiffCostFunction<EditCost, 8>(new EditCost{&p, &s, &lit, nc, nb});
-      cost->AddParameterBlock(nc);
-      cost->AddParameterBlock(nc * n_lit);
-      cost->AddParameterBlock(nc * nb);
-      cost->SetNumResiduals(residuals);
-      ceres::Problem problem;
-      problem.AddResidualBlock(cost, nullptr, {log_kr.data(), log_ke.data(), Lambda.data()});
-      for (int q = 0; q < nc * nb; ++q) problem.SetParameterLowerBound(Lambda.data(), q, 0.0);
-      for (int i = 0; i < nc; ++i) {  // kr and ke within the library's range, widened
-        problem.SetParameterLowerBound(log_kr.data(), i, std::log(1e-5));
-        problem.SetParameterUpperBound(log_kr.data(), i, std::log(1e3));
-      }
-      for (int q = 0; q < nc * n_lit; ++q) {
-        problem.SetParameterLowerBound(log_ke.data(), q, std::log(1e-12));
-        problem.SetParameterUpperBound(log_ke.data(), q, std::log(1e6));
-      }
-      ceres::Solver::Options solver;
-      solver.linear_solver_type = ceres::DENSE_QR;
-      solver.max_num_iterations = 60;
-      solver.function_tolerance = 1e-12;
-      solver.logging_type = ceres::SILENT;
-      ceres::Solver::Summary summary;
-      ceres::Solve(solver, &problem, &summary);
-      evaluations += summary.num_residual_evaluations + summary.num_jacobian_evaluations;
-      Parameters x;
-      for (int i = 0; i < nc; ++i) {
-        x.kr.push_back(std::exp(log_kr[i]));
-        x.ke.emplace_back();
-        for (int l = 0; l < n_lit; ++l) x.ke[i].push_back(std::exp(log_ke[i * n_lit + l]));
-        x.Lambda.emplace_back(Lambda.begin() + i * nb, Lambda.begin() + (i + 1) * nb);
-      }
+    std::vector<std::vector<double>> kr_sets;
+    for (std::size_t k = 0; k < ranked.size() && static_cast<int>(kr_sets.size()) < options.refine_starts; ++k) {
+      const Parameters x0 = params_of(ranked[k].second);
+      std::vector<double> kr_set = x0.kr;
+      std::sort(kr_set.begin(), kr_set.end());
+      if (std::find(kr_sets.begin(), kr_sets.end(), kr_set) != kr_sets.end()) continue;
+      kr_sets.push_back(kr_set);
+      const Parameters x = Refine(p, s, t, lit, x0, &evaluations);
       const double c = CostOf(p, s, EmittedAtSamples(p, s, lit, x));
       if (c < best_cost) {
         best_cost = c;
@@ -561,7 +912,7 @@ std::optional<Solution> SolveGridBaseline(const Problem& p, std::string* why) {
       std::vector<double> ke(nb);
       for (int b = 0, rest = combination; b < nb; ++b, rest /= 10) ke[b] = ke_grid[rest % 10];
       for (std::size_t q = 0; q < p.points.size(); ++q)
-        StateAtSamples(s.points[q], p.dt_s, ExcitationPerFrame(p.points[q], all_bands, ke.data()), kr, r[q]);
+        StateAtSamples(s.points[q], ExcitationPerStep(p.points[q], s.points[q], all_bands, ke.data()), kr, r[q]);
       ++evaluations;
       // The cost separates over bands, and Lambda_b enters band b only: the
       // best Lambda grid point per band gives the grid's best over all 10^3.

@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <random>
 
 #include <nlohmann/json.hpp>
 
@@ -91,6 +92,41 @@ TEST(EditorSolve, TwoStatesInEightBands) {
   std::string why;
   EXPECT_FALSE(SolveGridBaseline(p, &why).has_value());
   EXPECT_NE(why.find("nc = 1"), std::string::npos);
+}
+
+TEST(EditorSolve, ReachesTheLookOfRandomTwoStateMaterials) {
+  // Seeded random two-state truths over the ranges of issue 13: kr ratios 2
+  // to 50, ke and Lambda per state and band; their own look at a lit target,
+  // just after the light goes off and through the decay. The truth meets
+  // every target, so the solve must too, each within 1% (the feedback calls
+  // a miss of 10% one), with a cost below 1e-8 of the targets' energy. The
+  // curve library, the projected refinement and the starts are all tried
+  // here: a start stuck on a plateau of saturated or weak-light curves, or a
+  // refinement that stops on the cost's absolute scale, leaves some of these
+  // at 1e-5 and misses of 5-70%.
+  std::mt19937 rng(13);
+  auto log_uniform = [&](double lo, double hi) { return lo * std::pow(hi / lo, std::uniform_real_distribution<double>(0, 1)(rng)); };
+  auto uniform = [&](double lo, double hi) { return std::uniform_real_distribution<double>(lo, hi)(rng); };
+  for (int edit = 0; edit < 24; ++edit) {
+    const double kr_slow = log_uniform(0.01, 0.2), ratio = log_uniform(2, 50);
+    std::vector<std::vector<double>> ke(2), Lambda(2);
+    for (int i = 0; i < 2; ++i)
+      for (int b = 0; b < 3; ++b) {
+        ke[i].push_back(log_uniform(0.01, 0.5));
+        Lambda[i].push_back(uniform(0.1, 2.0));
+      }
+    const Material truth = Truth(kRgb, {ratio * kr_slow, kr_slow}, ke, Lambda);
+    const Problem p = FromTruth(truth, {1.0, 0.6, 0.2}, {3, 10.5, 12, 20, 40, 90});
+    const Solution s = Solve(p);
+    SCOPED_TRACE("edit " + std::to_string(edit) + ": kr " + std::to_string(truth.states[0].kr) + ", " +
+                 std::to_string(kr_slow));
+    EXPECT_LT(s.cost, 1e-8 * Scale(p));
+    for (std::size_t c = 0; c < s.constraints.size(); ++c) {
+      double norm2 = 0;
+      for (double v : p.constraints[c].radiance) norm2 += v * v;
+      EXPECT_LT(s.constraints[c].residual, 1e-2 * std::sqrt(norm2)) << s.constraints[c].label;
+    }
+  }
 }
 
 TEST(EditorSolve, BoundsAreMet) {

@@ -15,8 +15,11 @@
 //
 // Ours: Lambda enters linearly, so for any (kr, ke) it is solved in closed
 // form (non-negative least squares per band); only kr and the excitation
-// scale are searched, on a log grid shared by all states (a curve library),
-// then the best candidates are refined with Ceres over every parameter.
+// scale are searched, on a log grid shared by all states (a curve library,
+// one curve per plateau of look-alike excitations), then the best candidates
+// with distinct kr are refined with Ceres over kr and ke with Lambda
+// projected out (variable projection), and over every parameter when bounds
+// pull on Lambda too. Runs of frames with one irradiance are one exact step.
 // Baseline (the paper): the log grid of Table 8.2 over the 7 parameters of
 // nc = 1 in three bands, best cost wins (evaluated band by band, which finds
 // exactly the grid's best since the cost separates over bands).
@@ -84,7 +87,7 @@ struct Solution {
 
 struct SolveOptions {
   int library_kr = 20, library_excitation = 20;  // the curve library's log grid
-  int refine_starts = 3;                         // candidates refined with Ceres
+  int refine_starts = 5;                         // candidates (distinct kr) refined with Ceres
   bool refine = true;
 };
 
