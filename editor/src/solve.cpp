@@ -731,16 +731,42 @@ std::vector<std::pair<double, std::vector<int>>> RankCombinations(const std::vec
   return ranked;
 }
 
-// Bounds on the refinement's log parameters: kr and ke within the library's range, widened.
-void BoundLogRates(ceres::Problem& problem, std::vector<double>& log_kr, std::vector<double>& log_ke) {
+// Bounds on the refinement's log parameters: kr and ke within the library's
+// range, widened. Above, a state lit with ke_b E_b >= 1e3 /s in a band fills
+// within a millisecond of the light: saturated, it looks the same for any
+// larger ke, and a fit that wants saturation would otherwise push ke_b to
+// whatever bound there is.
+std::vector<double> KeUpperBounds(const Problem& p, const std::vector<int>& lit) {
+  std::vector<double> E_max(lit.size(), 0.0);
+  for (const Point& point : p.points)
+    for (const auto& E : point.irradiance)
+      for (std::size_t l = 0; l < lit.size(); ++l) E_max[l] = std::max(E_max[l], E[lit[l]]);
+  std::vector<double> upper;
+  for (double E : E_max) upper.push_back(1e3 / E);
+  return upper;
+}
+
+void BoundLogRates(const std::vector<double>& ke_upper, ceres::Problem& problem, std::vector<double>& log_kr,
+                   std::vector<double>& log_ke) {
+  const int n_lit = static_cast<int>(ke_upper.size());
   for (std::size_t i = 0; i < log_kr.size(); ++i) {
     problem.SetParameterLowerBound(log_kr.data(), static_cast<int>(i), std::log(1e-5));
     problem.SetParameterUpperBound(log_kr.data(), static_cast<int>(i), std::log(1e3));
   }
   for (std::size_t q = 0; q < log_ke.size(); ++q) {
     problem.SetParameterLowerBound(log_ke.data(), static_cast<int>(q), std::log(1e-12));
-    problem.SetParameterUpperBound(log_ke.data(), static_cast<int>(q), std::log(1e6));
+    problem.SetParameterUpperBound(log_ke.data(), static_cast<int>(q), std::log(ke_upper[q % n_lit]));
   }
+}
+
+// The cost as Ceres sees it, divided by the constraints' energy (sum w |T|^2):
+// Ceres' tolerances are absolute, and a faint glow's cost and gradient are
+// tiny, so unscaled the refinement would stop far from the targets.
+ceres::LossFunction* ScaleToTargets(const Problem& p) {
+  double energy = 0;
+  for (const Constraint& c : p.constraints)
+    for (double v : c.radiance) energy += c.weight * v * v;
+  return new ceres::ScaledLoss(nullptr, energy > 0 ? 1 / energy : 1.0, ceres::TAKE_OWNERSHIP);
 }
 
 // Refines one candidate with Ceres. First over log kr and log ke with Lambda
@@ -752,17 +778,16 @@ Parameters Refine(const Problem& p, const Samples& s, const TargetSystem& t, con
                   const Parameters& x0, int* evaluations) {
   const int nc = static_cast<int>(x0.kr.size()), nb = p.bands.band_count(), n_lit = static_cast<int>(lit.size());
   const int residuals = ResidualCount(p, s);
+  const std::vector<double> ke_upper = KeUpperBounds(p, lit);
   std::vector<double> log_kr(nc), log_ke(nc * n_lit), Lambda(nc * nb);
   for (int i = 0; i < nc; ++i) {
     log_kr[i] = std::log(x0.kr[i]);
-    for (int l = 0; l < n_lit; ++l) log_ke[i * n_lit + l] = std::log(std::max(x0.ke[i][l], 1e-12));
+    for (int l = 0; l < n_lit; ++l) log_ke[i * n_lit + l] = std::log(std::clamp(x0.ke[i][l], 1e-12, ke_upper[l]));
   }
   ceres::Solver::Options solver;
   solver.linear_solver_type = ceres::DENSE_QR;
   solver.max_num_iterations = 60;
   solver.function_tolerance = 1e-12;
-  solver.gradient_tolerance = 0;  // absolute, and the cost's scale is the targets': a faint glow's gradient is tiny
-  solver.parameter_tolerance = 1e-12;
   solver.logging_type = ceres::SILENT;
   ceres::Solver::Summary summary;
   {
@@ -771,8 +796,8 @@ Parameters Refine(const Problem& p, const Samples& s, const TargetSystem& t, con
     cost->AddParameterBlock(nc * n_lit);
     cost->SetNumResiduals(residuals);
     ceres::Problem problem;
-    problem.AddResidualBlock(cost, nullptr, {log_kr.data(), log_ke.data()});
-    BoundLogRates(problem, log_kr, log_ke);
+    problem.AddResidualBlock(cost, ScaleToTargets(p), {log_kr.data(), log_ke.data()});
+    BoundLogRates(ke_upper, problem, log_kr, log_ke);
     ceres::Solve(solver, &problem, &summary);
     *evaluations += summary.num_residual_evaluations + summary.num_jacobian_evaluations;
   }
@@ -795,9 +820,9 @@ Parameters Refine(const Problem& p, const Samples& s, const TargetSystem& t, con
   cost->AddParameterBlock(nc * nb);
   cost->SetNumResiduals(residuals);
   ceres::Problem problem;
-  problem.AddResidualBlock(cost, nullptr, {log_kr.data(), log_ke.data(), Lambda.data()});
+  problem.AddResidualBlock(cost, ScaleToTargets(p), {log_kr.data(), log_ke.data(), Lambda.data()});
   for (int q = 0; q < nc * nb; ++q) problem.SetParameterLowerBound(Lambda.data(), q, 0.0);
-  BoundLogRates(problem, log_kr, log_ke);
+  BoundLogRates(ke_upper, problem, log_kr, log_ke);
   ceres::Solve(solver, &problem, &summary);
   *evaluations += summary.num_residual_evaluations + summary.num_jacobian_evaluations;
   for (int i = 0; i < nc; ++i) {
@@ -805,6 +830,33 @@ Parameters Refine(const Problem& p, const Samples& s, const TargetSystem& t, con
     for (int l = 0; l < n_lit; ++l) x.ke[i][l] = std::exp(log_ke[i * n_lit + l]);
     x.Lambda[i].assign(Lambda.begin() + i * nb, Lambda.begin() + (i + 1) * nb);
   }
+  return x;
+}
+
+// A saturated state (full soon after the light comes on) looks the same for
+// any larger ke, so the refinement leaves its ke wherever it stopped, up to
+// the bound. Each state's ke is halved while the cost stays within 1e-6 of
+// its own (plus 1e-12 of the targets' energy): the weakest excitation that
+// makes the look, rather than an arbitrary point of the plateau (and its
+// Lambda with it, re-solved when only targets count).
+Parameters WeakestExcitation(const Problem& p, const Samples& s, const TargetSystem& t, const std::vector<int>& lit,
+                             Parameters x) {
+  double energy = 0;
+  for (const Constraint& c : p.constraints)
+    for (double v : c.radiance) energy += c.weight * v * v;
+  const double allowed = CostOf(p, s, EmittedAtSamples(p, s, lit, x)) * (1 + 1e-6) + 1e-12 * energy;
+  for (std::size_t i = 0; i < x.kr.size(); ++i)
+    for (int halving = 0; halving < 60; ++halving) {
+      Parameters weaker = x;
+      for (double& ke : weaker.ke[i]) ke /= 2;
+      if (!HasBounds(p)) {  // Lambda follows (r_inf = a / (a + kr) drops a little); bounds would pull on it too
+        std::vector<StateCurve<double>> g;
+        for (std::size_t j = 0; j < x.kr.size(); ++j) g.push_back(CurveOf(p, s, lit, weaker.kr[j], weaker.ke[j].data()));
+        weaker.Lambda = BestLambda(p, s, t, Pointers(g));
+      }
+      if (CostOf(p, s, EmittedAtSamples(p, s, lit, weaker)) > allowed) break;
+      x = std::move(weaker);
+    }
   return x;
 }
 
@@ -872,6 +924,7 @@ Solution Solve(const Problem& p, const SolveOptions& options) {
       }
     }
   }
+  best = WeakestExcitation(p, s, t, lit, best);
   // States sorted by rate, as everywhere in phos.
   std::vector<int> order(nc);
   std::iota(order.begin(), order.end(), 0);
