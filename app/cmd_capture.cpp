@@ -178,13 +178,14 @@ AutoExposure AutoExposureFrom(const nlohmann::json& j, AutoExposure a) {
 nlohmann::json ToJson(const DecayProtocolOptions& o) {
   return {{"charge_light", o.charge_light},   {"charge_s", o.charge_s},
           {"interval_s", o.interval_s},       {"duration_s", o.duration_s},
-          {"first_delay_s", o.first_delay_s}, {"initial_exposure_s", o.initial_exposure_s},
-          {"max_exposure_s", o.max_exposure_s}, {"gain", o.gain}};
+          {"first_delay_s", o.first_delay_s}, {"early_frames", o.early_frames},
+          {"initial_exposure_s", o.initial_exposure_s}, {"max_exposure_s", o.max_exposure_s}, {"gain", o.gain}};
 }
 nlohmann::json ToJson(const ExcitationProtocolOptions& o) {
   return {{"lights", o.lights},         {"reset_s", o.reset_s},       {"first_charge_s", o.first_charge_s},
           {"max_charge_s", o.max_charge_s}, {"plateau_growth", o.plateau_growth}, {"delay_s", o.delay_s},
-          {"exposure_s", o.exposure_s}, {"gain", o.gain}};
+          {"exposure_s", o.exposure_s}, {"gain", o.gain}, {"tail_frames", o.tail_frames},
+          {"tail_growth", o.tail_growth}, {"high_fraction", o.high_fraction}};
 }
 ExcitationProtocolOptions ExcitationFrom(const nlohmann::json& j) {
   ExcitationProtocolOptions o;
@@ -196,6 +197,10 @@ ExcitationProtocolOptions ExcitationFrom(const nlohmann::json& j) {
   o.delay_s = j.value("delay_s", o.delay_s);
   o.exposure_s = j.value("exposure_s", o.exposure_s);
   o.gain = j.value("gain", o.gain);
+  // A session recorded before the decay tail had one frame per charge: resume it so.
+  o.tail_frames = j.value("tail_frames", 0);
+  o.tail_growth = j.value("tail_growth", o.tail_growth);
+  o.high_fraction = j.value("high_fraction", o.high_fraction);
   return o;
 }
 nlohmann::json ToJson(const SpectrumProtocolOptions& o) {
@@ -344,6 +349,7 @@ void RunProtocol(const Plan& plan, Devices& devices, SessionWriter& session, boo
     o.interval_s = s.value("interval_s", o.interval_s);
     o.duration_s = s.value("duration_s", o.duration_s);
     o.first_delay_s = s.value("first_delay_s", o.first_delay_s);
+    o.early_frames = s.value("early_frames", 0);  // sessions from before the early frames had none
     o.initial_exposure_s = s.value("initial_exposure_s", o.initial_exposure_s);
     o.max_exposure_s = s.value("max_exposure_s", o.max_exposure_s);
     o.gain = s.value("gain", o.gain);
@@ -403,6 +409,7 @@ struct AllArgs : CaptureArgs {
   std::string light;  // charge light (default: the lab's)
   std::vector<std::string> excite;
   double charge_s = 5400, duration_s = 180, interval_s = 5, reset_s = 900;
+  int tail_frames = ExcitationProtocolOptions{}.tail_frames;
 };
 
 // Runs (or, resuming, finishes) every part of an `all` folder in order.
@@ -472,6 +479,7 @@ void RunCaptureAll(AllArgs args) {
   ExcitationProtocolOptions excitation;
   excitation.lights = excite;
   excitation.reset_s = args.reset_s;
+  excitation.tail_frames = args.tail_frames;
   excitation.exposure_s = 0.2;
   // Check every part's settings before anything is created.
   std::string error;
@@ -595,6 +603,9 @@ void RegisterCapture(CLI::App& app) {
   decay->add_option("--interval-s", decay_args->decay.interval_s, "seconds between frames (default 5)");
   decay->add_option("--duration-s", decay_args->decay.duration_s, "seconds of decay to record (default 180)");
   decay->add_option("--first-delay-s", decay_args->decay.first_delay_s, "light-off to the first exposure (default 0.005)");
+  decay->add_option("--early-frames", decay_args->decay.early_frames,
+                    "frames between the first two slots, at delays halving from --interval-s / 2, so a state\n"
+                    "that decays in under a second is seen by several frames (default 6; 0: none)");
   decay->add_option("--initial-exposure-s", decay_args->decay.initial_exposure_s, "first exposure (default 0.05)");
   decay->add_option("--max-exposure-s", decay_args->decay.max_exposure_s, "longest exposure (default 4)");
   decay->callback([decay_args] {
@@ -620,6 +631,11 @@ void RegisterCapture(CLI::App& app) {
   excitation->add_option("--max-charge-s", excitation_args->excitation.max_charge_s, "longest charge (default 4096)");
   excitation->add_option("--delay-s", excitation_args->excitation.delay_s, "light-off to the exposure (default 0.05)");
   excitation->add_option("--exposure-s", excitation_args->excitation.exposure_s, "exposure (default 1)");
+  excitation->add_option("--tail-frames", excitation_args->excitation.tail_frames,
+                         "frames of decay tail after each charge's first frame, each --tail-growth times longer;\n"
+                         "they split the response into the excited states (default 6; 0: one frame per charge)");
+  excitation->add_option("--tail-growth", excitation_args->excitation.tail_growth,
+                         "exposure ratio between successive tail frames (default 2)");
   excitation->callback([excitation_args] {
     ExcitationArgs args = *excitation_args;
     if (args.excitation.lights.empty()) args.excitation.lights = {"led405"};
@@ -688,6 +704,9 @@ void RegisterCapture(CLI::App& app) {
   all->add_option("--duration-s", all_args->duration_s, "decay: seconds recorded (default 180)");
   all->add_option("--interval-s", all_args->interval_s, "decay: seconds between frames (default 5)");
   all->add_option("--reset-s", all_args->reset_s, "excitation: darkness before each charge (default 900)");
+  all->add_option("--tail-frames", all_args->tail_frames,
+                  "excitation: frames of decay tail after each charge, which split the response into the\n"
+                  "excited states (default 6; 0: one frame per charge)");
   all->callback([all_args] { RunCaptureAll(*all_args); });
 
   auto resume_dir = std::make_shared<std::string>();

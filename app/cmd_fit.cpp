@@ -49,75 +49,134 @@ void WriteFloatImage(const std::filesystem::path& path, int width, int height, c
 struct SessionArgs {
   std::string dir, out, report, compare, weights = "poisson";
   int components = 0, max_components = 3;
-  bool json = false, joint = false;
+  bool json = false, sequential = false, joint = false;  // joint: the default, accepted for older scripts
 };
+
+nlohmann::json OptionalJson(const std::optional<double>& v) { return v ? nlohmann::json(*v) : nlohmann::json(nullptr); }
+
+nlohmann::json OptionalArrayJson(const std::vector<std::optional<double>>& values) {
+  nlohmann::json out = nlohmann::json::array();
+  for (const auto& v : values) out.push_back(OptionalJson(v));
+  return out;
+}
+
+// "0.1 +- 0.002, -, ..." per band.
+std::string BandValuesText(const std::vector<std::optional<double>>& values, const std::vector<std::optional<double>>& stderr_values) {
+  std::string text;
+  for (std::size_t b = 0; b < values.size(); ++b) {
+    text.append(b ? ", " : "");
+    if (!values[b]) {
+      text.append("-");
+      continue;
+    }
+    text.append(FormatShort(*values[b]));
+    if (b < stderr_values.size() && stderr_values[b]) text.append(" +- ").append(FormatShort(*stderr_values[b], 2));
+  }
+  return text;
+}
+
+nlohmann::json JointJson(const JointFit& j, bool written) {
+  nlohmann::json ke = nlohmann::json::array();
+  for (const KeEstimate& k : j.ke) ke.push_back({{"ke", OptionalArrayJson(k.ke)}, {"ke_stderr", OptionalArrayJson(k.ke_stderr)}});
+  return {{"kr", j.kr},
+          {"kr_stderr", j.kr_stderr},
+          {"a", j.a},
+          {"ke", ke},
+          {"converged", j.converged},
+          {"weighted_ss_sequential", {{"decay", j.decay_sequential}, {"excitation", j.excitation_sequential}}},
+          {"weighted_ss_joint", {{"decay", j.decay_joint}, {"excitation", j.excitation_joint}}},
+          {"written", written}};
+}
+
+nlohmann::json ComparisonJson(const MaterialComparison& c) {
+  nlohmann::json per_state = nlohmann::json::array();
+  for (const auto& errors : c.ke_relative_error_per_state) per_state.push_back(OptionalArrayJson(errors));
+  return {{"kr_relative_error", c.kr_relative_error},
+          {"spectrum_l1", c.spectrum_l1},
+          {"ke_relative_error", OptionalArrayJson(c.ke_relative_error)},
+          {"ke_relative_error_per_state", per_state}};
+}
+
+void PrintSessionFit(const SessionArgs& args, const SessionFit& fit) {
+  std::printf("phos fit session: %s -> %s (%s s)\n", args.dir.c_str(), args.out.c_str(), FormatShort(fit.seconds).c_str());
+  std::printf("  nc = %d: %s\n", fit.decay->n_components, fit.decay->choice.c_str());
+  for (std::size_t i = 0; i < fit.material.states.size(); ++i) {
+    const ExcitedState& state = fit.material.states[i];
+    std::printf("  state %zu: kr = %s +- %s /s\n", i + 1, FormatShort(state.kr).c_str(),
+                FormatShort(state.kr_stderr.value_or(0.0), 2).c_str());
+    std::printf("    ke per band (1/s per unit irradiance): %s\n", BandValuesText(state.ke, state.ke_stderr).c_str());
+  }
+  if (fit.state_excitation && !fit.state_excitation->converged)
+    std::printf("  excitation fit did not converge: %s\n", fit.state_excitation->termination.c_str());
+  if (fit.joint) {
+    const JointFit& j = *fit.joint;
+    std::string kr;
+    for (std::size_t i = 0; i < j.kr.size(); ++i) kr.append(i ? ", " : "").append(FormatShort(j.kr[i]));
+    std::printf("  joint refinement%s: kr = %s /s; weighted sum of squares (decay + excitation) %s + %s = %s, "
+                "sequential %s + %s = %s%s\n",
+                fit.joint_written ? " (written)" : "", kr.c_str(), FormatShort(j.decay_joint).c_str(),
+                FormatShort(j.excitation_joint).c_str(), FormatShort(j.decay_joint + j.excitation_joint).c_str(),
+                FormatShort(j.decay_sequential).c_str(), FormatShort(j.excitation_sequential).c_str(),
+                FormatShort(j.decay_sequential + j.excitation_sequential).c_str(), j.converged ? "" : " (not converged)");
+  }
+  for (const std::string& note : fit.notes) std::printf("  note: %s\n", note.c_str());
+  if (!args.report.empty()) std::printf("  report: %s\n", args.report.c_str());
+}
+
+void PrintComparison(const std::string& compare, const MaterialComparison& c) {
+  std::string kr_text;
+  for (double e : c.kr_relative_error) kr_text.append(kr_text.empty() ? "" : ", ").append(FormatShort(100 * e)).append("%");
+  std::printf("  against %s: kr off by %s; emission spectrum L1 %s\n", compare.c_str(), kr_text.c_str(),
+              FormatShort(c.spectrum_l1).c_str());
+  for (std::size_t i = 0; i < c.ke_relative_error_per_state.size(); ++i) {
+    std::string ke_text;
+    for (const auto& e : c.ke_relative_error_per_state[i])
+      ke_text.append(ke_text.empty() ? "" : ", ").append(e ? FormatShort(100 * *e) + "%" : "-");
+    std::printf("    state %zu: ke off by %s\n", i + 1, ke_text.c_str());
+  }
+}
 
 void RunFitSession(const SessionArgs& args) {
   SessionFitOptions options;
   options.components = args.components;
   options.max_components = args.max_components;
   options.weighting = ParseWeightsOption(args.weights);
-  options.joint = args.joint;
+  options.joint = !args.sequential;
   if (options.components < 0 || options.components > 4) ThrowUserError("", "--components", "expected 1 to 4");
   std::optional<Material> truth;
   if (!args.compare.empty()) truth = LoadMaterial(args.compare);  // a bad file fails before any work
   const SessionFit fit = FitSession(args.dir, options);
+  std::optional<MaterialComparison> comparison;
+  if (truth) comparison = CompareMaterials(fit.material, *truth);
   SaveMaterial(fit.material, args.out);
   if (!args.report.empty())
-    WriteFileAtomically(args.report, SessionReportHtml(fit, "phos fit session " + args.dir));
+    WriteFileAtomically(args.report, SessionReportHtml(fit, "phos fit session " + args.dir, comparison));
   nlohmann::json json = {{"material", args.out}, {"seconds", fit.seconds}, {"notes", fit.notes}};
-  json["n_components"] = fit.decay ? fit.decay->n_components : 0;
-  json["choice"] = fit.decay ? fit.decay->choice : "";
-  nlohmann::json kr = nlohmann::json::array();
-  for (std::size_t i = 0; i < fit.material.states.size(); ++i)
-    kr.push_back({{"kr", fit.material.states[i].kr}, {"kr_stderr", fit.decay->components[i].rate_stderr}});
-  json["states"] = kr;
-  if (fit.joint) {
-    const JointFit& j = *fit.joint;
-    json["joint"] = {{"kr", j.kr},
-                     {"a", j.a},
-                     {"weighted_ss_sequential", {{"decay", j.decay_sequential}, {"excitation", j.excitation_sequential}}},
-                     {"weighted_ss_joint", {{"decay", j.decay_joint}, {"excitation", j.excitation_joint}}},
-                     {"written", args.joint}};
-  }
-  if (!args.json) {
-    std::printf("phos fit session: %s -> %s (%s s)\n", args.dir.c_str(), args.out.c_str(), FormatShort(fit.seconds).c_str());
-    for (std::size_t i = 0; i < fit.material.states.size(); ++i)
-      std::printf("  state %zu: kr = %s +- %s /s\n", i + 1, FormatShort(fit.material.states[i].kr).c_str(),
-                  FormatShort(fit.decay->components[i].rate_stderr).c_str());
-    std::printf("  nc = %d: %s\n", fit.decay->n_components, fit.decay->choice.c_str());
-    std::string ke;
-    for (int b = 0; b < fit.material.band_count(); ++b) {
-      const auto& k = fit.material.states[0].ke[b];
-      ke.append(b ? ", " : "").append(k ? FormatShort(*k) : "-");
-    }
-    std::printf("  ke per band: %s\n", ke.c_str());
-    if (fit.joint) {
-      const JointFit& j = *fit.joint;
-      std::printf("  joint refinement%s: kr = %s /s; weighted sum of squares (decay + excitation) %s + %s = %s, "
-                  "sequential %s + %s = %s\n",
-                  args.joint ? " (written)" : "", FormatShort(j.kr).c_str(), FormatShort(j.decay_joint).c_str(),
-                  FormatShort(j.excitation_joint).c_str(), FormatShort(j.decay_joint + j.excitation_joint).c_str(),
-                  FormatShort(j.decay_sequential).c_str(), FormatShort(j.excitation_sequential).c_str(),
-                  FormatShort(j.decay_sequential + j.excitation_sequential).c_str());
-    }
-    for (const std::string& note : fit.notes) std::printf("  note: %s\n", note.c_str());
-    if (!args.report.empty()) std::printf("  report: %s\n", args.report.c_str());
-  }
-  if (truth) {
-    const MaterialComparison c = CompareMaterials(fit.material, *truth);
-    nlohmann::json cmp = {{"kr_relative_error", c.kr_relative_error}, {"spectrum_l1", c.spectrum_l1}};
-    nlohmann::json ke = nlohmann::json::array();
-    for (const auto& e : c.ke_relative_error) ke.push_back(e ? nlohmann::json(*e) : nlohmann::json(nullptr));
-    cmp["ke_relative_error"] = ke;
-    json["comparison"] = cmp;
-    if (!args.json) {
-      std::string kr_text, ke_text;
-      for (double e : c.kr_relative_error) kr_text.append(kr_text.empty() ? "" : ", ").append(FormatShort(100 * e)).append("%");
-      for (const auto& e : c.ke_relative_error) ke_text.append(ke_text.empty() ? "" : ", ").append(e ? FormatShort(100 * *e) + "%" : "-");
-      std::printf("  against %s: kr off by %s; emission spectrum L1 %s; ke off by %s\n", args.compare.c_str(),
-                  kr_text.c_str(), FormatShort(c.spectrum_l1).c_str(), ke_text.c_str());
-    }
+  json["n_components"] = fit.decay->n_components;
+  json["choice"] = fit.decay->choice;
+  json["bic"] = fit.decay->bic;
+  nlohmann::json states = nlohmann::json::array();
+  for (const ExcitedState& state : fit.material.states)
+    states.push_back({{"kr", state.kr},
+                      {"kr_stderr", OptionalJson(state.kr_stderr)},
+                      {"ke", OptionalArrayJson(state.ke)},
+                      {"ke_stderr", OptionalArrayJson(state.ke_stderr)}});
+  json["states"] = states;
+  if (fit.state_excitation)
+    json["excitation"] = {{"converged", fit.state_excitation->converged},
+                          {"condition_number", fit.state_excitation->condition_number},
+                          {"frames", fit.state_excitation->frames},
+                          {"S", fit.state_excitation->S},
+                          {"background", fit.state_excitation->background},
+                          {"weighted_rss", fit.state_excitation->weighted_rss},
+                          {"a", fit.state_excitation->a},
+                          {"a_stderr", fit.state_excitation->a_stderr}};
+  if (fit.joint) json["joint"] = JointJson(*fit.joint, fit.joint_written);
+  json["written"] = fit.joint_written ? "joint" : "sequential";
+  if (!args.json) PrintSessionFit(args, fit);
+  if (comparison) {
+    json["comparison"] = ComparisonJson(*comparison);
+    if (!args.json) PrintComparison(args.compare, *comparison);
   }
   if (args.json) std::printf("%s\n", json.dump().c_str());
 }
@@ -371,9 +430,12 @@ void RegisterFit(CLI::App& app) {
   f->add_option("--weights", session->weights, "poisson (default: photon counting) or none");
   f->add_option("--compare", session->compare,
                 "a material to compare with (the one a simulated sample was made of): kr, spectrum and ke errors");
-  f->add_flag("--joint", session->joint,
-              "write the joint refinement (decay and excitation fitted at once) instead of the sequential fit\n"
-              "of the paper; both are always reported");
+  f->add_flag("--sequential", session->sequential,
+              "write the sequential fit of the paper (kr from the decay, then the excitation with kr held)\n"
+              "instead of the joint refinement (decay and excitation fitted at once, the default when it\n"
+              "converges); both are always reported");
+  f->add_flag("--joint", session->joint, "write the joint refinement (the default; kept for older scripts)")
+      ->excludes("--sequential");
   f->add_flag("--json", session->json, "print one JSON object");
   f->callback([session] { RunFitSession(*session); });
 

@@ -6,6 +6,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <functional>
@@ -53,6 +54,27 @@ inline std::vector<nlohmann::json> ReadJsonLines(const std::filesystem::path& pa
   std::istringstream in(ReadText(path));
   for (std::string line; std::getline(in, line);) lines.push_back(nlohmann::json::parse(line));
   return lines;
+}
+
+// An excitation session's measurements: per charge (a light and its
+// light-off time) the charge time and how many frames (first and tail) it
+// recorded, in frames.jsonl's order of light-off times.
+struct ExcitationCharge {
+  std::string light;
+  double light_off_s = 0, charge_s = 0;
+  int frames = 0;
+};
+inline std::vector<ExcitationCharge> ExcitationCharges(const std::filesystem::path& frames_jsonl) {
+  std::vector<ExcitationCharge> charges;
+  for (const nlohmann::json& line : ReadJsonLines(frames_jsonl)) {
+    const std::string light = line["light"].get<std::string>();
+    const double off = line["light_off_s"].get<double>();
+    auto it = std::find_if(charges.begin(), charges.end(),
+                           [&](const ExcitationCharge& c) { return c.light == light && c.light_off_s == off; });
+    if (it == charges.end()) it = charges.insert(charges.end(), {light, off, line["charge_s"].get<double>(), 0});
+    ++it->frames;
+  }
+  return charges;
 }
 
 inline void WriteText(const std::filesystem::path& path, const std::string& text) {

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
 
 #include "phos/util/error.h"
 #include "phos/util/format.h"
@@ -22,6 +23,7 @@ bool DecayProtocolOptions::IsValid(std::string* error) const {
   if (!(charge_s >= 0)) return *error = "charge time must be >= 0", false;
   if (!(interval_s > 0) || !(duration_s > 0)) return *error = "interval and duration must be > 0", false;
   if (!(first_delay_s >= 0)) return *error = "first delay must be >= 0", false;
+  if (early_frames < 0 || early_frames > 20) return *error = "early frames must be 0-20", false;
   if (!(initial_exposure_s > 0) || !(max_exposure_s >= initial_exposure_s))
     return *error = "need 0 < initial exposure <= max exposure", false;
   if (!(low_fraction > 0 && low_fraction < high_fraction && high_fraction < 1))
@@ -116,6 +118,14 @@ void RunRecorded(SessionWriter& session, Lights& lights, const Clock& clock, con
 
 }  // namespace
 
+std::vector<double> DecayFrameDelays(const DecayProtocolOptions& options) {
+  std::vector<double> delays = {options.first_delay_s};
+  for (int j = options.early_frames; j >= 1; --j) delays.push_back(options.first_delay_s + options.interval_s / std::ldexp(1.0, j));
+  for (int m = 1; options.first_delay_s + m * options.interval_s <= options.duration_s; ++m)
+    delays.push_back(options.first_delay_s + m * options.interval_s);
+  return delays;
+}
+
 DecayProtocolResult RunDecayProtocol(Camera& camera, Lights& lights, Clock& clock, SessionWriter& session,
                                      const DecayProtocolOptions& options) {
   std::string error;
@@ -133,13 +143,16 @@ DecayProtocolResult RunDecayProtocol(Camera& camera, Lights& lights, Clock& cloc
     result.light_off_s = clock.now_s();
 
     double exposure = options.initial_exposure_s;
-    for (int m = 0;; ++m) {
-      const double start = result.light_off_s + options.first_delay_s + m * options.interval_s;
-      if (start > result.light_off_s + options.duration_s) break;
+    const std::vector<double> delays = DecayFrameDelays(options);
+    double readout_s = 0;  // the camera's time per frame beyond the exposure, as last measured
+    for (std::size_t m = 0; m < delays.size(); ++m) {
+      const double start = result.light_off_s + delays[m];
       clock.SleepUntil(start);
-      // Never expose past the next frame's start.
-      const double exposure_now = std::min(exposure, std::max(1e-6, 0.9 * options.interval_s));
+      // Never expose (and read out) past the next frame's start.
+      const double gap = m + 1 < delays.size() ? delays[m + 1] - delays[m] : options.interval_s;
+      const double exposure_now = std::min(exposure, std::max(1e-6, 0.9 * gap - readout_s));
       Frame frame = camera.Capture(exposure_now, options.gain);
+      readout_s = std::max(0.0, clock.now_s() - frame.t_start_s - exposure_now);
       const double brightest =
           RecordFrame(session, frame, {{"delay_after_light_off_s", frame.t_start_s - result.light_off_s}});
       ++result.frames;
@@ -160,6 +173,9 @@ bool ExcitationProtocolOptions::IsValid(std::string* error) const {
     return *error = "need 0 < first charge <= max charge", false;
   if (!(plateau_growth > 1)) return *error = "plateau growth must be > 1", false;
   if (!(exposure_s > 0)) return *error = "exposure must be > 0", false;
+  if (tail_frames < 0 || tail_frames > 20) return *error = "tail frames must be 0-20", false;
+  if (!(tail_growth >= 1) || !(tail_growth <= 16)) return *error = "tail growth must be 1-16", false;
+  if (!(high_fraction > 0 && high_fraction < 1)) return *error = "high fraction must be in (0, 1)", false;
   return true;
 }
 
@@ -172,6 +188,11 @@ ExcitationProtocolResult RunExcitationProtocol(Camera& camera, Lights& lights, C
     if (std::find(channels.begin(), channels.end(), light) == channels.end()) lights.Set(light, false);  // names them
   LightsOffGuard guard(lights);
   ExcitationProtocolResult result;
+  // Each light's first exposure: halved after a first frame that reached
+  // half the clipping point, since the next charge (twice as long) can
+  // double the glow; the first frame, the brightest and most informative,
+  // is then not lost to clipping on a bright sample.
+  std::map<std::string, double> first_exposure;
   // One charge-then-measure experiment; returns the brightest channel's signal.
   auto measure = [&](const std::string& light, double charge_s) {
     // Already measured before an interruption: replay its response. Charge
@@ -187,10 +208,30 @@ ExcitationProtocolResult RunExcitationProtocol(Camera& camera, Lights& lights, C
     RecordLight(session, lights, clock, light, false);
     const double off = clock.now_s();
     clock.SleepUntil(off + options.delay_s);
-    Frame frame = camera.Capture(options.exposure_s, options.gain);
-    ++result.frames;
-    return RecordFrame(session, frame,
-                       {{"light", light}, {"charge_s", charge_s}, {"delay_after_light_off_s", frame.t_start_s - off}});
+    if (!first_exposure.count(light)) first_exposure[light] = options.exposure_s;
+    double response = 0, exposure = first_exposure[light];
+    for (int tail = 0; tail <= options.tail_frames; ++tail) {
+      Frame frame = camera.Capture(std::min(exposure, camera.max_exposure_s()), options.gain);
+      ++result.frames;
+      const double brightest = RecordFrame(session, frame,
+                                           {{"light", light},
+                                            {"charge_s", charge_s},
+                                            {"delay_after_light_off_s", frame.t_start_s - off},
+                                            {"light_off_s", off},
+                                            {"tail", tail},
+                                            {"tail_frames", options.tail_frames}});
+      // The doubling stops on the last frame's response per second: late in
+      // the tail the slowest state dominates, and it is the last to reach
+      // its plateau (a fast, bright state plateaus first and would stop
+      // the doubling while a slow one is still rising).
+      if (tail == options.tail_frames) response = brightest / frame.exposure_s;
+      if (tail == 0 && (frame.SaturatedFraction() > 0 || brightest > options.high_fraction / 2))
+        first_exposure[light] = std::max(first_exposure[light] / 2, 1e-4);
+      // The next frame exposes longer, unless this one came close to clipping.
+      if (frame.SaturatedFraction() > 0) exposure /= options.tail_growth;
+      else if (brightest < options.high_fraction / options.tail_growth) exposure *= options.tail_growth;
+    }
+    return response;
   };
   if (!done.empty())
     session.Event({{"t_s", clock.now_s()}, {"event", "resume"}, {"measurements_kept", done.size()}});
@@ -213,7 +254,14 @@ ExcitationProtocolResult RunExcitationProtocol(Camera& camera, Lights& lights, C
 }
 
 ExcitationDone ReadExcitationDone(const std::filesystem::path& session_dir) {
-  ExcitationDone done;
+  // Per charge (light, light-off time): its last frame's response per
+  // second (what the doubling compares) and how many of its frames were
+  // recorded.
+  struct Measurement {
+    double charge_s = 0, response = -1;
+    int frames = 0, expected = 1;
+  };
+  std::map<std::pair<std::string, double>, Measurement> measurements;
   for (const nlohmann::json& line : ReadJsonLines(session_dir / "frames.jsonl")) {
     if (!line.contains("light") || !line.contains("charge_s") || !line.contains("mean_signal_dn") ||
         !line.contains("adc_bits") || !line.contains("black_level_dn"))
@@ -221,8 +269,17 @@ ExcitationDone ReadExcitationDone(const std::filesystem::path& session_dir) {
     const double range = std::pow(2.0, line["adc_bits"].get<int>()) - 1 - line["black_level_dn"].get<double>();
     double brightest = 0;
     for (double mean : line["mean_signal_dn"]) brightest = std::max(brightest, mean / range);
-    done[{line["light"].get<std::string>(), line["charge_s"].get<double>()}] = brightest;
+    // Sessions from before the decay tail have one frame per charge and no light_off_s.
+    const double off = line.value("light_off_s", static_cast<double>(measurements.size()));
+    Measurement& m = measurements[{line["light"].get<std::string>(), off}];
+    m.charge_s = line["charge_s"].get<double>();
+    m.expected = line.value("tail_frames", 0) + 1;
+    ++m.frames;
+    if (line.value("tail", 0) == m.expected - 1) m.response = brightest / line.value("exposure_s", 1.0);
   }
+  ExcitationDone done;
+  for (const auto& [key, m] : measurements)
+    if (m.frames == m.expected && m.response >= 0) done[{key.first, m.charge_s}] = m.response;
   return done;
 }
 

@@ -206,7 +206,13 @@ class VarProCost final : public ceres::CostFunction {
   bool Evaluate(double const* const* p, double* residuals, double** jacobians) const override {
     const int m = d_.m, q = nc_ + (d_.background ? 1 : 0);
     double k[4];
-    for (int i = 0; i < nc_; ++i) k[i] = std::exp(p[0][i]);
+    for (int i = 0; i < nc_; ++i) {
+      k[i] = std::exp(p[0][i]);
+      // A trial step to a rate that over- or underflows is refused (Ceres
+      // shrinks the step) instead of evaluated to NaN, which Ceres reports
+      // as a page of log lines on stderr.
+      if (!std::isfinite(k[i]) || !(k[i] > 0)) return false;
+    }
     const Eigen::MatrixXd Phi = DesignMatrix(d_, k, nc_);
     for (int c = 0; c < d_.C; ++c) {
       const Eigen::MatrixXd WPhi = d_.w[c].matrix().asDiagonal() * Phi;
@@ -393,6 +399,31 @@ DecayFitSummary FitDecay(const Curve& curve, const DecayFitOptions& options, con
     for (double th : fit.theta) rates.push_back(std::exp(th));
     fits.push_back(std::move(fit));
   }
+
+  // A stage whose greedy start collapsed (two rates onto one state, or a
+  // component with nothing left) is tried again from the next stage's
+  // rates less one of them, each refined: a fast state that dominates can
+  // pull the second rate onto itself before the slow state is seen, and
+  // the stage after it finds both (backward elimination).
+  if (options.components == 0)
+    for (std::size_t f = 0; f + 1 < fits.size(); ++f) {
+      if (fits[f].valid) continue;
+      const Fit& next = fits[f + 1];
+      for (std::size_t drop = 0; drop < next.theta.size(); ++drop) {
+        Fit candidate;
+        std::vector<double> start;
+        for (std::size_t i = 0; i < next.theta.size(); ++i)
+          if (i != drop) {
+            candidate.theta.push_back(next.theta[i]);
+            start.push_back(std::exp(next.theta[i]));
+          }
+        Project(d, start, &candidate);
+        Refine(d, options.max_iterations, &candidate);
+        iterations += candidate.iterations;
+        CheckComponents(theta_lo, theta_hi, &candidate);
+        if (candidate.valid && (!fits[f].valid || candidate.wrss < fits[f].wrss)) fits[f] = std::move(candidate);
+      }
+    }
 
   DecayFitSummary summary;
   const double N = static_cast<double>(d.m) * C;

@@ -1,11 +1,14 @@
 #include "phos/fit/excitation_fit.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <limits>
 
+#include <Eigen/Dense>
 #include <ceres/ceres.h>
 
+#include "phos/fit/small_nnls.h"
 #include "phos/util/error.h"
 #include "phos/util/format.h"
 #include "solver_options.h"
@@ -243,6 +246,37 @@ std::vector<std::optional<double>> KeFromExcitationRates(const std::vector<std::
   std::vector<std::optional<double>> result(bands);
   for (std::size_t i = 0; i < lit.size(); ++i) result[lit[i]] = ke[i];
   return result;
+}
+
+KeEstimate KeWithUncertainty(const std::vector<std::vector<double>>& E_per_light, const std::vector<double>& a_per_light,
+                             const std::vector<double>& a_stderr_per_light, const std::string& where) {
+  KeEstimate estimate;
+  estimate.ke = KeFromExcitationRates(E_per_light, a_per_light, where);
+  const std::size_t bands = estimate.ke.size();
+  estimate.ke_stderr.assign(bands, std::nullopt);
+  if (a_stderr_per_light.size() != a_per_light.size()) return estimate;
+  const double strongest = *std::max_element(a_per_light.begin(), a_per_light.end());
+  std::vector<int> free_bands;
+  for (std::size_t b = 0; b < bands; ++b)
+    if (estimate.ke[b] && *estimate.ke[b] > 1e-9 * std::max(strongest, 1e-300)) free_bands.push_back(static_cast<int>(b));
+  if (free_bands.empty()) return estimate;
+  if (free_bands.size() > 64) return estimate;
+  BoundedMatrix normal = BoundedMatrix::Zero(static_cast<Eigen::Index>(free_bands.size()),
+                                             static_cast<Eigen::Index>(free_bands.size()));
+  for (std::size_t l = 0; l < E_per_light.size(); ++l) {
+    const double sigma = a_stderr_per_light[l];
+    if (!(sigma > 0)) return estimate;  // an exact rate: no uncertainty to carry
+    for (std::size_t i = 0; i < free_bands.size(); ++i)
+      for (std::size_t j = 0; j < free_bands.size(); ++j)
+        normal(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(j)) +=
+            E_per_light[l][free_bands[i]] * E_per_light[l][free_bands[j]] / (sigma * sigma);
+  }
+  const Eigen::FullPivLU<BoundedMatrix> lu(normal);
+  if (!lu.isInvertible()) return estimate;
+  const BoundedMatrix covariance = lu.inverse();
+  for (std::size_t i = 0; i < free_bands.size(); ++i)
+    estimate.ke_stderr[free_bands[i]] = std::sqrt(std::max(0.0, covariance(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(i))));
+  return estimate;
 }
 
 }  // namespace phos

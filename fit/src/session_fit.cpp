@@ -9,11 +9,13 @@
 #include <map>
 #include <numeric>
 
+#include "phos/model/rate_equation.h"
 #include "phos/model/spectral.h"
 #include "phos/util/error.h"
 #include "phos/util/format.h"
 #include "phos/util/json.h"
 #include "phos/util/svg_plot.h"
+#include "relative_covariance.h"
 #include "solver_options.h"
 
 namespace phos {
@@ -121,114 +123,6 @@ std::string StopHow(const fs::path& dir) {
 }
 
 
-// ---- the joint refinement -------------------------------------------------
-
-// One decay sample of one channel: w (A e^{-k t} sinh(ke/2)/(ke/2) + B - y).
-struct JointDecayResidual {
-  double t, e, y, w;
-  template <typename T>
-  bool operator()(const T* log_k, const T* amplitude_background, T* residual) const {
-    const T k = exp(log_k[0]);
-    const T x = k * e / 2.0;
-    const T factor = x > T(1e-8) ? sinh(x) / x : T(1.0);
-    residual[0] = w * (amplitude_background[0] * exp(-k * t) * factor + amplitude_background[1] - y);
-    return true;
-  }
-};
-
-// One excitation sample: w (S r(t_c) D - y), the closed forms of excitation_fit.h.
-struct JointExcitationResidual {
-  double tc, td, te, y, w;
-  template <typename T>
-  bool operator()(const T* log_k, const T* log_a, const T* S, T* residual) const {
-    const T k = exp(log_k[0]), a = exp(log_a[0]);
-    const T r = a / (a + k) * (1.0 - exp(-(a + k) * tc));
-    const T D = te > 0 ? exp(-k * td) * (1.0 - exp(-k * te)) / (k * te) : exp(-k * td);
-    residual[0] = w * (S[0] * r * D - y);
-    return true;
-  }
-};
-
-double PoissonWeight(double value, double exposure, double floor) {
-  return std::sqrt(exposure / std::max(std::fabs(value), floor));
-}
-
-}  // namespace
-
-JointFit JointRefine(const Curve& decay_curve, const DecayFitSummary& decay,
-                     const std::vector<SessionFit::ExcitationLight>& lights) {
-  JointFit joint;
-  const int C = decay_curve.channel_count();
-  double log_k = std::log(decay.components[0].rate);
-  std::vector<std::array<double, 2>> ab(static_cast<std::size_t>(C));
-  for (int c = 0; c < C; ++c) ab[c] = {decay.components[0].amplitude[c], decay.background.empty() ? 0.0 : decay.background[c]};
-  std::map<std::string, double> log_a;
-  double S = 0;
-  for (const auto& light : lights)
-    if (light.fit.a > 0) {
-      log_a[light.light] = std::log(light.fit.a);
-      S = light.fit.scale;
-    }
-  if (log_a.empty()) ThrowUserError("", "joint refinement", "no light excites the sample");
-  std::vector<double> log_a_values;
-  for (auto& [name, value] : log_a) log_a_values.push_back(value);
-
-  ceres::Problem problem;
-  std::vector<ceres::ResidualBlockId> decay_blocks, excitation_blocks;
-  for (int c = 0; c < C; ++c) {
-    double peak = 0;
-    for (double v : decay_curve.channels[c]) peak = std::max(peak, std::fabs(v));
-    for (std::size_t j = 0; j < decay_curve.size(); ++j) {
-      const double e = j < decay_curve.exposure_s.size() ? decay_curve.exposure_s[j] : 1.0;
-      const double y = decay_curve.channels[c][j];
-      decay_blocks.push_back(problem.AddResidualBlock(
-          new ceres::AutoDiffCostFunction<JointDecayResidual, 1, 1, 2>(
-              new JointDecayResidual{decay_curve.t_s[j], e, y, PoissonWeight(y, e, 1e-3 * peak)}),
-          nullptr, &log_k, ab[c].data()));
-    }
-  }
-  std::size_t index = 0;
-  for (auto& [name, value] : log_a) {
-    double* parameter = &log_a_values[index++];
-    for (const auto& light : lights) {
-      if (light.light != name) continue;
-      double peak = 0;
-      for (const ExcitationSample& s : light.samples) peak = std::max(peak, std::fabs(s.value));
-      for (const ExcitationSample& s : light.samples)
-        excitation_blocks.push_back(problem.AddResidualBlock(
-            new ceres::AutoDiffCostFunction<JointExcitationResidual, 1, 1, 1, 1>(new JointExcitationResidual{
-                s.charge_s, s.delay_s, s.exposure_s, s.value,
-                PoissonWeight(s.value, std::max(s.exposure_s, 1e-6), 1e-3 * peak)}),
-            nullptr, &log_k, parameter, &S));
-    }
-  }
-  for (int c = 0; c < C; ++c) problem.SetParameterLowerBound(ab[c].data(), 0, 0.0);
-  auto cost_of = [&](const std::vector<ceres::ResidualBlockId>& blocks) {
-    if (blocks.empty()) return 0.0;
-    ceres::Problem::EvaluateOptions evaluate;
-    evaluate.residual_blocks = blocks;
-    double cost = 0;
-    problem.Evaluate(evaluate, &cost, nullptr, nullptr, nullptr);
-    return 2 * cost;  // Ceres reports half the sum of squares
-  };
-  joint.decay_sequential = cost_of(decay_blocks);
-  joint.excitation_sequential = cost_of(excitation_blocks);
-  ceres::Solver::Options options = SmallDenseSolverOptions(200, 1e-12);
-  ceres::Solver::Summary summary;
-  ceres::Solve(options, &problem, &summary);
-  joint.iterations = static_cast<int>(summary.iterations.size());
-  joint.decay_joint = cost_of(decay_blocks);
-  joint.excitation_joint = cost_of(excitation_blocks);
-  joint.kr = std::exp(log_k);
-  joint.S = S;
-  index = 0;
-  for (auto& [name, value] : log_a) joint.a[name] = std::exp(log_a_values[index++]);
-  for (const auto& light : lights)
-    if (!joint.a.count(light.light)) joint.a[light.light] = 0;  // did not excite: stays 0
-  return joint;
-}
-
-namespace {
 }  // namespace
 
 LvfCalibrationFit FitLvfCalibration(const fs::path& dir) {
@@ -412,6 +306,485 @@ SpectrumFit FitEmissionSpectrum(const fs::path& dir, const LvfCalibrationFit& ca
   return fit;
 }
 
+namespace {
+
+// ---- stage 3: the decay --------------------------------------------------------
+
+struct DecayStage {
+  std::optional<DecayFitSummary> fit;
+  Curve raw, corrected;
+};
+
+// The decay frames as a curve: signal per second of exposure, at the middle
+// of the exposure; clipped frames left out (and counted in a note).
+Curve ReadDecayCurve(const fs::path& part, std::vector<std::string>* notes) {
+  Curve curve;
+  int clipped = 0;
+  for (const nlohmann::json& line : ReadJsonLines(part / "frames.jsonl")) {
+    if (!line.contains("mean_signal_dn")) continue;
+    if (Clipped(line)) {
+      ++clipped;
+      continue;
+    }
+    const std::vector<double> means = line["mean_signal_dn"].get<std::vector<double>>();
+    const double exposure = line.at("exposure_s").get<double>();
+    if (curve.channels.empty()) {
+      curve.channels.resize(means.size());
+      for (std::size_t c = 0; c < means.size(); ++c) curve.names.push_back(means.size() == 3 ? std::string(1, "RGB"[c]) : "Y");
+    }
+    curve.t_s.push_back(line.value("delay_after_light_off_s", 0.0) + exposure / 2);
+    curve.exposure_s.push_back(exposure);
+    for (std::size_t c = 0; c < means.size() && c < curve.channels.size(); ++c) curve.channels[c].push_back(means[c] / exposure);
+  }
+  if (clipped > 0) notes->push_back("decay: " + std::to_string(clipped) + " clipped frame(s) left out");
+  if (curve.size() == 0) notes->push_back("decay: no unclipped frame to fit");
+  return curve;
+}
+
+// A frame integrates the glow over its exposure e: per second it reads
+// sum_i A_i exp(-k_i (d + e/2)) sinh(k_i e / 2) / (k_i e / 2). The middle of
+// the exposure alone leaves the last factor, 1 + (k e)^2 / 24, which a mean
+// over thousands of pixels resolves and BIC would take for another state.
+// So each sample is divided by the amplitude-weighted factor of the fitted
+// states at that sample, and the fit repeated (the factor moves by far less
+// then): exact for one state, and for several as far as the mix at each
+// sample is known.
+Curve CorrectForExposure(const Curve& curve, const DecayFitSummary& fit) {
+  Curve corrected = curve;
+  for (std::size_t j = 0; j < curve.size(); ++j) {
+    double weighted = 0, total = 0;
+    for (const DecayComponent& component : fit.components) {
+      double amplitude = 0;
+      for (double v : component.amplitude) amplitude += v;
+      const double share = amplitude * std::exp(-component.rate * curve.t_s[j]);
+      const double x = component.rate * curve.exposure_s[j] / 2;
+      weighted += share * (x > 1e-8 ? std::sinh(x) / x : 1.0);
+      total += share;
+    }
+    const double factor = total > 0 ? weighted / total : 1.0;
+    for (int c = 0; c < curve.channel_count(); ++c) corrected.channels[c][j] = curve.channels[c][j] / factor;
+  }
+  return corrected;
+}
+
+DecayStage FitDecayStage(const fs::path& part, const SessionFitOptions& options, std::vector<std::string>* notes) {
+  DecayStage stage;
+  stage.raw = ReadDecayCurve(part, notes);
+  if (stage.raw.size() == 0) return stage;
+  try {
+    DecayFitOptions decay_options;
+    decay_options.components = options.components;
+    decay_options.max_components = options.max_components;
+    decay_options.weighting = options.weighting;
+    decay_options.background = true;  // dark current
+    DecayFitSummary fit = FitDecay(stage.raw, decay_options, part.string());
+    for (int pass = 0; pass < 2; ++pass) {
+      stage.corrected = CorrectForExposure(stage.raw, fit);
+      fit = FitDecay(stage.corrected, decay_options, part.string());
+    }
+    stage.fit = fit;
+  } catch (const UserError& e) {
+    notes->push_back(e.what());
+  }
+  return stage;
+}
+
+// ---- stage 4: excitation per state ------------------------------------------------
+
+// The excitation frames grouped into measurements (one charge: its first
+// frame and its tail). A measurement cut off inside its tail (an interrupted
+// session that was not resumed) is left out whole; frames of a session from
+// before the tails are one-frame measurements.
+std::vector<ExcitationMeasurement> ReadExcitationMeasurements(const fs::path& part, double dark_dn_per_s,
+                                                              std::vector<std::string>* notes) {
+  struct Group {
+    ExcitationMeasurement measurement;
+    int expected = 1, clipped = 0;
+  };
+  std::map<std::pair<std::string, double>, Group> groups;
+  std::size_t order = 0;
+  for (const nlohmann::json& line : ReadJsonLines(part / "frames.jsonl")) {
+    if (!line.contains("light") || !line.contains("mean_signal_dn") || !line.contains("charge_s")) continue;
+    const std::string light = line["light"].get<std::string>();
+    const double off = line.value("light_off_s", static_cast<double>(order++));
+    Group& group = groups[{light, off}];
+    group.measurement.light = light;
+    group.measurement.charge_s = line["charge_s"].get<double>();
+    if (line.contains("light_off_s")) group.measurement.light_off_s = line["light_off_s"].get<double>();
+    group.expected = line.value("tail_frames", 0) + 1;
+    if (Clipped(line)) {
+      // A clipped frame is left out; the rest of its tail still tells.
+      ++group.clipped;
+      continue;
+    }
+    const double exposure = line.at("exposure_s").get<double>();
+    group.measurement.frames.push_back(
+        {line.value("delay_after_light_off_s", 0.0), exposure, SumSignal(line) / exposure - dark_dn_per_s});
+  }
+  std::vector<ExcitationMeasurement> measurements;
+  int cut = 0, clipped = 0;
+  for (auto& [key, group] : groups) {
+    const int seen = static_cast<int>(group.measurement.frames.size()) + group.clipped;
+    if (seen < group.expected) {
+      ++cut;
+      continue;
+    }
+    clipped += group.clipped > 0;
+    if (!group.measurement.frames.empty()) measurements.push_back(std::move(group.measurement));
+  }
+  if (cut > 0) notes->push_back("excitation: " + std::to_string(cut) + " measurement(s) cut off in their tail left out");
+  if (clipped > 0) notes->push_back("excitation: " + std::to_string(clipped) + " measurement(s) with a clipped frame");
+  return measurements;
+}
+
+struct ExcitationStage {
+  std::vector<SessionFit::ExcitationLight> lights;
+  std::vector<ExcitationMeasurement> measurements;
+  std::optional<StateExcitationFit> fit;
+  std::vector<KeEstimate> ke;  // per state; empty when no light's irradiance is known
+};
+
+// ke_i per band for every state from its rates under the lights whose band
+// irradiance is known.
+std::vector<KeEstimate> KePerState(const std::vector<SessionFit::ExcitationLight>& lights,
+                                   const std::map<std::string, std::vector<double>>& a,
+                                   const std::map<std::string, std::vector<double>>& a_stderr, int nc, int nb,
+                                   const std::string& where) {
+  std::vector<KeEstimate> ke;
+  for (int i = 0; i < nc; ++i) {
+    std::vector<std::vector<double>> E_per_light;
+    std::vector<double> a_per_light, sigma_per_light;
+    for (const auto& light : lights) {
+      if (static_cast<int>(light.band_irradiance.size()) != nb || !a.count(light.light)) continue;
+      E_per_light.push_back(light.band_irradiance);
+      a_per_light.push_back(a.at(light.light)[i]);
+      sigma_per_light.push_back(a_stderr.count(light.light) ? a_stderr.at(light.light)[i] : 0.0);
+    }
+    if (E_per_light.empty()) return {};
+    ke.push_back(KeWithUncertainty(E_per_light, a_per_light, sigma_per_light, where + " (state " + std::to_string(i + 1) + ")"));
+  }
+  return ke;
+}
+
+ExcitationStage FitExcitationStage(const fs::path& part, const DecayFitSummary& decay, const nlohmann::json& devices,
+                                   int nb, Weighting weighting, std::vector<std::string>* notes) {
+  ExcitationStage stage;
+  const nlohmann::json exc_devices = SessionStart(part).value("devices", devices);
+  const nlohmann::json irradiance = exc_devices.value("light_band_irradiance", nlohmann::json::object());
+  // The decay's background is the camera's dark signal per second (dark
+  // current): the excitation frames carry it too, under the same camera.
+  double dark = 0;
+  for (double b : decay.background) dark += b;
+  stage.measurements = ReadExcitationMeasurements(part, dark, notes);
+  std::map<std::string, SessionFit::ExcitationLight> by_light;
+  for (const ExcitationMeasurement& m : stage.measurements) {
+    SessionFit::ExcitationLight& light = by_light[m.light];
+    light.light = m.light;
+    const ExcitationFrame& first = m.frames.front();
+    light.samples.push_back({m.charge_s, first.delay_s, first.exposure_s, first.value});
+  }
+  for (auto& [name, light] : by_light) {
+    std::sort(light.samples.begin(), light.samples.end(),
+              [](const ExcitationSample& a, const ExcitationSample& b) { return a.charge_s < b.charge_s; });
+    if (!irradiance.contains(name))
+      notes->push_back("excitation: no band irradiance recorded for '" + name +
+                       "' (a bench's lab config must give it): its rate is reported, not turned into ke");
+    else
+      light.band_irradiance = irradiance[name].get<std::vector<double>>();
+    stage.lights.push_back(light);
+  }
+  if (stage.measurements.empty()) {
+    notes->push_back("excitation: no whole measurement to fit");
+    return stage;
+  }
+  StateExcitationOptions options;
+  for (const DecayComponent& c : decay.components) options.kr.push_back(c.rate);
+  options.weighting = weighting;
+  try {
+    stage.fit = FitStateExcitation(stage.measurements, options, part.string());
+    for (const std::string& note : stage.fit->notes) notes->push_back("excitation: " + note);
+    stage.ke = KePerState(stage.lights, stage.fit->a, stage.fit->a_stderr, decay.n_components, nb, part.string());
+  } catch (const UserError& e) {
+    notes->push_back(e.what());
+  }
+  return stage;
+}
+
+// ---- stage 5: Lambda per state -------------------------------------------------------
+
+struct LightSwitch {
+  double t_s;
+  bool on;
+};
+
+std::vector<LightSwitch> ReadSwitches(const fs::path& part, const std::string& light) {
+  std::vector<LightSwitch> switches;
+  for (const nlohmann::json& event : ReadJsonLines(part / "events.jsonl"))
+    if (event.value("event", "") == "light" && event.value("channel", "") == light)
+      switches.push_back({event.value("t_s", 0.0), event.value("on", false)});
+  return switches;
+}
+
+// r(t) from r = 0 before the first recorded switch (each part starts dark
+// after the one before), through every switch up to t: Eq. 8.1 exactly over
+// each interval of constant light (model/'s update).
+double StateAt(const std::vector<LightSwitch>& switches, double a_on, double kr, double t_s) {
+  double r = 0, t = switches.empty() ? t_s : switches.front().t_s;
+  bool on = false;
+  for (const LightSwitch& sw : switches) {
+    if (sw.t_s > t_s) break;
+    r = ExactStep(r, on ? a_on : 0.0, kr, sw.t_s - t);
+    t = sw.t_s;
+    on = sw.on;
+  }
+  return ExactStep(r, on ? a_on : 0.0, kr, t_s - t);
+}
+
+// a_i under a light: sum_b ke_i[b] E[b]; nullopt when a band the light
+// reaches has no known ke.
+std::optional<double> RateUnder(const std::vector<double>& E, const std::vector<std::optional<double>>& ke) {
+  double a = 0;
+  for (std::size_t b = 0; b < E.size() && b < ke.size(); ++b) {
+    if (E[b] <= 0) continue;
+    if (!ke[b]) return std::nullopt;
+    a += *ke[b] * E[b];
+  }
+  return a;
+}
+
+std::vector<double> LightBandIrradiance(const fs::path& part, const nlohmann::json& devices, const std::string& light) {
+  const nlohmann::json irradiance =
+      SessionStart(part).value("devices", devices).value("light_band_irradiance", nlohmann::json::object());
+  if (!irradiance.contains(light)) return {};
+  return irradiance[light].get<std::vector<double>>();
+}
+
+// Each state's share w_i of the emission, proportional to A_i / (kr_i r_i)
+// with r_i the state at the decay's light-off. Unknown ke: r_i = 1, said.
+std::vector<double> EmissionShares(const fs::path& decay_part, const nlohmann::json& devices,
+                                   const DecayFitSummary& decay, const std::vector<std::vector<std::optional<double>>>& ke,
+                                   std::vector<std::string>* notes) {
+  const nlohmann::json settings = SessionStart(decay_part).value("settings", nlohmann::json::object());
+  const std::string charge_light = settings.value("charge_light", "");
+  const std::vector<double> E = LightBandIrradiance(decay_part, devices, charge_light);
+  const std::vector<LightSwitch> switches = ReadSwitches(decay_part, charge_light);
+  double light_off = 0;
+  for (const LightSwitch& sw : switches)
+    if (!sw.on) light_off = sw.t_s;
+  std::vector<double> w;
+  double total = 0;
+  bool assumed = false;
+  for (std::size_t i = 0; i < decay.components.size(); ++i) {
+    double amplitude = 0;
+    for (double v : decay.components[i].amplitude) amplitude += v;
+    const double kr = decay.components[i].rate;
+    std::optional<double> a = i < ke.size() && !E.empty() ? RateUnder(E, ke[i]) : std::nullopt;
+    double r = 1;
+    if (a && *a > 0 && !switches.empty()) r = StateAt(switches, *a, kr, light_off);
+    else assumed = true;
+    w.push_back(amplitude / (kr * std::max(r, 1e-12)));
+    total += w.back();
+  }
+  if (assumed && decay.components.size() > 1)
+    notes->push_back("spectrum: a state's charge at the decay's light-off is not known (no ke for the decay's light): "
+                     "taken as saturated");
+  for (double& v : w) v = total > 0 ? v / total : 1.0 / static_cast<double>(w.size());
+  return w;
+}
+
+// Lambda_i[b] = w_i X_b with X_b = mean over spectrum frames of
+// L_b / sum_i w_i kr_i rbar_i, rbar_i the state averaged over the frame's
+// exposure in the dark. nullopt when the state during the spectrum is not
+// known (the charge light reaches a band without ke).
+std::optional<std::vector<std::vector<double>>> LambdaPerState(const fs::path& spectrum_part, const nlohmann::json& devices,
+                                                               const SpectrumFit& spectrum, const std::vector<double>& kr,
+                                                               const std::vector<std::vector<std::optional<double>>>& ke,
+                                                               const std::vector<double>& shares) {
+  const std::vector<double> E = LightBandIrradiance(spectrum_part, devices, spectrum.charge_light);
+  if (E.empty() || ke.size() != kr.size()) return std::nullopt;
+  std::vector<double> a;
+  for (std::size_t i = 0; i < kr.size(); ++i) {
+    const std::optional<double> rate = RateUnder(E, ke[i]);
+    if (!rate || !(*rate > 0)) return std::nullopt;
+    a.push_back(*rate);
+  }
+  const std::vector<LightSwitch> switches = ReadSwitches(spectrum_part, spectrum.charge_light);
+  const std::size_t nb = spectrum.shape.size();
+  std::vector<double> X(nb, 0.0);
+  for (const auto& frame : spectrum.frames) {
+    double emitting = 0;  // sum_i w_i kr_i rbar_i
+    const double e = std::max(frame.exposure_s, 1e-12);
+    for (std::size_t i = 0; i < kr.size(); ++i) {
+      const double r = StateAt(switches, a[i], kr[i], frame.t_start_s);
+      emitting += shares[i] * kr[i] * r * -std::expm1(-kr[i] * e) / (kr[i] * e);
+    }
+    for (std::size_t b = 0; b < nb; ++b) X[b] += frame.band_radiance[b] / emitting / static_cast<double>(spectrum.frames.size());
+  }
+  std::vector<std::vector<double>> Lambda;
+  for (double share : shares) {
+    Lambda.emplace_back();
+    for (double x : X) Lambda.back().push_back(share * x);
+  }
+  return Lambda;
+}
+
+std::vector<std::vector<std::optional<double>>> KeValues(const std::vector<KeEstimate>& ke) {
+  std::vector<std::vector<std::optional<double>>> values;
+  for (const KeEstimate& k : ke) values.push_back(k.ke);
+  return values;
+}
+
+// ---- stage 6: the joint refinement ------------------------------------------------
+
+// One decay sample of one channel: w (sum_i A_i e^{-k_i t} sinh(k_i e/2)/(k_i e/2) + B - y).
+struct JointDecayResidual {
+  double t, e, y, w;
+  int nc;
+  template <typename T>
+  bool operator()(T const* const* p, T* residual) const {
+    const T* log_k = p[0];
+    const T* amplitude_background = p[1];  // A_1..A_nc, B
+    T sum = amplitude_background[nc];
+    for (int i = 0; i < nc; ++i) {
+      const T k = exp(log_k[i]);
+      const T x = k * e / 2.0;
+      const T factor = x > T(1e-8) ? sinh(x) / x : T(1.0);
+      sum += amplitude_background[i] * exp(-k * t) * factor;
+    }
+    residual[0] = w * (sum - y);
+    return true;
+  }
+};
+
+// One excitation frame: w (sum_i S_i r_i(t_c) D_i + B - y), the closed forms of state_excitation_fit.h.
+struct JointExcitationResidual {
+  double tc, td, te, y, w;
+  int nc;
+  std::vector<double> r0;  // each state at the charge's start (empty: 0)
+  template <typename T>
+  bool operator()(T const* const* p, T* residual) const {
+    const T* log_k = p[0];
+    const T* S = p[1];
+    const T* a = p[2];
+    T sum = p[3][0];
+    for (int i = 0; i < nc; ++i) {
+      const T k = exp(log_k[i]);
+      const T r = a[i] / (a[i] + k) * (1.0 - exp(-(a[i] + k) * tc)) + (r0.empty() ? 0.0 : r0[i]) * exp(-(a[i] + k) * tc);
+      const T D = te > 0 ? exp(-k * td) * (1.0 - exp(-k * te)) / (k * te) : exp(-k * td);
+      sum += S[i] * r * D;
+    }
+    residual[0] = w * (sum - y);
+    return true;
+  }
+};
+
+double PoissonWeight(double value, double exposure, double floor) {
+  return std::sqrt(exposure / std::max(std::fabs(value), floor));
+}
+
+}  // namespace
+
+JointFit JointRefine(const Curve& decay_curve, const DecayFitSummary& decay,
+                     const std::vector<ExcitationMeasurement>& measurements, const StateExcitationFit& excitation) {
+  JointFit joint;
+  const int C = decay_curve.channel_count(), nc = decay.n_components;
+  std::vector<double> log_k;
+  for (const DecayComponent& c : decay.components) log_k.push_back(std::log(c.rate));
+  std::vector<std::vector<double>> ab(static_cast<std::size_t>(C));
+  for (int c = 0; c < C; ++c) {
+    for (const DecayComponent& component : decay.components) ab[c].push_back(component.amplitude[c]);
+    ab[c].push_back(decay.background.empty() ? 0.0 : decay.background[c]);
+  }
+  std::vector<double> S = excitation.S;
+  std::map<std::string, std::vector<double>> a = excitation.a;
+  double background = excitation.background;
+
+  ceres::Problem problem;
+  std::vector<ceres::ResidualBlockId> decay_blocks, excitation_blocks;
+  for (int c = 0; c < C; ++c) {
+    double peak = 0;
+    for (double v : decay_curve.channels[c]) peak = std::max(peak, std::fabs(v));
+    for (std::size_t j = 0; j < decay_curve.size(); ++j) {
+      const double e = j < decay_curve.exposure_s.size() ? decay_curve.exposure_s[j] : 1.0;
+      const double y = decay_curve.channels[c][j];
+      auto* cost = new ceres::DynamicAutoDiffCostFunction<JointDecayResidual, 8>(
+          new JointDecayResidual{decay_curve.t_s[j], e, y, PoissonWeight(y, e, 1e-3 * peak), nc});
+      cost->AddParameterBlock(nc);
+      cost->AddParameterBlock(nc + 1);
+      cost->SetNumResiduals(1);
+      decay_blocks.push_back(problem.AddResidualBlock(cost, nullptr, log_k.data(), ab[c].data()));
+    }
+  }
+  double peak = 0;
+  for (const auto& m : measurements)
+    for (const auto& f : m.frames) peak = std::max(peak, std::fabs(f.value));
+  // Each charge's start state as the sequential fit carried it over.
+  const std::vector<ExcitationMeasurement>& carried =
+      excitation.fitted_measurements.size() == measurements.size() ? excitation.fitted_measurements : measurements;
+  for (const auto& m : carried)
+    for (const ExcitationFrame& f : m.frames) {
+      auto* cost = new ceres::DynamicAutoDiffCostFunction<JointExcitationResidual, 8>(
+          new JointExcitationResidual{m.charge_s, f.delay_s, f.exposure_s, f.value,
+                                      PoissonWeight(f.value, std::max(f.exposure_s, 1e-6), 1e-3 * peak), nc, m.start_state});
+      cost->AddParameterBlock(nc);
+      cost->AddParameterBlock(nc);
+      cost->AddParameterBlock(nc);
+      cost->AddParameterBlock(1);
+      cost->SetNumResiduals(1);
+      excitation_blocks.push_back(
+          problem.AddResidualBlock(cost, nullptr, log_k.data(), S.data(), a[m.light].data(), &background));
+    }
+  for (int c = 0; c < C; ++c)
+    for (int i = 0; i < nc; ++i) problem.SetParameterLowerBound(ab[c].data(), i, 0.0);
+  for (int i = 0; i < nc; ++i) problem.SetParameterLowerBound(S.data(), i, 0.0);
+  for (auto& [light, values] : a)
+    if (problem.HasParameterBlock(values.data()))
+      for (int i = 0; i < nc; ++i) problem.SetParameterLowerBound(values.data(), i, 0.0);
+  auto cost_of = [&](const std::vector<ceres::ResidualBlockId>& blocks) {
+    if (blocks.empty()) return 0.0;
+    ceres::Problem::EvaluateOptions evaluate;
+    evaluate.residual_blocks = blocks;
+    double cost = 0;
+    problem.Evaluate(evaluate, &cost, nullptr, nullptr, nullptr);
+    return 2 * cost;  // Ceres reports half the sum of squares
+  };
+  joint.decay_sequential = cost_of(decay_blocks);
+  joint.excitation_sequential = cost_of(excitation_blocks);
+  ceres::Solver::Options options = SmallDenseSolverOptions(200, 1e-12);
+  ceres::Solver::Summary summary;
+  ceres::Solve(options, &problem, &summary);
+  joint.iterations = static_cast<int>(summary.iterations.size());
+  joint.converged = summary.IsSolutionUsable() && summary.termination_type == ceres::CONVERGENCE;
+  if (!joint.converged) joint.termination = summary.message;
+  joint.decay_joint = cost_of(decay_blocks);
+  joint.excitation_joint = cost_of(excitation_blocks);
+  for (double v : log_k) joint.kr.push_back(std::exp(v));
+  joint.S = S;
+  joint.a = a;
+  // 1-sigma from the covariance, scaled by the reduced chi-square, in
+  // relative terms (relative_covariance.h).
+  joint.kr_stderr.assign(static_cast<std::size_t>(nc), 0.0);
+  for (auto& [light, values] : joint.a) joint.a_stderr[light].assign(static_cast<std::size_t>(nc), 0.0);
+  std::vector<CovarianceBlock> blocks = {{log_k.data(), nc, 0}, {S.data(), nc, nc}, {&background, 1, 0}};
+  for (auto& values : ab) blocks.push_back({values.data(), nc + 1, nc});  // amplitudes, then the channel's background
+  std::vector<std::string> lights;
+  for (auto& [light, values] : a)
+    if (problem.HasParameterBlock(values.data())) {
+      blocks.push_back({values.data(), nc, nc});
+      lights.push_back(light);
+    }
+  const int n_residuals = problem.NumResiduals(), n_parameters = problem.NumParameters();
+  if (n_residuals > n_parameters) {
+    const double chi2 = (joint.decay_joint + joint.excitation_joint) / (n_residuals - n_parameters);
+    const RelativeCovariance covariance = ComputeRelativeCovariance(problem, blocks, chi2);
+    if (covariance.ok) {
+      for (int i = 0; i < nc; ++i) joint.kr_stderr[i] = joint.kr[i] * covariance.stderr_per_block[0][i];  // d kr = kr d log kr
+      for (std::size_t l = 0; l < lights.size(); ++l) joint.a_stderr[lights[l]] = covariance.stderr_per_block[3 + ab.size() + l];
+    }
+  }
+  return joint;
+}
+
 SessionFit FitSession(const fs::path& dir, const SessionFitOptions& options) {
   const auto started = std::chrono::steady_clock::now();
   const nlohmann::json top = SessionStart(dir);
@@ -437,7 +810,7 @@ SessionFit FitSession(const fs::path& dir, const SessionFitOptions& options) {
     return true;
   };
 
-  // 1-2. LVF calibration and the emission spectrum.
+  // 1. LVF calibration.
   if (part_ok("lvf-calibration")) {
     try {
       result.calibration = FitLvfCalibration(dir / "lvf-calibration");
@@ -446,65 +819,11 @@ SessionFit FitSession(const fs::path& dir, const SessionFitOptions& options) {
     }
   }
   // 3. Decay.
-  Curve raw_decay;
   if (part_ok("decay")) {
-    Curve& curve = raw_decay;
-    std::vector<double> exposures;
-    int clipped = 0;
-    for (const nlohmann::json& line : ReadJsonLines(dir / "decay" / "frames.jsonl")) {
-      if (!line.contains("mean_signal_dn")) continue;
-      if (Clipped(line)) {
-        ++clipped;
-        continue;
-      }
-      const std::vector<double> means = line["mean_signal_dn"].get<std::vector<double>>();
-      const double exposure = line.at("exposure_s").get<double>();
-      if (curve.channels.empty()) {
-        curve.channels.resize(means.size());
-        for (std::size_t c = 0; c < means.size(); ++c) curve.names.push_back(means.size() == 3 ? std::string(1, "RGB"[c]) : "Y");
-      }
-      // Signal per second of exposure, at the middle of the exposure.
-      curve.t_s.push_back(line.value("delay_after_light_off_s", 0.0) + exposure / 2);
-      exposures.push_back(exposure);
-      curve.exposure_s.push_back(exposure);
-      for (std::size_t c = 0; c < means.size() && c < curve.channels.size(); ++c) curve.channels[c].push_back(means[c] / exposure);
-    }
-    if (clipped > 0) result.notes.push_back("decay: " + std::to_string(clipped) + " clipped frame(s) left out");
-    if (curve.size() == 0) result.notes.push_back("decay: no unclipped frame to fit");
-    else try {
-      DecayFitOptions decay_options;
-      decay_options.components = options.components;
-      decay_options.max_components = options.max_components;
-      decay_options.weighting = options.weighting;
-      decay_options.background = true;  // dark current
-      // A frame integrates the glow over its exposure e: per second it reads
-      // A exp(-k (d + e/2)) sinh(k e / 2) / (k e / 2). The middle of the
-      // exposure alone leaves that last factor, 1 + (k e)^2 / 24, which a
-      // mean over thousands of pixels resolves and BIC would take for a
-      // second state. So: fit, divide by the factor at the fitted rate of
-      // the dominant state, fit again (the factor moves by far less then).
-      Curve corrected = curve;
-      DecayFitSummary first = FitDecay(curve, decay_options, (dir / "decay").string());
-      for (int pass = 0; pass < 2; ++pass) {
-        std::size_t dominant = 0;
-        double best = -1;
-        for (std::size_t i = 0; i < first.components.size(); ++i) {
-          const double total = std::accumulate(first.components[i].amplitude.begin(), first.components[i].amplitude.end(), 0.0);
-          if (total > best) best = total, dominant = i;
-        }
-        const double k = first.components[dominant].rate;
-        for (std::size_t j = 0; j < curve.size(); ++j) {
-          const double x = k * exposures[j] / 2;
-          const double factor = x > 1e-8 ? std::sinh(x) / x : 1.0;
-          for (int c = 0; c < curve.channel_count(); ++c) corrected.channels[c][j] = curve.channels[c][j] / factor;
-        }
-        first = FitDecay(corrected, decay_options, (dir / "decay").string());
-      }
-      result.decay = first;
-      result.decay_curve = corrected;
-    } catch (const UserError& e) {
-      result.notes.push_back(e.what());
-    }
+    DecayStage stage = FitDecayStage(dir / "decay", options, &result.notes);
+    result.decay = stage.fit;
+    result.raw_decay = std::move(stage.raw);
+    result.decay_curve = std::move(stage.corrected);
   }
   // 2. The spectrum, with the dark signal the decay measured.
   if (result.calibration && part_ok("spectrum")) {
@@ -519,7 +838,6 @@ SessionFit FitSession(const fs::path& dir, const SessionFitOptions& options) {
       result.notes.push_back(e.what());
     }
   }
-
   if (!result.decay) {
     std::string why;
     for (const std::string& note : result.notes)
@@ -528,213 +846,76 @@ SessionFit FitSession(const fs::path& dir, const SessionFitOptions& options) {
                                          (why.empty() ? std::string() : " (" + why + ")"));
   }
   const DecayFitSummary& decay = *result.decay;
-  // The state that carries most of the glow stands for all in the excitation fit.
-  std::vector<double> share;
-  for (const DecayComponent& c : decay.components) share.push_back(std::accumulate(c.amplitude.begin(), c.amplitude.end(), 0.0));
-  const double share_total = std::accumulate(share.begin(), share.end(), 0.0);
-  const std::size_t main = static_cast<std::size_t>(std::max_element(share.begin(), share.end()) - share.begin());
-  const double kr = decay.components[main].rate;
-  if (decay.n_components > 1)
-    result.notes.push_back("nc = " + std::to_string(decay.n_components) +
-                           ": one excitation rate per light is fitted with the dominant state's kr, and every state "
-                           "gets the same ke");
+  const int nc = decay.n_components;
+  std::vector<double> kr;
+  for (const DecayComponent& c : decay.components) kr.push_back(c.rate);
 
-  // 4. Excitation and ke per band.
-  std::vector<std::optional<double>> ke(static_cast<std::size_t>(nb));
+  // 4. Excitation per state and ke per band.
   if (part_ok("excitation")) {
-    const nlohmann::json exc_devices = SessionStart(dir / "excitation").value("devices", devices);
-    const nlohmann::json irradiance = exc_devices.value("light_band_irradiance", nlohmann::json::object());
-    // The decay's background is the camera's dark signal per second (dark
-    // current): the excitation frames carry it too, under the same camera.
-    double dark = 0;
-    for (double b : decay.background) dark += b;
-    std::map<std::string, SessionFit::ExcitationLight> by_light;
-    for (const nlohmann::json& line : ReadJsonLines(dir / "excitation" / "frames.jsonl")) {
-      if (!line.contains("light") || !line.contains("mean_signal_dn")) continue;
-      if (Clipped(line)) {
-        result.notes.push_back("excitation: a clipped frame of '" + line["light"].get<std::string>() + "' left out");
-        continue;
-      }
-      SessionFit::ExcitationLight& light = by_light[line["light"].get<std::string>()];
-      light.light = line["light"];
-      const double exposure = line.at("exposure_s").get<double>();
-      light.samples.push_back({line.at("charge_s").get<double>(), line.value("delay_after_light_off_s", 0.0), exposure,
-                               SumSignal(line) / exposure - dark});
-    }
-    // S, the signal of a saturated sample, is the same under every light:
-    // it comes from the light that charges the sample highest (its level and
-    // speed pin S best), and every other light's rate is fitted with S
-    // known, so a light that barely charges is read from the level it
-    // reaches, not from a charging speed that hardly differs from kr (the
-    // weak spot Sec. 8.4.6 names). A light whose response stays below 0.1%
-    // of the best one's excites nothing this camera resolves: a = 0.
-    auto peak_of = [](const SessionFit::ExcitationLight& light) {
-      double peak = 0;
-      for (const ExcitationSample& s : light.samples) peak = std::max(peak, s.value);
-      return peak;
-    };
-    std::string best;
-    for (const auto& [name, light] : by_light)
-      if (best.empty() || peak_of(light) > peak_of(by_light[best])) best = name;
-    std::optional<double> S;
-    std::vector<std::vector<double>> E_per_light;
-    std::vector<double> a_per_light;
-    auto fit_light = [&](SessionFit::ExcitationLight& light) {
-      std::sort(light.samples.begin(), light.samples.end(),
-                [](const ExcitationSample& a, const ExcitationSample& b) { return a.charge_s < b.charge_s; });
-      const std::string where = (dir / "excitation").string() + " (" + light.light + ")";
-      if (S && peak_of(light) < 1e-3 * peak_of(by_light[best])) {
-        light.fit = ExcitationFitSummary{};
-        light.fit.scale = *S;
-        light.fit.note = "no response above 0.1% of " + best + "'s: a = 0";
-      } else {
-        ExcitationFitOptions excitation_options;
-        excitation_options.kr = kr;
-        excitation_options.saturated_signal = S;
-        light.fit = FitExcitation(light.samples, excitation_options, where);
-      }
-      if (!irradiance.contains(light.light)) {
-        result.notes.push_back("excitation: no band irradiance recorded for '" + light.light +
-                               "' (a bench's lab config must give it): its rate is reported, not turned into ke");
-      } else {
-        light.band_irradiance = irradiance[light.light].get<std::vector<double>>();
-        if (static_cast<int>(light.band_irradiance.size()) == nb) {
-          E_per_light.push_back(light.band_irradiance);
-          a_per_light.push_back(light.fit.a);
-        }
-      }
-      result.excitation.push_back(light);
-    };
-    if (!best.empty()) {
-      try {
-        fit_light(by_light[best]);
-        S = result.excitation.back().fit.scale;
-        for (auto& [name, light] : by_light)
-          if (name != best) {
-            try {
-              fit_light(light);
-            } catch (const UserError& e) {
-              result.notes.push_back(e.what());
-            }
-          }
-      } catch (const UserError& e) {
-        result.notes.push_back(e.what());
-      }
-    }
-    if (!E_per_light.empty()) {
-      try {
-        ke = KeFromExcitationRates(E_per_light, a_per_light, (dir / "excitation").string());
-      } catch (const UserError& e) {
-        result.notes.push_back(e.what());
-      }
-    }
+    ExcitationStage stage = FitExcitationStage(dir / "excitation", decay, devices, nb, options.weighting, &result.notes);
+    result.excitation = std::move(stage.lights);
+    result.excitation_measurements = std::move(stage.measurements);
+    result.state_excitation = std::move(stage.fit);
+    result.ke = std::move(stage.ke);
   }
+  std::vector<std::vector<std::optional<double>>> ke = KeValues(result.ke);
+  if (ke.empty()) ke.assign(static_cast<std::size_t>(nc), std::vector<std::optional<double>>(static_cast<std::size_t>(nb)));
 
-  // 5. Lambda from the spectrum, the state during each spectrum frame known
-  //    from its charge (Eq. 8.1 in closed form) and the ke just fitted.
+  // 5. Lambda per state.
   Material& material = result.material;
   const nlohmann::json sample = top.value("sample", nlohmann::json::object());
   material.name = (sample.contains("material") ? sample["material"].value("name", std::string("sample")) : std::string("sample")) + " (fitted)";
   material.bands = bands;
-  // Lambda per band for a given kr and ke (the sequential fit's, or the
-  // joint refinement's); nullopt when the state during the spectrum is not
-  // known.
-  auto lambda_for = [&](double kr_value, const std::vector<std::optional<double>>& ke_value, bool note)
-      -> std::optional<std::vector<double>> {
-    if (!result.spectrum) return std::nullopt;
-    const nlohmann::json spectrum_devices = SessionStart(dir / "spectrum").value("devices", devices);
-    const nlohmann::json irradiance = spectrum_devices.value("light_band_irradiance", nlohmann::json::object());
-    double a_charge = 0;
-    bool known = irradiance.contains(result.spectrum->charge_light);
-    if (known) {
-      const std::vector<double> E = irradiance[result.spectrum->charge_light].get<std::vector<double>>();
-      for (int b = 0; b < nb && b < static_cast<int>(E.size()); ++b) {
-        if (E[b] <= 0) continue;
-        if (!ke_value[b]) known = false;
-        else a_charge += *ke_value[b] * E[b];
-      }
-    }
-    if (!known || a_charge <= 0) {
-      if (note)
-        result.notes.push_back("spectrum: the charge light's excitation is not known in every band it reaches, so the "
-                               "state during the spectrum is not, nor Lambda's scale");
-      return std::nullopt;
-    }
-    // The state through the recorded switches (r = 0 before the first: the
-    // calibration before it kept the sample dark), then averaged over each
-    // frame's exposure in the dark.
-    struct Switch {
-      double t_s;
-      bool on;
-    };
-    std::vector<Switch> switches;
-    for (const nlohmann::json& event : ReadJsonLines(dir / "spectrum" / "events.jsonl"))
-      if (event.value("event", "") == "light" && event.value("channel", "") == result.spectrum->charge_light)
-        switches.push_back({event.value("t_s", 0.0), event.value("on", false)});
-    std::vector<double> per_kr_r(static_cast<std::size_t>(nb), 0.0);
-    for (const auto& frame : result.spectrum->frames) {
-      double r = 0, t = switches.empty() ? frame.t_start_s : switches.front().t_s;
-      bool on = false;
-      for (const Switch& sw : switches) {
-        if (sw.t_s > frame.t_start_s) break;
-        const double a = on ? a_charge : 0.0, k = a + kr_value, dt = sw.t_s - t;
-        r = a / k + (r - a / k) * std::exp(-k * dt);  // Eq. 8.1, exact over a constant interval
-        t = sw.t_s;
-        on = sw.on;
-      }
-      const double a = on ? a_charge : 0.0, k = a + kr_value;
-      r = a / k + (r - a / k) * std::exp(-k * (frame.t_start_s - t));
-      const double e = std::max(frame.exposure_s, 1e-12);
-      const double r_mean = r * -std::expm1(-kr_value * e) / (kr_value * e);
-      for (int b = 0; b < nb; ++b)
-        per_kr_r[b] += frame.band_radiance[b] / (kr_value * r_mean) / result.spectrum->frames.size();
-    }
-    return per_kr_r;
-  };
-  const std::optional<std::vector<double>> lambda_sequential = lambda_for(kr, ke, true);
-  const bool have_lambda = lambda_sequential.has_value();
-  const std::vector<double> band_radiance_per_kr_r = have_lambda ? *lambda_sequential : std::vector<double>();
-  if (!have_lambda)
+  std::optional<std::vector<std::vector<double>>> Lambda;
+  if (result.spectrum) {
+    const std::vector<double> shares = EmissionShares(dir / "decay", devices, decay, ke, &result.notes);
+    Lambda = LambdaPerState(dir / "spectrum", devices, *result.spectrum, kr, ke, shares);
+    if (!Lambda)
+      result.notes.push_back("spectrum: the charge light's excitation is not known in every band it reaches, so the "
+                             "state during the spectrum is not, nor Lambda's scale");
+  }
+  if (!Lambda)
     ThrowUserError(dir.string(), "", "no emission spectrum with a known excitation: Lambda cannot be fitted" +
                                          std::string(result.notes.empty() ? "" : " (" + result.notes.back() + ")"));
-  for (std::size_t i = 0; i < decay.components.size(); ++i) {
+  for (int i = 0; i < nc; ++i) {
     ExcitedState state;
-    state.kr = decay.components[i].rate;
-    state.ke = ke;
-    // Sec. 8.4.5: the states share the emission shape, split by their decay
-    // amplitudes, Lambda_i = a_i Lambda* / kr_i (for nc = 1 simply Lambda*).
-    const double fraction = share_total > 0 ? share[i] / share_total : 1.0 / decay.components.size();
-    for (int b = 0; b < nb; ++b)
-      state.Lambda.push_back(decay.n_components == 1 ? band_radiance_per_kr_r[b]
-                                                     : fraction * band_radiance_per_kr_r[b] * kr / state.kr);
+    state.kr = kr[i];
+    state.kr_stderr = decay.components[i].rate_stderr;
+    state.ke = ke[i];
+    if (i < static_cast<int>(result.ke.size())) state.ke_stderr = result.ke[i].ke_stderr;
+    state.Lambda = (*Lambda)[i];
     material.states.push_back(state);
   }
-  material.source = "phos fit session " + dir.string() + ": nc = " + std::to_string(decay.n_components) + " (" +
-                    decay.choice + ")";
+  material.source = "phos fit session " + dir.string() + ": nc = " + std::to_string(nc) + " (" + decay.choice + ")";
   ValidateMaterial(material, dir.string());
 
   // 6. The joint refinement, beside the sequential fit: one problem over the
-  //    decay and every excitation series at once.
-  if (decay.n_components == 1 && !result.excitation.empty()) {
+  //    decay and every excitation frame at once.
+  if (result.state_excitation && !result.excitation_measurements.empty()) {
     try {
-      result.joint = JointRefine(raw_decay, decay, result.excitation);
+      result.joint = JointRefine(result.raw_decay, decay, result.excitation_measurements, *result.state_excitation);
       JointFit& joint = *result.joint;
-      std::vector<std::vector<double>> E_per_light;
-      std::vector<double> a_per_light;
-      for (const auto& light : result.excitation)
-        if (static_cast<int>(light.band_irradiance.size()) == nb && joint.a.count(light.light)) {
-          E_per_light.push_back(light.band_irradiance);
-          a_per_light.push_back(joint.a[light.light]);
+      if (!joint.converged) result.notes.push_back("joint refinement did not converge: " + joint.termination);
+      joint.ke = KePerState(result.excitation, joint.a, joint.a_stderr, nc, nb, dir.string() + " (joint)");
+      if (!joint.ke.empty() && result.spectrum) {
+        std::vector<std::string> ignored;
+        const auto joint_ke = KeValues(joint.ke);
+        const std::vector<double> shares = EmissionShares(dir / "decay", devices, decay, joint_ke, &ignored);
+        if (auto lambda = LambdaPerState(dir / "spectrum", devices, *result.spectrum, joint.kr, joint_ke, shares))
+          joint.Lambda = *lambda;
+      }
+      if (options.joint && joint.converged && !joint.Lambda.empty()) {
+        for (int i = 0; i < nc; ++i) {
+          ExcitedState& state = material.states[i];
+          state.kr = joint.kr[i];
+          state.kr_stderr = joint.kr_stderr[i];
+          state.ke = joint.ke[i].ke;
+          state.ke_stderr = joint.ke[i].ke_stderr;
+          state.Lambda = joint.Lambda[i];
         }
-      if (!E_per_light.empty()) joint.ke = KeFromExcitationRates(E_per_light, a_per_light, dir.string() + " (joint)");
-      else joint.ke = ke;
-      if (auto lambda = lambda_for(joint.kr, joint.ke, false)) joint.Lambda = *lambda;
-      if (options.joint && !joint.Lambda.empty()) {
-        material.states[0].kr = joint.kr;
-        material.states[0].ke = joint.ke;
-        material.states[0].Lambda = joint.Lambda;
         material.source += "; joint refinement over the decay and excitation";
         ValidateMaterial(material, dir.string());
+        result.joint_written = true;
       }
     } catch (const UserError& e) {
       result.notes.push_back(std::string("joint refinement: ") + e.what());
@@ -760,213 +941,22 @@ MaterialComparison CompareMaterials(const Material& fitted, const Material& trut
   };
   const std::vector<double> a = shape(fitted), b = shape(truth);
   for (std::size_t i = 0; i < a.size() && i < b.size(); ++i) c.spectrum_l1 += std::fabs(a[i] - b[i]);
-  // ke relative to the truth, with a floor of 5% of its largest ke: a band
-  // that barely charges is judged on the scale of the ones that do.
-  double largest = 0;
-  for (const auto& k : truth.states[0].ke) largest = std::max(largest, k.value_or(0.0));
-  for (std::size_t band = 0; band < truth.states[0].ke.size(); ++band) {
-    const auto& t = truth.states[0].ke[band];
-    const auto& f = band < fitted.states[0].ke.size() ? fitted.states[0].ke[band] : std::nullopt;
-    if (t && f) c.ke_relative_error.push_back(std::fabs(*f - *t) / std::max(*t, 0.05 * largest));
-    else c.ke_relative_error.push_back(std::nullopt);
+  // ke relative to the truth, with a floor of 5% of the state's largest ke:
+  // a band that barely charges is judged on the scale of the ones that do.
+  for (std::size_t i = 0; i < truth.states.size() && i < fitted.states.size(); ++i) {
+    const ExcitedState& t = truth.states[i];
+    double largest = 0;
+    for (const auto& k : t.ke) largest = std::max(largest, k.value_or(0.0));
+    std::vector<std::optional<double>> errors;
+    for (std::size_t band = 0; band < t.ke.size(); ++band) {
+      const auto& f = band < fitted.states[i].ke.size() ? fitted.states[i].ke[band] : std::nullopt;
+      if (t.ke[band] && f) errors.push_back(std::fabs(*f - *t.ke[band]) / std::max(*t.ke[band], 0.05 * largest));
+      else errors.push_back(std::nullopt);
+    }
+    c.ke_relative_error_per_state.push_back(errors);
   }
+  if (!c.ke_relative_error_per_state.empty()) c.ke_relative_error = c.ke_relative_error_per_state.front();
   return c;
-}
-
-namespace {
-
-std::string Escape(const std::string& text) {
-  std::string out;
-  for (char ch : text) {
-    if (ch == '<') out += "&lt;";
-    else if (ch == '>') out += "&gt;";
-    else if (ch == '&') out += "&amp;";
-    else out += ch;
-  }
-  return out;
-}
-
-}  // namespace
-
-std::string SessionReportHtml(const SessionFit& fit, const std::string& title) {
-  std::string html;
-  html.append("<!doctype html>\n<html><head><meta charset=\"utf-8\"><title>").append(Escape(title)).append(
-      "</title>\n<style>body{font-family:sans-serif;max-width:900px;margin:2em auto;color:#222}"
-      "table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}"
-      "th{background:#f4f4f4}.note{color:#a33}</style></head><body>\n");
-  html.append("<h1>").append(Escape(title)).append("</h1>\n");
-  const Material& m = fit.material;
-  html.append("<p>Fitted in ").append(FormatShort(fit.seconds)).append(" s. ").append(Escape(m.source)).append("</p>\n");
-  for (const std::string& note : fit.notes) html.append("<p class=\"note\">").append(Escape(note)).append("</p>\n");
-
-  // The material.
-  html.append("<h2>Material</h2>\n<table><tr><th>state</th><th>kr (1/s)</th><th>&plusmn; 1&sigma;</th></tr>\n");
-  for (std::size_t i = 0; i < m.states.size(); ++i) {
-    const double stderr_kr = fit.decay ? fit.decay->components[i].rate_stderr : 0;
-    html.append("<tr><td>").append(std::to_string(i + 1)).append("</td><td>").append(FormatShort(m.states[i].kr))
-        .append("</td><td>").append(FormatShort(stderr_kr)).append("</td></tr>\n");
-  }
-  html.append("</table>\n<table><tr><th>band (nm)</th><th>ke</th><th>&Lambda; (state 1)</th></tr>\n");
-  for (int b = 0; b < m.band_count(); ++b) {
-    const auto& ke = m.states[0].ke[b];
-    html.append("<tr><td>").append(m.bands.BandName(b)).append("</td><td>").append(ke ? FormatShort(*ke) : "not measured")
-        .append("</td><td>").append(FormatShort(m.states[0].Lambda[b])).append("</td></tr>\n");
-  }
-  html.append("</table>\n");
-
-  // Decay: data against fit, and residuals.
-  if (fit.decay) {
-    const DecayFitSummary& d = *fit.decay;
-    html.append("<h2>Decay</h2>\n<p>nc = ").append(std::to_string(d.n_components)).append(": ").append(Escape(d.choice))
-        .append(". BIC per nc: ");
-    for (std::size_t i = 0; i < d.bic.size(); ++i)
-      html.append(i ? ", " : "").append(std::to_string(i + 1)).append(": ").append(std::isfinite(d.bic[i]) ? FormatShort(d.bic[i]) : "invalid");
-    html.append(". rss ").append(FormatShort(d.rss)).append(" (DN/s)&sup2;.</p>\n");
-    std::vector<PlotSeries> data_fit, residuals;
-    for (int c = 0; c < fit.decay_curve.channel_count(); ++c) {
-      PlotSeries data(fit.decay_curve.names[c] + " measured"), model(fit.decay_curve.names[c] + " fit"),
-          residual(fit.decay_curve.names[c]);
-      data.markers = true;
-      data.line = false;
-      data.color = model.color = residual.color = PaletteColor(c);
-      model.dashed = true;
-      residual.markers = true;
-      for (std::size_t j = 0; j < fit.decay_curve.size(); ++j) {
-        const double t = fit.decay_curve.t_s[j], y = fit.decay_curve.channels[c][j], f = EvaluateDecay(d, c, t);
-        data.x.push_back(t);
-        data.y.push_back(y);
-        model.x.push_back(t);
-        model.y.push_back(f);
-        residual.x.push_back(t);
-        residual.y.push_back(y - f);
-      }
-      data_fit.push_back(data);
-      data_fit.push_back(model);
-      residuals.push_back(residual);
-    }
-    PlotOptions o;
-    o.title = "Decay after saturation: data and fit";
-    o.x_label = "time after light-off (s)";
-    o.y_label = "signal / exposure (DN/s)";
-    o.log_y = true;
-    html.append(PlotSvg(data_fit, o)).append("\n");
-    o.title = "Decay residuals";
-    o.log_y = false;
-    o.y_label = "data - fit (DN/s)";
-    o.height_px = 280;
-    html.append(PlotSvg(residuals, o)).append("\n");
-  }
-
-  // Excitation per light.
-  if (!fit.excitation.empty()) {
-    html.append("<h2>Excitation</h2>\n<table><tr><th>light</th><th>a (1/s)</th><th>&plusmn; 1&sigma;</th><th>samples</th><th>note</th></tr>\n");
-    std::vector<PlotSeries> series;
-    int index = 0;
-    for (const auto& light : fit.excitation) {
-      html.append("<tr><td>").append(Escape(light.light)).append("</td><td>").append(FormatShort(light.fit.a))
-          .append("</td><td>").append(FormatShort(light.fit.a_stderr)).append("</td><td>")
-          .append(std::to_string(light.samples.size())).append("</td><td>").append(Escape(light.fit.note)).append("</td></tr>\n");
-      PlotSeries data(light.light + " measured"), model(light.light + " fit");
-      data.markers = true;
-      data.line = false;
-      data.color = model.color = PaletteColor(index++);
-      model.dashed = true;
-      for (const ExcitationSample& s : light.samples) {
-        data.x.push_back(s.charge_s);
-        data.y.push_back(s.value);
-        model.x.push_back(s.charge_s);
-        model.y.push_back(ExcitationSignal(light.fit.a, fit.material.states[0].kr, light.fit.scale, s));
-      }
-      series.push_back(data);
-      series.push_back(model);
-    }
-    html.append("</table>\n");
-    PlotOptions o;
-    o.title = "Excitation: response after charging for t, and the fit";
-    o.x_label = "charge time t (s)";
-    o.y_label = "signal / exposure (DN/s)";
-    o.log_x = true;
-    html.append(PlotSvg(series, o)).append("\n");
-  }
-
-  // The joint refinement beside the sequential fit.
-  if (fit.joint) {
-    const JointFit& j = *fit.joint;
-    html.append("<h2>Joint refinement</h2>\n<p>kr, the decay amplitudes and backgrounds, every light's a and the "
-                "shared S fitted at once to the decay and all excitation series (one photon-counting chi-square), "
-                "beside the sequential fit of the paper (kr from the decay alone, then each light). ")
-        .append(std::to_string(j.iterations)).append(" Ceres iterations.</p>\n<table><tr><th></th><th>sequential</th><th>joint</th></tr>\n");
-    html.append("<tr><td>kr (1/s)</td><td>").append(FormatShort(m.states.empty() || !fit.decay ? 0 : fit.decay->components[0].rate))
-        .append("</td><td>").append(FormatShort(j.kr)).append("</td></tr>\n");
-    for (const auto& light : fit.excitation) {
-      const auto it = j.a.find(light.light);
-      html.append("<tr><td>a under ").append(Escape(light.light)).append(" (1/s)</td><td>").append(FormatShort(light.fit.a))
-          .append("</td><td>").append(it == j.a.end() ? "-" : FormatShort(it->second)).append("</td></tr>\n");
-    }
-    html.append("<tr><td>weighted SS, decay</td><td>").append(FormatShort(j.decay_sequential)).append("</td><td>")
-        .append(FormatShort(j.decay_joint)).append("</td></tr>\n<tr><td>weighted SS, excitation</td><td>")
-        .append(FormatShort(j.excitation_sequential)).append("</td><td>").append(FormatShort(j.excitation_joint))
-        .append("</td></tr>\n<tr><th>weighted SS, total</th><th>")
-        .append(FormatShort(j.decay_sequential + j.excitation_sequential)).append("</th><th>")
-        .append(FormatShort(j.decay_joint + j.excitation_joint)).append("</th></tr>\n</table>\n<p>")
-        .append(j.decay_joint + j.excitation_joint < j.decay_sequential + j.excitation_sequential
-                    ? "The joint fit fits the data better (lower total)."
-                    : "The sequential fit is already at the joint optimum.")
-        .append("</p>\n");
-  }
-
-  // LVF calibration and spectrum.
-  if (fit.calibration) {
-    const LvfCalibrationFit& c = *fit.calibration;
-    html.append("<h2>LVF calibration</h2>\n<p>centre(x) = ").append(FormatShort(c.center0_nm)).append(" nm + ")
-        .append(FormatShort(c.nm_per_column)).append(" nm &times; column; pass band ").append(FormatShort(c.fwhm_nm))
-        .append(" nm FWHM; line residual rms ").append(FormatShort(c.rms_residual_nm)).append(" nm.</p>\n");
-    PlotSeries lines("lines"), model("fitted line");
-    lines.markers = true;
-    lines.line = false;
-    for (const auto& line : c.lines) {
-      lines.x.push_back(line.column);
-      lines.y.push_back(line.wavelength_nm);
-    }
-    model.x = {0.0, static_cast<double>(c.width - 1)};
-    model.y = {c.CenterNm(0), c.CenterNm(c.width - 1)};
-    PlotOptions o;
-    o.title = "LVF: known lines against their centroid column";
-    o.x_label = "column";
-    o.y_label = "wavelength (nm)";
-    o.height_px = 320;
-    html.append(PlotSvg({lines, model}, o)).append("\n");
-  }
-  if (fit.spectrum && !fit.spectrum->frames.empty()) {
-    const auto& frame = fit.spectrum->frames.front();
-    PlotSeries measured("measured (first frame)"), modelled("reconstruction through the filter");
-    measured.markers = true;
-    measured.line = false;
-    for (std::size_t x = 0; x < frame.measured.size(); ++x) {
-      const double nm = fit.calibration->CenterNm(static_cast<double>(x));
-      measured.x.push_back(nm);
-      measured.y.push_back(frame.measured[x]);
-      modelled.x.push_back(nm);
-      modelled.y.push_back(frame.modelled[x]);
-    }
-    PlotOptions o;
-    o.title = "Emission spectrum through the LVF";
-    o.x_label = "wavelength (nm)";
-    o.y_label = "column signal (DN/s)";
-    html.append("<h2>Emission spectrum</h2>\n").append(PlotSvg({measured, modelled}, o)).append("\n");
-    PlotSeries shape("normalized band radiance");
-    shape.markers = true;
-    for (int b = 0; b < m.band_count(); ++b) {
-      shape.x.push_back(m.bands.center_nm(b));
-      shape.y.push_back(fit.spectrum->shape[b]);
-    }
-    o.title = "Emission spectrum per band (normalized)";
-    o.y_label = "share of the emission";
-    o.height_px = 320;
-    html.append(PlotSvg({shape}, o)).append("\n");
-  }
-  html.append("</body></html>\n");
-  return html;
 }
 
 }  // namespace phos

@@ -48,7 +48,7 @@ Material MaterialFromJson(const nlohmann::json& json, const std::string& source)
     states.Fail("expected 1 to " + std::to_string(kMaxStates) + " excited states, got " + std::to_string(nc));
   for (size_t i = 0; i < nc; ++i) {
     JsonField s = states.At(i);
-    s.RejectUnknownKeys({"kr", "ke", "Lambda"});
+    s.RejectUnknownKeys({"kr", "ke", "Lambda", "kr_stderr", "ke_stderr"});
     ExcitedState state;
     state.kr = s["kr"].NumberAtLeast(0.0);
     JsonField ke = s["ke"];
@@ -63,6 +63,18 @@ Material MaterialFromJson(const nlohmann::json& json, const std::string& source)
       }
     }
     state.Lambda = s["Lambda"].NumberArray(n, 0.0);
+    if (auto kr_stderr = s.Optional("kr_stderr"); kr_stderr && !kr_stderr->IsNull())
+      state.kr_stderr = kr_stderr->NumberAtLeast(0.0);
+    if (auto ke_stderr = s.Optional("ke_stderr"); ke_stderr && !ke_stderr->IsNull()) {
+      if (ke_stderr->ArraySize() != n)
+        ke_stderr->Fail("expected " + std::to_string(n) + " values (one per band), got " +
+                        std::to_string(ke_stderr->ArraySize()));
+      for (size_t b = 0; b < n; ++b) {
+        JsonField v = ke_stderr->At(b);
+        if (!v.IsNull() && !state.ke[b]) v.Fail("an uncertainty for a ke that is unknown");
+        state.ke_stderr.push_back(v.IsNull() ? std::nullopt : std::optional<double>(v.NumberAtLeast(0.0)));
+      }
+    }
     m.states.push_back(std::move(state));
   }
   return m;
@@ -87,6 +99,12 @@ nlohmann::json MaterialToJson(const Material& m) {
     }
     state["ke"] = any_known ? ke : nlohmann::json(nullptr);
     state["Lambda"] = s.Lambda;
+    if (s.kr_stderr) state["kr_stderr"] = *s.kr_stderr;
+    if (!s.ke_stderr.empty()) {
+      nlohmann::json ke_stderr = nlohmann::json::array();
+      for (const auto& v : s.ke_stderr) ke_stderr.push_back(v ? nlohmann::json(*v) : nlohmann::json(nullptr));
+      state["ke_stderr"] = ke_stderr;
+    }
     j["states"].push_back(state);
   }
   return j;
@@ -109,6 +127,9 @@ void ValidateMaterial(const Material& material, const std::string& source) {
     for (size_t b = 0; b < s.ke.size(); ++b)
       if (s.ke[b]) finite(*s.ke[b], at + ".ke[" + std::to_string(b) + "]");
     for (size_t b = 0; b < s.Lambda.size(); ++b) finite(s.Lambda[b], at + ".Lambda[" + std::to_string(b) + "]");
+    if (s.kr_stderr) finite(*s.kr_stderr, at + ".kr_stderr");
+    for (size_t b = 0; b < s.ke_stderr.size(); ++b)
+      if (s.ke_stderr[b]) finite(*s.ke_stderr[b], at + ".ke_stderr[" + std::to_string(b) + "]");
   }
   // One set of rules: a material built in code goes through the loader's checks.
   MaterialFromJson(MaterialToJson(material), source);

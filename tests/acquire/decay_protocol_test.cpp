@@ -59,7 +59,8 @@ TEST(DecayProtocol, RecordsTimingFramesAndTheSamplesDecayRate) {
     SessionWriter session(dir / "s", {{"protocol", "decay"}});
     result = RunDecayProtocol(lab.lab, lab.lab.lights(), lab.clock, session, options);
   }
-  EXPECT_EQ(result.frames, 36);
+  // The first slot, 6 early frames before the second, then every 5 s to 180 s.
+  EXPECT_EQ(result.frames, 36 + 6);
   EXPECT_EQ(result.light_off_s, 1800);
   EXPECT_FALSE(lab.lab.lights().IsOn("led405"));
 
@@ -71,13 +72,21 @@ TEST(DecayProtocol, RecordsTimingFramesAndTheSamplesDecayRate) {
   EXPECT_EQ(events[2]["on"], false);
   EXPECT_EQ(events[2]["t_s"], 1800);
   std::vector<nlohmann::json> frames = ReadJsonLines(dir / "s" / "frames.jsonl");
-  ASSERT_EQ(frames.size(), 36u);
+  ASSERT_EQ(frames.size(), 42u);
 
-  // Timing is part of the data: frame m starts 5 ms + 5 m s after light-off.
+  // Timing is part of the data: 5 ms after light-off, then 5 ms + 5 s / 2^j
+  // for j = 6..1, then 5 ms + 5 m s.
+  const std::vector<double> delays = DecayFrameDelays(options);
+  ASSERT_EQ(delays.size(), 42u);
   Curve curve{{}, {{}}, {"G"}};
   for (std::size_t m = 0; m < frames.size(); ++m) {
     const double delay = frames[m]["delay_after_light_off_s"];
-    EXPECT_NEAR(delay, 0.005 + 5.0 * m, 1e-9);
+    const double expected = m == 0 ? 0.005 : m <= 6 ? 0.005 + 5.0 / std::ldexp(1.0, 7 - static_cast<int>(m)) : 0.005 + 5.0 * (m - 6.0);
+    EXPECT_NEAR(delays[m], expected, 1e-12);
+    EXPECT_NEAR(delay, expected, 1e-9);
+    // An exposure never runs into the next frame's slot.
+    if (m + 1 < frames.size())
+      EXPECT_LE(frames[m]["exposure_s"].get<double>(), 0.9 * (delays[m + 1] - delays[m]) + 1e-12);
     Frame frame = ReadFrame(dir / "s" / frames[m]["file"].get<std::string>());
     EXPECT_EQ(frame.width * frame.height * frame.channels, 64 * 48 * 3);
     // Signal per second of exposure, at the middle of the exposure.

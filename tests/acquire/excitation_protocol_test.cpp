@@ -2,6 +2,8 @@
 // what it records: capture and fit together give back the sample's ke * E.
 
 #include <cmath>
+#include <fstream>
+#include <map>
 #include <gtest/gtest.h>
 
 #include "phos/acquire/protocols.h"
@@ -39,11 +41,15 @@ TEST(ExcitationProtocol, DoublesToThePlateauAndTheFitRecoversTheExcitationRate) 
   std::istringstream lines(testing::ReadText(dir / "s" / "frames.jsonl"));
   std::vector<ExcitationSample> samples;
   std::vector<double> doubling;
+  std::map<double, std::vector<nlohmann::json>> by_charge;  // light-off time -> the measurement's frames
   for (std::string line; std::getline(lines, line);) {
     nlohmann::json frame = nlohmann::json::parse(line);
     EXPECT_EQ(frame["light"], "led405");
-    EXPECT_NEAR(frame["delay_after_light_off_s"].get<double>(), 0.05, 1e-9);
     EXPECT_EQ(frame["saturated_fraction"].get<double>(), 0.0);
+    EXPECT_EQ(frame["tail_frames"], options.tail_frames);
+    by_charge[frame["light_off_s"].get<double>()].push_back(frame);
+    if (frame["tail"] != 0) continue;
+    EXPECT_NEAR(frame["delay_after_light_off_s"].get<double>(), 0.05, 1e-9);
     const double charge = frame["charge_s"], exposure = frame["exposure_s"];
     if (std::fabs(std::log2(charge) - std::round(std::log2(charge))) < 1e-9) doubling.push_back(charge);
     // The green channel's signal per second of exposure.
@@ -51,13 +57,64 @@ TEST(ExcitationProtocol, DoublesToThePlateauAndTheFitRecoversTheExcitationRate) 
   }
   // Doubled from 1 s until a doubling added less than 3%, then the midpoints.
   ASSERT_GE(doubling.size(), 5u);
-  EXPECT_EQ(result.frames, static_cast<int>(2 * doubling.size() - 1));
+  EXPECT_EQ(by_charge.size(), 2 * doubling.size() - 1);
+  EXPECT_EQ(result.frames, static_cast<int>(by_charge.size()) * (options.tail_frames + 1));
   EXPECT_GT(doubling.back() * (a_true + 0.015), 3.0);  // it reached the plateau
+  // Every charge has its whole tail: frames back to back in the dark, in
+  // order, each exposing longer (or as long, near clipping) than the last.
+  for (const auto& [off, frames] : by_charge) {
+    ASSERT_EQ(frames.size(), static_cast<std::size_t>(options.tail_frames + 1));
+    for (std::size_t j = 1; j < frames.size(); ++j) {
+      EXPECT_EQ(frames[j]["tail"], static_cast<int>(j));
+      EXPECT_EQ(frames[j]["charge_s"], frames[0]["charge_s"]);
+      EXPECT_GT(frames[j]["delay_after_light_off_s"].get<double>(),
+                frames[j - 1]["delay_after_light_off_s"].get<double>() + frames[j - 1]["exposure_s"].get<double>() - 1e-9);
+      EXPECT_GE(frames[j]["exposure_s"].get<double>(), frames[j - 1]["exposure_s"].get<double>());
+    }
+  }
 
   ExcitationFitOptions fit_options;
   fit_options.kr = 0.015;  // orange, Table 8.1
   ExcitationFitSummary fit = FitExcitation(samples, fit_options, "session");
   EXPECT_NEAR(fit.a, a_true, 0.03 * a_true);
+}
+
+// A measurement cut off inside its tail (kill -9 mid-tail) is not "done":
+// resuming measures it again whole, and the whole ones are kept.
+TEST(ExcitationProtocol, AMeasurementCutInItsTailIsMeasuredAgain) {
+  VirtualClock clock;
+  Material orange = LoadMaterial(testing::Fixture("materials/orange.json"));
+  SimulatedLab lab(orange, std::vector<double>(8, 0.8), DefaultLights(), DefaultCameraModel(), clock);
+  testing::TempDir dir;
+  ExcitationProtocolOptions options;
+  options.lights = {"led405"};
+  options.exposure_s = 0.2;
+  options.tail_frames = 3;
+  {
+    SessionWriter session(dir / "s", {{"protocol", "excitation"}});
+    RunExcitationProtocol(lab, lab.lights(), clock, session, options);
+  }
+  const std::vector<nlohmann::json> all = testing::ReadJsonLines(dir / "s" / "frames.jsonl");
+  const ExcitationDone whole = ReadExcitationDone(dir / "s");
+  ASSERT_EQ(whole.size() * 4, all.size());
+  // Keep two whole measurements and two frames of the third.
+  {
+    std::ofstream out(dir / "s" / "frames.jsonl", std::ios::trunc);
+    for (int i = 0; i < 10; ++i) out << all[i].dump() << "\n";
+    std::filesystem::remove(dir / "s" / "stop.json");
+  }
+  const ExcitationDone done = ReadExcitationDone(dir / "s");
+  EXPECT_EQ(done.size(), 2u);
+  for (const auto& [key, response] : done) {
+    ASSERT_TRUE(whole.count(key));
+    EXPECT_DOUBLE_EQ(response, whole.at(key));
+  }
+  auto session = SessionWriter::Reopen(dir / "s");
+  RunExcitationProtocol(lab, lab.lights(), clock, *session, options, done);
+  session.reset();
+  EXPECT_EQ(ReadExcitationDone(dir / "s").size(), whole.size());
+  // 10 frames kept, and every measurement but the two whole ones taken again.
+  EXPECT_EQ(testing::ReadJsonLines(dir / "s" / "frames.jsonl").size(), 10 + (whole.size() - 2) * 4);
 }
 
 TEST(ExcitationProtocol, BadOptionsAreClearErrors) {

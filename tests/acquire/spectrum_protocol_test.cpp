@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <gtest/gtest.h>
+#include <map>
 #include <set>
 
 #include "phos/acquire/protocols.h"
@@ -158,33 +159,41 @@ TEST(ExcitationProtocol, ResumingMeasuresOnlyWhatIsMissingAndOverwritesNothing) 
   options.lights = {"led405", "led365"};
   options.exposure_s = 0.2;
   {
-    DisappearingCamera camera(lab.lab, 5);
+    // Two whole measurements (a frame and its 6-frame tail each), then 3 frames of the third.
+    DisappearingCamera camera(lab.lab, 17);
     SessionWriter session(dir / "s", {{"protocol", "excitation"}});
     EXPECT_THROW(RunExcitationProtocol(camera, lab.lab.lights(), lab.clock, session, options), UserError);
   }
   EXPECT_EQ(ReadJsonFile(dir / "s" / "stop.json")["how"], "failed");
   EXPECT_NE(ReadJsonFile(dir / "s" / "stop.json")["why"].get<std::string>().find("disconnected"), std::string::npos);
   const std::string first_frame = testing::ReadText(dir / "s" / "frames" / "000001.tif");
-  ASSERT_EQ(ReadJsonLines(dir / "s" / "frames.jsonl").size(), 5u);
+  ASSERT_EQ(ReadJsonLines(dir / "s" / "frames.jsonl").size(), 17u);
 
   const ExcitationDone done = ReadExcitationDone(dir / "s");
-  EXPECT_EQ(done.size(), 5u);
+  EXPECT_EQ(done.size(), 2u);  // the cut one is not done
   {
     std::unique_ptr<SessionWriter> session = SessionWriter::Reopen(dir / "s");
-    EXPECT_EQ(session->frame_count(), 5);
+    EXPECT_EQ(session->frame_count(), 17);
     RunExcitationProtocol(lab.lab, lab.lab.lights(), lab.clock, *session, options, done);
   }
   EXPECT_EQ(ReadJsonFile(dir / "s" / "stop.json")["how"], "complete");
   EXPECT_EQ(testing::ReadText(dir / "s" / "frames" / "000001.tif"), first_frame);
-  // Every (light, charge time) once; frames numbered 1..n without a gap.
-  std::set<std::pair<std::string, double>> seen;
+  // Every (light, charge time) measured whole once, the cut one kept as it
+  // was and taken again; frames numbered 1..n without a gap.
   int seq = 0;
-  for (const nlohmann::json& line : ReadJsonLines(dir / "s" / "frames.jsonl")) {
-    EXPECT_EQ(line["seq"].get<int>(), ++seq);
-    const bool first_time = seen.insert({line["light"].get<std::string>(), line["charge_s"].get<double>()}).second;
-    EXPECT_TRUE(first_time) << line.dump();
+  for (const nlohmann::json& line : ReadJsonLines(dir / "s" / "frames.jsonl")) EXPECT_EQ(line["seq"].get<int>(), ++seq);
+  std::set<std::pair<std::string, double>> seen;
+  int cut = 0;
+  for (const testing::ExcitationCharge& charge : testing::ExcitationCharges(dir / "s" / "frames.jsonl")) {
+    if (charge.frames == 3) {
+      ++cut;
+      continue;
+    }
+    EXPECT_EQ(charge.frames, 7);
+    EXPECT_TRUE(seen.insert({charge.light, charge.charge_s}).second) << charge.light << " " << charge.charge_s;
   }
-  EXPECT_GT(seq, 10);
+  EXPECT_EQ(cut, 1);
+  EXPECT_GT(seq, 70);
   std::set<std::string> lights;
   for (const auto& measured : seen) lights.insert(measured.first);
   EXPECT_EQ(lights.size(), 2u);

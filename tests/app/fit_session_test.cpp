@@ -1,15 +1,24 @@
-// `phos fit session` end to end: the simulated lab captures each Table 8.1
-// preset that has a measured ke (phos capture all), and the fit must give the
-// preset back: kr within 3%, the normalized emission spectrum within 0.05
-// (L1 over bands), ke within 15% in the measured bands (issue 4's bar). The
-// truth is the material the simulated sample was made of, not a stored output.
+// `phos fit session` end to end: the simulated lab captures a material
+// (phos capture all), and the fit must give it back: each kr within 3%, the
+// normalized emission spectrum within 0.05 (L1 over bands), each state's ke
+// within 15% in every band a light reaches, and the true number of states.
+// The truth is the material the simulated sample was made of, not a stored
+// output: the Table 8.1 presets (one state), the two-state fixtures
+// (model/synthetic.h: rate ratios 2-50, mixes 10/90 to 90/10) and a seeded
+// family of random two-state materials no fixture was tuned on.
 
 #include <OpenImageIO/imageio.h>
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <atomic>
+#include <cstdio>
+#include <memory>
+#include <thread>
 #include <nlohmann/json.hpp>
 
+#include "phos/model/material.h"
+#include "phos/model/synthetic.h"
 #include "phos/util/json.h"
 #include "test_util.h"
 
@@ -18,54 +27,134 @@ namespace {
 
 using testing::RunPhos;
 
-class FitSessionEndToEnd : public ::testing::TestWithParam<std::string> {};
+struct Recovery {
+  nlohmann::json result, truth;
+};
 
-TEST_P(FitSessionEndToEnd, RecoversThePresetTheSampleWasMadeOf) {
-  const std::string name = GetParam();
-  const std::string preset = testing::Fixture("materials/" + name + ".json").string();
-  testing::TempDir dir;
-  auto capture = RunPhos("capture all --sim-material " + preset + " --out " + (dir / "c").string());
-  ASSERT_EQ(capture.exit_code, 0) << capture.err;
+// Captures `material` with every protocol and fits it back, with a report.
+Recovery CaptureAndFit(const std::filesystem::path& material, const testing::TempDir& dir) {
+  auto capture = RunPhos("capture all --sim-material " + material.string() + " --out " + (dir / "c").string());
+  EXPECT_EQ(capture.exit_code, 0) << capture.err;
   auto fit = RunPhos("fit session " + (dir / "c").string() + " --out " + (dir / "m.json").string() + " --report " +
-                     (dir / "r.html").string() + " --compare " + preset + " --json");
-  ASSERT_EQ(fit.exit_code, 0) << fit.err;
-  const nlohmann::json result = nlohmann::json::parse(fit.out);
-  EXPECT_EQ(result["n_components"], 1) << result["choice"];  // the presets are single-state
-  const nlohmann::json& c = result["comparison"];
-  EXPECT_LT(c["kr_relative_error"][0].get<double>(), 0.03);
+                     (dir / "r.html").string() + " --compare " + material.string() + " --json");
+  EXPECT_EQ(fit.exit_code, 0) << fit.err;
+  return {fit.exit_code == 0 ? nlohmann::json::parse(fit.out) : nlohmann::json(), ReadJsonFile(material)};
+}
+
+// Issue 13's bar, for any number of states.
+void ExpectRecovered(const Recovery& r) {
+  ASSERT_TRUE(r.result.is_object());
+  const std::size_t nc = r.truth["states"].size();
+  ASSERT_EQ(r.result["n_components"].get<std::size_t>(), nc) << r.result["choice"] << " " << r.result["bic"];
+  const nlohmann::json& c = r.result["comparison"];
+  for (std::size_t i = 0; i < nc; ++i) EXPECT_LT(c["kr_relative_error"][i].get<double>(), 0.03) << "state " << i + 1;
   EXPECT_LT(c["spectrum_l1"].get<double>(), 0.05);
-  // Table 8.1 measured ke in bands 1-3; the fit measures exactly those.
-  for (int b = 0; b < 8; ++b) {
-    if (b < 3) {
-      ASSERT_FALSE(c["ke_relative_error"][b].is_null()) << "band " << b;
-      EXPECT_LT(c["ke_relative_error"][b].get<double>(), 0.15) << "band " << b;
-    } else {
-      EXPECT_TRUE(c["ke_relative_error"][b].is_null()) << "band " << b;  // no light reached it: unknown, not 0
+  for (std::size_t i = 0; i < nc; ++i)
+    for (int b = 0; b < 8; ++b) {
+      const nlohmann::json& e = c["ke_relative_error_per_state"][i][b];
+      if (b < 3) {  // the bands the lab's LEDs reach, where the truths know ke
+        ASSERT_FALSE(e.is_null()) << "state " << i + 1 << " band " << b;
+        EXPECT_LT(e.get<double>(), 0.15) << "state " << i + 1 << " band " << b;
+      } else {
+        EXPECT_TRUE(e.is_null()) << "band " << b;  // no light reached it: unknown, not 0
+      }
     }
-  }
   // The joint refinement, reported beside the sequential fit, fits the same
   // data at least as well on the same objective (it starts from the
   // sequential parameters and only descends).
-  const nlohmann::json& joint = result["joint"];
+  const nlohmann::json& joint = r.result["joint"];
   const double sequential = joint["weighted_ss_sequential"]["decay"].get<double>() +
                             joint["weighted_ss_sequential"]["excitation"].get<double>();
   const double together = joint["weighted_ss_joint"]["decay"].get<double>() + joint["weighted_ss_joint"]["excitation"].get<double>();
   EXPECT_LE(together, sequential * (1 + 1e-9));
-  EXPECT_NEAR(joint["kr"].get<double>(), ReadJsonFile(preset)["states"][0]["kr"].get<double>(),
-              0.03 * ReadJsonFile(preset)["states"][0]["kr"].get<double>());
+  EXPECT_TRUE(joint["converged"].get<bool>());
+}
 
-  // The material loads as any other, and the report has its plots.
-  const nlohmann::json material = ReadJsonFile(dir / "m.json");
-  EXPECT_EQ(material["schema"], "phos.material/1");
+// How many of the 1-sigma intervals of kr and ke in a fitted material cover the truth.
+std::pair<int, int> Covered(const Recovery& r) {
+  int covered = 0, total = 0;
+  const nlohmann::json& states = r.result["states"];
+  for (std::size_t i = 0; i < states.size() && i < r.truth["states"].size(); ++i) {
+    const nlohmann::json& t = r.truth["states"][i];
+    if (!states[i]["kr_stderr"].is_null()) {
+      covered += std::fabs(states[i]["kr"].get<double>() - t["kr"].get<double>()) <= states[i]["kr_stderr"].get<double>();
+      ++total;
+    }
+    for (int b = 0; b < 8; ++b) {
+      if (states[i]["ke"][b].is_null() || states[i]["ke_stderr"][b].is_null() || t["ke"][b].is_null()) continue;
+      covered += std::fabs(states[i]["ke"][b].get<double>() - t["ke"][b].get<double>()) <=
+                 states[i]["ke_stderr"][b].get<double>();
+      ++total;
+    }
+  }
+  return {covered, total};
+}
+
+class FitSessionEndToEnd : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(FitSessionEndToEnd, RecoversTheMaterialTheSampleWasMadeOf) {
+  const std::string name = GetParam();
+  const auto material = testing::Fixture("materials/" + name + ".json");
+  testing::TempDir dir;
+  const Recovery r = CaptureAndFit(material, dir);
+  ExpectRecovered(r);
+  // The material loads as any other, with its uncertainties, and the report
+  // has its plots.
+  const Material fitted = LoadMaterial(dir / "m.json");
+  for (const ExcitedState& state : fitted.states) {
+    ASSERT_TRUE(state.kr_stderr.has_value());
+    EXPECT_GT(*state.kr_stderr, 0);
+    ASSERT_EQ(state.ke_stderr.size(), 8u);
+  }
   const std::string report = testing::ReadText(dir / "r.html");
-  EXPECT_GE(std::count(report.begin(), report.end(), '<') , 100);
-  for (const std::string section : {"<h2>Decay</h2>", "<h2>Excitation</h2>", "<h2>LVF calibration</h2>", "<h2>Emission spectrum</h2>", "<h2>Joint refinement</h2>"})
+  EXPECT_GE(std::count(report.begin(), report.end(), '<'), 100);
+  for (const std::string section : {"<h2>Decay</h2>", "<h2>Excitation</h2>", "<h2>LVF calibration</h2>",
+                                    "<h2>Emission spectrum</h2>", "<h2>Joint refinement</h2>",
+                                    "<h2>Against the known material</h2>", "1/s per unit band-integrated irradiance"})
     EXPECT_NE(report.find(section), std::string::npos) << section;
   EXPECT_NE(report.find("BIC per nc"), std::string::npos);
 }
 
 INSTANTIATE_TEST_SUITE_P(Table8_1, FitSessionEndToEnd,
                          ::testing::Values("blue", "green", "orange", "pink", "purple", "red", "white", "yellow"));
+INSTANTIATE_TEST_SUITE_P(TwoState, FitSessionEndToEnd,
+                         ::testing::Values("two-state-ratio2", "two-state-ratio2-fast10", "two-state-ratio50-fast10",
+                                           "two-state-ratio50-fast90", "two-state-ratio7-fast90", "two-state-ratio20"));
+
+// A seeded family of random two-state materials (RandomTwoStateMaterial,
+// seeds 1-20, drawn from the ranges and never tuned on): each recovered to
+// the same bar, and across the family the 1-sigma intervals of kr and ke
+// cover the truth in 68% +- 10% of cases. One test, two materials at a time.
+TEST(RandomTwoStateFamily, EachIsRecoveredAndTheIntervalsCoverAsStated) {
+  constexpr int kFamilySize = 20;
+  testing::TempDir root;
+  std::vector<Recovery> recoveries(kFamilySize);
+  std::vector<std::unique_ptr<testing::TempDir>> dirs;
+  for (int i = 0; i < kFamilySize; ++i) dirs.push_back(std::make_unique<testing::TempDir>());
+  std::atomic<int> next{0};
+  auto worker = [&] {
+    for (int i = next++; i < kFamilySize; i = next++) {
+      SaveMaterial(RandomTwoStateMaterial(static_cast<std::uint64_t>(i + 1)), *dirs[i] / "truth.json");
+      recoveries[i] = CaptureAndFit(*dirs[i] / "truth.json", *dirs[i]);
+    }
+  };
+  std::thread a(worker), b(worker);
+  a.join();
+  b.join();
+  int covered = 0, total = 0;
+  for (int i = 0; i < kFamilySize; ++i) {
+    SCOPED_TRACE("random two-state material, seed " + std::to_string(i + 1));
+    ExpectRecovered(recoveries[i]);
+    if (!recoveries[i].result.is_object()) continue;
+    const auto [c, t] = Covered(recoveries[i]);
+    covered += c;
+    total += t;
+  }
+  const double coverage = total > 0 ? static_cast<double>(covered) / total : 0;
+  std::printf("1-sigma intervals of kr and ke covering the truth: %d of %d (%.0f%%)\n", covered, total, 100 * coverage);
+  EXPECT_GE(total, kFamilySize * 8);
+  EXPECT_NEAR(coverage, 0.68, 0.10);
+}
 
 // Cuts a part back to its first `keep` frames, as a kill -9 would leave it.
 void KillAfter(const std::filesystem::path& session, int keep) {
@@ -80,11 +169,14 @@ TEST(FitSessionCommand, PartialSessionsAndBadInput) {
   const std::string orange = testing::Fixture("materials/orange.json").string();
   ASSERT_EQ(RunPhos("capture all --sim-material " + orange + " --out " + (dir / "c").string()).exit_code, 0);
 
-  // An excitation killed after 6 frames: still a material, with a note.
-  KillAfter(dir / "c" / "excitation", 6);
+  // An excitation killed in its seventh measurement (6 whole ones of a
+  // frame and a tail of 6, then 3 frames): still a material, with notes.
+  KillAfter(dir / "c" / "excitation", 6 * 7 + 3);
   auto partial = RunPhos("fit session " + (dir / "c").string() + " --out " + (dir / "m.json").string());
   ASSERT_EQ(partial.exit_code, 0) << partial.err;
   EXPECT_NE(partial.out.find("excitation: stopped 'none"), std::string::npos) << partial.out;
+  EXPECT_NE(partial.out.find("excitation: 1 measurement(s) cut off in their tail left out"), std::string::npos)
+      << partial.out;
 
   // Every decay frame clipped: said, and nothing written.
   {

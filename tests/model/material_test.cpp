@@ -96,7 +96,7 @@ TEST(Material, ValidationNamesFileAndField) {
       {"five states", [](auto& j) { for (int i = 0; i < 4; ++i) j["states"].push_back(j["states"][0]); },
        "states: expected 1 to 4 excited states, got 5"},
       {"typo", [](auto& j) { j["states"][0]["Lamda"] = 1; },
-       "states[0].Lamda: unknown field (expected one of: kr, ke, Lambda)"},
+       "states[0].Lamda: unknown field (expected one of: kr, ke, Lambda, kr_stderr, ke_stderr)"},
       {"albedo range", [](auto& j) { j["albedo"] = std::vector<double>(8, 1.5); },
        "albedo[0]: expected a reflectance in [0, 1], got 1.5"},
       {"missing name", [](auto& j) { j.erase("name"); }, "name: missing (required)"},

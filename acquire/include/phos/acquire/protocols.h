@@ -47,6 +47,11 @@ struct DecayProtocolOptions {
   double interval_s = 5;          // one frame every
   double duration_s = 180;        // of decay
   double first_delay_s = 0.005;   // light-off to the first exposure
+  // Frames between the first and the second slot, at delays halving from
+  // interval_s / 2 down: a state that decays in well under interval_s (the
+  // fast state of a two-state material, kr up to a few 1/s) is seen by
+  // several frames, not one. 0: the plain schedule.
+  int early_frames = 6;
   double initial_exposure_s = 0.05;
   double max_exposure_s = 4;
   double gain = 1;
@@ -56,6 +61,11 @@ struct DecayProtocolOptions {
 
   bool IsValid(std::string* error) const;
 };
+
+// The frames' delays after light-off: first_delay_s, then the early frames
+// at first_delay_s + interval_s / 2^j (j = early_frames..1), then every
+// interval_s until duration_s.
+std::vector<double> DecayFrameDelays(const DecayProtocolOptions& options);
 
 struct DecayProtocolResult {
   int frames = 0;
@@ -67,10 +77,22 @@ DecayProtocolResult RunDecayProtocol(Camera& camera, Lights& lights, Clock& cloc
 
 // Excitation per light (Sec. 8.4.6): for each light, reset in darkness,
 // charge for t, switch off, wait a fixed short delay, expose; charge times
-// double from first_charge_s until the response grows by less than
-// `plateau_growth` (or max_charge_s), then the geometric midpoints of the
+// double from first_charge_s until the response (of the tail's last frame,
+// which the slowest state dominates) grows by less than `plateau_growth`
+// (or max_charge_s), then the geometric midpoints of the
 // rising part are measured too. Every frame records its light, charge time
 // and measured delay, for the excitation fit.
+//
+// After each charge's first frame comes a decay tail: `tail_frames` more
+// frames in the dark, back to back, each exposing `tail_growth` times longer
+// than the one before (0.2 s, then 0.4 ... 12.8 s by default: 25 s in all).
+// With two or more excited states, one frame per charge sees only the sum
+// sum_i S_i r_i(t): how much of each state a charge made cannot be told from
+// it, so neither can each state's ke. The states decay at different kr
+// (known from the decay), so the tail's shape splits the sum into its
+// states (docs/fit.md shows the Fisher information of both designs). A
+// measurement is kept whole or redone: every frame records its charge's
+// light-off time and its place in the tail.
 struct ExcitationProtocolOptions {
   std::vector<std::string> lights;  // channels to measure, one after the other
   double reset_s = 900;             // darkness before each charge (several 1/kr)
@@ -80,6 +102,9 @@ struct ExcitationProtocolOptions {
   double delay_s = 0.05;            // light-off to exposure
   double exposure_s = 1;
   double gain = 1;
+  int tail_frames = 6;              // 0: one frame per charge (the paper's design)
+  double tail_growth = 2;           // each tail frame's exposure over the one before
+  double high_fraction = 0.7;       // a tail frame above this share of the range stops the growth
 
   bool IsValid(std::string* error) const;
 };
@@ -89,7 +114,9 @@ struct ExcitationProtocolResult {
 };
 
 // What an interrupted excitation session already measured: the brightest
-// channel's response per (light, charge time). Resuming replays the schedule
+// channel's response per second of exposure in each charge's last frame,
+// per (light, charge time), for the measurements whose tail is whole; a
+// measurement cut off inside its tail is measured again. Resuming replays the schedule
 // against it and measures only what is missing (each measurement starts with
 // its own reset in darkness, so nothing earlier is needed).
 using ExcitationDone = std::map<std::pair<std::string, double>, double>;

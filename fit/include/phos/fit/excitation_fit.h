@@ -67,4 +67,14 @@ ExcitationFitSummary FitExcitation(const std::vector<ExcitationSample>& samples,
 std::vector<std::optional<double>> KeFromExcitationRates(const std::vector<std::vector<double>>& E_per_light,
                                           const std::vector<double>& a_per_light, const std::string& where);
 
+// The same with the rates' 1-sigma uncertainties: ke as above, and for every
+// band whose ke is above its bound 0 the linearized 1-sigma of the weighted
+// problem, sqrt(diag((E' W E)^-1)) over those bands (W = 1 / sigma_a^2).
+// A band at its bound gets no uncertainty (nullopt), as an unknown band.
+struct KeEstimate {
+  std::vector<std::optional<double>> ke, ke_stderr;
+};
+KeEstimate KeWithUncertainty(const std::vector<std::vector<double>>& E_per_light, const std::vector<double>& a_per_light,
+                             const std::vector<double>& a_stderr_per_light, const std::string& where);
+
 }  // namespace phos

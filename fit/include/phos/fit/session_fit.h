@@ -14,15 +14,22 @@
 //  3. Decay (Sec. 8.4.4): frames normalized by their exposure, at the middle
 //     of the exposure, saturated frames left out; FitDecay with shared rates
 //     across channels, a background, and nc chosen by BIC (or fixed).
-//  4. Excitation (Sec. 8.4.6): per light, FitExcitation with kr from the
-//     decay (the delay and the exposure are in its model); ke per band from
-//     the rates and the lights' band irradiances (non-negative).
-//  5. Re-radiation (Sec. 8.4.5): Lambda_b = L_b / (kr r), with r the state
-//     during each spectrum frame, known in closed form (Eq. 8.1) from the
-//     session's recorded light switches, the ke just fitted and the frame's
-//     exposure. With nc > 1, the
-//     states share the shape and split it by their decay amplitudes,
-//     Lambda_i = a_i Lambda* / kr_i.
+//  4. Excitation (Sec. 8.4.6), per excited state: each charge's first frame
+//     and its decay tail split the response into the states (their kr from
+//     the decay), FitStateExcitation gives every state's rate a_il under
+//     every light and its saturated signal S_i, and ke_i per band follows
+//     from the rates and the lights' band irradiances (non-negative), each
+//     with its 1-sigma uncertainty.
+//  5. Re-radiation (Sec. 8.4.5): the states share the emission shape (one
+//     emitting centre fed by several traps) and split it by their decay
+//     amplitudes A_i: Lambda_i = w_i X, w_i proportional to
+//     A_i / (kr_i r_i(light-off)), the state at the decay's light-off known
+//     from its charge and ke_i. X per band is L_b / sum_i w_i kr_i r_i over
+//     the spectrum frames, r_i during each frame known in closed form
+//     (Eq. 8.1) from the session's recorded light switches and the frame's
+//     exposure. For nc = 1: Lambda = L / (kr r).
+//  6. The joint refinement (any nc): every parameter above that the decay and
+//     the excitation share, fitted to all their frames at once.
 
 #include <filesystem>
 #include <map>
@@ -32,6 +39,7 @@
 
 #include "phos/fit/decay_fit.h"
 #include "phos/fit/excitation_fit.h"
+#include "phos/fit/state_excitation_fit.h"
 #include "phos/model/material.h"
 
 namespace phos {
@@ -82,43 +90,57 @@ struct SessionFitOptions {
   int components = 0;      // 0: BIC chooses up to max_components
   int max_components = 3;
   Weighting weighting = Weighting::kPoisson;
-  bool joint = false;      // write the joint refinement's kr, ke, Lambda instead of the sequential ones
+  // Write the joint refinement's kr, ke, Lambda and their uncertainties (when
+  // it converged), else the sequential fit's. The joint fit uses every frame
+  // for every parameter and its covariance counts kr's uncertainty in ke;
+  // the sequential one holds kr fixed, so its ke intervals are too narrow.
+  bool joint = true;
 };
 
-// The joint refinement (nc = 1): kr, the decay's amplitude and background
-// per channel, every light's excitation rate a and the shared saturated
-// signal S, fitted at once to the decay frames and every excitation series
-// (Ceres, autodiff through the exact closed forms; each sample weighted for
-// photon counting, scaled by its exposure, so the experiments are on one
-// chi-square). The sequential fit of the paper fixes kr from the decay
-// before the excitation sees it; the joint fit lets the excitation series
-// inform kr too. Both are evaluated on the same objective.
+// The joint refinement (any nc): every kr_i, the decay's amplitudes and
+// background per channel, every S_i and every a_il, fitted at once to the
+// decay frames and every excitation frame (Ceres, autodiff through the
+// exact closed forms; each sample weighted for photon counting, scaled by
+// its exposure, so the experiments are on one chi-square). The sequential
+// fit of the paper fixes kr from the decay before the excitation sees it;
+// the joint fit lets the excitation tails inform kr too. Both are evaluated
+// on the same objective. Its covariance (scaled by the reduced chi-square)
+// carries every source of uncertainty, kr's included, into the rates.
 struct JointFit {
-  double kr = 0;
-  std::map<std::string, double> a;  // per light
-  double S = 0;
-  std::vector<std::optional<double>> ke;
-  std::vector<double> Lambda;
+  std::vector<double> kr, kr_stderr;                       // per state
+  std::map<std::string, std::vector<double>> a, a_stderr;  // per light, per state
+  std::vector<double> S;                                   // per state
+  std::vector<KeEstimate> ke;                              // per state
+  std::vector<std::vector<double>> Lambda;                 // per state (empty when not known)
   // Weighted sums of squares on the joint objective: decay part, excitation
-  // part, total, for the sequential parameters and for the joint ones.
+  // part, for the sequential parameters and for the joint ones.
   double decay_sequential = 0, excitation_sequential = 0, decay_joint = 0, excitation_joint = 0;
   int iterations = 0;
+  bool converged = false;
+  std::string termination;  // Ceres's message when it did not converge
 };
 
 struct SessionFit {
-  Material material;
+  Material material;  // with kr_stderr and ke_stderr per state
   std::optional<LvfCalibrationFit> calibration;
   std::optional<SpectrumFit> spectrum;
   std::optional<DecayFitSummary> decay;
-  Curve decay_curve;
+  Curve decay_curve;  // per second of exposure at the exposure's middle, corrected for the exposure
+  Curve raw_decay;    // the same, uncorrected (the joint refinement's data)
+  // Excitation: per light its band irradiance and the response of each
+  // charge's first frame (for plots), every measurement with its tail, the
+  // per-state fit and ke per state.
   struct ExcitationLight {
     std::string light;
     std::vector<ExcitationSample> samples;
-    ExcitationFitSummary fit;
     std::vector<double> band_irradiance;
   };
   std::vector<ExcitationLight> excitation;
-  std::optional<JointFit> joint;   // nc = 1 with excitation data
+  std::vector<ExcitationMeasurement> excitation_measurements;
+  std::optional<StateExcitationFit> state_excitation;
+  std::vector<KeEstimate> ke;  // per state
+  std::optional<JointFit> joint;   // with excitation data
+  bool joint_written = false;      // the material is the joint refinement's
   std::vector<std::string> notes;  // what was left out or could not be fitted, and why
   double seconds = 0;
 };
@@ -128,26 +150,29 @@ struct SessionFit {
 // (Lambda), else a UserError naming what is missing.
 SessionFit FitSession(const std::filesystem::path& dir, const SessionFitOptions& options);
 
-// The joint refinement alone (FitSession runs it for nc = 1): starts from the
-// sequential decay fit and per-light excitation fits. `decay_curve` is the
+// The joint refinement alone (FitSession runs it): starts from the
+// sequential decay fit and the per-state excitation fit. `decay_curve` is the
 // decay as recorded (per second of exposure at the exposure's middle, with
 // exposure_s), not corrected for the exposure.
 JointFit JointRefine(const Curve& decay_curve, const DecayFitSummary& decay,
-                     const std::vector<SessionFit::ExcitationLight>& lights);
+                     const std::vector<ExcitationMeasurement>& measurements, const StateExcitationFit& excitation);
 
 // How close a fitted material is to the one a simulated sample was made of:
 // kr relative error per state, the L1 distance of the normalized emission
 // spectra (sum of |difference| over bands, each spectrum summing to 1), and
 // the relative error of ke in every band both know.
 struct MaterialComparison {
-  std::vector<double> kr_relative_error;
+  std::vector<double> kr_relative_error;  // per state, matched fastest to fastest
   double spectrum_l1 = 0;
   std::vector<std::optional<double>> ke_relative_error;  // per band of the first state
+  std::vector<std::vector<std::optional<double>>> ke_relative_error_per_state;  // [state][band]
 };
 MaterialComparison CompareMaterials(const Material& fitted, const Material& truth);
 
 // A self-contained HTML report: data against fit, residuals, uncertainties,
-// the chosen nc with its reason, as inline SVG plots.
-std::string SessionReportHtml(const SessionFit& fit, const std::string& title);
+// the chosen nc with its reason, as inline SVG plots; with `comparison`, how
+// far the fit is from a known material (`fit session --compare`).
+std::string SessionReportHtml(const SessionFit& fit, const std::string& title,
+                              const std::optional<MaterialComparison>& comparison = std::nullopt);
 
 }  // namespace phos

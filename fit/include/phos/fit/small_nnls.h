@@ -16,6 +16,14 @@ namespace phos {
 using SmallMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, 5, 5>;
 using SmallVector = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 5, 1>;
 
+// Up to 64 x 64, for the few dense decompositions fit/ does itself
+// (conditions, covariances of a few dozen parameters). A bounded type of our
+// own, never Eigen::MatrixXd: phos is built for x86-64-v3 and Debian's Ceres
+// is not, and an Eigen template instantiated for MatrixXd in both (the
+// JacobiSVD that Ceres's BDCSVD calls for its covariance, say) is one symbol
+// at link time: whichever copy wins corrupts the other's memory.
+using BoundedMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, 64, 64>;
+
 struct SmallNnlsResult {
   SmallVector x;
   double cost = 0;  // 0.5 x'Gx - b'x (add 0.5 y'y for the half squared residual)

@@ -10,6 +10,9 @@
 //           bottle, gloves, stickers). Unknown is not zero: a material whose
 //           ke is unknown in a band refuses to be charged there.
 //   Lambda[b] emitted radiance per unit kr*r (the re-radiation function)
+//   kr_stderr, ke_stderr[b]  optional 1-sigma uncertainties of a fitted
+//           material (`phos fit session` writes them); readers that do not
+//           know them still load the file, and nothing in the model uses them
 // Albedo (diffuse reflectance per band) is optional: Table 8.1 does not give it.
 
 #include <filesystem>
@@ -30,6 +33,9 @@ struct ExcitedState {
   double kr = 0.0;                         // 1/s
   std::vector<std::optional<double>> ke;   // per band, 1/s per unit irradiance; nullopt = unknown
   std::vector<double> Lambda;              // per band, radiance per unit kr*r
+  // Optional 1-sigma uncertainties of a fit (same units); nullopt: not given.
+  std::optional<double> kr_stderr;
+  std::vector<std::optional<double>> ke_stderr;  // empty, or one per band (nullopt where ke is unknown)
 
   bool ke_known(int b) const { return ke[b].has_value(); }
 };
