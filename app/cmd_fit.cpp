@@ -148,6 +148,11 @@ void RunFitSession(const SessionArgs& args) {
   const SessionFit fit = FitSession(args.dir, options);
   std::optional<MaterialComparison> comparison;
   if (truth) comparison = CompareMaterials(fit.material, *truth);
+  for (const std::string& file : {args.out, args.report}) {
+    const std::filesystem::path parent = std::filesystem::path(file).parent_path();
+    std::error_code ec;
+    if (!file.empty() && !parent.empty()) std::filesystem::create_directories(parent, ec);  // a failure is named by the write
+  }
   SaveMaterial(fit.material, args.out);
   if (!args.report.empty())
     WriteFileAtomically(args.report, SessionReportHtml(fit, "phos fit session " + args.dir, comparison));

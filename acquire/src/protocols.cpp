@@ -148,9 +148,13 @@ DecayProtocolResult RunDecayProtocol(Camera& camera, Lights& lights, Clock& cloc
     for (std::size_t m = 0; m < delays.size(); ++m) {
       const double start = result.light_off_s + delays[m];
       clock.SleepUntil(start);
-      // Never expose (and read out) past the next frame's start.
+      // Never expose (and read out) past the next frame's start. A slot the
+      // camera cannot take (its readout leaves under 0.1 ms of exposure, or
+      // the slot is gone by now: early frames on a slow camera) is skipped.
       const double gap = m + 1 < delays.size() ? delays[m + 1] - delays[m] : options.interval_s;
-      const double exposure_now = std::min(exposure, std::max(1e-6, 0.9 * gap - readout_s));
+      const double room = 0.9 * gap - readout_s;
+      if (m + 1 < delays.size() && (room < 1e-4 || clock.now_s() >= result.light_off_s + delays[m + 1])) continue;
+      const double exposure_now = std::min(exposure, std::max(1e-6, room));
       Frame frame = camera.Capture(exposure_now, options.gain);
       readout_s = std::max(0.0, clock.now_s() - frame.t_start_s - exposure_now);
       const double brightest =

@@ -303,6 +303,9 @@ void CheckComponents(double theta_lo, double theta_hi, Fit* fit) {
   }
 }
 
+// The most components a decay fit places (DecayFitOptions: 1..4).
+constexpr int kMaxDecayComponents = 4;
+
 }  // namespace
 
 DecayFitSummary FitDecay(const Curve& curve, const DecayFitOptions& options, const std::string& where) {
@@ -405,25 +408,35 @@ DecayFitSummary FitDecay(const Curve& curve, const DecayFitOptions& options, con
   // rates less one of them, each refined: a fast state that dominates can
   // pull the second rate onto itself before the slow state is seen, and
   // the stage after it finds both (backward elimination).
-  if (options.components == 0)
-    for (std::size_t f = 0; f + 1 < fits.size(); ++f) {
-      if (fits[f].valid) continue;
-      const Fit& next = fits[f + 1];
-      for (std::size_t drop = 0; drop < next.theta.size(); ++drop) {
-        Fit candidate;
-        std::vector<double> start;
-        for (std::size_t i = 0; i < next.theta.size(); ++i)
-          if (i != drop) {
-            candidate.theta.push_back(next.theta[i]);
-            start.push_back(std::exp(next.theta[i]));
-          }
-        Project(d, start, &candidate);
-        Refine(d, options.max_iterations, &candidate);
-        iterations += candidate.iterations;
-        CheckComponents(theta_lo, theta_hi, &candidate);
-        if (candidate.valid && (!fits[f].valid || candidate.wrss < fits[f].wrss)) fits[f] = std::move(candidate);
-      }
+  auto retry_from = [&](Fit& stage, const Fit& next) {
+    for (std::size_t drop = 0; drop < next.theta.size(); ++drop) {
+      Fit candidate;
+      std::vector<double> start;
+      for (std::size_t i = 0; i < next.theta.size(); ++i)
+        if (i != drop) {
+          candidate.theta.push_back(next.theta[i]);
+          start.push_back(std::exp(next.theta[i]));
+        }
+      Project(d, start, &candidate);
+      Refine(d, options.max_iterations, &candidate);
+      iterations += candidate.iterations;
+      CheckComponents(theta_lo, theta_hi, &candidate);
+      if (candidate.valid && (!stage.valid || candidate.wrss < stage.wrss)) stage = std::move(candidate);
     }
+  };
+  if (options.components == 0) {
+    for (std::size_t f = 0; f + 1 < fits.size(); ++f)
+      if (!fits[f].valid) retry_from(fits[f], fits[f + 1]);
+  } else if (!fits.empty() && !fits.back().valid && max_nc < kMaxDecayComponents &&
+             curve.size() * C > static_cast<std::size_t>(max_nc + 1) * (1 + C) + (options.background ? C : 0)) {
+    // A fixed count that collapsed: one stage more, for its rates only.
+    Fit next = ScanNewComponent(d, rates, grid, grid_columns);
+    if (!next.theta.empty()) {
+      Refine(d, options.max_iterations, &next);
+      iterations += next.iterations;
+      retry_from(fits.back(), next);
+    }
+  }
 
   DecayFitSummary summary;
   const double N = static_cast<double>(d.m) * C;

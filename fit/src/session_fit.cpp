@@ -3,7 +3,6 @@
 #include <ceres/ceres.h>
 
 #include <algorithm>
-#include <array>
 #include <chrono>
 #include <cmath>
 #include <map>
@@ -14,7 +13,6 @@
 #include "phos/util/error.h"
 #include "phos/util/format.h"
 #include "phos/util/json.h"
-#include "phos/util/svg_plot.h"
 #include "relative_covariance.h"
 #include "solver_options.h"
 

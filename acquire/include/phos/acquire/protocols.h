@@ -50,7 +50,8 @@ struct DecayProtocolOptions {
   // Frames between the first and the second slot, at delays halving from
   // interval_s / 2 down: a state that decays in well under interval_s (the
   // fast state of a two-state material, kr up to a few 1/s) is seen by
-  // several frames, not one. 0: the plain schedule.
+  // several frames, not one. A slot a slow camera cannot take is skipped.
+  // 0: the plain schedule.
   int early_frames = 6;
   double initial_exposure_s = 0.05;
   double max_exposure_s = 4;
