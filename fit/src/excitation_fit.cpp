@@ -11,29 +11,11 @@
 #include "phos/fit/small_nnls.h"
 #include "phos/util/error.h"
 #include "phos/util/format.h"
+#include "excitation_model.h"
 #include "solver_options.h"
 
 namespace phos {
 namespace {
-
-// The decay factor D of the delay and the exposure (1 for an instantaneous
-// reading at light-off).
-template <typename T>
-T DecayFactor(T kr, double delay_s, double exposure_s) {
-  using std::exp;
-  using std::expm1;
-  T decay = exp(-kr * delay_s);
-  if (exposure_s <= 0) return decay;
-  return decay * -expm1(-kr * exposure_s) / (kr * exposure_s);
-}
-
-// Charging from r = 0 (Eq. 8.1, exact): a / k * (1 - e^{-k t}).
-template <typename T>
-T ChargedState(T a, T kr, double charge_s) {
-  using std::expm1;
-  const T k = a + kr;
-  return a / k * -expm1(-k * charge_s);
-}
 
 struct ExcitationResidual {
   ExcitationResidual(const ExcitationSample& sample, double kr, double weight)

@@ -13,6 +13,7 @@
 #include "phos/util/error.h"
 #include "phos/util/format.h"
 #include "phos/util/json.h"
+#include "excitation_model.h"
 #include "relative_covariance.h"
 #include "solver_options.h"
 
@@ -654,7 +655,7 @@ struct JointDecayResidual {
   }
 };
 
-// One excitation frame: w (sum_i S_i r_i(t_c) D_i + B - y), the closed forms of state_excitation_fit.h.
+// One excitation frame: w (sum_i S_i r_i(t_c) D_i + B - y), the closed forms of excitation_model.h.
 struct JointExcitationResidual {
   double tc, td, te, y, w;
   int nc;
@@ -667,18 +668,12 @@ struct JointExcitationResidual {
     T sum = p[3][0];
     for (int i = 0; i < nc; ++i) {
       const T k = exp(log_k[i]);
-      const T r = a[i] / (a[i] + k) * (1.0 - exp(-(a[i] + k) * tc)) + (r0.empty() ? 0.0 : r0[i]) * exp(-(a[i] + k) * tc);
-      const T D = te > 0 ? exp(-k * td) * (1.0 - exp(-k * te)) / (k * te) : exp(-k * td);
-      sum += S[i] * r * D;
+      sum += S[i] * ChargedState(a[i], k, tc, r0.empty() ? 0.0 : r0[i]) * DecayFactor(k, td, te);
     }
     residual[0] = w * (sum - y);
     return true;
   }
 };
-
-double PoissonWeight(double value, double exposure, double floor) {
-  return std::sqrt(exposure / std::max(std::fabs(value), floor));
-}
 
 }  // namespace
 
@@ -706,7 +701,7 @@ JointFit JointRefine(const Curve& decay_curve, const DecayFitSummary& decay,
       const double e = j < decay_curve.exposure_s.size() ? decay_curve.exposure_s[j] : 1.0;
       const double y = decay_curve.channels[c][j];
       auto* cost = new ceres::DynamicAutoDiffCostFunction<JointDecayResidual, 8>(
-          new JointDecayResidual{decay_curve.t_s[j], e, y, PoissonWeight(y, e, 1e-3 * peak), nc});
+          new JointDecayResidual{decay_curve.t_s[j], e, y, PhotonCountingWeight(y, e, 1e-3 * peak), nc});
       cost->AddParameterBlock(nc);
       cost->AddParameterBlock(nc + 1);
       cost->SetNumResiduals(1);
@@ -723,7 +718,7 @@ JointFit JointRefine(const Curve& decay_curve, const DecayFitSummary& decay,
     for (const ExcitationFrame& f : m.frames) {
       auto* cost = new ceres::DynamicAutoDiffCostFunction<JointExcitationResidual, 8>(
           new JointExcitationResidual{m.charge_s, f.delay_s, f.exposure_s, f.value,
-                                      PoissonWeight(f.value, std::max(f.exposure_s, 1e-6), 1e-3 * peak), nc, m.start_state});
+                                      PhotonCountingWeight(f.value, std::max(f.exposure_s, 1e-6), 1e-3 * peak), nc, m.start_state});
       cost->AddParameterBlock(nc);
       cost->AddParameterBlock(nc);
       cost->AddParameterBlock(nc);

@@ -13,30 +13,12 @@
 #include "phos/fit/small_nnls.h"
 #include "phos/util/error.h"
 #include "phos/util/format.h"
+#include "excitation_model.h"
 #include "relative_covariance.h"
 #include "solver_options.h"
 
 namespace phos {
 namespace {
-
-// D_i: the decay of state i over the delay and the exposure (per second of exposure).
-template <typename T>
-T TailFactor(const T& kr, double delay_s, double exposure_s) {
-  using std::exp;
-  using std::expm1;
-  const T decay = exp(-kr * delay_s);
-  if (exposure_s <= 0) return decay;
-  return decay * -expm1(-kr * exposure_s) / (kr * exposure_s);
-}
-
-// r_i(t_c) from r0 (Eq. 8.1, exact; -expm1 keeps a weak charge's digits).
-template <typename T>
-T Charged(const T& a, double kr, double charge_s, double r0) {
-  using std::exp;
-  using std::expm1;
-  const T k = a + kr;
-  return a / k * -expm1(-k * charge_s) + r0 * exp(-k * charge_s);
-}
 
 struct FrameResidual {
   FrameResidual(std::vector<double> kr, double charge_s, ExcitationFrame frame, double weight, std::vector<double> r0)
@@ -46,8 +28,8 @@ struct FrameResidual {
   bool operator()(T const* const* p, T* residual) const {
     T sum = p[2][0];
     for (std::size_t i = 0; i < kr_.size(); ++i)
-      sum += p[0][i] * Charged(p[1][i], kr_[i], charge_s_, r0_.empty() ? 0.0 : r0_[i]) *
-             TailFactor(T(kr_[i]), frame_.delay_s, frame_.exposure_s);
+      sum += p[0][i] * ChargedState(p[1][i], T(kr_[i]), charge_s_, r0_.empty() ? 0.0 : r0_[i]) *
+             DecayFactor(T(kr_[i]), frame_.delay_s, frame_.exposure_s);
     residual[0] = weight_ * (sum - frame_.value);
     return true;
   }
@@ -65,10 +47,9 @@ double PeakValue(const std::vector<ExcitationMeasurement>& measurements) {
   return peak;
 }
 
-// Photon counting: a rate's variance is value / exposure.
 double FrameWeight(const ExcitationFrame& f, Weighting weighting, double peak) {
   if (weighting == Weighting::kNone) return 1.0 / std::max(peak, 1e-300);
-  return std::sqrt(std::max(f.exposure_s, 1e-6) / std::max(std::fabs(f.value), 1e-3 * peak));
+  return PhotonCountingWeight(f.value, std::max(f.exposure_s, 1e-6), 1e-3 * peak);
 }
 
 // The linear step: how much of each state one measurement's frames show,
@@ -81,7 +62,7 @@ std::vector<double> SplitIntoStates(const ExcitationMeasurement& m, const std::v
   for (const ExcitationFrame& f : m.frames) {
     const double w = FrameWeight(f, weighting, peak);
     std::vector<double> row(static_cast<std::size_t>(nc));
-    for (int i = 0; i < nc; ++i) row[i] = TailFactor(kr[i], f.delay_s, f.exposure_s);
+    for (int i = 0; i < nc; ++i) row[i] = DecayFactor(kr[i], f.delay_s, f.exposure_s);
     for (int i = 0; i < nc; ++i) {
       b(i) += w * w * row[i] * f.value;
       for (int j = 0; j < nc; ++j) G(i, j) += w * w * row[i] * row[j];
@@ -283,8 +264,8 @@ double ExcitationFrameSignal(const std::vector<double>& S, const std::vector<dou
                              const std::vector<double>& start_state) {
   double sum = background;
   for (std::size_t i = 0; i < kr.size(); ++i)
-    sum += S[i] * Charged(a[i], kr[i], charge_s, start_state.empty() ? 0.0 : start_state[i]) *
-           TailFactor(kr[i], frame.delay_s, frame.exposure_s);
+    sum += S[i] * ChargedState(a[i], kr[i], charge_s, start_state.empty() ? 0.0 : start_state[i]) *
+           DecayFactor(kr[i], frame.delay_s, frame.exposure_s);
   return sum;
 }
 
@@ -306,8 +287,8 @@ void CarryOverStartStates(std::vector<ExcitationMeasurement>& measurements,
     if (!(dark_s >= 0)) continue;
     m.start_state.resize(kr.size());
     for (std::size_t i = 0; i < kr.size(); ++i) {
-      const double r_off = Charged(rates->second[i], kr[i], before.charge_s,
-                                   before.start_state.empty() ? 0.0 : before.start_state[i]);
+      const double r_off = ChargedState(rates->second[i], kr[i], before.charge_s,
+                                        before.start_state.empty() ? 0.0 : before.start_state[i]);
       m.start_state[i] = r_off * std::exp(-kr[i] * dark_s);
     }
   }
