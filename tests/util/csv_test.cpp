@@ -83,5 +83,19 @@ TEST(ReadCsv, ADecimalCommaIsNamed) {
             std::string::npos);
 }
 
+// Limits before allocation (issue 16 item 2): columns and rows are counted
+// as they are read, and only regular files are read.
+TEST(ReadCsv, ColumnsRowsAndFileKindsHaveLimits) {
+  testing::TempDir dir;
+  std::string wide = "t";
+  for (std::size_t c = 0; c < kMaxCsvColumns; ++c) wide += ",v";
+  testing::WriteText(dir / "wide.csv", wide + "\n");
+  EXPECT_EQ(testing::ErrorOfType<UserError>([&] { ReadCsv(dir / "wide.csv"); }),
+            (dir / "wide.csv").string() + ": line 1: more than the limit of 4096 columns");
+  EXPECT_EQ(ParseCsv("t,v\n0,1\n1,2\n", "mem.csv").row_count(), 2u);
+  EXPECT_NE(testing::ErrorOfType<UserError>([&] { ReadCsv("/dev/zero"); }).find("/dev/zero: not a regular file"),
+            std::string::npos);
+}
+
 }  // namespace
 }  // namespace phos

@@ -2,6 +2,7 @@
 
 #include <functional>
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 
 #include "phos/util/error.h"
 #include "test_util.h"
@@ -29,6 +30,24 @@ TEST(ReadJsonFile, MissingAndMalformedFilesAreUserErrors) {
   testing::WriteText(dir / "bad.json", "{\"a\": 1,,}");
   std::string message = ErrorOf([&] { ReadJsonFile(dir / "bad.json"); });
   EXPECT_NE(message.find("bad.json: not valid JSON: parse error at line 1"), std::string::npos) << message;
+}
+
+// Issue 16: a FIFO as a material path hung, and /dev/zero exhausted memory.
+TEST(ReadFileText, ReadsOnlyRegularFilesWithinTheLimit) {
+  testing::TempDir dir;
+  testing::WriteText(dir / "a.json", "{\"a\": 1}");
+  EXPECT_EQ(ReadFileText(dir / "a.json"), "{\"a\": 1}");
+  EXPECT_EQ(ReadJsonFile(dir / "a.json")["a"], 1);
+  ASSERT_EQ(::mkfifo((dir / "fifo.json").c_str(), 0600), 0);
+  EXPECT_EQ(ErrorOf([&] { ReadJsonFile(dir / "fifo.json"); }),
+            (dir / "fifo.json").string() + ": not a regular file (a FIFO, socket or device); phos reads only regular files");
+  EXPECT_NE(ErrorOf([&] { ReadJsonFile("/dev/zero"); }).find("/dev/zero: not a regular file"), std::string::npos);
+  EXPECT_EQ(ErrorOf([&] { ReadJsonFile(dir.path()); }), dir.path().string() + ": is a folder, not a file");
+  EXPECT_EQ(ErrorOf([&] { ReadFileText(dir / "a.json", 4); }),
+            (dir / "a.json").string() + ": the file has 8 bytes, more than the limit of 4 bytes");
+  EXPECT_EQ(ReadFileText(dir / "a.json", 8).size(), 8u);
+  testing::WriteText(dir / "empty.json", "");
+  EXPECT_EQ(ReadFileText(dir / "empty.json"), "");
 }
 
 TEST(WriteFileAtomically, ReplacesWholeAndLeavesNoTemporary) {

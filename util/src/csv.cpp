@@ -1,10 +1,11 @@
 #include "phos/util/csv.h"
 
 #include <algorithm>
-#include <fstream>
+#include <sstream>
 
 #include "phos/util/error.h"
 #include "phos/util/format.h"
+#include "phos/util/json.h"
 
 namespace phos {
 namespace {
@@ -25,11 +26,13 @@ char DetectSeparator(const std::string& line) {
   return best;
 }
 
+// At most kMaxCsvColumns + 1 fields: one more than the limit is enough to refuse the line.
 std::vector<std::string> SplitFields(const std::string& line, char separator) {
   std::vector<std::string> fields;
   if (separator == ' ') {
     // Runs of spaces and tabs are one separator (aligned columns).
-    for (std::size_t a = line.find_first_not_of(kBlank); a != std::string::npos; a = line.find_first_not_of(kBlank, a)) {
+    for (std::size_t a = line.find_first_not_of(kBlank); a != std::string::npos && fields.size() <= kMaxCsvColumns;
+         a = line.find_first_not_of(kBlank, a)) {
       const std::size_t b = line.find_first_of(kBlank, a);
       fields.push_back(line.substr(a, b == std::string::npos ? std::string::npos : b - a));
       a = b;
@@ -43,7 +46,7 @@ std::vector<std::string> SplitFields(const std::string& line, char separator) {
     // Trim spaces and a trailing carriage return (files from Windows instruments).
     std::size_t a = field.find_first_not_of(kBlank), b = field.find_last_not_of(kBlank);
     fields.push_back(a == std::string::npos ? "" : field.substr(a, b - a + 1));
-    if (end == std::string::npos) return fields;
+    if (end == std::string::npos || fields.size() > kMaxCsvColumns) return fields;
     start = end + 1;
   }
 }
@@ -61,11 +64,12 @@ int CsvTable::Find(const std::string& name) const {
   return -1;
 }
 
-CsvTable ReadCsv(const std::filesystem::path& path) {
-  std::ifstream in(path);
-  if (!in) ThrowUserError(path.string(), "", "cannot open the file for reading");
+CsvTable ReadCsv(const std::filesystem::path& path) { return ParseCsv(ReadFileText(path), path.string()); }
+
+CsvTable ParseCsv(const std::string& text, const std::string& source) {
+  std::istringstream in(text);
   CsvTable table;
-  table.source = path.string();
+  table.source = source;
   std::string line;
   int line_number = 0;
   while (std::getline(in, line)) {
@@ -73,6 +77,9 @@ CsvTable ReadCsv(const std::filesystem::path& path) {
     if (line.find_first_not_of(kBlank) == std::string::npos || line[0] == '#') continue;
     if (table.header.empty()) table.separator = DetectSeparator(line);
     std::vector<std::string> fields = SplitFields(line, table.separator);
+    if (fields.size() > kMaxCsvColumns)
+      ThrowUserError(table.source, "line " + std::to_string(line_number),
+                     "more than the limit of " + std::to_string(kMaxCsvColumns) + " columns");
     if (table.header.empty()) {
       table.columns.resize(fields.size());
       if (!AllNumbers(fields)) {
@@ -82,6 +89,9 @@ CsvTable ReadCsv(const std::filesystem::path& path) {
       table.has_header = false;
       for (std::size_t c = 0; c < fields.size(); ++c) table.header.push_back("column " + std::to_string(c + 1));
     }
+    if (table.row_count() >= kMaxCsvRows)
+      ThrowUserError(table.source, "line " + std::to_string(line_number),
+                     "more than the limit of " + std::to_string(kMaxCsvRows) + " rows");
     if (fields.size() != table.header.size())
       ThrowUserError(table.source, "line " + std::to_string(line_number),
                      "expected " + std::to_string(table.header.size()) + " columns, got " + std::to_string(fields.size()));

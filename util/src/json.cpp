@@ -1,9 +1,15 @@
 #include "phos/util/json.h"
 
+#include <algorithm>
+#include <cerrno>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <fstream>
 #include <sstream>
+
+#include <fcntl.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include "phos/util/error.h"
@@ -11,21 +17,66 @@
 
 namespace phos {
 
-nlohmann::json ReadJsonFile(const std::filesystem::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) ThrowUserError(path.string(), "", "cannot open the file for reading");
-  std::stringstream text;
-  text << in.rdbuf();
+std::string ReadFileText(const std::filesystem::path& path, std::uintmax_t max_bytes) {
+  const std::string where = path.string();
+  // O_NONBLOCK: opening a FIFO for reading would otherwise wait for a writer.
+  const int fd = ::open(path.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC);
+  if (fd < 0) ThrowUserError(where, "", std::string("cannot open the file for reading (") + std::strerror(errno) + ")");
+  struct FdCloser {
+    int fd;
+    ~FdCloser() { ::close(fd); }
+  } closer{fd};
+  struct stat info {};
+  if (::fstat(fd, &info) != 0) ThrowUserError(where, "", std::string("cannot read the file (") + std::strerror(errno) + ")");
+  if (S_ISDIR(info.st_mode)) ThrowUserError(where, "", "is a folder, not a file");
+  if (!S_ISREG(info.st_mode))
+    ThrowUserError(where, "", "not a regular file (a FIFO, socket or device); phos reads only regular files");
+  const auto too_large = [&](std::uintmax_t bytes) {
+    ThrowUserError(where, "", "the file has " + std::to_string(bytes) + " bytes, more than the limit of " +
+                                  std::to_string(max_bytes) + " bytes");
+  };
+  if (static_cast<std::uintmax_t>(info.st_size) > max_bytes) too_large(static_cast<std::uintmax_t>(info.st_size));
+  std::string text(static_cast<std::size_t>(info.st_size), '\0');
+  std::size_t have = 0;
+  while (true) {  // the file may have grown or shrunk since fstat: read to its end, within the limit
+    if (have == text.size()) {
+      if (text.size() >= max_bytes) {
+        char probe;
+        const ssize_t n = ::read(fd, &probe, 1);
+        if (n > 0) too_large(max_bytes + 1);
+        if (n == 0) break;
+        if (errno == EINTR) continue;
+        ThrowUserError(where, "", std::string("reading failed (") + std::strerror(errno) + ")");
+      }
+      text.resize(static_cast<std::size_t>(std::min<std::uintmax_t>(max_bytes, std::max<std::uintmax_t>(4096, 2 * text.size()))));
+    }
+    const ssize_t n = ::read(fd, text.data() + have, text.size() - have);
+    if (n == 0) break;
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      ThrowUserError(where, "", std::string("reading failed (") + std::strerror(errno) + ")");
+    }
+    have += static_cast<std::size_t>(n);
+  }
+  text.resize(have);
+  return text;
+}
+
+nlohmann::json ParseJsonText(std::string_view text, const std::string& source) {
   try {
-    return nlohmann::json::parse(text.str());
+    return nlohmann::json::parse(text);
   } catch (const nlohmann::json::exception& e) {
     // Drop nlohmann's "[json.exception.parse_error.101] " prefix: the user
     // needs the position and the reason.
     std::string what = e.what();
     if (auto close = what.find("] "); what.rfind("[json.exception", 0) == 0 && close != std::string::npos)
       what = what.substr(close + 2);
-    ThrowUserError(path.string(), "", "not valid JSON: " + what);
+    ThrowUserError(source, "", "not valid JSON: " + what);
   }
+}
+
+nlohmann::json ReadJsonFile(const std::filesystem::path& path) {
+  return ParseJsonText(ReadFileText(path), path.string());
 }
 
 std::vector<nlohmann::json> ReadJsonLines(const std::filesystem::path& path) {

@@ -30,6 +30,14 @@ struct CsvTable {
 // when every field of it is a number it is data instead, and the columns are
 // named "column 1", "column 2", ... Decimal commas are not read ("0,5" with
 // ';' is an error that says so).
+// The file is read whole first (ReadFileText: a regular file, at most
+// kMaxInputFileBytes); a table has at most kMaxCsvColumns columns and
+// kMaxCsvRows rows of data (a curve's samples).
 CsvTable ReadCsv(const std::filesystem::path& path);
+// The same from text in memory; `source` names it in errors.
+CsvTable ParseCsv(const std::string& text, const std::string& source);
+
+inline constexpr std::size_t kMaxCsvColumns = 4096;
+inline constexpr std::size_t kMaxCsvRows = 10'000'000;
 
 }  // namespace phos

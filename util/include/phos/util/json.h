@@ -4,6 +4,7 @@
 // complaint names both, in the one form of UserError.
 
 #include <cstddef>
+#include <cstdint>
 #include <filesystem>
 #include <initializer_list>
 #include <limits>
@@ -16,7 +17,21 @@
 
 namespace phos {
 
-// Reads and parses a JSON file; a missing file or a syntax error is a UserError.
+// The largest input file phos reads (material, scene, constraints, lab
+// config, curve CSV, mesh, glTF buffer): 256 MiB. Limits before allocation
+// (docs/fuzzing.md, "Limits"): a file is sized before it is read.
+inline constexpr std::uintmax_t kMaxInputFileBytes = std::uintmax_t{256} << 20;
+
+// The whole content of a regular file of at most max_bytes. Anything else is
+// a UserError naming the file: missing, a folder, a FIFO or a device (which
+// would block or never end: /dev/zero), or larger than the limit.
+std::string ReadFileText(const std::filesystem::path& path, std::uintmax_t max_bytes = kMaxInputFileBytes);
+
+// Parses JSON text; a syntax error is a UserError naming `source`.
+nlohmann::json ParseJsonText(std::string_view text, const std::string& source);
+
+// Reads (ReadFileText) and parses a JSON file; a missing file or a syntax
+// error is a UserError.
 nlohmann::json ReadJsonFile(const std::filesystem::path& path);
 
 // The records of a JSON Lines file (frames.jsonl, events.jsonl) that parse as
