@@ -251,7 +251,9 @@ template <typename Real>
 BatchStepInfo AdvanceBatch(Integrator integrator, const BatchCoefficients<Real>& c, const Real* E,
                            std::size_t E_stride, Real h_s, StateBatch<Real>& s, Real* Lp, std::size_t Lp_stride) {
   PHOS_CHECK(s.nc == c.nc);
-  PHOS_CHECK(c.n_exc == 0 || E != nullptr);
+  // An empty batch (a phosphorescent medium with no voxel of density > 0)
+  // has nothing to advance, and its empty E may well be null.
+  PHOS_CHECK(c.n_exc == 0 || s.n == 0 || E != nullptr);
   BatchStepInfo info;
   switch (integrator) {
     case Integrator::kExact:

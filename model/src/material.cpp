@@ -16,6 +16,17 @@ bool Material::ChargeableIn(int b) const {
   return true;
 }
 
+namespace {
+
+// A number >= 0 and at most `limit` (the finite ranges of material.h).
+double NonNegativeUpTo(const JsonField& field, double limit) {
+  const double v = field.NumberAtLeast(0.0);
+  if (v > limit) field.Fail("expected at most " + FormatDouble(limit) + " (the limit phos accepts), got " + FormatDouble(v));
+  return v;
+}
+
+}  // namespace
+
 Material MaterialFromJson(const nlohmann::json& json, const std::string& source) {
   JsonField root(json, source);
   root.RejectUnknownKeys({"schema", "name", "bands_nm", "albedo", "states", "source"});
@@ -28,7 +39,13 @@ Material MaterialFromJson(const nlohmann::json& json, const std::string& source)
 
   JsonField bands = root["bands_nm"];
   if (bands.ArraySize() < 2) bands.Fail("expected at least 2 band edges (one band)");
+  if (bands.ArraySize() > static_cast<size_t>(kMaxBands) + 1)
+    bands.Fail("more than the limit of " + std::to_string(kMaxBands) + " bands");
   m.bands.edges_nm = bands.NumberArray(0, 0.0);
+  for (size_t i = 0; i < m.bands.edges_nm.size(); ++i)
+    if (m.bands.edges_nm[i] > kMaxWavelengthNm)
+      bands.At(i).Fail("expected a wavelength of at most " + FormatDouble(kMaxWavelengthNm) + " nm, got " +
+                       FormatDouble(m.bands.edges_nm[i]));
   for (size_t i = 1; i < m.bands.edges_nm.size(); ++i)
     if (!(m.bands.edges_nm[i] > m.bands.edges_nm[i - 1]))
       bands.At(i).Fail("band edges must increase strictly (" + FormatDouble(m.bands.edges_nm[i]) +
@@ -50,7 +67,7 @@ Material MaterialFromJson(const nlohmann::json& json, const std::string& source)
     JsonField s = states.At(i);
     s.RejectUnknownKeys({"kr", "ke", "Lambda", "kr_stderr", "ke_stderr"});
     ExcitedState state;
-    state.kr = s["kr"].NumberAtLeast(0.0);
+    state.kr = NonNegativeUpTo(s["kr"], kMaxRate);
     JsonField ke = s["ke"];
     if (ke.IsNull()) {
       state.ke.assign(n, std::nullopt);  // never measured: the material can decay but not be charged
@@ -59,10 +76,11 @@ Material MaterialFromJson(const nlohmann::json& json, const std::string& source)
         ke.Fail("expected " + std::to_string(n) + " values (one per band), got " + std::to_string(ke.ArraySize()));
       for (size_t b = 0; b < n; ++b) {
         JsonField v = ke.At(b);
-        state.ke.push_back(v.IsNull() ? std::nullopt : std::optional<double>(v.NumberAtLeast(0.0)));
+        state.ke.push_back(v.IsNull() ? std::nullopt : std::optional<double>(NonNegativeUpTo(v, kMaxRate)));
       }
     }
     state.Lambda = s["Lambda"].NumberArray(n, 0.0);
+    for (size_t b = 0; b < n; ++b) NonNegativeUpTo(s["Lambda"].At(b), kMaxLambda);
     if (auto kr_stderr = s.Optional("kr_stderr"); kr_stderr && !kr_stderr->IsNull())
       state.kr_stderr = kr_stderr->NumberAtLeast(0.0);
     if (auto ke_stderr = s.Optional("ke_stderr"); ke_stderr && !ke_stderr->IsNull()) {

@@ -3,6 +3,7 @@
 #include <cmath>
 #include <functional>
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 #include <nlohmann/json.hpp>
 
 #include "phos/model/schedule.h"
@@ -124,6 +125,47 @@ TEST(Material, NumbersTooLargeForADoubleAreRejected) {
   testing::WriteText(dir / "huge.json", text);
   std::string message = ErrorOf([&] { LoadMaterial(dir / "huge.json"); });
   EXPECT_EQ(message.rfind((dir / "huge.json").string(), 0), 0u) << message;
+}
+
+// Issue 16: kr = 1e308 was accepted and the output was not finite. Rates and
+// Lambda have finite ranges (material.h), and the message names the limit.
+TEST(Material, RatesOutsideTheFiniteRangeAreRefused) {
+  const nlohmann::json green = nlohmann::json::parse(testing::ReadText(testing::Fixture("materials/green.json")));
+  struct Case {
+    std::function<void(nlohmann::json&)> edit;
+    std::string expected;
+  } cases[] = {
+      {[](nlohmann::json& j) { j["states"][0]["kr"] = 1e308; },
+       "m.json: states[0].kr: expected at most 1e+09 (the limit phos accepts), got 1e+308"},
+      {[](nlohmann::json& j) { j["states"][0]["ke"][0] = 1e10; },
+       "m.json: states[0].ke[0]: expected at most 1e+09 (the limit phos accepts), got 1e+10"},
+      {[](nlohmann::json& j) { j["states"][0]["Lambda"][3] = 1e300; },
+       "m.json: states[0].Lambda[3]: expected at most 1e+09 (the limit phos accepts), got 1e+300"},
+      {[](nlohmann::json& j) { j["bands_nm"][8] = 1e300; },
+       "m.json: bands_nm[8]: expected a wavelength of at most 1e+05 nm, got 1e+300"},
+      {[](nlohmann::json& j) {
+         j["bands_nm"] = nlohmann::json::array();
+         for (int i = 0; i <= kMaxBands + 1; ++i) j["bands_nm"].push_back(400 + i);
+       },
+       "m.json: bands_nm: more than the limit of 256 bands"},
+  };
+  for (const Case& c : cases) {
+    nlohmann::json j = green;
+    c.edit(j);
+    EXPECT_EQ(ErrorOf([&] { MaterialFromJson(j, "m.json"); }), c.expected);
+  }
+  // The limit itself is accepted.
+  nlohmann::json j = green;
+  j["states"][0]["kr"] = kMaxRate;
+  EXPECT_EQ(MaterialFromJson(j, "m.json").states[0].kr, kMaxRate);
+}
+
+// Issue 16: a material path that is a FIFO hung; /dev/zero exhausted memory.
+TEST(Material, OnlyRegularFilesAreRead) {
+  testing::TempDir dir;
+  ASSERT_EQ(::mkfifo((dir / "fifo.json").c_str(), 0600), 0);
+  EXPECT_NE(ErrorOf([&] { LoadMaterial(dir / "fifo.json"); }).find("fifo.json: not a regular file"), std::string::npos);
+  EXPECT_NE(ErrorOf([&] { LoadMaterial("/dev/zero"); }).find("/dev/zero: not a regular file"), std::string::npos);
 }
 
 }  // namespace

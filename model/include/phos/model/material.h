@@ -27,6 +27,21 @@
 namespace phos {
 
 inline constexpr int kMaxStates = 4;
+// The finite ranges a material file's values must lie in (docs/fuzzing.md,
+// "Limits"), so that every product the model forms (ke E, kr r, Lambda kr r,
+// e^{-kr t}) stays finite, in float as in double: kr and every ke in
+// [0, kMaxRate] (1/s, and 1/s per unit irradiance), Lambda in
+// [0, kMaxLambda], band edges in [0, kMaxWavelengthNm] nm, at most kMaxBands
+// bands. Far beyond any phosphor (Table 8.1: kr 0.01 to 0.3/s), and wide
+// enough for ke in any irradiance unit; the uncertainties (*_stderr) need
+// only be finite.
+inline constexpr double kMaxRate = 1e9;
+inline constexpr double kMaxLambda = 1e9;
+inline constexpr double kMaxWavelengthNm = 1e5;
+inline constexpr int kMaxBands = 256;
+// The largest band-integrated irradiance any input may give (a scene's light,
+// `phos simulate --irradiance`): with kMaxRate, ke E stays below 1e18/s.
+inline constexpr double kMaxIrradiance = 1e9;
 inline constexpr const char* kMaterialSchema = "phos.material/1";
 
 struct ExcitedState {
