@@ -3,16 +3,20 @@
 // (v1 - v0) x (v2 - v0) is the side that charges and glows (a paint layer).
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstring>
 #include <functional>
 #include <map>
+#include <type_traits>
 
 #include <tiny_gltf.h>
 #include <tiny_obj_loader.h>
 
 #include "phos/render/scene.h"
 #include "phos/util/error.h"
+#include "phos/util/format.h"
+#include "phos/util/json.h"
 
 namespace phos::render {
 namespace {
@@ -22,35 +26,79 @@ void FlipWinding(Mesh& mesh) {
   for (Eigen::Vector3i& t : mesh.uv_triangles) std::swap(t[1], t[2]);
 }
 
-Mesh LoadObj(const std::filesystem::path& path, const std::string& group, const std::string& where) {
+// A loader's message as one line: tinyobjloader and tinygltf end every
+// complaint with a newline and may give several.
+std::string OneLine(std::string message) {
+  std::string line;
+  std::size_t start = 0;
+  while (start <= message.size()) {
+    std::size_t end = message.find_first_of("\r\n", start);
+    if (end == std::string::npos) end = message.size();
+    std::string part = message.substr(start, end - start);
+    while (!part.empty() && std::isspace(static_cast<unsigned char>(part.back()))) part.pop_back();
+    if (!part.empty()) line += (line.empty() ? "" : "; ") + part;
+    start = end + 1;
+  }
+  for (char& c : line)
+    if (static_cast<unsigned char>(c) < 0x20) c = ' ';
+  return line.empty() ? "unknown error" : line;
+}
+
+// What the loaders check after reading, whichever the format: the counts,
+// indices in range, and vertices finite and within kMaxCoordinate_m.
+void CheckCounts(std::size_t vertices, std::size_t triangles, const std::string& where, const std::string& file) {
+  if (vertices > kMaxMeshVertices)
+    ThrowUserError(where, "", "mesh '" + file + "' has more than the limit of " + std::to_string(kMaxMeshVertices) +
+                                  " vertices");
+  if (triangles > kMaxMeshTriangles)
+    ThrowUserError(where, "", "mesh '" + file + "' has more than the limit of " + std::to_string(kMaxMeshTriangles) +
+                                  " triangles");
+}
+
+Mesh ParseObj(std::string_view text, const std::string& name, const std::string& group, const std::string& where) {
+  // Counts before allocation: a vertex is a line "v ...", and a face of k
+  // corners "f ..." gives k - 2 triangles, fewer than its fields.
+  std::size_t vertex_lines = 0, face_fields = 0;
+  for (std::size_t a = 0; a < text.size();) {
+    std::size_t b = text.find('\n', a);
+    if (b == std::string_view::npos) b = text.size();
+    const std::string_view line = text.substr(a, b - a);
+    if (line.size() >= 2 && line[0] == 'v' && (line[1] == ' ' || line[1] == '\t')) ++vertex_lines;
+    if (line.size() >= 2 && line[0] == 'f' && (line[1] == ' ' || line[1] == '\t'))
+      face_fields += static_cast<std::size_t>(std::count(line.begin(), line.end(), ' ') +
+                                              std::count(line.begin(), line.end(), '\t'));
+    a = b + 1;
+  }
+  CheckCounts(vertex_lines, face_fields, where, name);
   tinyobj::ObjReaderConfig config;
   config.triangulate = true;
   config.vertex_color = false;
-  config.mtl_search_path = path.parent_path().string();
   tinyobj::ObjReader reader;
-  if (!reader.ParseFromFile(path.string(), config)) {
-    std::string message = reader.Error();
-    while (!message.empty() && (message.back() == '\n' || message.back() == '\r')) message.pop_back();
-    ThrowUserError(where, "", "cannot read OBJ '" + path.string() + "': " + (message.empty() ? "unknown error" : message));
-  }
+  // No .mtl is read (an empty material text): phos uses no OBJ materials, and
+  // a mtllib naming a FIFO or /dev/zero must not hang the load.
+  if (!reader.ParseFromString(std::string(text), std::string(), config))
+    ThrowUserError(where, "", "cannot read OBJ '" + name + "': " + OneLine(reader.Error()));
   Mesh mesh;
-  mesh.source = path.string() + (group.empty() ? "" : "#" + group);
+  mesh.source = name + (group.empty() ? "" : "#" + group);
   const std::vector<tinyobj::real_t>& v = reader.GetAttrib().vertices;
+  CheckCounts(v.size() / 3, 0, where, name);
   for (std::size_t i = 0; i + 2 < v.size(); i += 3) mesh.positions.emplace_back(v[i], v[i + 1], v[i + 2]);
   const std::vector<tinyobj::real_t>& vt = reader.GetAttrib().texcoords;
+  CheckCounts(vt.size() / 2, 0, where, name);
   for (std::size_t i = 0; i + 1 < vt.size(); i += 2) mesh.uvs.emplace_back(vt[i], vt[i + 1]);
   bool every_corner_has_uv = !mesh.uvs.empty();
   bool found = group.empty();
   std::string names;
   for (const tinyobj::shape_t& shape : reader.GetShapes()) {
-    names += (names.empty() ? "" : ", ") + shape.name;
+    if (names.size() < 200) names += (names.empty() ? "" : ", ") + shape.name;
     if (!group.empty() && shape.name != group) continue;
     found = true;
     const auto& indices = shape.mesh.indices;
+    CheckCounts(0, mesh.triangles.size() + indices.size() / 3, where, name);
     for (std::size_t i = 0; i + 2 < indices.size(); i += 3) {
       Eigen::Vector3i t(indices[i].vertex_index, indices[i + 1].vertex_index, indices[i + 2].vertex_index);
       if (t.minCoeff() < 0 || t.maxCoeff() >= static_cast<int>(mesh.positions.size()))
-        ThrowUserError(where, "", "OBJ '" + path.string() + "' has a face with a vertex index out of range");
+        ThrowUserError(where, "", "OBJ '" + name + "' has a face with a vertex index out of range");
       mesh.triangles.push_back(t);
       const Eigen::Vector3i uv(indices[i].texcoord_index, indices[i + 1].texcoord_index, indices[i + 2].texcoord_index);
       every_corner_has_uv = every_corner_has_uv && uv.minCoeff() >= 0 && uv.maxCoeff() < static_cast<int>(mesh.uvs.size());
@@ -61,41 +109,66 @@ Mesh LoadObj(const std::filesystem::path& path, const std::string& group, const 
     mesh.uvs.clear();
     mesh.uv_triangles.clear();
   }
-  if (!found) ThrowUserError(where, "", "OBJ '" + path.string() + "' has no group '" + group + "' (groups: " + names + ")");
+  if (!found) ThrowUserError(where, "", "OBJ '" + name + "' has no group '" + group + "' (groups: " + names + ")");
   return mesh;
 }
 
-// Reads accessor `index` of a glTF model as `components` values per element.
+// Reads accessor `index` of a glTF model as `components` values per element,
+// at most max_elements of them. Every offset is checked against the buffer
+// before it is used, without overflow (a count of 2^62 wrapped the old sum).
 template <typename Out>
-std::vector<Out> ReadAccessor(const tinygltf::Model& model, int index, int components, const std::string& where,
-                              const std::string& what) {
+std::vector<Out> ReadAccessor(const tinygltf::Model& model, int index, int components, std::size_t max_elements,
+                              const std::string& where, const std::string& what) {
   if (index < 0 || index >= static_cast<int>(model.accessors.size()))
     ThrowUserError(where, what, "accessor index out of range");
   const tinygltf::Accessor& accessor = model.accessors[index];
+  if (accessor.sparse.isSparse) ThrowUserError(where, what, "sparse accessors are not supported");
   if (accessor.bufferView < 0 || accessor.bufferView >= static_cast<int>(model.bufferViews.size()))
     ThrowUserError(where, what, "accessor without a valid bufferView");
   const tinygltf::BufferView& view = model.bufferViews[accessor.bufferView];
-  const tinygltf::Buffer& buffer = model.buffers.at(view.buffer);
+  if (view.buffer < 0 || view.buffer >= static_cast<int>(model.buffers.size()))
+    ThrowUserError(where, what, "bufferView " + std::to_string(accessor.bufferView) + " names a buffer that does not exist");
+  const tinygltf::Buffer& buffer = model.buffers[view.buffer];
   const int component_bytes = tinygltf::GetComponentSizeInBytes(accessor.componentType);
   const int element_components = tinygltf::GetNumComponentsInType(accessor.type);
   if (component_bytes <= 0 || element_components != components)
     ThrowUserError(where, what, "unexpected accessor type");
-  const std::size_t stride = view.byteStride ? view.byteStride : static_cast<std::size_t>(component_bytes * components);
+  const bool integer = accessor.componentType == TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT ||
+                       accessor.componentType == TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT ||
+                       accessor.componentType == TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE;
+  if (accessor.componentType != TINYGLTF_COMPONENT_TYPE_FLOAT && !integer)
+    ThrowUserError(where, what, "unsupported component type " + std::to_string(accessor.componentType));
+  if (std::is_integral_v<Out> && !integer) ThrowUserError(where, what, "indices must be unsigned integers");
+  if (accessor.count > max_elements)
+    ThrowUserError(where, what, "accessor count " + std::to_string(accessor.count) + " is more than the limit of " +
+                                    std::to_string(max_elements));
+  const std::size_t element_bytes = static_cast<std::size_t>(component_bytes) * static_cast<std::size_t>(components);
+  const std::size_t stride = view.byteStride ? view.byteStride : element_bytes;
+  const std::size_t size = buffer.data.size();
+  // begin + stride (count - 1) + element_bytes <= size, each step checked.
+  if (view.byteOffset > size || accessor.byteOffset > size - view.byteOffset)
+    ThrowUserError(where, what, "accessor starts past the end of its buffer");
   const std::size_t begin = view.byteOffset + accessor.byteOffset;
-  if (accessor.count > 0 &&
-      begin + stride * (accessor.count - 1) + static_cast<std::size_t>(component_bytes * components) > buffer.data.size())
+  if (accessor.count > 0 && (element_bytes > size - begin ||
+                             (accessor.count - 1) > (size - begin - element_bytes) / stride))
     ThrowUserError(where, what, "accessor reaches past the end of its buffer");
   std::vector<Out> out;
-  out.reserve(accessor.count * components);
+  out.reserve(accessor.count * static_cast<std::size_t>(components));
   for (std::size_t e = 0; e < accessor.count; ++e) {
     const unsigned char* p = buffer.data.data() + begin + e * stride;
     for (int c = 0; c < components; ++c, p += component_bytes) {
       switch (accessor.componentType) {
         case TINYGLTF_COMPONENT_TYPE_FLOAT: { float f; std::memcpy(&f, p, 4); out.push_back(static_cast<Out>(f)); break; }
-        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: { std::uint32_t u; std::memcpy(&u, p, 4); out.push_back(static_cast<Out>(u)); break; }
+        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: {
+          std::uint32_t u;
+          std::memcpy(&u, p, 4);
+          // An index past INT_MAX is out of range anyway: -1 says so below.
+          if constexpr (std::is_integral_v<Out>) out.push_back(u > 0x7fffffffu ? Out(-1) : static_cast<Out>(u));
+          else out.push_back(static_cast<Out>(u));
+          break;
+        }
         case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: { std::uint16_t u; std::memcpy(&u, p, 2); out.push_back(static_cast<Out>(u)); break; }
-        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: out.push_back(static_cast<Out>(*p)); break;
-        default: ThrowUserError(where, what, "unsupported component type " + std::to_string(accessor.componentType));
+        default: out.push_back(static_cast<Out>(*p)); break;  // unsigned byte
       }
     }
   }
@@ -115,23 +188,62 @@ Eigen::Affine3d NodeTransform(const tinygltf::Node& node) {
   return transform;
 }
 
-Mesh LoadGltf(const std::filesystem::path& path, const std::string& group, const std::string& where) {
+// tinygltf's file access, for external buffers: regular files within the
+// size limit only (ReadFileText), no "~" expansion.
+bool GltfFileExists(const std::string& path, void*) {
+  std::error_code ec;
+  return std::filesystem::is_regular_file(path, ec);
+}
+std::string GltfExpandPath(const std::string& path, void*) { return path; }
+bool GltfReadFile(std::vector<unsigned char>* out, std::string* err, const std::string& path, void*) {
+  try {
+    const std::string text = ReadFileText(path);
+    out->assign(text.begin(), text.end());
+    return true;
+  } catch (const UserError& e) {
+    if (err) *err += std::string(e.what()) + "\n";
+    return false;
+  }
+}
+bool GltfNoWrite(std::string* err, const std::string&, const std::vector<unsigned char>&, void*) {
+  if (err) *err += "phos writes no glTF files\n";
+  return false;
+}
+// Images are not decoded: phos uses none, and a crafted image must not cost
+// memory or time.
+bool GltfSkipImage(tinygltf::Image*, const int, std::string*, std::string*, int, int, const unsigned char*, int, void*) {
+  return true;
+}
+
+Mesh ParseGltf(std::string_view data, bool binary, const std::filesystem::path& base_dir, const std::string& name,
+               const std::string& group, const std::string& where) {
+  if (data.size() > kMaxInputFileBytes)
+    ThrowUserError(where, "", "glTF '" + name + "' is more than the limit of " + std::to_string(kMaxInputFileBytes) + " bytes");
   tinygltf::TinyGLTF loader;
+  loader.SetFsCallbacks({&GltfFileExists, &GltfExpandPath, &GltfReadFile, &GltfNoWrite, nullptr});
+  loader.SetImageLoader(&GltfSkipImage, nullptr);
   tinygltf::Model model;
   std::string error, warning;
-  const bool binary = path.extension() == ".glb";
-  const bool ok = binary ? loader.LoadBinaryFromFile(&model, &error, &warning, path.string())
-                         : loader.LoadASCIIFromFile(&model, &error, &warning, path.string());
-  if (!ok) ThrowUserError(where, "", "cannot read glTF '" + path.string() + "': " + (error.empty() ? "unknown error" : error));
+  const bool ok =
+      binary ? loader.LoadBinaryFromMemory(&model, &error, &warning, reinterpret_cast<const unsigned char*>(data.data()),
+                                           static_cast<unsigned int>(data.size()), base_dir.string())
+             : loader.LoadASCIIFromString(&model, &error, &warning, data.data(), static_cast<unsigned int>(data.size()),
+                                          base_dir.string());
+  if (!ok) ThrowUserError(where, "", "cannot read glTF '" + name + "': " + OneLine(error));
   Mesh mesh;
-  mesh.source = path.string() + (group.empty() ? "" : "#" + group);
+  mesh.source = name + (group.empty() ? "" : "#" + group);
   bool found = group.empty();
   bool all_uv = true;
-  const std::string file_where = where + " (" + path.string() + ")";
+  const std::string file_where = where + " (" + name + ")";
+  std::size_t instances = 0;
   // Walks the node tree of the default scene, applying each node's transform.
   std::function<void(int, const Eigen::Affine3d&, int)> visit = [&](int index, const Eigen::Affine3d& parent, int depth) {
     if (index < 0 || index >= static_cast<int>(model.nodes.size()) || depth > 64)
       ThrowUserError(file_where, "nodes", "node index out of range or a cycle");
+    // A node graph that shares children multiplies its instances (2^40 ran out of memory).
+    if (++instances > kMaxGltfInstances)
+      ThrowUserError(file_where, "nodes", "the node graph has more than the limit of " +
+                                              std::to_string(kMaxGltfInstances) + " node instances");
     const tinygltf::Node& node = model.nodes[index];
     const Eigen::Affine3d transform = parent * NodeTransform(node);
     if (node.mesh >= 0 && node.mesh < static_cast<int>(model.meshes.size()) &&
@@ -141,7 +253,8 @@ Mesh LoadGltf(const std::filesystem::path& path, const std::string& group, const
         if (primitive.mode != TINYGLTF_MODE_TRIANGLES && primitive.mode != -1) continue;  // points and lines carry no surface
         const auto position = primitive.attributes.find("POSITION");
         if (position == primitive.attributes.end()) ThrowUserError(file_where, "meshes", "a primitive without POSITION");
-        const std::vector<float> p = ReadAccessor<float>(model, position->second, 3, file_where, "POSITION");
+        const std::vector<float> p =
+            ReadAccessor<float>(model, position->second, 3, kMaxMeshVertices - mesh.positions.size(), file_where, "POSITION");
         const int base = static_cast<int>(mesh.positions.size());
         const int count = static_cast<int>(p.size() / 3);
         for (int i = 0; i < count; ++i)
@@ -150,15 +263,18 @@ Mesh LoadGltf(const std::filesystem::path& path, const std::string& group, const
         const int uv_base = static_cast<int>(mesh.uvs.size());
         bool with_uv = texcoord != primitive.attributes.end();
         if (with_uv) {
-          const std::vector<float> uv = ReadAccessor<float>(model, texcoord->second, 2, file_where, "TEXCOORD_0");
+          const std::vector<float> uv =
+              ReadAccessor<float>(model, texcoord->second, 2, kMaxMeshVertices - mesh.uvs.size(), file_where, "TEXCOORD_0");
           with_uv = static_cast<int>(uv.size() / 2) == count;
           for (int i = 0; with_uv && i < count; ++i) mesh.uvs.emplace_back(uv[2 * i], uv[2 * i + 1]);
         }
         all_uv = all_uv && with_uv;
         std::vector<int> indices;
         if (primitive.indices >= 0) {
-          indices = ReadAccessor<int>(model, primitive.indices, 1, file_where, "indices");
+          indices = ReadAccessor<int>(model, primitive.indices, 1, 3 * (kMaxMeshTriangles - mesh.triangles.size()),
+                                      file_where, "indices");
         } else {
+          CheckCounts(0, mesh.triangles.size() + static_cast<std::size_t>(count) / 3, file_where, name);
           for (int i = 0; i < count; ++i) indices.push_back(i);
         }
         for (std::size_t i = 0; i + 2 < indices.size(); i += 3) {
@@ -179,11 +295,13 @@ Mesh LoadGltf(const std::filesystem::path& path, const std::string& group, const
   };
   if (!model.scenes.empty()) {
     const int scene = model.defaultScene >= 0 ? model.defaultScene : 0;
-    for (int node : model.scenes.at(scene).nodes) visit(node, Eigen::Affine3d::Identity(), 0);
+    if (scene >= static_cast<int>(model.scenes.size()))
+      ThrowUserError(file_where, "scene", "the default scene " + std::to_string(scene) + " does not exist");
+    for (int node : model.scenes[scene].nodes) visit(node, Eigen::Affine3d::Identity(), 0);
   } else {
     for (std::size_t node = 0; node < model.nodes.size(); ++node) visit(static_cast<int>(node), Eigen::Affine3d::Identity(), 0);
   }
-  if (!found) ThrowUserError(where, "", "glTF '" + path.string() + "' has no mesh named '" + group + "'");
+  if (!found) ThrowUserError(where, "", "glTF '" + name + "' has no mesh named '" + group + "'");
   if (!all_uv || mesh.uv_triangles.size() != mesh.triangles.size()) {  // a partial UV map is no map
     mesh.uvs.clear();
     mesh.uv_triangles.clear();
@@ -252,17 +370,37 @@ Mesh MakeSphere(double radius, int subdivisions, bool inward) {
   return mesh;
 }
 
+Mesh ParseMesh(std::string_view data, const std::string& format, const std::filesystem::path& base_dir,
+               const std::string& name, const std::string& group, const std::string& where) {
+  Mesh mesh;
+  if (format == ".obj") mesh = ParseObj(data, name, group, where);
+  else if (format == ".gltf" || format == ".glb") mesh = ParseGltf(data, format == ".glb", base_dir, name, group, where);
+  else ThrowUserError(where, "", "unknown mesh format '" + format + "' (.obj, .gltf, .glb)");
+  for (const Eigen::Vector3f& v : mesh.positions) {
+    if (!v.allFinite()) ThrowUserError(where, "", "mesh '" + name + "' has a vertex that is not finite");
+    if (v.cwiseAbs().maxCoeff() > kMaxCoordinate_m)
+      ThrowUserError(where, "", "mesh '" + name + "' has a vertex beyond the limit of " + FormatDouble(kMaxCoordinate_m) +
+                                    " m from the origin on an axis");
+  }
+  for (const Eigen::Vector2f& uv : mesh.uvs)
+    if (!uv.allFinite()) ThrowUserError(where, "", "mesh '" + name + "' has a texture coordinate that is not finite");
+  return mesh;
+}
+
 Mesh LoadMesh(const std::filesystem::path& path, const std::string& group, const std::string& where) {
   std::string extension = path.extension().string();
   std::transform(extension.begin(), extension.end(), extension.begin(), [](unsigned char c) { return std::tolower(c); });
-  if (!std::filesystem::exists(path)) ThrowUserError(where, "", "mesh file '" + path.string() + "' does not exist");
-  Mesh mesh;
-  if (extension == ".obj") mesh = LoadObj(path, group, where);
-  else if (extension == ".gltf" || extension == ".glb") mesh = LoadGltf(path, group, where);
-  else ThrowUserError(where, "", "unknown mesh format '" + extension + "' (.obj, .gltf, .glb)");
-  for (const Eigen::Vector3f& v : mesh.positions)
-    if (!v.allFinite()) ThrowUserError(where, "", "mesh '" + path.string() + "' has a vertex that is not finite");
-  return mesh;
+  std::error_code ec;
+  if (!std::filesystem::exists(path, ec)) ThrowUserError(where, "", "mesh file '" + path.string() + "' does not exist");
+  if (extension != ".obj" && extension != ".gltf" && extension != ".glb")
+    ThrowUserError(where, "", "unknown mesh format '" + extension + "' (.obj, .gltf, .glb)");
+  std::string data;
+  try {
+    data = ReadFileText(path);
+  } catch (const UserError& e) {
+    ThrowUserError(where, "", std::string("mesh ") + e.what());
+  }
+  return ParseMesh(data, extension, path.parent_path(), path.string(), group, where);
 }
 
 }  // namespace phos::render

@@ -17,23 +17,33 @@ namespace {
 
 constexpr double kPi = 3.14159265358979323846;
 
+// Every coordinate, size and direction of a scene lies in
+// [-kMaxCoordinate_m, kMaxCoordinate_m] (scene.h): Embree's float BVH
+// asserted on 1e308.
 Vec3 ReadVec3(const JsonField& field) {
-  const std::vector<double> v = field.NumberArray(3);
-  return {v[0], v[1], v[2]};
+  if (field.ArraySize() != 3) field.Fail("expected 3 values [x, y, z], got " + std::to_string(field.ArraySize()));
+  return {field.At(0).NumberInRange(-kMaxCoordinate_m, kMaxCoordinate_m),
+          field.At(1).NumberInRange(-kMaxCoordinate_m, kMaxCoordinate_m),
+          field.At(2).NumberInRange(-kMaxCoordinate_m, kMaxCoordinate_m)};
 }
+
+double ReadLength(const JsonField& field, double lower) { return field.NumberInRange(lower, kMaxCoordinate_m); }
+
+// A time of the scene: in [-kMaxTime_s, kMaxTime_s].
+double ReadTime(const JsonField& field) { return field.NumberInRange(-kMaxTime_s, kMaxTime_s); }
 
 Eigen::Quaterniond ReadRotation(const JsonField& field) {
   field.RejectUnknownKeys({"axis", "deg"});
   const Vec3 axis = ReadVec3(field["axis"]);
   if (axis.norm() == 0) field["axis"].Fail("the rotation axis must not be zero");
-  return Eigen::Quaterniond(Eigen::AngleAxisd(field["deg"].Number() * kPi / 180, axis.normalized()));
+  return Eigen::Quaterniond(Eigen::AngleAxisd(field["deg"].NumberInRange(-1e6, 1e6) * kPi / 180, axis.normalized()));
 }
 
 RigidKey ReadRigidKey(const JsonField& field, bool with_time) {
   RigidKey key;
   if (with_time) {
     field.RejectUnknownKeys({"t_s", "translate", "rotate", "scale"});
-    key.t_s = field["t_s"].Number();
+    key.t_s = ReadTime(field["t_s"]);
   } else {
     field.RejectUnknownKeys({"translate", "rotate", "scale"});
   }
@@ -42,6 +52,7 @@ RigidKey ReadRigidKey(const JsonField& field, bool with_time) {
   if (auto f = field.Optional("scale")) {
     key.scale = f->Number();
     if (!(key.scale > 0)) f->Fail("expected a scale > 0, got " + DescribeJson(f->value()));
+    key.scale = f->NumberInRange(kMinScale, kMaxScale);
   }
   return key;
 }
@@ -85,7 +96,11 @@ std::vector<double> ReadSpectrum(const JsonField& field, const SpectralGrid& ban
     spectrum = BlackbodySpectrum(5778, 300, 1000);  // the sun as a 5778 K blackbody
   } else if (type == "bands") {
     field.RejectUnknownKeys({"type", "values"});
-    return field["values"].NumberArray(static_cast<std::size_t>(bands.band_count()), 0.0);
+    std::vector<double> values = field["values"].NumberArray(static_cast<std::size_t>(bands.band_count()), 0.0);
+    for (std::size_t b = 0; b < values.size(); ++b)
+      if (values[b] > kMaxIrradiance)
+        field["values"].At(b).Fail("expected at most " + FormatDouble(kMaxIrradiance) + ", got " + FormatDouble(values[b]));
+    return values;
   } else {
     field["type"].Fail("unknown spectrum type '" + type + "' (led, white_led, blackbody, sun, bands)");
   }
@@ -111,7 +126,9 @@ std::shared_ptr<const Mesh> ReadShape(const JsonField& field) {
   const std::string type = field["type"].String();
   if (type == "quad") {
     field.RejectUnknownKeys({"type", "size"});
-    const std::vector<double> size = field["size"].NumberArray(2, 1e-9);
+    const JsonField size_field = field["size"];
+    if (size_field.ArraySize() != 2) size_field.Fail("expected 2 sizes");
+    const std::vector<double> size = {ReadLength(size_field.At(0), 1e-9), ReadLength(size_field.At(1), 1e-9)};
     return std::make_shared<Mesh>(MakeQuad(size[0], size[1]));
   }
   if (type == "box") {
@@ -123,7 +140,7 @@ std::shared_ptr<const Mesh> ReadShape(const JsonField& field) {
   }
   if (type == "sphere") {
     field.RejectUnknownKeys({"type", "radius", "subdivisions", "inward"});
-    const double radius = field["radius"].NumberAtLeast(1e-9);
+    const double radius = ReadLength(field["radius"], 1e-9);
     const int subdivisions = field.Has("subdivisions") ? field["subdivisions"].Integer(0, 7) : 3;
     const bool inward = ReadBool(field, "inward", false);
     return std::make_shared<Mesh>(MakeSphere(radius, subdivisions, inward));
@@ -137,7 +154,7 @@ LightSchedule ReadSchedule(const JsonField& f) {
   for (std::size_t k = 0; k < f.ArraySize(); ++k) {
     const JsonField key = f.At(k);
     key.RejectUnknownKeys({"t_s", "level"});
-    schedule.keys.push_back({key["t_s"].Number(), key["level"].NumberAtLeast(0)});
+    schedule.keys.push_back({ReadTime(key["t_s"]), key["level"].NumberInRange(0, kMaxLevel)});
   }
   if (schedule.keys.empty()) f.Fail("expected at least one {t_s, level}");
   RequireIncreasingTimes(f, schedule.keys);
@@ -185,18 +202,25 @@ void ReadPhosphorPolicy(const JsonField& o, bool is_phosphor, bool& unknown_ke_a
 // places drawn with "seed", "below_y_m": empty above a level (a liquid)}.
 std::vector<float> ReadDensity(const JsonField& f, const Volume& v) {
   const std::size_t n = static_cast<std::size_t>(v.nx) * v.ny * v.nz;
-  if (f.value().is_number()) return std::vector<float>(n, static_cast<float>(f.NumberAtLeast(0)));
+  if (f.value().is_number()) return std::vector<float>(n, static_cast<float>(f.NumberInRange(0, kMaxDensity)));
   if (f.value().is_array()) {
     const std::vector<double> values = f.NumberArray(n, 0.0);
+    for (std::size_t j = 0; j < n; ++j)
+      if (values[j] > kMaxDensity) f.At(j).Fail("expected a density in [0, " + FormatDouble(kMaxDensity) + "]");
     return std::vector<float>(values.begin(), values.end());
   }
   f.RejectUnknownKeys({"value", "shape", "puffs", "radius_m", "seed", "below_y_m"});
-  const double value = f.Has("value") ? f["value"].NumberAtLeast(0) : 1.0;
+  const double value = f.Has("value") ? f["value"].NumberInRange(0, kMaxDensity) : 1.0;
   const std::string shape = f.Has("shape") ? f["shape"].String() : "box";
   if (shape != "box" && shape != "ellipsoid") f["shape"].Fail("expected \"box\" or \"ellipsoid\", got \"" + shape + "\"");
   const int puffs = f.Has("puffs") ? f["puffs"].Integer(1, 100000) : 0;
-  const double radius = f.Has("radius_m") ? f["radius_m"].NumberInRange(1e-9, 1e9) : 0.0;
+  const double radius = f.Has("radius_m") ? ReadLength(f["radius_m"], 1e-9) : 0.0;
   if (puffs > 0 && !f.Has("radius_m")) f.Fail("'puffs' needs 'radius_m'");
+  // Each voxel sums every puff: bound the work before doing it.
+  if (static_cast<double>(puffs) * static_cast<double>(n) > kMaxPuffEvaluations)
+    f["puffs"].Fail(std::to_string(puffs) + " puffs over " + std::to_string(n) + " voxels is more than the limit of " +
+                    FormatDouble(kMaxPuffEvaluations) + " puff evaluations; use fewer puffs or voxels");
+  const double below_y_m = f.Has("below_y_m") ? f["below_y_m"].NumberInRange(-kMaxCoordinate_m, kMaxCoordinate_m) : 0.0;
   std::mt19937_64 random(f.Has("seed") ? static_cast<unsigned>(f["seed"].Integer(0, 1 << 30)) : 1u);
   std::vector<Vec3> centres;
   const Vec3 size = v.max_m - v.min_m, centre = 0.5 * (v.min_m + v.max_m);
@@ -219,7 +243,7 @@ std::vector<float> ReadDensity(const JsonField& f, const Volume& v) {
         const Vec3 p = v.min_m + Vec3(x + 0.5, y + 0.5, z + 0.5).cwiseProduct(voxel);
         double d = value;
         if (shape == "ellipsoid" && (p - centre).cwiseQuotient(0.5 * size).squaredNorm() > 1) d = 0;
-        if (f.Has("below_y_m") && p.y() > f["below_y_m"].Number()) d = 0;
+        if (f.Has("below_y_m") && p.y() > below_y_m) d = 0;
         if (puffs > 0 && d > 0) {
           double sum = 0;
           for (const Vec3& c : centres) sum += std::exp(-0.5 * (p - c).squaredNorm() / (radius * radius));
@@ -320,8 +344,13 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
   scene.name = root.Has("name") ? root["name"].String() : std::filesystem::path(source).stem().string();
   scene.bands = SpectralGrid::Paper();
   if (auto f = root.Optional("bands_nm")) {
+    if (f->ArraySize() > static_cast<std::size_t>(kMaxBands) + 1)
+      f->Fail("more than the limit of " + std::to_string(kMaxBands) + " bands");
     scene.bands.edges_nm = f->NumberArray(0, 1.0);
     if (scene.bands.edges_nm.size() < 2) f->Fail("expected at least two band edges");
+    for (std::size_t i = 0; i < scene.bands.edges_nm.size(); ++i)
+      if (scene.bands.edges_nm[i] > kMaxWavelengthNm)
+        f->At(i).Fail("expected a wavelength of at most " + FormatDouble(kMaxWavelengthNm) + " nm");
     for (std::size_t i = 1; i < scene.bands.edges_nm.size(); ++i)
       if (!(scene.bands.edges_nm[i] > scene.bands.edges_nm[i - 1])) f->At(i).Fail("band edges must increase");
   }
@@ -329,8 +358,8 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
 
   if (auto time = root.Optional("time")) {
     time->RejectUnknownKeys({"start_s", "end_s", "fps"});
-    if (time->Has("start_s")) scene.start_s = (*time)["start_s"].Number();
-    if (time->Has("end_s")) scene.end_s = (*time)["end_s"].Number();
+    if (time->Has("start_s")) scene.start_s = ReadTime((*time)["start_s"]);
+    if (time->Has("end_s")) scene.end_s = ReadTime((*time)["end_s"]);
     if (time->Has("fps")) scene.fps = (*time)["fps"].NumberInRange(1e-6, 1e4);
     if (!(scene.end_s >= scene.start_s)) (*time)["end_s"].Fail("must not be before start_s");
     if ((scene.end_s - scene.start_s) * scene.fps > 1e6) (*time)["fps"].Fail("more than a million frames");
@@ -350,7 +379,9 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
     for (std::size_t i = 0; i < path->ArraySize(); ++i) {
       const JsonField key = path->At(i);
       key.RejectUnknownKeys({"t_s", "position", "look_at"});
-      scene.camera.keys.push_back({key["t_s"].Number(), ReadVec3(key["position"]), ReadVec3(key["look_at"])});
+      scene.camera.keys.push_back({ReadTime(key["t_s"]), ReadVec3(key["position"]), ReadVec3(key["look_at"])});
+      if ((scene.camera.keys.back().position - scene.camera.keys.back().look_at).norm() == 0)
+        key["look_at"].Fail("must differ from position");
     }
     if (scene.camera.keys.empty()) path->Fail("expected at least one keyframe");
     RequireIncreasingTimes(*path, scene.camera.keys);
@@ -360,7 +391,10 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
   if (auto f = camera.Optional("fov_deg")) scene.camera.fov_deg = f->NumberInRange(1, 170);
   if (auto f = camera.Optional("width")) scene.camera.width = f->Integer(1, 16384);
   if (auto f = camera.Optional("height")) scene.camera.height = f->Integer(1, 16384);
-  if (auto f = camera.Optional("exposure")) scene.camera.exposure = f->NumberAtLeast(0);
+  if (auto f = camera.Optional("exposure")) scene.camera.exposure = f->NumberInRange(0, 1e9);
+  if (static_cast<double>(scene.camera.width) * scene.camera.height > kMaxPixels)
+    camera.Fail(std::to_string(scene.camera.width) + " x " + std::to_string(scene.camera.height) +
+                " pixels is more than the limit of " + std::to_string(kMaxPixels) + " pixels per frame");
 
   if (auto render = root.Optional("render")) {
     render->RejectUnknownKeys({"spp", "max_depth", "direct_spp", "seed", "max_step_s", "phosphor_irradiance"});
@@ -451,7 +485,7 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
           const JsonField key = path.At(k);
           key.RejectUnknownKeys({"t_s", "position"});
           RigidKey rigid;
-          rigid.t_s = key["t_s"].Number();
+          rigid.t_s = ReadTime(key["t_s"]);
           rigid.translate = ReadVec3(key["position"]);
           light.motion.keys.push_back(rigid);
         }
@@ -480,16 +514,21 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
       light.sheet_normal = ReadVec3(l["normal"]);
       if (light.sheet_normal.norm() == 0) l["normal"].Fail("must not be zero");
       light.sheet_normal.normalize();
-      light.sheet_thickness_m = l["thickness_m"].NumberInRange(1e-9, 1e9);
+      light.sheet_thickness_m = ReadLength(l["thickness_m"], 1e-9);
     } else {
       l["type"].Fail("unknown light type '" + type + "' (point, directional, sheet)");
     }
     if (type != "sheet")
       for (const char* key : {"normal", "thickness_m"})
         if (l.Has(key)) l[key].Fail(std::string("only a sheet light has '").append(key).append("'"));
-    light.intensity = l["intensity"].NumberAtLeast(0);
+    light.intensity = l["intensity"].NumberInRange(0, kMaxIrradiance);
     light.E_per_band = ReadSpectrum(l["spectrum"], scene.bands);
-    for (double& e : light.E_per_band) e *= light.intensity;
+    for (double& e : light.E_per_band) {
+      e *= light.intensity;
+      if (!(e <= kMaxIrradiance))
+        l["intensity"].Fail("gives an irradiance of " + FormatDouble(e) + " in a band, more than the limit of " +
+                            FormatDouble(kMaxIrradiance));
+    }
     if (auto f = l.Optional("schedule")) light.schedule = ReadSchedule(*f);
     scene.lights.push_back(std::move(light));
   }
@@ -498,8 +537,13 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
     f->RejectUnknownKeys({"spectrum", "radiance", "gradient", "schedule"});
     Environment env;
     env.L_per_band = ReadSpectrum((*f)["spectrum"], scene.bands);
-    const double radiance = (*f)["radiance"].NumberAtLeast(0);
-    for (double& l : env.L_per_band) l *= radiance;
+    const double radiance = (*f)["radiance"].NumberInRange(0, kMaxIrradiance);
+    for (double& l : env.L_per_band) {
+      l *= radiance;
+      if (!(l <= kMaxIrradiance))
+        (*f)["radiance"].Fail("gives a radiance of " + FormatDouble(l) + " in a band, more than the limit of " +
+                              FormatDouble(kMaxIrradiance));
+    }
     if (f->Has("gradient")) env.gradient = (*f)["gradient"].NumberInRange(-1, 1);
     if (auto sf = f->Optional("schedule")) env.schedule = ReadSchedule(*sf);
     scene.environment = env;
@@ -507,6 +551,7 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
 
   // Volumes.
   if (auto volumes = root.Optional("volumes")) {
+    double voxels = 0;  // over every volume: they are all in memory at once
     for (std::size_t i = 0; i < volumes->ArraySize(); ++i) {
       const JsonField f = volumes->At(i);
       f.RejectUnknownKeys({"name", "bounds", "resolution", "density", "sigma_t_per_m", "albedo", "g", "phosphor",
@@ -523,7 +568,10 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
       v.nx = resolution.At(0).Integer(1, 4096);
       v.ny = resolution.At(1).Integer(1, 4096);
       v.nz = resolution.At(2).Integer(1, 4096);
-      if (static_cast<double>(v.nx) * v.ny * v.nz > 1 << 27) resolution.Fail("more than 134 million voxels");
+      voxels += static_cast<double>(v.nx) * v.ny * v.nz;
+      if (voxels > kMaxVoxels)
+        resolution.Fail("the scene's volumes have " + FormatDouble(voxels) + " voxels, more than the limit of " +
+                        std::to_string(kMaxVoxels));
       v.density = ReadDensity(f["density"], v);
       v.sigma_t_per_m = f["sigma_t_per_m"].NumberInRange(0, 1e9);
       ReadPhosphor(f, base_dir, scene.bands, materials, v.phosphor, v.phosphor_path);

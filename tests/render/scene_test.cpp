@@ -7,12 +7,15 @@
 #include <random>
 #include <set>
 
+#include <sys/stat.h>
+
 #include <nlohmann/json.hpp>
 
 #include "phos/render/geometry.h"
 #include "phos/render/solver.h"
 #include "phos/render/scene.h"
 #include "phos/render/subsurface.h"
+#include "phos/render/volume.h"
 #include "phos/util/error.h"
 #include "phos/util/json.h"
 #include "render/scene_util.h"
@@ -333,6 +336,121 @@ TEST(UvAtlas, SolverChargesUvTexelsLikeTheClosedForm) {
   EXPECT_LE(E, 1.0);
   const double r = E / (E + 0.1) * -std::expm1(-(E + 0.1) * 2.0);
   EXPECT_NEAR(solver.State(0, 0, texel), r, 1e-5);
+}
+
+// Issue 16, found by mutating the fixtures: each input that crashed, hung or
+// ran out of memory is refused at load time in one line naming the field
+// and the limit.
+TEST(Scenes, CoordinatesTimesAndCountsOutsideTheLimitsAreRefused) {
+  auto error_has = [](const std::string& error, const std::string& part) {
+    EXPECT_EQ(error.find('\n'), std::string::npos) << error;
+    return error.find(part) != std::string::npos;
+  };
+  // Embree's assertion in bvh_intersector1.cpp aborted on these.
+  EXPECT_TRUE(error_has(ErrorAfterEdit([](nlohmann::json& j) { j["camera"]["position"] = {0, 1e308, 0}; }),
+                        "cornell-phosphor.json: camera.position[1]: expected a number in [-1e+06, 1e+06], got 1e+308"));
+  EXPECT_TRUE(error_has(MediaErrorAfterEdit([](nlohmann::json& j) { j["volumes"][0]["bounds"]["max"] = {1e308, 1, 1}; }),
+                        "volumes[0].bounds.max[0]: expected a number in [-1e+06, 1e+06]"));
+  EXPECT_TRUE(error_has(ErrorAfterEdit([](nlohmann::json& j) { j["objects"][0]["transform"] = {{"scale", 1e300}}; }),
+                        "objects[0].transform.scale: expected a number in [1e-06, 1e+06]"));
+  EXPECT_TRUE(error_has(ErrorAfterEdit([](nlohmann::json& j) { j["time"]["end_s"] = 1e300; }), "time.end_s"));
+  EXPECT_TRUE(error_has(ErrorAfterEdit([](nlohmann::json& j) { j["lights"][0]["intensity"] = 1e300; }),
+                        "lights[0].intensity: expected a number in [0, 1e+09]"));
+  EXPECT_TRUE(error_has(ErrorAfterEdit([](nlohmann::json& j) { j["camera"]["width"] = 16384; j["camera"]["height"] = 16384; }),
+                        "camera: 16384 x 16384 pixels is more than the limit of 67108864 pixels per frame"));
+  // A volume scaled 100x hung: voxels over all volumes, and voxels x puffs, are capped.
+  EXPECT_TRUE(error_has(MediaErrorAfterEdit([](nlohmann::json& j) { j["volumes"][0]["resolution"] = {4096, 4096, 2}; }),
+                        "volumes[0].resolution: the scene's volumes have 33554432 voxels, more than the limit of 16777216"));
+  EXPECT_TRUE(error_has(MediaErrorAfterEdit([](nlohmann::json& j) { j["volumes"][0]["density"]["puffs"] = 100000; }),
+                        "volumes[0].density.puffs: 100000 puffs over 43008 voxels is more than the limit of 1e+08"));
+  // Huge bounds with a phosphor: "check failed: c.n_exc == 0 || E != nullptr".
+  EXPECT_TRUE(error_has(MediaErrorAfterEdit([](nlohmann::json& j) { j["volumes"][0]["bounds"]["min"] = {-1e30, 0, 0}; }),
+                        "volumes[0].bounds.min[0]"));
+}
+
+// Issue 18: a phosphorescent volume of density 0 aborted with "check failed"
+// in model/src/batch.cpp. An empty glowing medium has no voxels to glow and
+// renders as empty space.
+TEST(Scenes, AnEmptyGlowingMediumRenders) {
+  nlohmann::json json = ReadJsonFile(Fixture("scenes/dust-sheets.json"));
+  json["volumes"][0]["density"] = 0;
+  const Scene scene = SceneFromJson(json, Fixture("scenes"), "dust-sheets.json");
+  SceneGeometry geometry(scene);
+  CoupledSolver solver(scene, geometry);
+  ASSERT_NE(solver.media(), nullptr);
+  solver.AdvanceTo(2.0);  // under the sweeping sheet: aborted here
+  EXPECT_EQ(solver.media()->stats().phosphor_voxels, 0u);
+  EXPECT_EQ(solver.media()->stats().voxels, 48u * 28 * 32);
+}
+
+// The glTF fixture, as JSON, to craft broken ones from.
+nlohmann::json Pedestal() { return ReadJsonFile(Fixture("scenes/meshes/pedestal.gltf")); }
+
+std::string GltfError(const nlohmann::json& gltf) {
+  const std::string text = gltf.dump();
+  return ErrorOfType<UserError>([&] { ParseMesh(text, ".gltf", Fixture("scenes/meshes"), "crafted.gltf", "", "scene.json: objects[0].mesh"); });
+}
+
+// Issue 16: crafted glTF files gave an ASan error (an accessor count that
+// wraps), ran out of memory (a node graph of 2^40 instances), ended in
+// "internal error: vector::reserve" (a 2^62 count) or "internal error"
+// (missing buffers). Each is now one line naming the field.
+TEST(Meshes, CraftedGltfFilesAreRefusedInOneLine) {
+  EXPECT_EQ(GltfError(Pedestal()), "(no error)");
+  auto has = [](const std::string& error, const std::string& part) {
+    EXPECT_EQ(error.find('\n'), std::string::npos) << error;
+    EXPECT_EQ(error.rfind("scene.json: objects[0].mesh", 0), 0u) << error;
+    return error.find(part) != std::string::npos;
+  };
+  nlohmann::json j = Pedestal();
+  j["accessors"][0]["count"] = std::uint64_t{1} << 62;
+  EXPECT_TRUE(has(GltfError(j), "POSITION: accessor count 4611686018427387904 is more than the limit of 16777216"));
+  j = Pedestal();
+  j["accessors"][0]["count"] = 1000;  // within the limit, past the buffer (wrapped before)
+  EXPECT_TRUE(has(GltfError(j), "POSITION: accessor reaches past the end of its buffer"));
+  j = Pedestal();
+  j["accessors"][0]["byteOffset"] = std::uint64_t{1} << 63;
+  EXPECT_TRUE(has(GltfError(j), "POSITION: accessor"));
+  j = Pedestal();
+  j["bufferViews"][0]["buffer"] = 3;
+  EXPECT_TRUE(has(GltfError(j), "cannot read glTF")||has(GltfError(j), "names a buffer that does not exist"));
+  j = Pedestal();
+  j.erase("buffers");
+  EXPECT_TRUE(has(GltfError(j), "crafted.gltf"));
+  j = Pedestal();
+  j["scene"] = 5;
+  EXPECT_TRUE(has(GltfError(j), "crafted.gltf"));
+  // 41 nodes, each with its successor twice as children: 2^40 instances.
+  j = Pedestal();
+  j["scenes"][0]["nodes"] = {0};
+  j["nodes"] = nlohmann::json::array();
+  for (int i = 0; i < 40; ++i) j["nodes"].push_back({{"children", {i + 1, i + 1}}});
+  j["nodes"].push_back({{"mesh", 0}});
+  EXPECT_TRUE(has(GltfError(j), "nodes: the node graph has more than the limit of 65536 node instances"));
+  // A node translation like 1e308 reached Embree's assertion.
+  j = Pedestal();
+  j["nodes"][0]["translation"] = {0, 1e308, 0};
+  EXPECT_TRUE(has(GltfError(j), "crafted.gltf' has a vertex"));
+  j = Pedestal();
+  j["nodes"][0]["translation"] = {0, 2e6, 0};
+  EXPECT_TRUE(has(GltfError(j), "has a vertex beyond the limit of 1e+06 m"));
+}
+
+// Issue 16: 92 mesh-loader rejections printed several lines.
+TEST(Meshes, ObjRejectionsAreOneLine) {
+  const std::string bad[] = {"v 0 0 0\nv 1 0 0\nf 1 2 7\n", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nv 1e39 0 0\n",
+                             "f 1 2 3\nf 4 5 6\n", "v 1e7 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"};
+  for (const std::string& obj : bad) {
+    const std::string error = ErrorOfType<UserError>([&] { ParseMesh(obj, ".obj", ".", "crafted.obj", "", "s.json: objects[0].mesh"); });
+    EXPECT_EQ(error.rfind("s.json: objects[0].mesh: ", 0), 0u) << error;
+    EXPECT_EQ(error.find('\n'), std::string::npos) << error;
+  }
+  // The mesh file itself: a regular file only.
+  EXPECT_NE(ErrorOfType<UserError>([&] { LoadMesh("/dev/zero.obj", "", "s.json"); }).find("does not exist"), std::string::npos);
+  testing::TempDir dir;
+  ASSERT_EQ(::mkfifo((dir / "fifo.obj").c_str(), 0600), 0);
+  EXPECT_NE(ErrorOfType<UserError>([&] { LoadMesh(dir / "fifo.obj", "", "s.json"); }).find("not a regular file"),
+            std::string::npos);
 }
 
 }  // namespace

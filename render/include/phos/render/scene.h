@@ -13,6 +13,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <Eigen/Geometry>
@@ -24,6 +25,22 @@
 namespace phos::render {
 
 using Vec3 = Eigen::Vector3d;
+
+// Limits of what a scene and its meshes may hold, checked at load time and
+// before anything is allocated (docs/fuzzing.md, "Limits"). Coordinates go
+// into Embree's float BVH, whose assertions abort on values like 1e308; the
+// counts bound memory and time. A message that refuses a value names its limit.
+inline constexpr double kMaxCoordinate_m = 1e6;  // |x| of every position, size, bound, vertex (after transforms)
+inline constexpr double kMinScale = 1e-6, kMaxScale = 1e6;  // a transform's scale
+inline constexpr double kMaxTime_s = 1e9;        // |t| of every time in a scene
+inline constexpr double kMaxLevel = 1e6;         // a light's or the sky's schedule level
+inline constexpr double kMaxDensity = 1e6;       // a volume's density
+inline constexpr std::size_t kMaxVoxels = std::size_t{1} << 24;       // over all volumes of a scene (16.8 million)
+inline constexpr double kMaxPuffEvaluations = 1e8;                   // voxels x puffs of a procedural density
+inline constexpr std::size_t kMaxPixels = std::size_t{1} << 26;       // width x height (67 million, 8192 x 8192)
+inline constexpr std::size_t kMaxMeshVertices = std::size_t{1} << 24;   // per mesh file (16.8 million)
+inline constexpr std::size_t kMaxMeshTriangles = std::size_t{1} << 24;  // per mesh file
+inline constexpr std::size_t kMaxGltfInstances = std::size_t{1} << 16;  // node visits of a glTF scene graph (65536)
 
 // A triangle mesh in object space.
 struct Mesh {
@@ -207,7 +224,14 @@ Mesh MakeBox(const Vec3& size, bool inward);            // centred at the origin
 Mesh MakeSphere(double radius, int subdivisions, bool inward);  // icosphere
 // Loads OBJ (tinyobjloader) or glTF 2.0 (.gltf/.glb, tinygltf), triangulated,
 // with node transforms applied (glTF). A non-empty `group` keeps only the OBJ
-// group (o/g) or glTF mesh of that name. Problems are UserErrors naming `where`.
+// group (o/g) or glTF mesh of that name. Problems are UserErrors naming
+// `where`, one line each. The file and a glTF's external buffers are read as
+// regular files of at most kMaxInputFileBytes; glTF images are not decoded
+// (phos uses none), and no OBJ .mtl file is read (phos uses no OBJ materials).
 Mesh LoadMesh(const std::filesystem::path& path, const std::string& group, const std::string& where);
+// The same from the file's bytes in memory (the fuzz harnesses): `format` is
+// ".obj", ".gltf" or ".glb", `base_dir` where a glTF's external buffers are.
+Mesh ParseMesh(std::string_view data, const std::string& format, const std::filesystem::path& base_dir,
+               const std::string& name, const std::string& group, const std::string& where);
 
 }  // namespace phos::render
