@@ -180,7 +180,12 @@ struct Parameters {
   std::vector<std::vector<double>> Lambda; // [nc][nb]
 };
 
-Material ToMaterial(const Problem& p, const std::vector<int>& lit, const Parameters& x) {
+// ke over `bands` (the lit ones, or all of them for the grid baseline) into a
+// material. Where no light reaches any point, every ke looks the same, so the
+// constraints say nothing of it: it stays unknown (null in the file), as a
+// measurement that never lit a band leaves it, and is never invented.
+Material ToMaterial(const Problem& p, const std::vector<int>& bands, const Parameters& x) {
+  const std::vector<int> lit = LitBands(p);
   Material m;
   m.name = "edited";
   m.source = "phos edit solve (Sec. 8.6, Eq. 8.7) on " + p.source;
@@ -189,8 +194,9 @@ Material ToMaterial(const Problem& p, const std::vector<int>& lit, const Paramet
   for (std::size_t i = 0; i < x.kr.size(); ++i) {
     ExcitedState s;
     s.kr = x.kr[i];
-    s.ke.assign(p.bands.band_count(), 0.0);  // no light there: any ke looks the same; 0 is the honest minimum
-    for (std::size_t l = 0; l < lit.size(); ++l) s.ke[lit[l]] = x.ke[i][l];
+    s.ke.assign(p.bands.band_count(), std::nullopt);
+    for (std::size_t l = 0; l < bands.size(); ++l)
+      if (std::find(lit.begin(), lit.end(), bands[l]) != lit.end()) s.ke[bands[l]] = x.ke[i][l];
     s.Lambda = x.Lambda[i];
     m.states.push_back(s);
   }
@@ -838,7 +844,12 @@ Parameters Refine(const Problem& p, const Samples& s, const TargetSystem& t, con
 // the bound. Each state's ke is halved while the cost stays within 1e-6 of
 // its own (plus 1e-12 of the targets' energy): the weakest excitation that
 // makes the look, rather than an arbitrary point of the plateau (and its
-// Lambda with it, re-solved when only targets count).
+// Lambda with it, re-solved when only targets count). Only while the state
+// stays saturated: once halving ke lowers its peak by more than a quarter,
+// it is on the weak-light line, where r grows in proportion to ke and Lambda
+// takes the other factor, so the look holds for every further halving and ke
+// would fall (and Lambda rise) 2^60-fold, past what a material file holds.
+// There the knee is kept.
 Parameters WeakestExcitation(const Problem& p, const Samples& s, const TargetSystem& t, const std::vector<int>& lit,
                              Parameters x) {
   double energy = 0;
@@ -849,12 +860,22 @@ Parameters WeakestExcitation(const Problem& p, const Samples& s, const TargetSys
     for (int halving = 0; halving < 60; ++halving) {
       Parameters weaker = x;
       for (double& ke : weaker.ke[i]) ke /= 2;
+      const auto peak = [&](const Parameters& q) {
+        double top = 0;
+        for (const auto& at_point : CurveOf(p, s, lit, q.kr[i], q.ke[i].data()))
+          for (double v : at_point) top = std::max(top, v);
+        return top;
+      };
+      if (peak(weaker) < 0.75 * peak(x)) break;
       if (!HasBounds(p)) {  // Lambda follows (r_inf = a / (a + kr) drops a little); bounds would pull on it too
         std::vector<StateCurve<double>> g;
         for (std::size_t j = 0; j < x.kr.size(); ++j) g.push_back(CurveOf(p, s, lit, weaker.kr[j], weaker.ke[j].data()));
         weaker.Lambda = BestLambda(p, s, t, Pointers(g));
       }
-      if (CostOf(p, s, EmittedAtSamples(p, s, lit, weaker)) > allowed) break;
+      bool representable = true;
+      for (const auto& Lambda : weaker.Lambda)
+        for (double v : Lambda) representable = representable && v <= kMaxLambda;
+      if (!representable || CostOf(p, s, EmittedAtSamples(p, s, lit, weaker)) > allowed) break;
       x = std::move(weaker);
     }
   return x;
@@ -1007,13 +1028,22 @@ std::optional<Solution> SolveGridBaseline(const Problem& p, std::string* why) {
 
 namespace {
 
-// A material as the solver's parameters (ke on the lit bands; unknown as 0).
-Parameters ParametersOf(const Material& material, const std::vector<int>& lit) {
+// A material as the solver's parameters (ke on the lit bands). An unknown ke
+// in a lit band has no value to simulate with: the caller states an
+// assumption (AssumeUnknownKeZero) or gets a UserError, as the simulator does.
+Parameters ParametersOf(const Problem& p, const Material& material, const std::vector<int>& lit) {
   Parameters x;
-  for (const ExcitedState& state : material.states) {
+  for (std::size_t i = 0; i < material.states.size(); ++i) {
+    const ExcitedState& state = material.states[i];
     x.kr.push_back(state.kr);
     std::vector<double> ke;
-    for (int b : lit) ke.push_back(state.ke[b].value_or(0.0));
+    for (int b : lit) {
+      if (!state.ke[b])
+        ThrowUserError(material.name, "states[" + std::to_string(i) + "].ke[" + std::to_string(b) + "]",
+                       "unknown (not measured) for band " + p.bands.BandName(b) + ", which " + p.source +
+                           " lights");
+      ke.push_back(*state.ke[b]);
+    }
     x.ke.push_back(ke);
     x.Lambda.push_back(state.Lambda);
   }
@@ -1025,7 +1055,7 @@ Parameters ParametersOf(const Material& material, const std::vector<int>& lit) {
 double Cost(const Problem& p, const Material& material) {
   const Samples s = MakeSamples(p);
   const std::vector<int> lit = LitBands(p);
-  const Parameters x = ParametersOf(material, lit);
+  const Parameters x = ParametersOf(p, material, lit);
   return CostOf(p, s, EmittedAtSamples(p, s, lit, x));
 }
 
@@ -1042,7 +1072,7 @@ std::vector<std::vector<double>> PredictRadiance(const Problem& p, const Materia
   }
   const Samples s = MakeSamples(probe);
   const std::vector<int> lit = LitBands(p);
-  const Parameters x = ParametersOf(material, lit);
+  const Parameters x = ParametersOf(p, material, lit);
   const Emitted<double> Lp = EmittedAtSamples(probe, s, lit, x);
   const Point& at = p.points[point];
   std::vector<std::vector<double>> out;

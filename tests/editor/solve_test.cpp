@@ -77,6 +77,29 @@ TEST(EditorSolve, RecoversAnRgbMaterialFromItsOwnLook) {
   EXPECT_NEAR(Cost(p, s.material), s.cost, 1e-12 + 1e-9 * s.cost);
 }
 
+TEST(EditorSolve, KeStaysUnknownInBandsNoLightReaches) {
+  // Lit in blue only: the look says nothing of ke in green and red, so the
+  // solution leaves it unknown there (ToMaterial wrote 0), in the solve and
+  // in the grid baseline (which searches ke in every band).
+  const Material truth = Truth(kRgb, {0.3}, {{0.2, 0.1, 0.05}}, {{0.5, 2.0, 0.3}});
+  const Problem p = FromTruth(truth, {1.0, 0.0, 0.0}, {5, 11, 30, 90});
+  const Solution s = Solve(p);
+  EXPECT_LT(s.cost, 1e-8 * Scale(p));
+  const std::optional<Solution> grid = SolveGridBaseline(p);
+  ASSERT_TRUE(grid.has_value());
+  for (const Material* m : {&s.material, &grid->material}) {
+    EXPECT_TRUE(m->states[0].ke[0].has_value());
+    EXPECT_FALSE(m->states[0].ke[1].has_value());
+    EXPECT_FALSE(m->states[0].ke[2].has_value());
+  }
+  EXPECT_NEAR(Cost(p, s.material), s.cost, 1e-12);  // unknown where unlit is no obstacle
+  // ... but unknown where the constraints' light falls has no value to simulate with.
+  Material unmeasured = truth;
+  unmeasured.states[0].ke[0].reset();
+  EXPECT_NE(phos::testing::ErrorOfType<UserError>([&] { Cost(p, unmeasured); }).find("unknown (not measured) for band 380-490"),
+            std::string::npos);
+}
+
 TEST(EditorSolve, TwoStatesInEightBands) {
   const SpectralGrid paper = SpectralGrid::Paper();
   const Material truth = Truth(paper, {1.5, 0.05}, {{0.3, 0.2, 0.1, 0, 0, 0, 0, 0}, {0.05, 0.04, 0.02, 0, 0, 0, 0, 0}},
