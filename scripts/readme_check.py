@@ -45,6 +45,7 @@ difference is printed), 2 for a usage error. Python 3 standard library only.
 """
 
 import argparse
+import difflib
 import os
 import re
 import shutil
@@ -63,7 +64,7 @@ DEFAULT_MASKS = [
     r"\((" + NUM + r") s\)",                     # "phos fit session: ... (0.6576 s)"
     r'"\w*seconds":(' + NUM + r")",              # JSON "seconds", "render_seconds", ...
     r"t = +" + NUM + r" s +(" + NUM + r") s",    # phos render: "t =   20 s    0.014 s  out/..."
-    r"(" + NUM + r") s/it",
+    r"\bin (" + NUM + r") s\b",                  # "fitted in 11.04 s"
 ]
 
 DIRECTIVE = re.compile(r"<!--\s*readme-check:\s*(.*?)\s*-->", re.S)
@@ -279,12 +280,27 @@ def line_matches(expected, actual, masks, rtol):
     return None
 
 
+def shape(line):
+    """A line with its numbers blanked: lines of one shape can be compared number by number."""
+    return squeeze(NUM_TOKEN.sub("#", line.rstrip()[:-3] if line.rstrip().endswith("...") else line)).strip()
+
+
 def compare(expected, actual, masks, rtol):
     """A list of difference lines (empty if the output matches)."""
     diffs = []
     more = bool(expected) and expected[-1].strip() == "..."
     if more:
         expected = expected[:-1]
+    if len(actual) != len(expected) and not (more and len(actual) > len(expected)):
+        # Lines missing or added: a diff says where.
+        diffs.append("  %d line(s) shown, %d printed (- README, + actual):" % (len(expected), len(actual)))
+        matcher = difflib.SequenceMatcher(None, [shape(e) for e in expected], [shape(a) for a in actual],
+                                          autojunk=False)
+        for tag, i1, i2, j1, j2 in matcher.get_opcodes():
+            if tag != "equal":
+                diffs.extend("    - " + e for e in expected[i1:i2])
+                diffs.extend("    + " + a for a in actual[j1:j2])
+        return diffs
     for k, e in enumerate(expected):
         if k >= len(actual):
             diffs.append("  missing line %d: %s" % (k + 1, e))
@@ -412,8 +428,8 @@ def main():
                 print("\n".join(diffs))
             else:
                 print("ok   %s  $ %s  (%.2f s)" % (where, shown, seconds))
-            if args.update and c.output:
-                replacements.append((c.first_out, c.end, updated_lines(c.output, actual, block.indent)))
+            if args.update and c.output and diffs:
+                replacements.append((c.first_out, c.end, updated_lines(c.output, actual, block.indent, masks, rtol)))
     total = time.monotonic() - total_start
     print("readme_check: %d command(s) run, %d skipped, %d failed, %.1f s (%s)" % (ran, skipped, failed, total, phos))
 
@@ -437,17 +453,35 @@ def main():
     return 1 if failed else 0
 
 
-def updated_lines(expected, actual, indent):
-    """The output lines to write back: the actual ones, cut where the README cut them."""
+def updated_lines(expected, actual, indent, masks, rtol):
+    """The output lines to write back for a command whose output differs.
+
+    Lines that still match (timings aside) stay as the README has them, so an
+    update changes only what drifted; the others become the actual lines,
+    cut where the README cut them."""
     more = bool(expected) and expected[-1].strip() == "..."
-    keep = len(expected) - 1 if more else None
-    new = actual[:keep] if keep is not None else list(actual)
-    # A line the README cut with "..." is cut again at the same length.
-    for k, e in enumerate(expected[:len(new)]):
-        if e.rstrip().endswith("...") and e.strip() != "...":
+    shown = expected[:-1] if more else expected
+    printed = actual[:len(shown)] if more else list(actual)
+    # Pair the README's lines with the printed ones by their shape (numbers
+    # blanked), so an added or removed line leaves the others as they were.
+    pairs = {}
+    matcher = difflib.SequenceMatcher(None, [shape(e) for e in shown], [shape(a) for a in printed], autojunk=False)
+    for tag, i1, i2, j1, j2 in matcher.get_opcodes():
+        if tag in ("equal", "replace") and i2 - i1 == j2 - j1:
+            for d in range(i2 - i1):
+                pairs[j1 + d] = i1 + d
+    new = []
+    for k, a in enumerate(printed):
+        e = shown[pairs[k]] if k in pairs else None
+        if e is not None and line_matches(e, a, masks, rtol) is None:
+            new.append(e)
+            continue
+        # A line the README cut with "..." is cut again at the same length.
+        if e is not None and e.rstrip().endswith("...") and e.strip() != "...":
             length = len(e.rstrip()) - 3
-            if len(new[k]) > length:
-                new[k] = new[k][:length] + "..."
+            if len(a) > length:
+                a = a[:length] + "..."
+        new.append(a)
     if more:
         new.append("...")
     return [(indent + a) if a else "" for a in new]
