@@ -76,11 +76,20 @@ void Run(const RenderArgs& args) {
     std::string bad;
     if (!ParseDoubleList(args.times, &times, &bad))
       ThrowUserError("", "--times", "expected a comma-separated list of seconds, got \"" + bad + "\"");
-    for (double t : times)
-      if (t < scene.start_s)
-        ThrowUserError("", "--times", FormatDouble(t) + " s is before the scene's start (" +
+    // Frames are numbered in the order given and the states only advance:
+    // times out of order are refused rather than silently re-sorted.
+    for (std::size_t i = 0; i < times.size(); ++i) {
+      if (times[i] < scene.start_s)
+        ThrowUserError("", "--times", FormatDouble(times[i]) + " s is before the scene's start (" +
                                           FormatDouble(scene.start_s) + " s): states are only known from there on");
-    std::sort(times.begin(), times.end());
+      if (i > 0 && times[i] < times[i - 1])
+        ThrowUserError("", "--times", "expected times in increasing order, got " + FormatDouble(times[i]) + " after " +
+                                          FormatDouble(times[i - 1]));
+    }
+    // Past the scene's end is allowed (the frame an hour after lights-out), and said.
+    if (!times.empty() && times.back() > scene.end_s)
+      std::fprintf(stderr, "phos render: warning: --times: %s s is past the scene's end (%s s); rendered all the same\n",
+                   FormatDouble(times.back()).c_str(), FormatDouble(scene.end_s).c_str());
   }
   std::error_code ec;
   std::filesystem::create_directories(args.out, ec);
@@ -203,19 +212,12 @@ void Run(const RenderArgs& args) {
 
 void RegisterRender(CLI::App& app) {
   auto args = std::make_shared<RenderArgs>();
-  CLI::App* cmd = app.add_subcommand(
-      "render",
-      "Render a scene's frames: the coupled solver charges and drains every phosphorescent\n"
-      "texel through the scene's light schedule, then each frame is rendered per band and\n"
-      "written as linear EXR (R,G,B and one channel per band) and tone-mapped PNG.\n"
-      "Transports: direct (lights + glow, fast), path (spectral path tracer, the reference:\n"
-      "glowing surfaces light the others) or dss (direct + one bounce through deep screen space);\n"
-      "--budget-s or --quality picks one. Media (volumes) are ray marched in every transport.\n"
-      "Scenes: phos.scene/1, see docs/render.md.");
+  CLI::App* cmd = app.add_subcommand("render", Summary("render"));
   cmd->add_option("scene", args->scene, "Scene file (phos.scene/1)")->required();
   cmd->add_option("--out", args->out, "Folder for frame-NNNN.exr and frame-NNNN.png")->required();
   cmd->add_option("--times", args->times,
-                  "Comma-separated frame times in seconds (default: the scene's time range at its fps)");
+                  "Comma-separated frame times in seconds, in increasing order (default: the scene's time range\n"
+                  "at its fps); times past the scene's end are rendered with a warning");
   cmd->add_option("--transport", args->transport,
                   "direct (fast, no interreflection), path (the reference: a spectral path tracer) or dss\n"
                   "(direct plus one diffuse bounce through deep screen space; docs/render.md)")

@@ -1,6 +1,7 @@
 // phos simulate: one point of a material under a charge-then-dark schedule
 // (DESIGN.md contract). CSV t,r_1..r_nc,L_1..L_n or JSON {"t","r","L"}.
 
+#include <algorithm>
 #include <cstdio>
 #include <iostream>
 #include <memory>
@@ -108,8 +109,29 @@ std::string ToSvg(const SimulationResult& result, const Material& material, doub
   PlotOptions options;
   options.title = "'" + material.name + "': emitted radiance (charge " + FormatDouble(charge_s) + " s, then dark)";
   options.x_label = "time since the start of the charge (s)";
-  options.y_label = "Lp (radiance per band)";
+  options.y_label = "emitted radiance Lp per band (unit of Lambda)";
   return PlotSvg(series, options);
+}
+
+// One sample every --dt from 0 reaches the end of the schedule only when --dt
+// divides it (--dt 3 over 20 s stops at 18): then the state at the end is
+// added as a last sample, stepped from the last one over what is left of the
+// schedule by the same integrator.
+void SampleTheEnd(const Material& material, const std::vector<double>& E, const SimulateArgs& args,
+                  const SimulationOptions& options, SimulationResult* result) {
+  const double total = args.charge_s + args.decay_s, last = result->t_s.back();
+  if (!(total - last > 1e-9 * options.dt_s)) return;
+  SimulationOptions rest = options;
+  rest.dt_s = total - last;
+  rest.r0.assign(result->r.end() - result->nc, result->r.end());
+  const double charge_left = std::max(0.0, args.charge_s - last);
+  const SimulationResult tail = Simulate(
+      material, IrradianceSchedule::ChargeThenDecay(E, charge_left, charge_left > 0 ? args.decay_s : total - last), rest,
+      args.material);
+  result->t_s.push_back(total);
+  result->r.insert(result->r.end(), tail.r.end() - tail.nc, tail.r.end());
+  result->L.insert(result->L.end(), tail.L.end() - tail.nb, tail.L.end());
+  result->steps += tail.steps;
 }
 
 void RunSimulate(const SimulateArgs& args) {
@@ -132,6 +154,7 @@ void RunSimulate(const SimulateArgs& args) {
 
   SimulationResult result =
       Simulate(material, IrradianceSchedule::ChargeThenDecay(E, args.charge_s, args.decay_s), options, args.material);
+  SampleTheEnd(material, E, args, options, &result);
   for (const std::string& w : result.warnings) std::fprintf(stderr, "phos simulate: warning: %s\n", w.c_str());
 
   std::string text = args.json ? ToJson(result, args.integrator) : ToCsv(result);
@@ -147,20 +170,16 @@ void RunSimulate(const SimulateArgs& args) {
 
 void RegisterSimulate(CLI::App& app) {
   auto args = std::make_shared<SimulateArgs>();
-  CLI::App* cmd = app.add_subcommand(
-      "simulate",
-      "Simulate one point of a material: charge under constant irradiance, then dark.\n"
-      "Starts from r = 0 (or --r0); t is measured from the start of the charge; one sample\n"
-      "every --dt seconds from 0 to charge + decay. Steps never straddle the light switch.\n"
-      "Output: CSV t,r_1..r_nc,L_1..L_n (L = emitted radiance per band, Eq. 8.2), or --json\n"
-      "{\"t\":[..],\"r\":[[..]],\"L\":[[..]],\"integrator\",\"steps\",\"warnings\"}.");
+  CLI::App* cmd = app.add_subcommand("simulate", Summary("simulate"));
   cmd->add_option("--material", args->material, "material file (phos.material/1)")->required();
   cmd->add_option("--charge-s", args->charge_s, "seconds of charging under --irradiance (default 0)");
   cmd->add_option("--irradiance", args->irradiance,
                   "band-integrated irradiance E while charging: one number (every band) or a comma list,\n"
                   "one value per band of the material; bands whose ke is unknown must get 0");
   cmd->add_option("--decay-s", args->decay_s, "seconds of darkness after the charge (default 0)");
-  cmd->add_option("--dt", args->dt_s, "sample interval and step in seconds (default 1)");
+  cmd->add_option("--dt", args->dt_s,
+                  "sample interval and step in seconds (default 1); the end of the schedule is sampled too\n"
+                  "when --dt does not divide it");
   cmd->add_option("--integrator", args->integrator,
                   "exact (default: closed form, stable for any step), euler (the paper's; refused past\n"
                   "h*k > 2, warned past h*k > 1), rk4 (refused past h*k > 2.785), reference (adaptive\n"

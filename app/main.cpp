@@ -1,69 +1,94 @@
 // phos: capture, fit and render phosphorescent materials.
 //
-// Error policy (DESIGN.md): a mistake in the input (file, option, field)
-// prints one line naming it and exits with code 2; nothing already written
-// is lost, because every output file is written whole through a rename.
+// This is only the dispatcher, after git: `phos <command> ...` runs the
+// executable phos-<command> found next to this one (the same bin folder, from
+// /proc/self/exe), with the same arguments. Each of those links only the parts
+// its command needs, so `phos simulate` or `phos fit decay-curve` start in a
+// few milliseconds without loading OpenImageIO, Embree, Aravis or OpenCV
+// (issue 17; bench/startup.sh measures it). `phos --help` lists every command
+// from kCommands (commands.h) without linking any of them.
+//
+// Conventions: `phos --version` prints the project version (phos::kVersion).
+// A bare `phos` prints the usage on standard output and exits with 2, like git
+// (which prints its usage and exits non-zero): no command is a usage mistake,
+// and phos's code for those is 2. An unknown command is one line, exit 2.
 
+#include <unistd.h>
+
+#include <cerrno>
+#include <climits>
 #include <cstdio>
-#include <exception>
+#include <cstring>
 #include <string>
+#include <string_view>
 
 #include <CLI/CLI.hpp>
 
 #include "commands.h"
-#include "phos/util/error.h"
+#include "phos/util/version.h"
+
+namespace {
+
+// The executable that runs `phos ARGS`: phos-<command>, except that the curve
+// fits, which need no session reader (nor OpenImageIO), are phos-fit-curve.
+std::string ExecutableFor(int argc, char** argv) {
+  const std::string_view command = argv[1];
+  if (command == "fit" && argc > 2) {
+    const std::string_view sub = argv[2];
+    if (sub == "decay-curve" || sub == "charge-curve") return "phos-fit-curve";
+  }
+  return "phos-" + std::string(command);
+}
+
+// The folder this executable was run from, with its trailing '/' ("" if unknown).
+std::string OwnFolder(const char* argv0) {
+  char path[PATH_MAX];
+  const ssize_t n = readlink("/proc/self/exe", path, sizeof path - 1);
+  std::string self = n > 0 ? std::string(path, static_cast<std::size_t>(n)) : std::string(argv0);
+  const std::size_t slash = self.rfind('/');
+  return slash == std::string::npos ? "" : self.substr(0, slash + 1);
+}
+
+}  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{
-      "phos: capture, fit and render phosphorescent materials.\n"
-      "Materials follow the rate-equation model dr/dt = (1 - r) sum_b ke[b] E[b] - kr r,\n"
-      "Lp[b] = sum_i Lambda_i[b] kr_i r_i (files: phos.material/1, see docs/).\n"
-      "Run 'phos <command> --help' for the options of a command.",
-      "phos"};
+  // A command: run its executable at once (before building any help).
+  if (argc > 1 && argv[1][0] != '-' && phos::app::Summary(argv[1])[0] != '\0') {
+    const std::string folder = OwnFolder(argv[0]);
+    const std::string executable = ExecutableFor(argc, argv);
+    if (!folder.empty()) {
+      execv((folder + executable).c_str(), argv);
+    } else {
+      execvp(executable.c_str(), argv);
+    }
+    std::fprintf(stderr, "phos: internal error: cannot run %s%s: %s (it is built and installed beside phos)\n",
+                 folder.c_str(), executable.c_str(), std::strerror(errno));
+    return 1;
+  }
+
+  CLI::App app{phos::app::kAbout, "phos"};
   app.require_subcommand(1);
   app.failure_message(CLI::FailureMessage::simple);
-  phos::app::RegisterSimulate(app);
-  phos::app::RegisterPlot(app);
-  phos::app::RegisterFit(app);
-  phos::app::RegisterCapture(app);
-  phos::app::RegisterRender(app);
-  phos::app::RegisterEdit(app);
-  phos::app::RegisterEditor(app);
-
-  // Name an unknown command rather than CLI11's "A subcommand is required".
-  if (argc > 1 && argv[1][0] != '-') {
-    bool known = false;
-    std::string names;
-    for (const CLI::App* sub : app.get_subcommands({})) {
-      known = known || sub->get_name() == argv[1];
-      names += (names.empty() ? "" : ", ") + sub->get_name();
-    }
-    if (!known) {
-      std::fprintf(stderr, "phos: unknown command '%s' (commands: %s; see 'phos --help')\n", argv[1], names.c_str());
-      return 2;
-    }
+  app.set_version_flag("--version", std::string("phos ") + phos::kVersion, "Print the version and exit");
+  for (const phos::app::CommandSummary& c : phos::app::kCommands) app.add_subcommand(c.name, c.summary);
+  if (argc < 2) {
+    std::fputs(app.help().c_str(), stdout);
+    return 2;
   }
+  if (argv[1][0] != '-') {
+    std::string names;
+    for (const phos::app::CommandSummary& c : phos::app::kCommands) names += (names.empty() ? "" : ", ") + std::string(c.name);
+    std::fprintf(stderr, "phos: unknown command '%s' (commands: %s; see 'phos --help')\n", argv[1], names.c_str());
+    return 2;
+  }
+
+  // Options before any command: --help, --version, or a mistake.
   try {
     app.parse(argc, argv);
-  } catch (const CLI::CallForHelp& e) {
-    return app.exit(e);
-  } catch (const CLI::CallForAllHelp& e) {
-    return app.exit(e);
   } catch (const CLI::ParseError& e) {
-    // Name the (possibly nested) command the mistake was made in: "phos fit decay-curve".
-    std::string command;
-    for (const CLI::App* level = &app; !level->get_subcommands().empty();) {
-      level = level->get_subcommands().front();
-      command += " " + level->get_name();
-    }
-    std::fprintf(stderr, "phos%s: %s (see 'phos%s --help')\n", command.c_str(), e.what(), command.c_str());
+    if (e.get_exit_code() == 0) return app.exit(e);  // --help, --version
+    std::fprintf(stderr, "phos: %s (see 'phos --help')\n", e.what());
     return 2;
-  } catch (const phos::UserError& e) {
-    std::fprintf(stderr, "phos: %s\n", e.what());
-    return 2;
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "phos: internal error: %s\n", e.what());
-    return 1;
   }
   return 0;
 }

@@ -17,11 +17,11 @@ const std::string kCornell = Fixture("scenes/cornell-phosphor.json").string();
 TEST(RenderCommand, JsonFramesFollowTheContract) {
   TempDir dir;
   const CommandResult r = RunPhos("render " + kCornell + " --out " + dir.path().string() +
-                                  " --times 40,20 --width 40 --height 30 --json");
+                                  " --times 20,40 --width 40 --height 30 --json");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const nlohmann::json json = nlohmann::json::parse(r.out);
   ASSERT_EQ(json["frames"].size(), 2u);
-  EXPECT_EQ(json["frames"][0]["t"].get<double>(), 20.0);  // rendered in time order
+  EXPECT_EQ(json["frames"][0]["t"].get<double>(), 20.0);  // in the order given
   for (const auto& frame : json["frames"]) {
     EXPECT_GT(frame["seconds"].get<double>(), 0.0);
     const render::Image exr = render::ReadImage(frame["exr"].get<std::string>());
@@ -97,6 +97,15 @@ TEST(RenderCommand, ABudgetPicksTheBestTransportThatFits) {
   EXPECT_EQ(good["transport"], "path");
 }
 
+TEST(RenderCommand, TimesPastTheScenesEndAreRenderedWithAWarning) {
+  TempDir dir;
+  const CommandResult r = RunPhos("render " + kCornell + " --out " + dir.path().string() +
+                                  " --times 40,3600 --width 8 --height 8 --json");  // the scene ends at 90 s
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(nlohmann::json::parse(r.out)["frames"].size(), 2u);
+  EXPECT_EQ(r.err, "phos render: warning: --times: 3600 s is past the scene's end (90 s); rendered all the same\n");
+}
+
 TEST(RenderCommand, BadInputIsOneLineAndExitTwo) {
   TempDir dir;
   const std::string out = " --out " + dir.path().string();
@@ -104,6 +113,9 @@ TEST(RenderCommand, BadInputIsOneLineAndExitTwo) {
   EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + kCornell + out + " --transport magic"), "unknown transport 'magic'"));
   EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + kCornell + out + " --times 5,x"), "--times"));
   EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + kCornell + out + " --times -1"), "before the scene's start"));
+  // Out of order is refused, not re-sorted (frames are numbered as given).
+  EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + kCornell + out + " --times 30,0"),
+                                 "--times: expected times in increasing order, got 0 after 30"));
   EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + kCornell + out + " --spp 0"), "--spp"));
   EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + kCornell + out + " --budget-s 1 --transport dss"), "--budget-s"));
   EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + kCornell + out + " --budget-s 1 --quality 0.5"), "not both"));

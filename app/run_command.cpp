@@ -1,0 +1,56 @@
+// The error policy of every phos-<command> executable (commands.h):
+// a mistake in the input (file, option, field) prints one line naming it and
+// exits with code 2; nothing already written is lost, because every output
+// file is written whole through a rename. An internal error exits with 1.
+
+#include <cstdio>
+#include <cstring>
+#include <exception>
+#include <string>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+
+#include "commands.h"
+#include "phos/util/error.h"
+
+namespace phos::app {
+
+int RunCommand(int argc, char** argv, const char* command, void (*register_command)(CLI::App&)) {
+  CLI::App app{kAbout, "phos"};
+  app.require_subcommand(1);
+  app.failure_message(CLI::FailureMessage::simple);
+  register_command(app);
+  // The summary `phos --help` shows, whichever file registered the command.
+  for (CLI::App* sub : app.get_subcommands({}))
+    if (sub->get_name() == command) sub->description(Summary(command));
+
+  // phos execs us as `phos <command> ...`; run by hand, the command's name may be left out.
+  std::vector<char*> args(argv, argv + argc);
+  if (argc < 2 || std::strcmp(argv[1], command) != 0) args.insert(args.begin() + 1, const_cast<char*>(command));
+  try {
+    app.parse(static_cast<int>(args.size()), args.data());
+  } catch (const CLI::CallForHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::CallForAllHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::ParseError& e) {
+    // Name the (possibly nested) command the mistake was made in: "phos fit decay-curve".
+    std::string name;
+    for (const CLI::App* level = &app; !level->get_subcommands().empty();) {
+      level = level->get_subcommands().front();
+      name += " " + level->get_name();
+    }
+    std::fprintf(stderr, "phos%s: %s (see 'phos%s --help')\n", name.c_str(), e.what(), name.c_str());
+    return 2;
+  } catch (const phos::UserError& e) {
+    std::fprintf(stderr, "phos: %s\n", e.what());
+    return 2;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "phos: internal error: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}
+
+}  // namespace phos::app
