@@ -1,12 +1,16 @@
 // `phos simulate` and `phos plot` as a user runs them: the DESIGN.md
 // contract, and one clear line with exit code 2 for every kind of bad input.
 
+#include <array>
 #include <cmath>
+#include <cstdlib>
+#include <filesystem>
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
 #include "model/closed_form.h"
 #include "phos/util/csv.h"
+#include "phos/util/version.h"
 #include "test_util.h"
 
 namespace phos {
@@ -118,6 +122,83 @@ TEST(SimulateCommand, AFailedRunLosesNothingAlreadyWritten) {
   EXPECT_EQ(testing::ReadText(dir / "keep.csv"), "precious\n");
 }
 
+TEST(SimulateCommand, SamplesTheEndWhenTheStepDoesNotDivideIt) {
+  // --dt 3 over 10 + 10 s: 0, 3, ..., 18, and the end, 20.
+  auto result = RunPhos("simulate --material " + Green() + " --charge-s 10 --irradiance " + kBlueLight +
+                        " --decay-s 10 --dt 3 --json");
+  ASSERT_EQ(result.exit_code, 0) << result.err;
+  nlohmann::json j = nlohmann::json::parse(result.out);
+  const std::vector<double> t = j["t"].get<std::vector<double>>();
+  ASSERT_EQ(t.size(), 8u);
+  EXPECT_EQ(t[6], 18.0);
+  EXPECT_EQ(t.back(), 20.0);
+  const double a = 0.1 + 0.035 + 0.006, kr = 0.227;
+  const long double end = testing::ClosedForm(testing::ClosedForm(0, a, kr, 10), 0, kr, 10);
+  EXPECT_TRUE(testing::RelativelyNear(j["r"][7][0].get<double>(), end, 1e-12));
+  EXPECT_TRUE(testing::RelativelyNear(j["L"][7][3].get<double>(), 0.64 * kr * static_cast<double>(end), 1e-12));
+  // Ending inside the charge (no decay) too.
+  auto charge = RunPhos("simulate --material " + Green() + " --charge-s 10 --irradiance " + kBlueLight + " --dt 4 --json");
+  ASSERT_EQ(charge.exit_code, 0) << charge.err;
+  nlohmann::json c = nlohmann::json::parse(charge.out);
+  EXPECT_EQ(c["t"].get<std::vector<double>>(), (std::vector<double>{0, 4, 8, 10}));
+  EXPECT_TRUE(testing::RelativelyNear(c["r"][3][0].get<double>(), testing::ClosedForm(0, a, kr, 10), 1e-12));
+}
+
+// The phos command itself: the dispatcher and its conventions.
+std::filesystem::path BinFolder() { return std::filesystem::path(PHOS_BINARY).parent_path(); }
+
+TEST(PhosCommand, VersionIsTheProjectVersion) {
+  auto result = RunPhos("--version");
+  EXPECT_EQ(result.exit_code, 0);
+  EXPECT_EQ(result.out, std::string("phos ") + kVersion + "\n");
+  EXPECT_FALSE(std::string(kVersion).empty());
+}
+
+TEST(PhosCommand, BarePhosPrintsItsUsageAndHelpListsEveryCommand) {
+  auto bare = RunPhos("");
+  EXPECT_EQ(bare.exit_code, 2);  // no command is a usage mistake, as for git
+  EXPECT_EQ(bare.err, "");
+  auto help = RunPhos("--help");
+  EXPECT_EQ(help.exit_code, 0);
+  EXPECT_EQ(bare.out, help.out);
+  for (const char* command : {"simulate", "plot", "fit", "capture", "render", "edit", "editor", "--version"})
+    EXPECT_NE(help.out.find(command), std::string::npos) << command;
+  EXPECT_EQ(help.out.find("../"), std::string::npos);  // points nowhere outside the repository
+  // Each command's own help says what the list says.
+  auto simulate = RunPhos("simulate --help");
+  EXPECT_NE(simulate.out.find("Simulate one point of a material"), std::string::npos);
+  EXPECT_NE(help.out.find("Simulate one point of a material"), std::string::npos);
+}
+
+TEST(PhosCommand, CommandsRunTheSameWithoutTheDispatcher) {
+  const std::string args = " --material " + Green() + " --charge-s 2 --irradiance " + kBlueLight + " --decay-s 2 --json";
+  auto through = RunPhos("simulate" + args);
+  ASSERT_EQ(through.exit_code, 0) << through.err;
+  testing::TempDir dir;
+  const std::string direct = (BinFolder() / "phos-simulate").string() + args + " > " + (dir / "out").string();
+  ASSERT_EQ(std::system(direct.c_str()), 0);
+  EXPECT_EQ(testing::ReadText(dir / "out"), through.out);
+}
+
+// What `ldd` lists for an executable of the bin folder.
+std::string SharedLibraries(const std::string& executable) {
+  testing::TempDir dir;
+  const std::string command = "ldd " + (BinFolder() / executable).string() + " > " + (dir / "ldd").string() + " 2>&1";
+  EXPECT_EQ(std::system(command.c_str()), 0) << command;
+  return testing::ReadText(dir / "ldd");
+}
+
+TEST(PhosCommand, QuickCommandsLinkNoImageRenderOrCameraLibrary) {
+  // Issue 17: these start in milliseconds because they load none of these.
+  const std::array<const char*, 4> heavy = {"libOpenImageIO", "libembree", "libaravis", "libopencv"};
+  for (const char* executable : {"phos", "phos-simulate", "phos-plot", "phos-fit-curve", "phos-edit"}) {
+    const std::string libraries = SharedLibraries(executable);
+    for (const char* library : heavy) EXPECT_EQ(libraries.find(library), std::string::npos) << executable << ": " << library;
+  }
+  // The check sees them where they are.
+  EXPECT_NE(SharedLibraries("phos-render").find("libembree"), std::string::npos);
+}
+
 TEST(PlotCommand, DrawsOneLinePerCsv) {
   testing::TempDir dir;
   for (const char* name : {"green", "orange"}) {
@@ -137,6 +218,41 @@ TEST(PlotCommand, DrawsOneLinePerCsv) {
   auto bad = RunPhos("plot " + (dir / "other.csv").string() + " --out " + (dir / "x.svg").string());
   EXPECT_EQ(bad.exit_code, 2);
   EXPECT_NE(bad.err.find("no column 't'"), std::string::npos);
+}
+
+TEST(PlotCommand, LinesTakeTheColourOfTheirGlowAndTheLogAxisFollowsTheData) {
+  testing::TempDir dir;
+  std::string files;
+  for (const char* name : {"green", "red", "blue"}) {
+    const std::string csv = (dir / (std::string(name) + ".csv")).string();
+    auto r = RunPhos("simulate --material " + testing::Fixture(std::string("materials/") + name + ".json").string() +
+                     " --charge-s 10 --irradiance 1,1,1,0,0,0,0,0 --decay-s 300 --dt 2 --out " + csv);
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    files += " " + csv;
+  }
+  auto r = RunPhos("plot" + files + " --log-y --json --out " + (dir / "all.svg").string());
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const nlohmann::json j = nlohmann::json::parse(r.out);
+  ASSERT_EQ(j["series"].size(), 3u);
+  auto rgb = [](const std::string& hex) {
+    std::array<long, 3> c{};
+    for (int i = 0; i < 3; ++i) c[i] = std::strtol(hex.substr(1 + 2 * i, 2).c_str(), nullptr, 16);
+    return c;
+  };
+  const auto green = rgb(j["series"][0]["color"]), red = rgb(j["series"][1]["color"]), blue = rgb(j["series"][2]["color"]);
+  EXPECT_TRUE(green[1] > green[0] && green[1] > green[2]) << j["series"][0]["color"];
+  EXPECT_TRUE(red[0] > red[1] && red[0] > red[2]) << j["series"][1]["color"];
+  EXPECT_TRUE(blue[2] > blue[0] && blue[2] > blue[1]) << j["series"][2]["color"];
+  EXPECT_EQ(j["series"][0]["label"], "green");
+  EXPECT_EQ(j["out"], (dir / "all.svg").string());
+  const std::string svg = testing::ReadText(dir / "all.svg");
+  EXPECT_NE(svg.find("stroke=\"" + j["series"][0]["color"].get<std::string>() + "\""), std::string::npos);
+  EXPECT_NE(svg.find("(unit of Lambda)"), std::string::npos);
+  // Green decays at kr = 0.227/s for 300 s: 30 decades below its peak, all on the axis.
+  double lowest = INFINITY;
+  for (std::size_t p = svg.find("text-anchor=\"end\">"); p != std::string::npos; p = svg.find("text-anchor=\"end\">", p + 1))
+    lowest = std::min(lowest, std::atof(svg.c_str() + p + 18));
+  EXPECT_LE(lowest, j["series"][0]["end_radiance"].get<double>());
 }
 
 }  // namespace

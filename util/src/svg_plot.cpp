@@ -1,12 +1,20 @@
 #include "phos/util/svg_plot.h"
 
 #include <algorithm>
+#include <array>
+#include <cctype>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <sstream>
+
+#include "phos/util/colour.h"
 
 namespace phos {
 namespace {
+
+// The visible range (CIE 15): light outside it has no colour.
+constexpr double kVisibleLowerNm = 380, kVisibleUpperNm = 780;
 
 std::string Escape(const std::string& text) {
   std::string out;
@@ -21,6 +29,11 @@ std::string Escape(const std::string& text) {
   }
   return out;
 }
+
+// Width of a line of text at this font size, a little more than the average
+// of sans-serif fonts (about 0.55 of the size per character), so that what is
+// laid out by it fits.
+double TextWidth(const std::string& text, double font_px) { return 0.6 * font_px * static_cast<double>(text.size()); }
 
 std::string Num(double v) {
   char buffer[32];
@@ -89,12 +102,12 @@ std::string WavelengthColor(double nm) {
   // Piecewise-linear hue ramp after Bruton's approximation of the visible
   // spectrum, darkened a little so thin lines read on white.
   double r = 0, g = 0, b = 0;
-  if (nm >= 380 && nm < 440) { r = (440 - nm) / 60; b = 1; }
+  if (nm >= kVisibleLowerNm && nm < 440) { r = (440 - nm) / 60; b = 1; }
   else if (nm >= 440 && nm < 490) { g = (nm - 440) / 50; b = 1; }
   else if (nm >= 490 && nm < 510) { g = 1; b = (510 - nm) / 20; }
   else if (nm >= 510 && nm < 580) { r = (nm - 510) / 70; g = 1; }
   else if (nm >= 580 && nm < 645) { r = 1; g = (645 - nm) / 65; }
-  else if (nm >= 645 && nm <= 780) { r = 1; }
+  else if (nm >= 645 && nm <= kVisibleUpperNm) { r = 1; }
   else return "#888888";
   char buffer[16];
   std::snprintf(buffer, sizeof buffer, "#%02X%02X%02X", static_cast<int>(r * 210), static_cast<int>(g * 190),
@@ -107,6 +120,65 @@ const std::string& PaletteColor(int index) {
                                                    "#E69F00", "#56B4E9", "#000000", "#F0E442",
                                                    "#7F7F7F", "#8C564B", "#9467BD"};
   return palette[static_cast<size_t>(index) % palette.size()];
+}
+
+std::string ChannelColor(std::string_view channel) {
+  std::string first;
+  for (char c : channel) {
+    if (c == ' ' || c == '(' || c == '_' || c == ',') break;
+    first += static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  }
+  if (first == "r" || first == "red") return "#D62728";
+  if (first == "g" || first == "green") return "#2CA02C";
+  if (first == "b" || first == "blue") return "#1F77B4";
+  return "";
+}
+
+std::string ChannelOrPaletteColor(std::string_view channel, int index) {
+  std::string color = ChannelColor(channel);
+  return color.empty() ? PaletteColor(index) : color;
+}
+
+std::string SpectrumColor(const std::vector<double>& band_radiance, const std::vector<double>& edges_nm) {
+  if (edges_nm.size() != band_radiance.size() + 1) return "#888888";
+  Tristimulus xyz{0, 0, 0};
+  for (std::size_t b = 0; b < band_radiance.size(); ++b) {
+    if (!(band_radiance[b] > 0) || !std::isfinite(band_radiance[b])) continue;
+    // Band radiance of uniform density over the band: XYZ = L_b times the
+    // band's mean CMF, over the part of the band inside the visible range.
+    const double lower = std::max(edges_nm[b], kVisibleLowerNm), upper = std::min(edges_nm[b + 1], kVisibleUpperNm);
+    if (!(upper > lower)) continue;
+    const double visible = (upper - lower) / (edges_nm[b + 1] - edges_nm[b]);
+    const Tristimulus cmf = Cie1931CmfBandMean(lower, upper);
+    for (int i = 0; i < 3; ++i) xyz[i] += band_radiance[b] * visible * cmf[i];
+  }
+  Tristimulus rgb = XyzToLinearSrgb(xyz);
+  for (double& c : rgb) c = std::max(c, 0.0);  // spectral colours lie outside sRGB: keep the hue, clip the rest
+  const double peak = std::max({rgb[0], rgb[1], rgb[2]});
+  if (!(peak > 0)) return "#888888";
+  for (double& c : rgb) c /= peak;
+  // A thin line of luminance above ~0.35 (yellow, light green) fades into white paper.
+  const double luminance = LinearSrgbLuminance(rgb[0], rgb[1], rgb[2]);
+  if (luminance > 0.35)
+    for (double& c : rgb) c *= 0.35 / luminance;
+  auto encode = [](double linear) {
+    const double v = linear <= 0.0031308 ? 12.92 * linear : 1.055 * std::pow(linear, 1 / 2.4) - 0.055;  // sRGB
+    return static_cast<int>(std::lround(std::clamp(v, 0.0, 1.0) * 255));
+  };
+  char buffer[16];
+  std::snprintf(buffer, sizeof buffer, "#%02X%02X%02X", encode(rgb[0]), encode(rgb[1]), encode(rgb[2]));
+  return buffer;
+}
+
+double ColorDistance(const std::string& a, const std::string& b) {
+  auto channels = [](const std::string& hex) {
+    std::array<double, 3> c{0, 0, 0};
+    if (hex.size() == 7 && hex[0] == '#')
+      for (int i = 0; i < 3; ++i) c[i] = std::strtol(hex.substr(1 + 2 * i, 2).c_str(), nullptr, 16);
+    return c;
+  };
+  const auto x = channels(a), y = channels(b);
+  return std::sqrt((x[0] - y[0]) * (x[0] - y[0]) + (x[1] - y[1]) * (x[1] - y[1]) + (x[2] - y[2]) * (x[2] - y[2]));
 }
 
 std::string PlotSvg(const std::vector<PlotSeries>& series, const PlotOptions& options) {
@@ -127,9 +199,21 @@ std::string PlotSvg(const std::vector<PlotSeries>& series, const PlotOptions& op
   ay.hi = std::isnan(options.y_max) ? yhi : options.y_max;
   std::vector<double> xticks = ax.Ticks(), yticks = ay.Ticks();
 
-  const double W = options.width_px, H = options.height_px;
-  const double left = 78, right = 190, top = options.title.empty() ? 20 : 42, bottom = 56;
-  const double pw = W - left - right, ph = H - top - bottom;
+  // The plot area is what width_px and height_px leave beside a legend of
+  // 190 px; a legend that needs more, or a longer title, widens the document,
+  // and more legend lines than the plot is tall make it taller.
+  const double left = 78, top = options.title.empty() ? 20 : 42, bottom = 56;
+  const double pw = options.width_px - left - 190, ph = options.height_px - top - bottom;
+  double legend_width = 0;
+  int legend_lines = 0;
+  for (const PlotSeries& s : series)
+    if (!s.label.empty()) {
+      legend_width = std::max(legend_width, 28 + TextWidth(s.label, 12));
+      ++legend_lines;
+    }
+  const double right = std::max(190.0, 14 + legend_width + 10);
+  const double W = std::max(left + pw + right, TextWidth(options.title, 15) + 20);
+  const double H = std::max<double>(options.height_px, top + 8 + 18.0 * legend_lines + 8);
   auto px = [&](double x) { return left + ax.Map(x) * pw; };
   auto py = [&](double y) { return top + (1 - ay.Map(y)) * ph; };
 
@@ -138,7 +222,8 @@ std::string PlotSvg(const std::vector<PlotSeries>& series, const PlotOptions& op
       << "\" viewBox=\"0 0 " << W << " " << H << "\" font-family=\"sans-serif\" font-size=\"12\">\n"
       << "<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n";
   if (!options.title.empty())
-    svg << "<text x=\"" << Num(left + pw / 2) << "\" y=\"24\" text-anchor=\"middle\" font-size=\"15\">"
+    svg << "<text x=\"" << Num(std::clamp(left + pw / 2, TextWidth(options.title, 15) / 2 + 10, W - TextWidth(options.title, 15) / 2 - 10))
+        << "\" y=\"24\" text-anchor=\"middle\" font-size=\"15\">"
         << Escape(options.title) << "</text>\n";
   // Grid and ticks.
   svg << "<g stroke=\"#e3e3e3\" stroke-width=\"1\">\n";
@@ -150,7 +235,7 @@ std::string PlotSvg(const std::vector<PlotSeries>& series, const PlotOptions& op
     svg << "<text x=\"" << Num(px(t)) << "\" y=\"" << Num(top + ph + 16) << "\" text-anchor=\"middle\">" << TickLabel(t) << "</text>\n";
   for (double t : yticks)
     svg << "<text x=\"" << Num(left - 6) << "\" y=\"" << Num(py(t) + 4) << "\" text-anchor=\"end\">" << TickLabel(t) << "</text>\n";
-  svg << "<text x=\"" << Num(left + pw / 2) << "\" y=\"" << Num(H - 14) << "\" text-anchor=\"middle\">" << Escape(options.x_label) << "</text>\n";
+  svg << "<text x=\"" << Num(left + pw / 2) << "\" y=\"" << Num(top + ph + bottom - 14) << "\" text-anchor=\"middle\">" << Escape(options.x_label) << "</text>\n";
   svg << "<text transform=\"translate(18," << Num(top + ph / 2) << ") rotate(-90)\" text-anchor=\"middle\">" << Escape(options.y_label) << "</text>\n";
 
   // Data, clipped to the plot area.
@@ -158,7 +243,7 @@ std::string PlotSvg(const std::vector<PlotSeries>& series, const PlotOptions& op
       << "\" height=\"" << Num(ph) << "\"/></clipPath>\n<g clip-path=\"url(#plotarea)\">\n";
   for (size_t k = 0; k < series.size(); ++k) {
     const PlotSeries& s = series[k];
-    std::string color = s.color.empty() ? PaletteColor(static_cast<int>(k)) : s.color;
+    const std::string color = s.color.empty() ? ChannelOrPaletteColor(s.label, static_cast<int>(k)) : s.color;
     if (s.line) {
       std::string path;
       bool pen_down = false;
@@ -182,7 +267,7 @@ std::string PlotSvg(const std::vector<PlotSeries>& series, const PlotOptions& op
   for (size_t k = 0; k < series.size(); ++k) {
     const PlotSeries& s = series[k];
     if (s.label.empty()) continue;
-    std::string color = s.color.empty() ? PaletteColor(static_cast<int>(k)) : s.color;
+    const std::string color = s.color.empty() ? ChannelOrPaletteColor(s.label, static_cast<int>(k)) : s.color;
     double lx = left + pw + 14;
     if (s.line)
       svg << "<line x1=\"" << Num(lx) << "\" y1=\"" << Num(ly) << "\" x2=\"" << Num(lx + 22) << "\" y2=\"" << Num(ly)
