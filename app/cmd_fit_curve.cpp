@@ -12,6 +12,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "cli_finite.h"
 #include "commands.h"
 #include "phos/fit/charge_fit.h"
 #include "phos/fit/decay_fit.h"
@@ -384,8 +385,9 @@ void AddCurveOptions(CLI::App* command, const std::shared_ptr<CurveArgs>& args, 
   CLI::Option* csv = command->add_option("--csv", args->csv, "a curve file (may repeat; same as FILE)")
                          ->allow_extra_args(false);
   command->add_option("--from", args->from_s,
-                      "keep samples at t >= T (s, inclusive; default: from the first); t = 0 stays the file's");
-  command->add_option("--to", args->to_s, "keep samples at t <= T (s, inclusive; default: to the last)");
+                      "keep samples at t >= T (s, inclusive; default: from the first); t = 0 stays the file's")
+      ->check(kFinite);
+  command->add_option("--to", args->to_s, "keep samples at t <= T (s, inclusive; default: to the last)")->check(kFinite);
   command->add_option("--plot", args->plot, "write an SVG of the data against the fit (one file only)");
   command->add_flag("--json", args->json, "print one JSON object per file, one per line, each with \"file\"");
   command->callback([command, args, csv, positional, run] {

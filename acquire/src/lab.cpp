@@ -7,11 +7,18 @@
 #include <iostream>
 #include <set>
 
+#include "phos/model/material.h"
 #include "phos/util/csv.h"
 #include "phos/util/error.h"
 #include "phos/util/json.h"
 
 namespace phos {
+namespace {
+
+// The largest sensor side a lab config may name, in pixels (docs/fuzzing.md, "Limits").
+constexpr int kMaxSensorPixels = 65536;
+
+}  // namespace
 
 nlohmann::json LabConfig::ToJson() const {
   nlohmann::json channels_json = nlohmann::json::object();
@@ -61,10 +68,14 @@ LabConfig LoadLabConfig(const std::filesystem::path& path) {
     config.binning_y = static_cast<int>(b[1]);
   }
   if (auto f = camera.Optional("region")) {
-    const std::vector<double> r = f->NumberArray(4, 0);
-    if (!(r[2] >= 1 && r[3] >= 1)) f->Fail("expected [x, y, width, height] with width and height >= 1");
-    config.region = std::array<int, 4>{static_cast<int>(r[0]), static_cast<int>(r[1]), static_cast<int>(r[2]),
-                                       static_cast<int>(r[3])};
+    // Whole pixels of a sensor of at most kMaxSensorPixels a side: a region of
+    // 1e9 crashed in the camera (ASan SEGV), and 1e10 does not fit an int.
+    if (f->ArraySize() != 4) f->Fail("expected [x, y, width, height]");
+    std::array<int, 4> r{};
+    for (int i = 0; i < 4; ++i) r[i] = f->At(i).Integer(i < 2 ? 0 : 1, kMaxSensorPixels);
+    if (r[0] + r[2] > kMaxSensorPixels || r[1] + r[3] > kMaxSensorPixels)
+      f->Fail("the region reaches past " + std::to_string(kMaxSensorPixels) + " pixels, the largest sensor phos accepts");
+    config.region = r;
   }
   if (auto f = camera.Optional("timeout_s")) config.timeout_s = f->NumberInRange(0.1, 3600);
   if (auto f = camera.Optional("trigger")) {
@@ -82,8 +93,12 @@ LabConfig LoadLabConfig(const std::filesystem::path& path) {
   }
 
   if (auto f = root.Optional("bands_nm")) {
+    if (f->ArraySize() > static_cast<std::size_t>(kMaxBands) + 1)
+      f->Fail("more than the limit of " + std::to_string(kMaxBands) + " bands");
     config.bands.edges_nm = f->NumberArray(0, 100);
     if (config.bands.edges_nm.size() < 2) f->Fail("expected at least 2 band edges");
+    for (std::size_t i = 0; i < config.bands.edges_nm.size(); ++i)
+      if (config.bands.edges_nm[i] > kMaxWavelengthNm) f->At(i).Fail("expected a wavelength of at most 1e5 nm");
     for (std::size_t i = 1; i < config.bands.edges_nm.size(); ++i)
       if (!(config.bands.edges_nm[i] > config.bands.edges_nm[i - 1])) f->Fail("band edges must increase");
   }

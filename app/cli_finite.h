@@ -1,0 +1,36 @@
+#pragma once
+// NaN and infinity in a numeric option (issue 18 item 5): CLI11 converts
+// "nan", "inf" and "1e999" to doubles without a word, and a time, rate or
+// irradiance of NaN then runs silently into every later computation. Every
+// numeric option of every command takes this check:
+//
+//   command->add_option("--charge-s", args->charge_s, "...")->check(phos::app::kFinite);
+//
+// For a list option (a delimiter, or a std::vector), CLI11 applies the
+// check to each element. Text that is not a number at all is left to
+// CLI11's own conversion, which names the option too.
+
+#include <cmath>
+#include <cstdlib>
+#include <string>
+
+#include <CLI/CLI.hpp>
+
+namespace phos::app {
+
+// The error text for an option value that parses as a number but not a
+// finite one ("" when it is finite or no number at all).
+inline std::string NonFiniteOptionValue(const std::string& text) {
+  const char* begin = text.c_str();
+  char* end = nullptr;
+  const double value = std::strtod(begin, &end);
+  if (end == begin) return "";  // not a number: CLI11's conversion says so
+  while (*end == ' ') ++end;
+  if (*end != '\0') return "";
+  if (std::isfinite(value)) return "";  // an underflow to a denormal or 0 is finite too
+  return "expected a finite number, got " + text;
+}
+
+inline const CLI::Validator kFinite(NonFiniteOptionValue, "FINITE", "finite");
+
+}  // namespace phos::app
