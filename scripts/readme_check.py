@@ -356,7 +356,10 @@ def main():
     ap.add_argument("--only", default=None, help="run only the commands containing this text (and the setups)")
     ap.add_argument("--rtol", type=float, default=1e-3, help="relative tolerance of non-integer numbers (default 1e-3)")
     ap.add_argument("--timeout", type=int, default=300, help="seconds allowed per command (default 300)")
+    ap.add_argument("--self-test", action="store_true", help="check the parser and the comparison on built-in cases")
     args = ap.parse_args()
+    if args.self_test:
+        return self_test()
 
     source = os.path.abspath(args.source_dir)
     readme = args.readme or os.path.join(source, "README.md")
@@ -485,6 +488,62 @@ def updated_lines(expected, actual, indent, masks, rtol):
     if more:
         new.append("...")
     return [(indent + a) if a else "" for a in new]
+
+
+def self_test():
+    """The checker's own test: what must match does, and a drift is caught."""
+    failures = []
+
+    def expect(name, ok):
+        print("%s %s" % ("ok  " if ok else "FAIL", name))
+        if not ok:
+            failures.append(name)
+
+    m, r = DEFAULT_MASKS, 1e-3
+    same = lambda e, a: compare(e, a, m, r) == []
+    expect("equal output matches", same(["  decay            42 frames"], ["  decay            42 frames"]))
+    expect("a frame count that drifted is caught (57 against 55)",
+           not same(["  excitation       57 frames"], ["  excitation       55 frames"]))
+    expect("a missing line is caught",
+           not same(["a", "  joint refinement (written): kr = 0.015 /s", "b"], ["a", "b"]))
+    expect("an extra line is caught", not same(["a"], ["a", "b"]))
+    expect("timings are masked",
+           same(["rss 77.9949, 1.41 ms", "fit session: d -> m.json (0.6576 s)", '{"seconds":0.0011,"x":1}',
+                 "  t =       20 s    0.014 s  out/frame-0000.png", "fitted in 11.04 s -> x"],
+                ["rss 77.9949, 8.35 ms", "fit session: d -> m.json (7.9 s)", '{"seconds":0.09,"x":1}',
+                 "  t =       20 s    0.151 s  out/frame-0000.png", "fitted in 15.42 s -> x"]))
+    expect("a time that is not a timing is compared",
+           not same(["  t =       20 s    0.014 s  out/frame-0000.png"], ["  t =       40 s    0.014 s  out/frame-0000.png"]))
+    expect("numbers within the tolerance match", same(["rate 1.20177 /s"], ["rate 1.201771 /s"]))
+    expect("numbers beyond it do not", not same(["rss 77.9949"], ["rss 78.1"]))
+    expect("integers are exact", not same(["37132 phosphor texels"], ["37133 phosphor texels"]))
+    expect("runs of spaces count as one", same(["a   nc  1.5"], ["a nc    1.5"]))
+    expect("identifiers keep their digits as text", not same(["r_1,L_1"], ["r_1,L_2"]))
+    expect("a cut line compares its prefix", same(['{"t":[0,5],"L":[[0,0.0074,...'], ['{"t":[0,5],"L":[[0,0.0074,0.07585]]}']))
+    expect("a cut line still catches a drift before the cut",
+           not same(['{"t":[0,5],"L":[[0,0.0075,...'], ['{"t":[0,5],"L":[[0,0.0074,0.07585]]}']))
+    expect("'...' alone stands for further lines", same(["a", "..."], ["a", "b", "c"]))
+    expect("text differences are caught", not same(["phos: --dt: euler"], ["phos: --dt: rk4"]))
+
+    readme = ["intro", "", "<!-- readme-check: skip \"editor\": a server -->", "",
+              "    $ build/bin/phos simulate --material m.json \\", "        --dt 5", "    t,r_1", "    0,0",
+              "    $ echo $?", "    0", "", "Prose.", "", "    make demo", "", "```console", "$ build/bin/phos editor", "listening",
+              "```"]
+    blocks = parse(readme)
+    expect("console blocks are found, plain code blocks are not", len(blocks) == 2)
+    if len(blocks) == 2:
+        c = blocks[0].commands
+        expect("a continued command is one command with its output",
+               len(c) == 2 and c[0].text.endswith("--dt 5") and c[0].output == ["t,r_1", "0,0"] and c[1].output == ["0"])
+        expect("a directive applies to the next block", blocks[0].skips == [("editor", "a server")])
+        expect("fenced blocks are read", blocks[1].commands[0].output == ["listening"])
+    new = updated_lines(["phos fit session: (0.6 s)", "  nc = 1", "  report: r.html"],
+                        ["phos fit session: (0.9 s)", "  nc = 1", "  joint refinement (written)", "  report: r.html"],
+                        "    ", m, r)
+    expect("--update keeps matching lines (timings too) and adds the new one",
+           new == ["    phos fit session: (0.6 s)", "      nc = 1", "      joint refinement (written)", "      report: r.html"])
+    print("readme_check self-test: %d failed" % len(failures))
+    return 1 if failures else 0
 
 
 if __name__ == "__main__":
