@@ -88,7 +88,7 @@ void RunPlot(const PlotArgs& args) {
   options.title = args.title;
   options.x_label = "time (s)";
   // Radiance is in the unit of the material's Lambda (radiance per unit kr r, Eq. 8.2).
-  options.y_label = std::string("total emitted radiance, sum of Lp over bands (unit of Lambda)") + (args.log_y ? ", log" : "");
+  options.y_label = std::string("emitted radiance, all bands (unit of Lambda)") + (args.log_y ? ", log scale" : "");
   options.log_y = args.log_y;  // the axis spans the decades the data reach
   WriteFileAtomically(args.out, PlotSvg(series, options));
   if (args.json)

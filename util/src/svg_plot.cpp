@@ -153,7 +153,12 @@ std::string SpectrumColor(const std::vector<double>& band_radiance, const std::v
     for (int i = 0; i < 3; ++i) xyz[i] += band_radiance[b] * visible * cmf[i];
   }
   Tristimulus rgb = XyzToLinearSrgb(xyz);
-  for (double& c : rgb) c = std::max(c, 0.0);  // spectral colours lie outside sRGB: keep the hue, clip the rest
+  // Narrow-band light lies outside sRGB: desaturate it toward white (add the
+  // same to every channel) until it fits, which keeps its hue, where clipping
+  // would make different greens one.
+  const double lowest = std::min({rgb[0], rgb[1], rgb[2]});
+  if (lowest < 0)
+    for (double& c : rgb) c -= lowest;
   const double peak = std::max({rgb[0], rgb[1], rgb[2]});
   if (!(peak > 0)) return "#888888";
   for (double& c : rgb) c /= peak;
