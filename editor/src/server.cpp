@@ -1,56 +1,307 @@
 #include "phos/editor/server.h"
 
+#include <algorithm>
+#include <cerrno>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <list>
+#include <memory>
 #include <mutex>
+#include <set>
+#include <thread>
+
+#include <fcntl.h>
+#include <netdb.h>
+#include <netinet/in.h>
+#include <netinet/tcp.h>
+#include <poll.h>
+#include <sys/socket.h>
+#include <unistd.h>
 
 #include <httplib.h>
 #include <nlohmann/json.hpp>
 
 #include "phos/util/error.h"
+#include "phos/util/json.h"
 
 namespace phos::editor {
 namespace {
+
+using Clock = std::chrono::steady_clock;
+
+// Names (objects, presets) longer than this are refused before any lookup.
+constexpr std::size_t kMaxNameBytes = 256;
 
 void Error(httplib::Response& response, int status, const std::string& message) {
   response.status = status;
   response.set_content(nlohmann::json{{"error", message}}.dump(), "application/json");
 }
 
-nlohmann::json ParseBody(const httplib::Request& request) {
+// The request body as a JSON object. nlohmann refuses a number beyond
+// double's range (1e400) with its own exception, not a syntax error: it is a
+// bad value like any other, named with its field (the parser's callback
+// follows the keys down to the one being read).
+nlohmann::json ParseBody(const std::string& text) {
+  std::vector<std::string> keys;
+  const nlohmann::json::parser_callback_t follow = [&](int, nlohmann::json::parse_event_t event, nlohmann::json& parsed) {
+    if (event == nlohmann::json::parse_event_t::object_start) keys.emplace_back();
+    if (event == nlohmann::json::parse_event_t::key) keys.back() = parsed.get<std::string>();
+    if (event == nlohmann::json::parse_event_t::object_end) keys.pop_back();
+    return true;
+  };
+  nlohmann::json body;
   try {
-    nlohmann::json body = nlohmann::json::parse(request.body);
-    if (!body.is_object()) throw UserError("request: expected a JSON object");
-    return body;
-  } catch (const nlohmann::json::parse_error& e) {
-    throw UserError(std::string("request: malformed JSON: ") + e.what());
+    body = nlohmann::json::parse(text, follow);
+  } catch (const nlohmann::json::out_of_range& e) {
+    std::string field;
+    for (const std::string& key : keys)
+      if (!key.empty()) field += (field.empty() ? "" : ".") + key;
+    ThrowUserError("request", field, "a number beyond the range of a double (" + std::string(e.what()).substr(std::string(e.what()).find("] ") + 2) + ")");
+  } catch (const nlohmann::json::exception& e) {
+    std::string what = e.what();
+    if (auto close = what.find("] "); close != std::string::npos) what = what.substr(close + 2);
+    ThrowUserError("request", "", "malformed JSON: " + what);
   }
+  if (!body.is_object()) ThrowUserError("request", "", "expected a JSON object, got " + DescribeJson(body));
+  return body;
+}
+
+// A name field of a request: a string, not too long to look up.
+std::string Name(const JsonField& field) {
+  const std::string name = field.String();
+  if (name.size() > kMaxNameBytes)
+    field.Fail("has " + std::to_string(name.size()) + " characters, more than " + std::to_string(kMaxNameBytes));
+  return name;
+}
+
+// A query parameter as a number: the whole text, finite.
+double QueryNumber(const httplib::Request& request, const std::string& key) {
+  const std::string text = request.get_param_value(key);
+  char* end = nullptr;
+  errno = 0;
+  const double v = std::strtod(text.c_str(), &end);
+  if (text.empty() || end != text.c_str() + text.size() || errno == ERANGE || !std::isfinite(v))
+    ThrowUserError("request", key, "expected a number, got '" + text.substr(0, 40) + "'");
+  return v;
+}
+
+// Every query parameter is one the route knows, given once.
+void RejectUnknownParameters(const httplib::Request& request, std::initializer_list<std::string> known) {
+  for (const auto& [key, value] : request.params) {
+    if (std::find(known.begin(), known.end(), key) == known.end()) {
+      std::string list;
+      for (const std::string& k : known) list += (list.empty() ? "" : ", ") + k;
+      ThrowUserError("request", key.substr(0, 40), "unknown parameter (expected " + (list.empty() ? "none" : list) + ")");
+    }
+    if (request.get_param_value_count(key) > 1) ThrowUserError("request", key, "given more than once");
+  }
+}
+
+// One connection's socket as httplib's Stream, with deadlines: the whole
+// request must arrive by `read_deadline` however slowly its bytes trickle, and
+// the response must leave by `write_deadline` (a client that sends or reads
+// one byte a second cannot hold a worker; httplib's own read timeout restarts
+// with every byte).
+class DeadlineStream : public httplib::Stream {
+ public:
+  DeadlineStream(int fd, Clock::time_point read_deadline, Clock::duration write_timeout)
+      : fd_(fd), read_deadline_(read_deadline), write_timeout_(write_timeout) {}
+
+  bool is_readable() const override { return begin_ < end_ || Wait(POLLIN, read_deadline_); }
+  bool is_writable() const override { return Wait(POLLOUT, WriteDeadline()); }
+
+  ssize_t read(char* ptr, size_t size) override {
+    if (begin_ == end_) {
+      if (!Wait(POLLIN, read_deadline_)) return -1;
+      const ssize_t n = ::recv(fd_, buffer_, sizeof buffer_, 0);
+      if (n <= 0) return n;
+      begin_ = 0;
+      end_ = static_cast<std::size_t>(n);
+    }
+    const std::size_t n = std::min(size, end_ - begin_);
+    std::memcpy(ptr, buffer_ + begin_, n);
+    begin_ += n;
+    return static_cast<ssize_t>(n);
+  }
+
+  ssize_t write(const char* ptr, size_t size) override {
+    if (!Wait(POLLOUT, WriteDeadline())) return -1;
+    return ::send(fd_, ptr, size, MSG_NOSIGNAL);
+  }
+
+  void get_remote_ip_and_port(std::string& ip, int& port) const override { Address(::getpeername, ip, port); }
+  void get_local_ip_and_port(std::string& ip, int& port) const override { Address(::getsockname, ip, port); }
+  socket_t socket() const override { return fd_; }
+
+ private:
+  Clock::time_point WriteDeadline() const {
+    if (!write_started_) {
+      write_started_ = true;
+      write_deadline_ = Clock::now() + write_timeout_;
+    }
+    return write_deadline_;
+  }
+  bool Wait(short events, Clock::time_point deadline) const {
+    while (true) {
+      const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()).count();
+      if (left <= 0) return false;
+      pollfd p{fd_, events, 0};
+      const int n = ::poll(&p, 1, static_cast<int>(std::min<long long>(left, 1000)));
+      if (n > 0) return true;
+      if (n < 0 && errno != EINTR) return false;
+    }
+  }
+  void Address(int (*get)(int, sockaddr*, socklen_t*), std::string& ip, int& port) const {
+    sockaddr_storage address{};
+    socklen_t length = sizeof address;
+    char host[NI_MAXHOST] = "", service[NI_MAXSERV] = "";
+    if (get(fd_, reinterpret_cast<sockaddr*>(&address), &length) == 0 &&
+        ::getnameinfo(reinterpret_cast<sockaddr*>(&address), length, host, sizeof host, service, sizeof service,
+                      NI_NUMERICHOST | NI_NUMERICSERV) == 0) {
+      ip = host;
+      port = std::atoi(service);
+    }
+  }
+
+  int fd_;
+  Clock::time_point read_deadline_;
+  Clock::duration write_timeout_;
+  mutable bool write_started_ = false;
+  mutable Clock::time_point write_deadline_;
+  char buffer_[4096];
+  std::size_t begin_ = 0, end_ = 0;
+};
+
+// httplib's routing and request parsing, fed by our own listener (below):
+// process_request reads one request from a Stream, routes it and writes the
+// response.
+class Router : public httplib::Server {
+ public:
+  void HandleOne(httplib::Stream& stream) {
+    bool closed = false;
+    process_request(stream, /*close_connection=*/true, closed, nullptr);
+  }
+};
+
+// The listening socket, bound without SO_REUSEPORT: httplib sets it, and with
+// it a second editor on a port in use started anyway and the two shared the
+// requests. SO_REUSEADDR only lets a restarted editor take its port back from
+// connections in TIME_WAIT; Linux still refuses a second listener.
+int Listen(const std::string& bind, int port) {
+  addrinfo hints{};
+  hints.ai_family = AF_UNSPEC;
+  hints.ai_socktype = SOCK_STREAM;
+  hints.ai_flags = AI_PASSIVE | AI_NUMERICSERV;
+  addrinfo* found = nullptr;
+  const std::string where = bind + ":" + std::to_string(port);
+  if (const int e = ::getaddrinfo(bind.c_str(), std::to_string(port).c_str(), &hints, &found); e != 0)
+    ThrowUserError("", "--bind", "cannot resolve '" + bind + "' (" + ::gai_strerror(e) + ")");
+  int error = 0;
+  int fd = -1;
+  for (addrinfo* a = found; a && fd < 0; a = a->ai_next) {
+    fd = ::socket(a->ai_family, a->ai_socktype | SOCK_CLOEXEC, a->ai_protocol);
+    if (fd < 0) {
+      error = errno;
+      continue;
+    }
+    const int yes = 1;
+    ::setsockopt(fd, SOL_SOCKET, SO_REUSEADDR, &yes, sizeof yes);
+    if (::bind(fd, a->ai_addr, a->ai_addrlen) != 0 || ::listen(fd, 128) != 0) {
+      error = errno;
+      ::close(fd);
+      fd = -1;
+    }
+  }
+  ::freeaddrinfo(found);
+  if (fd < 0 && error == EADDRINUSE)
+    ThrowUserError("", "--port", where + " is in use (another phos editor?); pick another port, or --port 0 for any free one");
+  if (fd < 0) ThrowUserError("", "--bind", "cannot listen on " + where + " (" + std::strerror(error) + ")");
+  return fd;
+}
+
+int BoundPort(int fd) {
+  sockaddr_storage address{};
+  socklen_t length = sizeof address;
+  ::getsockname(fd, reinterpret_cast<sockaddr*>(&address), &length);
+  if (address.ss_family == AF_INET6) return ntohs(reinterpret_cast<sockaddr_in6*>(&address)->sin6_port);
+  return ntohs(reinterpret_cast<sockaddr_in*>(&address)->sin_port);
+}
+
+// A short response written straight to a socket we will not serve (too many
+// connections), without waiting on the client.
+void Refuse(int fd, int status, const std::string& reason, const std::string& message) {
+  const std::string body = nlohmann::json{{"error", message}}.dump();
+  const std::string response = "HTTP/1.1 " + std::to_string(status) + " " + reason +
+                               "\r\nContent-Type: application/json\r\nConnection: close\r\nContent-Length: " +
+                               std::to_string(body.size()) + "\r\n\r\n" + body;
+  ::send(fd, response.data(), response.size(), MSG_NOSIGNAL | MSG_DONTWAIT);
+}
+
+// Closes a served connection. A response sent before its request was read
+// whole (a refused Origin, a body over the limit) would be lost to the reset
+// that closing with unread input sends: what is left is read first, for a
+// moment.
+void LingerAndClose(int fd) {
+  ::shutdown(fd, SHUT_WR);
+  const Clock::time_point until = Clock::now() + std::chrono::milliseconds(200);
+  char sink[4096];
+  for (std::size_t drained = 0; drained < (1u << 20) && Clock::now() < until;) {
+    pollfd p{fd, POLLIN, 0};
+    if (::poll(&p, 1, 50) <= 0) continue;
+    const ssize_t n = ::recv(fd, sink, sizeof sink, 0);
+    if (n <= 0) break;
+    drained += static_cast<std::size_t>(n);
+  }
+  ::close(fd);
 }
 
 }  // namespace
 
 void Serve(EditSession& session, const ServerOptions& options, const std::function<void(int)>& on_listening) {
-  httplib::Server server;
-  std::mutex mutex;  // httplib runs handlers on a thread pool; the session is not thread-safe
-  int port = options.port;
+  Router server;
+  std::mutex mutex;  // connections run on threads of their own; the session is not thread-safe
+  const int listener = Listen(options.bind, options.port);
+  const int port = BoundPort(listener);
   server.set_payload_max_length(options.max_body_bytes);
 
   // Origin and Host: only the page itself, at the address it was served from.
+  // Each exactly once (Origin at most once): with two, a check of the first
+  // let a bad second one through to whatever reads the other.
   server.set_pre_routing_handler([&](const httplib::Request& request, httplib::Response& response) {
+    for (const char* header : {"Host", "Origin"})
+      if (request.get_header_value_count(header) > 1) {
+        Error(response, 400, std::string("request: ") + header + ": given " +
+                                 std::to_string(request.get_header_value_count(header)) + " times; expected once");
+        return httplib::Server::HandlerResponse::Handled;
+      }
     const std::string here = ":" + std::to_string(port);
     const std::string host = request.get_header_value("Host");
     const bool loopback = options.bind == "127.0.0.1" || options.bind == "localhost";
     if (loopback && host != "127.0.0.1" + here && host != "localhost" + here) {
-      Error(response, 403, "Host '" + host + "' is not this editor's address");
+      Error(response, 403, "Host '" + host.substr(0, 80) + "' is not this editor's address");
       return httplib::Server::HandlerResponse::Handled;
     }
     if (request.has_header("Origin")) {
       const std::string origin = request.get_header_value("Origin");
       if (origin != "http://" + host) {
-        Error(response, 403, "requests from other origins are refused ('" + origin + "')");
+        Error(response, 403, "requests from other origins are refused ('" + origin.substr(0, 80) + "')");
         return httplib::Server::HandlerResponse::Handled;
       }
     }
     return httplib::Server::HandlerResponse::Unhandled;
   });
+  // What httplib answers by itself (a body over the limit, a malformed
+  // request line, a URI too long) gets the same one-line JSON as ours.
+  server.set_error_handler(httplib::Server::HandlerWithResponse([&](const httplib::Request&, httplib::Response& response) {
+    if (!response.body.empty()) return httplib::Server::HandlerResponse::Unhandled;
+    std::string message = "request: malformed HTTP request";
+    if (response.status == 413) message = "request: the body is larger than " + std::to_string(options.max_body_bytes) + " bytes";
+    if (response.status == 414) message = "request: the URI is too long";
+    if (response.status == 404) message = "request: no such route";
+    Error(response, response.status, message);
+    return httplib::Server::HandlerResponse::Handled;
+  }));
 
   // Every handler: one lock, and user errors become 400 with nothing changed
   // (the session validates a request completely before it edits anything).
@@ -67,90 +318,162 @@ void Serve(EditSession& session, const ServerOptions& options, const std::functi
     };
   };
   auto state = [&](httplib::Response& response) { response.set_content(session.State().dump(), "application/json"); };
+  auto body_of = [](const httplib::Request& request) { return ParseBody(request.body); };
 
-  server.Get("/", handle([](const httplib::Request&, httplib::Response& response) {
+  // The routes, by method, for 404 and 405 below.
+  const std::set<std::string> get_routes = {"/", "/api/state", "/api/frame", "/api/material"};
+  const std::set<std::string> post_routes = {"/api/constraints", "/api/constraints/update", "/api/constraints/remove",
+                                             "/api/preset", "/api/settings", "/api/export"};
+
+  server.Get("/", handle([](const httplib::Request& request, httplib::Response& response) {
+    RejectUnknownParameters(request, {});
     response.set_content(EditorPage(), "text/html; charset=utf-8");
   }));
-  server.Get("/api/state", handle([&](const httplib::Request&, httplib::Response& response) { state(response); }));
+  server.Get("/api/state", handle([&](const httplib::Request& request, httplib::Response& response) {
+    RejectUnknownParameters(request, {});
+    state(response);
+  }));
   server.Get("/api/frame", handle([&](const httplib::Request& request, httplib::Response& response) {
-    double t = session.scene().start_s;
-    if (request.has_param("t")) {
-      try {
-        t = std::stod(request.get_param_value("t"));
-      } catch (const std::exception&) {
-        throw UserError("t: expected seconds, got '" + request.get_param_value("t") + "'");
-      }
-    }
+    RejectUnknownParameters(request, {"t", "exposure", "v"});  // v: the page's cache breaker
+    const double t = request.has_param("t") ? QueryNumber(request, "t") : session.scene().start_s;
     double exposure = session.scene().camera.exposure;
     if (request.has_param("exposure")) {
-      try {
-        exposure = std::stod(request.get_param_value("exposure"));
-      } catch (const std::exception&) {
-        exposure = -1;
-      }
+      exposure = QueryNumber(request, "exposure");
       if (!(exposure > 0 && exposure < 1e6))
-        throw UserError("exposure: expected a number > 0, got '" + request.get_param_value("exposure") + "'");
+        ThrowUserError("request", "exposure", "expected a number > 0 and < 1e6, got " + request.get_param_value("exposure"));
     }
     const std::vector<unsigned char> png = session.FramePng(t, exposure);
     response.set_content(std::string(png.begin(), png.end()), "image/png");
+    response.set_header("Cache-Control", "no-store");  // a frame changes with every edit
   }));
   server.Post("/api/constraints", handle([&](const httplib::Request& request, httplib::Response& response) {
-    const nlohmann::json body = ParseBody(request);
-    if (!body.contains("x") || !body["x"].is_number() || !body.contains("y") || !body["y"].is_number() ||
-        !body.contains("t_s") || !body["t_s"].is_number())
-      throw UserError("request: expected {\"x\": pixel, \"y\": pixel, \"t_s\": seconds}");
-    session.AddConstraint(body["x"].get<int>(), body["y"].get<int>(), body["t_s"].get<double>());
+    const nlohmann::json body = body_of(request);
+    const JsonField f(body, "request");
+    f.RejectUnknownKeys({"x", "y", "t_s"});
+    const int x = f["x"].Integer(-1000000, 1000000), y = f["y"].Integer(-1000000, 1000000);
+    session.AddConstraint(x, y, f["t_s"].Number());
     state(response);
   }));
   server.Post("/api/constraints/update", handle([&](const httplib::Request& request, httplib::Response& response) {
-    const nlohmann::json body = ParseBody(request);
-    if (!body.contains("index") || !body["index"].is_number_unsigned()) throw UserError("index: expected a constraint number");
-    session.UpdateConstraint(body["index"].get<std::size_t>(), body);
+    const nlohmann::json body = body_of(request);
+    const JsonField f(body, "request");
+    f.RejectUnknownKeys({"index", "rgb", "t_s", "weight", "kind"});
+    session.UpdateConstraint(static_cast<std::size_t>(f["index"].Integer(0, 1000000)), body);
     state(response);
   }));
   server.Post("/api/constraints/remove", handle([&](const httplib::Request& request, httplib::Response& response) {
-    const nlohmann::json body = ParseBody(request);
-    if (!body.contains("index") || !body["index"].is_number_unsigned()) throw UserError("index: expected a constraint number");
-    session.RemoveConstraint(body["index"].get<std::size_t>());
+    const nlohmann::json body = body_of(request);
+    const JsonField f(body, "request");
+    f.RejectUnknownKeys({"index"});
+    session.RemoveConstraint(static_cast<std::size_t>(f["index"].Integer(0, 1000000)));
     state(response);
   }));
   server.Post("/api/preset", handle([&](const httplib::Request& request, httplib::Response& response) {
-    const nlohmann::json body = ParseBody(request);
-    if (!body.contains("object") || !body["object"].is_string() || !body.contains("preset") || !body["preset"].is_string())
-      throw UserError("request: expected {\"object\": name, \"preset\": name}");
-    session.SetPreset(body["object"].get<std::string>(), body["preset"].get<std::string>());
+    const nlohmann::json body = body_of(request);
+    const JsonField f(body, "request");
+    f.RejectUnknownKeys({"object", "preset"});
+    session.SetPreset(Name(f["object"]), Name(f["preset"]));
     state(response);
   }));
   server.Post("/api/settings", handle([&](const httplib::Request& request, httplib::Response& response) {
-    const nlohmann::json body = ParseBody(request);
-    if (body.contains("states") && !body["states"].is_number_integer()) throw UserError("states: expected 1, 2 or 3");
-    if (body.contains("falloff") && !body["falloff"].is_number()) throw UserError("falloff: expected a number");
-    if (body.contains("states")) session.SetStates(body["states"].get<int>());
-    if (body.contains("falloff")) session.SetPropagation(body["falloff"].get<double>());
+    const nlohmann::json body = body_of(request);
+    const JsonField f(body, "request");
+    f.RejectUnknownKeys({"states", "falloff"});
+    // Both read before either is applied: a bad falloff leaves the states as they were.
+    const std::optional<int> states = f.Has("states") ? std::optional<int>(f["states"].Integer(1, 3)) : std::nullopt;
+    const std::optional<double> falloff =
+        f.Has("falloff") ? std::optional<double>(f["falloff"].NumberInRange(0, 10)) : std::nullopt;
+    if (states) session.SetStates(*states);
+    if (falloff) session.SetPropagation(*falloff);
     state(response);
   }));
   server.Get("/api/material", handle([&](const httplib::Request& request, httplib::Response& response) {
+    RejectUnknownParameters(request, {"object"});
     const std::string object = request.get_param_value("object");
-    response.set_content(session.MaterialJson(object).dump(2) + "\n", "application/json");
-    response.set_header("Content-Disposition", "attachment; filename=\"material.json\"");
+    if (object.size() > kMaxNameBytes) ThrowUserError("request", "object", "longer than " + std::to_string(kMaxNameBytes) + " characters");
+    const nlohmann::json material = session.MaterialJson(object);
+    response.set_content(material.dump(2) + "\n", "application/json");
+    // Named after the object (lower case, '-' for the rest): no quote or
+    // control character reaches the header.
+    response.set_header("Content-Disposition", "attachment; filename=\"" + session.ExportFileName(object) + "\"");
   }));
   server.Post("/api/export", handle([&](const httplib::Request& request, httplib::Response& response) {
-    const nlohmann::json body = ParseBody(request);
-    if (!body.contains("object") || !body["object"].is_string() || !body.contains("path") || !body["path"].is_string())
-      throw UserError("request: expected {\"object\": name, \"path\": relative path}");
-    const std::filesystem::path written =
-        session.ExportMaterial(body["object"].get<std::string>(), body["path"].get<std::string>());
+    const nlohmann::json body = body_of(request);
+    const JsonField f(body, "request");
+    f.RejectUnknownKeys({"object", "path"});
+    const std::string object = Name(f["object"]);
+    const std::filesystem::path written = session.ExportMaterial(object, f["path"].String());
     response.set_content(nlohmann::json{{"written", written.string()}}.dump(), "application/json");
   }));
+  // Anything else: 405 naming the methods of a route that exists, else 404.
+  const auto unrouted = [&](const httplib::Request& request, httplib::Response& response) {
+    const bool get = get_routes.count(request.path) > 0, post = post_routes.count(request.path) > 0;
+    if (get || post) {
+      response.set_header("Allow", get ? "GET" : "POST");
+      Error(response, 405, "request: " + request.method + " " + request.path + ": method not allowed (use " +
+                               (get ? "GET" : "POST") + ")");
+    } else {
+      Error(response, 404, "request: " + request.path.substr(0, 80) + ": no such route");
+    }
+  };
+  server.Get(".*", unrouted);
+  server.Post(".*", unrouted);
+  server.Put(".*", unrouted);
+  server.Patch(".*", unrouted);
+  server.Delete(".*", unrouted);
+  server.Options(".*", unrouted);
 
-  if (port == 0) {
-    port = server.bind_to_any_port(options.bind);
-    if (port < 0) ThrowUserError("--bind", "", "cannot listen on " + options.bind);
-  } else if (!server.bind_to_port(options.bind, port)) {
-    ThrowUserError("--port", "", "cannot listen on " + options.bind + ":" + std::to_string(port) + " (in use?)");
-  }
   on_listening(port);
-  server.listen_after_bind();
+
+  // Our own listener: a thread per connection, at most max_connections of
+  // them (more are answered 503 at once), each request read under a deadline
+  // and the connection closed after its response. So slow clients hold only
+  // their own threads, for at most the deadline, and the page is answered
+  // beside them.
+  struct Connection {
+    std::thread thread;
+    std::shared_ptr<std::atomic<bool>> done = std::make_shared<std::atomic<bool>>(false);
+  };
+  std::list<Connection> connections;
+  const auto read_timeout = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(options.read_timeout_s));
+  const auto write_timeout = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(options.write_timeout_s));
+  const auto reap = [&] {
+    for (auto it = connections.begin(); it != connections.end();) {
+      if (*it->done) {
+        it->thread.join();
+        it = connections.erase(it);
+      } else {
+        ++it;
+      }
+    }
+  };
+  while (!(options.stop && options.stop->load())) {
+    pollfd p{listener, POLLIN, 0};
+    const int ready = ::poll(&p, 1, 100);
+    reap();
+    if (ready <= 0) continue;
+    const int fd = ::accept4(listener, nullptr, nullptr, SOCK_CLOEXEC);
+    if (fd < 0) continue;
+    if (connections.size() >= options.max_connections) {
+      Refuse(fd, 503, "Service Unavailable",
+             "request: the editor already has " + std::to_string(connections.size()) + " connections open; try again");
+      ::close(fd);
+      continue;
+    }
+    const int yes = 1;
+    ::setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &yes, sizeof yes);
+    Connection& connection = connections.emplace_back();
+    connection.thread = std::thread([&server, fd, read_timeout, write_timeout, done = connection.done] {
+      {
+        DeadlineStream stream(fd, Clock::now() + read_timeout, write_timeout);
+        server.HandleOne(stream);
+      }
+      LingerAndClose(fd);
+      *done = true;
+    });
+  }
+  for (Connection& connection : connections) connection.thread.join();
+  ::close(listener);
 }
 
 }  // namespace phos::editor

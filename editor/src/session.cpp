@@ -3,10 +3,16 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cctype>
+#include <cerrno>
+#include <cstring>
 #include <limits>
 
 #include <Eigen/LU>
+#include <fcntl.h>
 #include <stb/stb_image_write.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 #include "phos/render/renderer.h"
 #include "phos/render/solver.h"
@@ -19,6 +25,113 @@ namespace {
 
 constexpr int kTimelineFrames = 200;
 constexpr double kPi = 3.14159265358979323846;
+// Bounds on what the page may ask, so that |T|^2 and the weights stay finite.
+constexpr double kMaxRadiance = 1e6;
+constexpr double kMaxWeight = 1e6;
+
+// Export paths: at most this long, each name at most kMaxNameBytes (the
+// system's 255, less room for the temporary's suffix).
+constexpr std::size_t kMaxPathBytes = 1024;
+constexpr std::size_t kMaxNameBytes = 200;
+
+// A request's text in a message: a name of 60 KiB is not repeated whole.
+std::string Shorten(const std::string& text) {
+  return text.size() <= 80 ? text : text.substr(0, 77) + "...";
+}
+
+// The names of a path relative to root, or a UserError: absolute, "..",
+// control characters (a NUL would cut the name short where it reaches the
+// system) and names longer than the system takes are refused before any file
+// is touched.
+std::vector<std::string> NamesUnderRoot(const std::string& relative_path, const std::filesystem::path& root) {
+  const auto outside = [&] {
+    ThrowUserError("", "path", "'" + Shorten(relative_path) + "' is outside the project's working folder " + root.string());
+  };
+  if (relative_path.empty()) ThrowUserError("", "path", "expected a path inside the working folder, such as edited/wall.json");
+  if (relative_path.size() > kMaxPathBytes)
+    ThrowUserError("", "path", "has " + std::to_string(relative_path.size()) + " characters, more than " +
+                                   std::to_string(kMaxPathBytes));
+  for (unsigned char ch : relative_path)
+    if (ch < 0x20 || ch == 0x7f)
+      ThrowUserError("", "path", "contains a control character (code " + std::to_string(ch) + ")");
+  if (relative_path.front() == '/') outside();
+  std::vector<std::string> names;
+  for (std::size_t start = 0; start <= relative_path.size();) {
+    const std::size_t end = std::min(relative_path.find('/', start), relative_path.size());
+    const std::string name = relative_path.substr(start, end - start);
+    if (name == "..") outside();
+    if (name.size() > kMaxNameBytes)
+      ThrowUserError("", "path", "the name '" + Shorten(name) + "' is longer than " + std::to_string(kMaxNameBytes) + " bytes");
+    if (!name.empty() && name != ".") names.push_back(name);
+    start = end + 1;
+  }
+  if (names.empty()) outside();  // the folder itself
+  return names;
+}
+
+struct FileDescriptor {
+  int fd = -1;
+  ~FileDescriptor() {
+    if (fd >= 0) ::close(fd);
+  }
+};
+
+// Writes text at root/names without following a symbolic link anywhere
+// under root: each folder is opened with O_NOFOLLOW (and made if missing),
+// the temporary beside the file is created with O_CREAT | O_EXCL |
+// O_NOFOLLOW (whatever is already at its name, a planted link included, is
+// never opened: another name is tried), written, synced and renamed over the
+// file (a link in the file's place is replaced, not followed).
+std::filesystem::path WriteUnderRoot(const std::filesystem::path& root, const std::vector<std::string>& names,
+                                     const std::string& text) {
+  std::filesystem::path shown = root;
+  const auto fail = [&](const std::string& what) {
+    ThrowUserError(shown.string(), "", what + " (" + std::strerror(errno) + ")");
+  };
+  FileDescriptor folder{::open(root.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC)};
+  if (folder.fd < 0) fail("cannot open the working folder");
+  for (std::size_t k = 0; k + 1 < names.size(); ++k) {
+    shown /= names[k];
+    const int flags = O_RDONLY | O_DIRECTORY | O_NOFOLLOW | O_CLOEXEC;
+    int next = ::openat(folder.fd, names[k].c_str(), flags);
+    if (next < 0 && errno == ENOENT) {
+      if (::mkdirat(folder.fd, names[k].c_str(), 0755) != 0 && errno != EEXIST) fail("cannot create the folder");
+      next = ::openat(folder.fd, names[k].c_str(), flags);
+    }
+    if (next < 0 && (errno == ELOOP || errno == ENOTDIR))
+      ThrowUserError(shown.string(), "", "is a symbolic link or not a folder; exports do not follow links");
+    if (next < 0) fail("cannot open the folder");
+    ::close(folder.fd);
+    folder.fd = next;
+  }
+  const std::string& name = names.back();
+  shown /= name;
+  std::string temporary;
+  FileDescriptor file;
+  for (int attempt = 0; attempt < 100 && file.fd < 0; ++attempt) {
+    temporary = "." + name + ".tmp" + (attempt == 0 ? "" : "." + std::to_string(::getpid()) + "." + std::to_string(attempt));
+    file.fd = ::openat(folder.fd, temporary.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC, 0644);
+    if (file.fd < 0 && errno != EEXIST) fail("cannot create a temporary file beside it");
+  }
+  if (file.fd < 0) fail("cannot create a temporary file beside it");
+  const auto abandon = [&](const std::string& what) {
+    const int error = errno;
+    ::unlinkat(folder.fd, temporary.c_str(), 0);
+    errno = error;
+    fail(what);
+  };
+  for (std::size_t written = 0; written < text.size();) {
+    const ssize_t n = ::write(file.fd, text.data() + written, text.size() - written);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) abandon("cannot write");
+    written += static_cast<std::size_t>(n);
+  }
+  if (::fsync(file.fd) != 0) abandon("cannot write");
+  ::close(file.fd);
+  file.fd = -1;
+  if (::renameat(folder.fd, temporary.c_str(), folder.fd, name.c_str()) != 0) abandon("cannot replace");
+  return shown;
+}
 
 }  // namespace
 
@@ -32,7 +145,10 @@ EditSession::EditSession(const std::filesystem::path& scene, const std::filesyst
   const double span = scene_.end_s - scene_.start_s;
   dt_s_ = span > 0 ? span / kTimelineFrames : 0.1;
   for (int k = 0; k < kTimelineFrames; ++k) timeline_.push_back(scene_.start_s + dt_s_ * k);
-  for (const render::Object& o : scene_.objects) base_.push_back(o.phosphor);
+  for (const render::Object& o : scene_.objects) {
+    base_.push_back(o.phosphor);
+    base_unknown_ke_as_zero_.push_back(o.unknown_ke_as_zero);
+  }
   solved_.assign(scene_.objects.size(), nullptr);
   // Band radiance -> linear sRGB: the renderer's own conversion (one pixel per band).
   const int nb = scene_.bands.band_count();
@@ -106,7 +222,7 @@ std::vector<double> EditSession::RgbToBands(const std::vector<double>& rgb) cons
 int EditSession::ObjectIndex(const std::string& name) const {
   for (std::size_t o = 0; o < scene_.objects.size(); ++o)
     if (scene_.objects[o].name == name) return static_cast<int>(o);
-  ThrowUserError("", "object", "the scene has no object '" + name + "'");
+  ThrowUserError("", "object", "the scene has no object '" + Shorten(name) + "'");
 }
 
 void EditSession::AddConstraint(int x, int y, double t_s) {
@@ -117,6 +233,7 @@ void EditSession::AddConstraint(int x, int y, double t_s) {
   if (!(t_s >= scene_.start_s && t_s <= scene_.end_s))
     ThrowUserError("", "t_s", FormatDouble(t_s) + " s is outside the scene's time range");
   // The camera ray through the pixel's centre (the renderer's own camera).
+  geometry_->SetTime(scene_.start_s);  // the last frame shown left it at its time
   const render::CameraRays rays(scene_, scene_.start_s);
   const render::Hit hit = geometry_->Intersect(rays.origin(), rays.Direction(x + 0.5f, y + 0.5f));
   if (!hit || !scene_.objects[hit.object].phosphor)
@@ -140,6 +257,16 @@ void EditSession::AddConstraint(int x, int y, double t_s) {
     }
     c.irradiance.push_back(E);
   }
+  const std::string where = "pixel (" + std::to_string(x) + ", " + std::to_string(y) + ") on '" +
+                            scene_.objects[hit.object].name + "'";
+  bool lit = false;
+  for (const auto& E : c.irradiance)
+    for (double e : E) lit = lit || e > 0;
+  // An edge pixel's point can be shadowed by the neighbouring wall: nothing
+  // charges there, and a target at it could only be met with Lambda = 0.
+  if (!lit)
+    ThrowUserError("", "x, y", where + ": no light reaches that point at any time (an edge, or in shadow), so nothing "
+                                       "can charge it; click inside the lit surface");
   // The target starts as what the point looks like now.
   const render::Object& object = scene_.objects[hit.object];
   Problem probe;
@@ -151,6 +278,10 @@ void EditSession::AddConstraint(int x, int y, double t_s) {
   AssumeUnknownKeZero(known);  // only a curve to start the target from
   c.rgb = BandsToRgb(PredictRadiance(probe, known, {t_s - scene_.start_s})[0]);
   for (double& v : c.rgb) v = std::max(v, 0.0);
+  if (*std::max_element(c.rgb.begin(), c.rgb.end()) <= 0)
+    ThrowUserError("", "x, y", where + " is black at t = " + FormatShort(t_s, 4) +
+                                   " s, and a target of zero would give it Lambda = 0 (no glow); place it at a time "
+                                   "when the point is lit or glows");
   constraints_.push_back(c);
   Resolve();
 }
@@ -160,9 +291,17 @@ void EditSession::UpdateConstraint(std::size_t index, const nlohmann::json& fiel
   PlacedConstraint c = constraints_[index];
   const JsonField f(fields, "request");
   f.RejectUnknownKeys({"index", "rgb", "t_s", "weight", "kind"});
-  if (f.Has("rgb")) c.rgb = f["rgb"].NumberArray(3, 0.0);
+  if (f.Has("rgb")) {
+    const JsonField rgb = f["rgb"];
+    if (rgb.ArraySize() != 3) rgb.Fail("expected 3 values (R, G, B), got " + std::to_string(rgb.ArraySize()));
+    for (std::size_t k = 0; k < 3; ++k) c.rgb[k] = rgb.At(k).NumberInRange(0, kMaxRadiance);
+    // The weight is 1 / |T|^2 and the solve meets a zero target with Lambda = 0:
+    // the object would silently stop glowing.
+    if (*std::max_element(c.rgb.begin(), c.rgb.end()) <= 0)
+      rgb.Fail("a target of [0, 0, 0] would give the object Lambda = 0 (no glow at all); give the colour it should have");
+  }
   if (f.Has("t_s")) c.t_s = f["t_s"].NumberInRange(scene_.start_s, scene_.end_s);
-  if (f.Has("weight")) c.weight = f["weight"].NumberAtLeast(0);
+  if (f.Has("weight")) c.weight = f["weight"].NumberInRange(0, kMaxWeight);
   if (f.Has("kind")) {
     const std::string kind = f["kind"].String();
     if (kind == "target") c.kind = Constraint::Kind::kTarget;
@@ -184,7 +323,7 @@ void EditSession::SetPreset(const std::string& object, const std::string& preset
   const int o = ObjectIndex(object);
   if (!scene_.objects[o].phosphor) ThrowUserError("", "object", "'" + object + "' is not phosphorescent");
   const auto it = presets_.find(preset);
-  if (it == presets_.end()) ThrowUserError("", "preset", "no preset '" + preset + "'");
+  if (it == presets_.end()) ThrowUserError("", "preset", "no preset '" + Shorten(preset) + "'");
   auto material = std::make_shared<Material>(LoadMaterial(it->second));
   if (!(material->bands == scene_.bands)) ThrowUserError(it->second.string(), "bands_nm", "differ from the scene's");
   base_[o] = material;
@@ -287,8 +426,10 @@ void EditSession::ApplyMaterials() {
             ExcitedState& s = blended->states[i];
             const ExcitedState& b = base.states[i];
             s.kr = std::exp((1 - best_w) * std::log(b.kr) + best_w * std::log(s.kr));
+            // A blend with an unknown ke is unknown: neither side says what it is.
             for (std::size_t k = 0; k < s.ke.size(); ++k)
-              s.ke[k] = (1 - best_w) * b.ke[k].value_or(0.0) + best_w * s.ke[k].value_or(0.0);
+              s.ke[k] = b.ke[k] && s.ke[k] ? std::optional<double>((1 - best_w) * *b.ke[k] + best_w * *s.ke[k])
+                                           : std::nullopt;
             for (std::size_t k = 0; k < s.Lambda.size(); ++k) s.Lambda[k] = (1 - best_w) * b.Lambda[k] + best_w * s.Lambda[k];
           }
         } else if (best_w < 0.5) {
@@ -299,6 +440,12 @@ void EditSession::ApplyMaterials() {
       }
     }
     object.phosphor = material;
+    // A solved material leaves ke unknown in the bands no light reaches at its
+    // constraints' points (the solve cannot tell any ke there from another),
+    // and the export says so. Other points of the object, or the glow of its
+    // neighbours, may still light those bands: the view alone takes unknown
+    // ke as 0 for edited objects (State() says which bands), so it can be drawn.
+    object.unknown_ke_as_zero = material != base_[o] || base_unknown_ke_as_zero_[o];
   }
 }
 
@@ -306,10 +453,23 @@ nlohmann::json EditSession::State() const {
   nlohmann::json objects = nlohmann::json::array();
   for (std::size_t o = 0; o < scene_.objects.size(); ++o) {
     const render::Object& object = scene_.objects[o];
+    // Bands where the material's ke is unknown (for a solved one: no light
+    // reaches its constraints' points there); the view takes them as 0 only
+    // when the object does (unknown_ke_assumed_zero).
+    nlohmann::json unknown_ke = nlohmann::json::array();
+    if (object.phosphor)
+      for (int b = 0; b < scene_.bands.band_count(); ++b) {
+        bool unknown = false;
+        for (const ExcitedState& state : object.phosphor->states) unknown = unknown || !state.ke[b];
+        if (unknown) unknown_ke.push_back(scene_.bands.BandName(b));
+      }
     objects.push_back({{"name", object.name},
                        {"phosphorescent", object.phosphor != nullptr},
                        {"material", object.phosphor ? object.phosphor->name : ""},
-                       {"edited", solved_[o] != nullptr}});
+                       {"edited", solved_[o] != nullptr},
+                       {"export_name", object.phosphor ? ExportFileName(object.name) : ""},
+                       {"unknown_ke", unknown_ke},
+                       {"unknown_ke_assumed_zero", object.unknown_ke_as_zero}});
   }
   nlohmann::json presets = nlohmann::json::array();
   for (const auto& [name, path] : presets_) presets.push_back(name);
@@ -354,6 +514,12 @@ nlohmann::json EditSession::State() const {
 std::vector<unsigned char> EditSession::FramePng(double t_s, double exposure) const {
   if (!(t_s >= scene_.start_s && t_s <= scene_.end_s + 1e-9))
     ThrowUserError("", "t", FormatDouble(t_s) + " s is outside the scene's time range");
+  // A solver starts at the scene's start, and AdvanceTo(start) moves nothing,
+  // geometry included; but the renderer reads the lights' levels at the
+  // geometry's time, which the previous frame left where it was. So t = 0
+  // after a frame past lamp-off was lit as at that frame (black): the
+  // geometry goes back to the start first.
+  geometry_->SetTime(scene_.start_s);
   render::CoupledSolver solver(scene_, *geometry_);
   solver.AdvanceTo(t_s);
   const render::Image bands =
@@ -378,18 +544,25 @@ nlohmann::json EditSession::MaterialJson(const std::string& object) const {
   return MaterialToJson(*scene_.objects[o].phosphor);
 }
 
+std::string EditSession::ExportFileName(const std::string& object) const {
+  const int o = ObjectIndex(object);
+  std::string name;
+  for (unsigned char ch : scene_.objects[o].name) {
+    if (std::isalnum(ch)) name += static_cast<char>(std::tolower(ch));
+    else if (!name.empty() && name.back() != '-') name += '-';
+  }
+  while (!name.empty() && name.back() == '-') name.pop_back();
+  return (name.empty() ? std::string("material") : name.substr(0, kMaxNameBytes - 5)) + ".json";
+}
+
 std::filesystem::path EditSession::ExportMaterial(const std::string& object, const std::string& relative_path) const {
-  const std::filesystem::path requested(relative_path);
-  const std::filesystem::path target = std::filesystem::weakly_canonical(root_ / requested);
-  const auto [root_end, ignored] = std::mismatch(root_.begin(), root_.end(), target.begin(), target.end());
-  if (requested.is_absolute() || root_end != root_.end() || target == root_)
-    ThrowUserError("", "path", "'" + relative_path + "' is outside the project's working folder " + root_.string());
-  if (target.extension() != ".json") ThrowUserError("", "path", "a material file ends in .json");
+  const std::vector<std::string> names = NamesUnderRoot(relative_path, root_);
+  if (!names.back().ends_with(".json")) ThrowUserError("", "path", "a material file ends in .json");
   const int o = ObjectIndex(object);
   if (!scene_.objects[o].phosphor) ThrowUserError("", "object", "'" + object + "' is not phosphorescent");
-  std::filesystem::create_directories(target.parent_path());
-  SaveMaterial(*scene_.objects[o].phosphor, target);
-  return target;
+  const Material& material = *scene_.objects[o].phosphor;
+  ValidateMaterial(material, relative_path);
+  return WriteUnderRoot(root_, names, MaterialToJson(material).dump(2) + "\n");
 }
 
 }  // namespace phos::editor

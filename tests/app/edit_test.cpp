@@ -1,7 +1,13 @@
 // `phos edit solve` as DESIGN.md specifies it: the JSON keys, the material it
-// returns, the baseline beside it, and one-line errors.
+// returns, the baseline beside it, and one-line errors; and `phos editor` on a
+// port in use.
 
 #include <gtest/gtest.h>
+
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <nlohmann/json.hpp>
 
@@ -36,6 +42,31 @@ TEST(EditCommand, BadInputIsOneLineAndExitTwo) {
     "irradiance": [[1, 1, 1]], "albedo": [0.5, 0.5, 0.5], "constraints": []})");
   EXPECT_TRUE(IsOneLineUserError(RunPhos("edit solve " + (dir / "c.json").string()), "constraints"));
   EXPECT_TRUE(IsOneLineUserError(RunPhos("edit"), "edit"));
+}
+
+TEST(EditorCommand, APortInUseIsRefusedWithExitTwo) {
+  // Something already listens on the port (as a first phos editor would).
+  // Without SO_REUSEPORT the second cannot bind it too and share its requests.
+  const int listener = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+  sockaddr_in address{};
+  address.sin_family = AF_INET;
+  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  ASSERT_EQ(::bind(listener, reinterpret_cast<sockaddr*>(&address), sizeof address), 0);
+  ASSERT_EQ(::listen(listener, 4), 0);
+  socklen_t length = sizeof address;
+  ::getsockname(listener, reinterpret_cast<sockaddr*>(&address), &length);
+  const int port = ntohs(address.sin_port);
+  // `timeout`: an editor that started anyway would serve forever.
+  TempDir dir;
+  const std::string command = "timeout 60 " + std::string(PHOS_BINARY) + " editor --port " + std::to_string(port) +
+                              " --scene " + Fixture("scenes/cornell-phosphor.json").string() + " >" +
+                              (dir / "out").string() + " 2>" + (dir / "err").string() + " </dev/null";
+  const int status = std::system(command.c_str());
+  CommandResult r;
+  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  r.err = ReadText(dir / "err");
+  EXPECT_TRUE(IsOneLineUserError(r, "127.0.0.1:" + std::to_string(port) + " is in use"));
+  ::close(listener);
 }
 
 }  // namespace

@@ -1,11 +1,23 @@
 // The editing session behind the page, without HTTP: placing constraints by
 // pixel, re-solving on every edit, colours as band spectra, presets, edit
-// propagation, and refusing bad edits without changing anything.
+// propagation, and refusing bad edits without changing anything. Then the
+// server over loopback sockets (EditorServer): each attack of issue 16 item
+// 10 and issue 18 item 5 as a test.
 
 #include <gtest/gtest.h>
 
+#include <atomic>
+#include <chrono>
 #include <cmath>
+#include <future>
+#include <thread>
 
+#include <netinet/in.h>
+#include <poll.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include "phos/editor/server.h"
 #include "phos/editor/session.h"
 #include "phos/util/error.h"
 #include "test_util.h"
@@ -15,7 +27,9 @@ namespace {
 
 using phos::testing::ErrorOfType;
 using phos::testing::Fixture;
+using phos::testing::ReadText;
 using phos::testing::TempDir;
+using phos::testing::WriteText;
 
 struct Cornell {
   TempDir root;
@@ -84,6 +98,307 @@ TEST(EditSession, EditsPropagateToSimilarObjectsWithTheFalloff) {
   const nlohmann::json propagated = c.session.MaterialJson("right wall");
   EXPECT_NE(propagated.dump(), right_before);
   EXPECT_NE(propagated["name"].get<std::string>().find("propagated"), std::string::npos);
+}
+
+TEST(EditSession, TheStartFrameAfterALateOneIsTheSame) {
+  // The geometry kept the last frame's time, so t = 0 after lamp-off came back
+  // black (every loop of "play").
+  Cornell c;
+  const std::vector<unsigned char> first = c.session.FramePng(0, 1.0);
+  const std::vector<unsigned char> late = c.session.FramePng(60, 1.0);
+  EXPECT_NE(late, first);
+  EXPECT_EQ(c.session.FramePng(0, 1.0), first);
+}
+
+TEST(EditSession, ATargetOfZeroIsRefused) {
+  Cornell c;
+  c.session.AddConstraint(128, 64, 35);
+  const std::string before = c.session.State().dump();
+  EXPECT_NE(ErrorOfType<UserError>([&] { c.session.UpdateConstraint(0, {{"rgb", {0, 0, 0}}}); }).find("Lambda = 0"),
+            std::string::npos);
+  // A point that looks black when clicked (a preset with no known ke, after
+  // lamp-off: nothing charged it) would start as a target of zero.
+  c.session.SetPreset("left wall", "bottle");
+  EXPECT_NE(ErrorOfType<UserError>([&] { c.session.AddConstraint(20, 128, 60); }).find("Lambda = 0"), std::string::npos);
+  // A point no light reaches (an edge pixel whose shadow rays hit the
+  // neighbouring wall, or, along this row, the left wall in the tall block's
+  // shadow) could only be met with Lambda = 0: refused, naming why.
+  int refused = 0, placed = 0;
+  for (int x = 30; x < 80 && refused == 0; ++x) {
+    const std::string error = ErrorOfType<UserError>([&] { c.session.AddConstraint(x, 128, 35); });
+    if (error.find("no light reaches") != std::string::npos) ++refused;
+    else if (error == "(no error)") ++placed;
+  }
+  EXPECT_EQ(refused, 1);
+  for (int k = 0; k < placed; ++k) c.session.RemoveConstraint(1);
+  EXPECT_EQ(c.session.State()["constraints"].dump(), nlohmann::json::parse(before)["constraints"].dump());
+}
+
+TEST(EditSession, KeStaysUnknownWhereNoLightReaches) {
+  Cornell c;
+  c.session.AddConstraint(128, 64, 35);
+  c.session.UpdateConstraint(0, {{"rgb", {0.004, 0.02, 0.012}}});
+  const std::vector<double>& E = c.session.scene().lights[0].E_per_band;  // the 405 nm LED, the only light
+  const nlohmann::json material = c.session.MaterialJson("back wall");
+  const std::filesystem::path file = c.session.ExportMaterial("back wall", "wall.json");
+  const Material exported = LoadMaterial(file);
+  int unknown = 0;
+  for (std::size_t b = 0; b < E.size(); ++b) {
+    EXPECT_EQ(material["states"][0]["ke"][b].is_null(), E[b] <= 0) << "band " << b;
+    EXPECT_EQ(exported.states[0].ke[b].has_value(), E[b] > 0) << "band " << b;
+    unknown += E[b] <= 0;
+  }
+  EXPECT_GT(unknown, 0);
+  // The view still draws it (ke taken as 0 there, and the page says so).
+  const nlohmann::json state = c.session.State();
+  EXPECT_EQ(state["objects"][2]["unknown_ke"].size(), static_cast<std::size_t>(unknown));
+  EXPECT_TRUE(state["objects"][2]["unknown_ke_assumed_zero"].get<bool>());
+  EXPECT_FALSE(c.session.FramePng(40, 1.0).empty());
+}
+
+TEST(EditSession, ExportsAreNamedAfterTheObjectAndFollowNoLink) {
+  Cornell c;
+  EXPECT_EQ(c.session.ExportFileName("back wall"), "back-wall.json");
+  TempDir outside;
+  WriteText(outside / "victim.json", "keep");
+  const std::filesystem::path root = c.root.path();
+  // A link planted at the temporary's name, one in the file's place, and a linked folder.
+  std::filesystem::create_directories(root / "edited");
+  std::filesystem::create_symlink(outside / "victim.json", root / "edited" / ".back-wall.json.tmp");
+  std::filesystem::create_symlink(outside / "victim.json", root / "linked.json");
+  std::filesystem::create_directory_symlink(outside.path(), root / "elsewhere");
+  const std::filesystem::path written = c.session.ExportMaterial("back wall", "edited/back-wall.json");
+  EXPECT_EQ(LoadMaterial(written).name, "green");
+  c.session.ExportMaterial("back wall", "linked.json");
+  EXPECT_FALSE(std::filesystem::is_symlink(root / "linked.json"));  // replaced, not followed
+  EXPECT_NE(ErrorOfType<UserError>([&] { c.session.ExportMaterial("back wall", "elsewhere/x.json"); }).find("symbolic link"),
+            std::string::npos);
+  EXPECT_EQ(ReadText(outside / "victim.json"), "keep");
+  EXPECT_FALSE(std::filesystem::exists(outside / "x.json"));
+  EXPECT_TRUE(std::filesystem::is_symlink(root / "edited" / ".back-wall.json.tmp"));  // never opened
+  // NUL and over-long names are refused before any file is touched.
+  EXPECT_NE(ErrorOfType<UserError>([&] { c.session.ExportMaterial("back wall", std::string("a\0b.json", 8)); })
+                .find("control character"),
+            std::string::npos);
+  EXPECT_NE(ErrorOfType<UserError>([&] { c.session.ExportMaterial("back wall", std::string(300, 'a') + ".json"); })
+                .find("longer than"),
+            std::string::npos);
+  EXPECT_NE(ErrorOfType<UserError>([&] { c.session.ExportMaterial("back wall", std::string(2000, 'a') + ".json"); })
+                .find("more than 1024"),
+            std::string::npos);
+}
+
+// The server, over loopback sockets: the real Serve on a thread of the test,
+// and raw HTTP, so that every attack is sent as an attacker would.
+struct Reply {
+  int status = 0;  // 0: the connection closed without a response
+  std::string head, body;
+};
+
+int Connect(int port) {
+  const int fd = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+  sockaddr_in address{};
+  address.sin_family = AF_INET;
+  address.sin_port = htons(static_cast<std::uint16_t>(port));
+  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  if (::connect(fd, reinterpret_cast<sockaddr*>(&address), sizeof address) != 0) ADD_FAILURE() << "connect";
+  return fd;
+}
+
+// Reads until the server closes (or `timeout`).
+Reply ReadReply(int fd, std::chrono::milliseconds timeout = std::chrono::milliseconds(10000)) {
+  std::string text;
+  const auto until = std::chrono::steady_clock::now() + timeout;
+  char buffer[4096];
+  while (std::chrono::steady_clock::now() < until) {
+    pollfd p{fd, POLLIN, 0};
+    if (::poll(&p, 1, 50) <= 0) continue;
+    const ssize_t n = ::recv(fd, buffer, sizeof buffer, 0);
+    if (n <= 0) break;
+    text.append(buffer, static_cast<std::size_t>(n));
+  }
+  Reply reply;
+  const std::size_t split = text.find("\r\n\r\n");
+  if (text.rfind("HTTP/1.1 ", 0) == 0 && split != std::string::npos) {
+    reply.status = std::atoi(text.c_str() + 9);
+    reply.head = text.substr(0, split);
+    reply.body = text.substr(split + 4);
+  }
+  return reply;
+}
+
+struct RunningServer {
+  explicit RunningServer(ServerOptions o = {}) : options(o) {
+    options.port = 0;
+    options.stop = &stop;
+    thread = std::thread([this] {
+      try {
+        Serve(cornell.session, options, [this](int p) { listening.set_value(p); });
+      } catch (...) {
+        listening.set_exception(std::current_exception());
+      }
+    });
+    port = listening.get_future().get();
+  }
+  ~RunningServer() {
+    stop = true;
+    thread.join();
+  }
+  std::string Host() const { return "Host: 127.0.0.1:" + std::to_string(port) + "\r\n"; }
+  Reply Send(const std::string& request) const {
+    const int fd = Connect(port);
+    ::send(fd, request.data(), request.size(), MSG_NOSIGNAL);
+    const Reply reply = ReadReply(fd);
+    ::close(fd);
+    return reply;
+  }
+  Reply Get(const std::string& target, const std::string& headers = "") const {
+    return Send("GET " + target + " HTTP/1.1\r\n" + Host() + headers + "\r\n");
+  }
+  Reply Post(const std::string& target, const std::string& body, const std::string& method = "POST") const {
+    return Send(method + " " + target + " HTTP/1.1\r\n" + Host() + "Content-Type: application/json\r\nContent-Length: " +
+                std::to_string(body.size()) + "\r\n\r\n" + body);
+  }
+
+  Cornell cornell;
+  ServerOptions options;
+  std::atomic<bool> stop{false};
+  std::promise<int> listening;
+  std::thread thread;
+  int port = 0;
+};
+
+std::string ErrorOf(const Reply& reply) {
+  try {
+    return nlohmann::json::parse(reply.body).at("error").get<std::string>();
+  } catch (const std::exception&) {
+    return "(no error in '" + reply.body.substr(0, 200) + "')";
+  }
+}
+
+TEST(EditorServer, DuplicateHostAndOriginAreRefused) {
+  RunningServer server;
+  const std::string origin = "Origin: http://127.0.0.1:" + std::to_string(server.port) + "\r\n";
+  EXPECT_EQ(server.Get("/api/state", origin).status, 200);
+  // A good value followed by a bad one (and the other way round) was accepted.
+  Reply r = server.Get("/api/state", "Host: evil.example\r\n");
+  EXPECT_EQ(r.status, 400);
+  EXPECT_NE(ErrorOf(r).find("Host"), std::string::npos) << ErrorOf(r);
+  EXPECT_EQ(server.Send("GET /api/state HTTP/1.1\r\nhost: evil.example\r\n" + server.Host() + "\r\n").status, 400);
+  r = server.Get("/api/state", origin + "Origin: http://evil.example\r\n");
+  EXPECT_EQ(r.status, 400);
+  EXPECT_NE(ErrorOf(r).find("Origin"), std::string::npos) << ErrorOf(r);
+  EXPECT_EQ(server.Get("/api/state", "Origin: http://evil.example\r\n").status, 403);
+}
+
+TEST(EditorServer, EveryBadValueIs400NamingTheField) {
+  RunningServer server;
+  const std::string before = server.Get("/api/state").body;
+  const auto refused = [&](const Reply& r, const std::string& field) {
+    EXPECT_EQ(r.status, 400) << field << ": " << r.body;
+    EXPECT_NE(ErrorOf(r).find(field), std::string::npos) << ErrorOf(r);
+  };
+  refused(server.Post("/api/constraints", R"({"x": 1e400, "y": 64, "t_s": 35})"), "x");
+  refused(server.Post("/api/constraints", R"({"x": 128, "y": 64, "t_s": -1e400})"), "t_s");
+  refused(server.Post("/api/constraints", R"({"x": 1e300, "y": 64, "t_s": 35})"), "x");
+  refused(server.Post("/api/constraints", R"({"x": 128, "y": 64, "t_s": 35, "colour": 1})"), "colour");
+  refused(server.Post("/api/constraints", R"({"x": 128, "y": 64})"), "t_s");
+  refused(server.Post("/api/settings", R"({"states": 2, "falloff": 1e9})"), "falloff");
+  refused(server.Post("/api/settings", R"({"states": 2.5})"), "states");
+  refused(server.Post("/api/export", R"({"object": "back wall", "path": "a\u0000b.json"})"), "path");
+  refused(server.Post("/api/export", R"({"object": "back wall", "path": ")" + std::string(5000, 'a') + R"(.json"})"), "path");
+  refused(server.Post("/api/export", R"({"object": ")" + std::string(5000, 'o') + R"(", "path": "x.json"})"), "object");
+  refused(server.Post("/api/preset", R"({"object": "back wall", "preset": "green", "extra": true})"), "extra");
+  refused(server.Post("/api/constraints/update", R"({"index": 0, "rgb": [1e400, 0, 0]})"), "rgb");
+  refused(server.Post("/api/constraints/remove", R"([1, 2])"), "object");
+  refused(server.Get("/api/frame?t=abc"), "t");
+  refused(server.Get("/api/frame?t=1e400"), "t");
+  refused(server.Get("/api/frame?t=1&colour=red"), "colour");
+  refused(server.Get("/api/state?x=1"), "x");
+  // Unknown routes and methods.
+  EXPECT_EQ(server.Get("/api/nothing").status, 404);
+  EXPECT_EQ(server.Get("/etc/passwd").status, 404);
+  Reply r = server.Get("/api/export");
+  EXPECT_EQ(r.status, 405);
+  EXPECT_NE(r.head.find("Allow: POST"), std::string::npos);
+  EXPECT_EQ(server.Post("/api/state", "{}").status, 405);
+  EXPECT_EQ(server.Post("/api/state", "{}", "PUT").status, 405);
+  EXPECT_EQ(server.Post("/api/nothing", "{}", "DELETE").status, 404);
+  // Nothing changed, and nothing was written.
+  EXPECT_EQ(server.Get("/api/state").body, before);
+  EXPECT_TRUE(std::filesystem::is_empty(server.cornell.root.path()));
+}
+
+TEST(EditorServer, ExportsThroughTheServerFollowNoLink) {
+  RunningServer server;
+  TempDir outside;
+  WriteText(outside / "victim.json", "keep");
+  const std::filesystem::path root = server.cornell.root.path();
+  std::filesystem::create_symlink(outside / "victim.json", root / ".wall.json.tmp");
+  std::filesystem::create_directory_symlink(outside.path(), root / "elsewhere");
+  EXPECT_EQ(server.Post("/api/export", R"({"object": "back wall", "path": "wall.json"})").status, 200);
+  const Reply r = server.Post("/api/export", R"({"object": "back wall", "path": "elsewhere/x.json"})");
+  EXPECT_EQ(r.status, 400);
+  EXPECT_NE(ErrorOf(r).find("symbolic link"), std::string::npos) << ErrorOf(r);
+  EXPECT_EQ(ReadText(outside / "victim.json"), "keep");
+  EXPECT_FALSE(std::filesystem::exists(outside / "x.json"));
+  EXPECT_EQ(LoadMaterial(root / "wall.json").name, "green");
+  const Reply download = server.Get("/api/material?object=back%20wall");
+  EXPECT_NE(download.head.find("filename=\"back-wall.json\""), std::string::npos) << download.head;
+}
+
+TEST(EditorServer, RequestsAreAnsweredWhileSlowClientsHoldTheirs) {
+  ServerOptions options;
+  options.read_timeout_s = 1;
+  RunningServer server(options);
+  // 20 clients that start a request and never finish it (slowloris).
+  std::vector<int> slow;
+  for (int k = 0; k < 20; ++k) {
+    slow.push_back(Connect(server.port));
+    const std::string start = "GET /api/state HTTP/1.1\r\n" + server.Host();
+    ::send(slow.back(), start.data(), start.size(), MSG_NOSIGNAL);
+  }
+  const auto start = std::chrono::steady_clock::now();
+  EXPECT_EQ(server.Get("/api/state").status, 200);
+  const double answered_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  EXPECT_LT(answered_s, 0.5);  // was 10 s
+  // And the slow ones are cut off at the deadline, not waited for.
+  for (int fd : slow) {
+    const Reply r = ReadReply(fd, std::chrono::milliseconds(3000));
+    EXPECT_NE(r.status, 200);
+    ::close(fd);
+  }
+  const double cut_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  EXPECT_GT(cut_s, 0.8);
+  EXPECT_LT(cut_s, 2.5);
+}
+
+TEST(EditorServer, ConnectionsAreBounded) {
+  ServerOptions options;
+  options.max_connections = 4;
+  RunningServer server(options);
+  std::vector<int> idle;
+  for (int k = 0; k < 4; ++k) idle.push_back(Connect(server.port));
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));  // accepted
+  const Reply refused = server.Get("/api/state");
+  EXPECT_EQ(refused.status, 503);
+  EXPECT_NE(ErrorOf(refused).find("connections"), std::string::npos);
+  for (int fd : idle) ::close(fd);
+  int status = 0;
+  for (int attempt = 0; attempt < 20 && status != 200; ++attempt) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    status = server.Get("/api/state").status;
+  }
+  EXPECT_EQ(status, 200);
+}
+
+TEST(EditorServer, APortInUseIsRefused) {
+  RunningServer first;
+  ServerOptions options;
+  options.port = first.port;
+  const std::string error = ErrorOfType<UserError>([&] { Serve(first.cornell.session, options, [](int) {}); });
+  EXPECT_NE(error.find("127.0.0.1:" + std::to_string(first.port) + " is in use"), std::string::npos) << error;
+  EXPECT_EQ(first.Get("/api/state").status, 200);
 }
 
 }  // namespace

@@ -1,8 +1,10 @@
 // The editor page in a real browser: Debian's Chromium driven by Playwright.
 // Starts `phos editor` on a free port, checks what the server must refuse,
-// then loads the page, places two constraints by clicking the image at two
-// times, edits their targets, checks that the solved curves pass through
-// them, exports the material and takes a screenshot.
+// then loads the page: the frame at t = 0 after a late one, two constraints
+// placed by clicking the image at two times, their targets edited, the
+// solved curves through them, the curve panel's axes and legend, swatches at
+// two exposures, the export (named after the object, ke unknown where no
+// light reaches), targets of zero refused, the colour picker, a screenshot.
 //
 //   node page_test.mjs PHOS_BINARY FIXTURES_DIR [SCREENSHOT.png]
 
@@ -63,6 +65,27 @@ try {
   const timeline = await page.evaluate(() => window.phos.state.timeline);
   const frameAt = (t) => timeline.findIndex((x) => x >= t - 1e-9);
 
+  // The frame shown at t = 0 after a late one is the first t = 0 frame (it
+  // came back black: every loop of "play" showed one). Its pixels, as drawn.
+  const shown = (f) => page.evaluate(async (f) => {
+    window.phos.setFrame(f);
+    const image = document.getElementById("view");
+    await image.decode();
+    const canvas = document.createElement("canvas");
+    canvas.width = image.naturalWidth; canvas.height = image.naturalHeight;
+    const g = canvas.getContext("2d");
+    g.drawImage(image, 0, 0);
+    const pixels = g.getImageData(0, 0, canvas.width, canvas.height).data;
+    let sum = 0, weighted = 0;
+    pixels.forEach((v, i) => { sum += v; weighted = (weighted + v * (i % 65521)) % 2147483647; });
+    return { sum, weighted };
+  }, f);
+  const startFrame = await shown(0);
+  const lateFrame = await shown(frameAt(60));
+  assert.ok(lateFrame.sum < startFrame.sum, "the lit start is brighter than the glow at 60 s");
+  const [again] = await Promise.all([shown(0), page.waitForResponse((r) => r.url().includes("/api/frame?t=0&"))]);
+  assert.deepEqual(again, startFrame);
+
   // Two constraints on the back wall: 5 s and 30 s after the LED goes off (30 s).
   const view = page.locator("#view");
   await page.waitForFunction(() => document.getElementById("view").complete);
@@ -103,22 +126,116 @@ try {
   }
   assert.equal(state.solutions.length, 1);
   assert.equal(state.solutions[0].object, "back wall");
+
+  // The curve panel: axis titles with units, tick labels and a legend (the
+  // text drawn on the canvas, caught as it is drawn).
+  const drawn = await page.evaluate(() => {
+    const seen = [], original = CanvasRenderingContext2D.prototype.fillText;
+    CanvasRenderingContext2D.prototype.fillText = function (text, ...rest) { seen.push(String(text)); return original.call(this, text, ...rest); };
+    window.phos.setFrame(window.phos.state.timeline.length - 1);
+    CanvasRenderingContext2D.prototype.fillText = original;
+    return seen;
+  });
+  for (const label of ["time t (s)", "R", "G", "B", "now", "#1", "#2"]) assert.ok(drawn.includes(label), `curve panel lacks '${label}': ${drawn}`);
+  assert.ok(drawn.some((t) => /^radiance .*\/ sr/.test(t)), `no radiance axis title with units: ${drawn}`);
+  assert.ok(drawn.some((t) => /^target/.test(t)), `no legend entry for targets: ${drawn}`);
+  assert.ok(drawn.filter((t) => /^\d+e[-+]\d+$/.test(t)).length >= 2, `no radiance ticks: ${drawn}`);
+
+  // Swatches follow the exposure: target and solved colour through the view's
+  // tone map (render::ToneMap, written out again here: Reinhard on BT.709
+  // luminance, then the sRGB transfer function).
+  const expected = (c, e) => {
+    const Y = 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2], scale = e / (1 + Math.max(0, e * Y));
+    return c.map((v) => { const x = Math.min(1, Math.max(0, v * scale));
+      return Math.round(255 * (x <= 0.0031308 ? 12.92 * x : 1.055 * Math.pow(x, 1 / 2.4) - 0.055)); });
+  };
+  const swatches = () => page.evaluate(() => [...document.querySelectorAll("#constraints tbody tr")].map((row) =>
+    ["target", "solved"].map((k) => getComputedStyle(row.querySelector(".swatch." + k)).backgroundColor.match(/\d+/g).map(Number))));
+  const setExposure = (e) => page.evaluate((e) => { const x = document.getElementById("exposure"); x.value = String(e); x.dispatchEvent(new Event("change")); }, e);
+  const exposure0 = await page.evaluate(() => Number(document.getElementById("exposure").value));
+  const at1 = await swatches();
+  await setExposure(4 * exposure0);
+  const at4 = await swatches();
+  for (let i = 0; i < 2; ++i) {
+    assert.deepEqual(at1[i], [expected(state.constraints[i].rgb, exposure0), expected(state.constraints[i].predicted, exposure0)]);
+    assert.deepEqual(at4[i], [expected(state.constraints[i].rgb, 4 * exposure0), expected(state.constraints[i].predicted, 4 * exposure0)]);
+    assert.notDeepEqual(at4[i][0], at1[i][0]);
+  }
+  await setExposure(exposure0);
   // The view was re-rendered with the solved material (a fresh frame request).
   await page.waitForFunction(() => document.getElementById("view").complete);
   assert.match(await view.getAttribute("src"), /\/api\/frame\?t=/);
 
-  // Export: the download is a phos.material/1 whose decay matches the targets' 40% over 25 s.
+  // Export: the download is a phos.material/1 named after the object, whose
+  // decay matches the targets' 40% over 25 s.
   await page.selectOption("#object", "back wall");
   const [download] = await Promise.all([page.waitForEvent("download"), page.click("#download button")]);
+  assert.equal(download.suggestedFilename(), "back-wall.json");
   const material = JSON.parse(readFileSync(await download.path(), "utf8"));
   assert.equal(material.schema, "phos.material/1");
   assert.equal(material.states.length, 1);
   assert.ok(Math.abs(material.states[0].kr - Math.log(1 / 0.4) / 25) < 0.002, `kr ${material.states[0].kr}`);
+  // ke stays unknown (null) where no light reaches: the LED lights only the
+  // bands near 405 nm, and the page says which bands are unknown.
+  const ke = material.states[0].ke;
+  assert.ok(ke.some((v) => v === null) && ke.some((v) => typeof v === "number" && v > 0), `ke ${JSON.stringify(ke)}`);
+  const unknownNote = await page.textContent("#unknown-ke");
+  assert.match(unknownNote, /ke unknown/);
+  assert.equal((unknownNote.match(/\d+(\.\d+)?-\d+(\.\d+)?/g) || []).length, ke.filter((v) => v === null).length);
 
   // Saving under the working folder works.
   response = await post("/api/export", JSON.stringify({ object: "back wall", path: "edited/back-wall.json" }));
   assert.equal(response.status, 200);
   assert.equal(JSON.parse(readFileSync(join(work, "edited/back-wall.json"), "utf8")).schema, "phos.material/1");
+
+  // A target of zero is refused with its message, and nothing changes: typed
+  // in the table, or from a point no light reaches (the left wall in the
+  // tall block's shadow, pixel 45, 128).
+  const refusedEdit = async (act) => {
+    const before = await page.evaluate(() => JSON.stringify(window.phos.state.constraints));
+    await page.evaluate(() => { document.getElementById("error").textContent = ""; });
+    await act();
+    await page.waitForFunction(() => document.getElementById("error").textContent !== "");
+    assert.equal(await page.evaluate(() => JSON.stringify(window.phos.state.constraints)), before);
+    return page.textContent("#error");
+  };
+  assert.match(await refusedEdit(() => page.evaluate(() => {
+    const row = document.querySelector('#constraints tbody tr[data-index="0"]');
+    for (let k = 0; k < 3; ++k) row.querySelector(".rgb" + k).value = "0";
+    row.querySelector(".rgb2").dispatchEvent(new Event("change", { bubbles: true }));
+  })), /Lambda = 0/);
+  assert.equal(await page.evaluate(() => Number(document.querySelector('#constraints tbody tr[data-index="0"] .rgb1').value)),
+               Number(targets[0][1].toPrecision(4)));  // the table shows the target again
+  assert.match(await refusedEdit(() => view.click({ position: { x: (45 + 0.5) * box.width / 256, y: (128 + 0.5) * box.height / 256 } })),
+               /no light reaches/);
+
+  // The colour picker: sRGB as it should look at the current exposure e in,
+  // linear radiance out, L = x / (e (1 - Y(x))) with x the decoded colour
+  // (the inverse of the tone map above), so the target swatch shows the picked colour.
+  const picked = "#4080c0";
+  const decode = (v) => v <= 0.04045 ? v / 12.92 : Math.pow((v + 0.055) / 1.055, 2.4);
+  const x = [1, 3, 5].map((i) => decode(parseInt(picked.slice(i, i + 2), 16) / 255));
+  const Yx = 0.2126 * x[0] + 0.7152 * x[1] + 0.0722 * x[2];
+  await setExposure(2 * exposure0);
+  const revision = await page.evaluate(() => window.phos.state.revision);
+  await page.evaluate((hex) => {
+    const input = document.querySelector('#constraints tbody tr[data-index="1"] .pick');
+    input.value = hex;
+    input.dispatchEvent(new Event("change", { bubbles: true }));
+  }, picked);
+  await page.waitForFunction((b) => window.phos.state.revision !== b, revision);
+  const pickedRgb = await page.evaluate(() => window.phos.state.constraints[1].rgb);
+  x.forEach((v, k) => assert.ok(Math.abs(pickedRgb[k] - v / (2 * exposure0 * (1 - Yx))) < 1e-9 * (1 + pickedRgb[k]), `picked ${pickedRgb}`));
+  assert.deepEqual((await swatches())[1][0], [0x40, 0x80, 0xc0]);
+  await setExposure(exposure0);
+  // The second target back as it was, for the screenshot.
+  const restored = await page.evaluate(() => window.phos.state.revision);
+  await page.evaluate((rgb) => {
+    const row = document.querySelector('#constraints tbody tr[data-index="1"]');
+    rgb.forEach((v, k) => { row.querySelector(".rgb" + k).value = String(v); });
+    row.querySelector(".rgb2").dispatchEvent(new Event("change", { bubbles: true }));
+  }, targets[1]);
+  await page.waitForFunction((b) => window.phos.state.revision !== b, restored);
 
   if (screenshot) {
     // Brighter, to see the glow in the picture; the exposure only scales the view.

@@ -56,9 +56,17 @@ class EditSession {
   void SetPreset(const std::string& object, const std::string& preset);
   void SetStates(int states);
   void SetPropagation(double falloff);
-  // The material of an object; and the same written under root (a relative path inside it).
+  // The material of an object; and the same written under root (a relative
+  // path inside it, no "..", no control characters, at most 1024 bytes). The
+  // export never follows a symbolic link: every folder of the path is opened
+  // under root with O_NOFOLLOW, and the file is written to a temporary beside
+  // it (".NAME.tmp", created with O_EXCL | O_NOFOLLOW; another name if
+  // something is there) and renamed over it.
   nlohmann::json MaterialJson(const std::string& object) const;
   std::filesystem::path ExportMaterial(const std::string& object, const std::string& relative_path) const;
+  // What an export of the object is called: its name in lower case, other
+  // characters as '-' ("back wall" -> "back-wall.json").
+  std::string ExportFileName(const std::string& object) const;
 
   const render::Scene& scene() const { return scene_; }
   double last_solve_seconds() const { return last_solve_seconds_; }
@@ -89,6 +97,7 @@ class EditSession {
   double falloff_ = 0;
   std::vector<PlacedConstraint> constraints_;
   std::vector<std::shared_ptr<const Material>> base_;     // per object: before edits (scene or preset)
+  std::vector<bool> base_unknown_ke_as_zero_;             // per object: the scene file's "unknown_ke" policy
   std::vector<std::shared_ptr<const Material>> solved_;   // per object: solved, or null
   std::map<int, Solution> solutions_;                     // per edited object
   std::vector<double> xyz_to_rgb_weights_;                // 3 x nb: band radiance -> linear sRGB
