@@ -52,7 +52,8 @@ void Run(const EditSolveArgs& args) {
               FormatShort(solution.seconds * 1e3, 3).c_str());
   for (const ExcitedState& s : solution.material.states) {
     std::string ke, Lambda;
-    for (const auto& k : s.ke) ke += (ke.empty() ? "" : ", ") + FormatShort(k.value_or(0), 3);
+    // Unknown where no light reaches the point (the look says nothing of it), as in the file: null.
+    for (const auto& k : s.ke) ke += (ke.empty() ? "" : ", ") + (k ? FormatShort(*k, 3) : std::string("unknown"));
     for (double l : s.Lambda) Lambda += (Lambda.empty() ? "" : ", ") + FormatShort(l, 3);
     std::printf("  kr %s /s  ke [%s]  Lambda [%s]\n", FormatShort(s.kr, 4).c_str(), ke.c_str(), Lambda.c_str());
   }

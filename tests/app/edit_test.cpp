@@ -34,6 +34,23 @@ TEST(EditCommand, JsonFollowsTheContract) {
   EXPECT_EQ(LoadMaterial(dir / "m.json").states.size(), 1u);
 }
 
+TEST(EditCommand, KeIsUnknownWhereNoLightReaches) {
+  // Lit in the blue band only: green and red ke stay unknown, in the file and on screen.
+  TempDir dir;
+  std::string irradiance;
+  for (int f = 0; f < 60; ++f) irradiance += std::string(f ? ", " : "") + (f < 20 ? "[1, 0, 0]" : "[0, 0, 0]");
+  WriteText(dir / "c.json", R"({"schema": "phos.constraints/1", "bands_nm": [380, 490, 580, 720], "dt_s": 0.5,
+    "irradiance": [)" + irradiance + R"(], "albedo": [0.5, 0.5, 0.5], "states": 1,
+    "constraints": [{"t_s": 11, "radiance": [0.02, 0.06, 0.01]}, {"t_s": 25, "radiance": [0.01, 0.03, 0.005]}]})");
+  const CommandResult text = RunPhos("edit solve " + (dir / "c.json").string() + " --no-baseline --out " + (dir / "m.json").string());
+  ASSERT_EQ(text.exit_code, 0) << text.err;
+  EXPECT_NE(text.out.find(", unknown, unknown]"), std::string::npos) << text.out;
+  const Material m = LoadMaterial(dir / "m.json");
+  EXPECT_TRUE(m.states[0].ke[0].has_value());
+  EXPECT_FALSE(m.states[0].ke[1].has_value());
+  EXPECT_FALSE(m.states[0].ke[2].has_value());
+}
+
 TEST(EditCommand, BadInputIsOneLineAndExitTwo) {
   TempDir dir;
   EXPECT_TRUE(IsOneLineUserError(RunPhos("edit solve /nonexistent.json"), "nonexistent.json"));

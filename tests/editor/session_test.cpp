@@ -349,7 +349,7 @@ TEST(EditorServer, ExportsThroughTheServerFollowNoLink) {
 
 TEST(EditorServer, RequestsAreAnsweredWhileSlowClientsHoldTheirs) {
   ServerOptions options;
-  options.read_timeout_s = 1;
+  options.read_timeout_s = 2;
   RunningServer server(options);
   // 20 clients that start a request and never finish it (slowloris).
   std::vector<int> slow;
@@ -361,7 +361,7 @@ TEST(EditorServer, RequestsAreAnsweredWhileSlowClientsHoldTheirs) {
   const auto start = std::chrono::steady_clock::now();
   EXPECT_EQ(server.Get("/api/state").status, 200);
   const double answered_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  EXPECT_LT(answered_s, 0.5);  // was 10 s
+  EXPECT_LT(answered_s, 1.0);  // was 10 s; well before the slow ones' deadline
   // And the slow ones are cut off at the deadline, not waited for.
   for (int fd : slow) {
     const Reply r = ReadReply(fd, std::chrono::milliseconds(3000));
@@ -369,8 +369,8 @@ TEST(EditorServer, RequestsAreAnsweredWhileSlowClientsHoldTheirs) {
     ::close(fd);
   }
   const double cut_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  EXPECT_GT(cut_s, 0.8);
-  EXPECT_LT(cut_s, 2.5);
+  EXPECT_GT(cut_s, 1.8);
+  EXPECT_LT(cut_s, 4.0);
 }
 
 TEST(EditorServer, ConnectionsAreBounded) {
