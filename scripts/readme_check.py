@@ -36,6 +36,10 @@ The README's convention (pure Markdown, nothing else to learn):
         budget), run with --all and --update.
     <!-- readme-check: setup: COMMAND -->        run first, output hidden,
         must exit 0 (to make the files a command reads).
+    <!-- readme-check: until "TEXT": N lines -->  a command that runs until
+        Ctrl-C (a server): its first N lines are compared, then it gets SIGINT.
+    <!-- readme-check: args "TEXT": ARGS -->      ARGS are added to commands
+        containing TEXT when they run (a free port instead of a fixed one).
     <!-- readme-check: mask /REGEX/ -->          numbers inside the match
         (group 1 if it has one) are masked in this block.
     <!-- readme-check: rtol X -->                this block's tolerance.
@@ -48,7 +52,9 @@ import argparse
 import difflib
 import os
 import re
+import select
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
@@ -86,6 +92,8 @@ class Block:
         self.skips = []     # (text or None, reason)
         self.slows = []
         self.setup = []
+        self.untils = []    # (text, lines): a command that runs until Ctrl-C
+        self.args = []      # (text, extra arguments)
         self.masks = []
         self.rtol = None
 
@@ -191,6 +199,14 @@ def apply_directive(block, d):
     m = re.match(r'(skip|slow)\s*(?:"([^"]*)")?\s*:?\s*(.*)$', d, re.S)
     if m:
         (block.skips if m.group(1) == "skip" else block.slows).append((m.group(2), m.group(3).strip()))
+        return
+    m = re.match(r'until\s*"([^"]*)"\s*:\s*(\d+)\s*lines?\s*$', d)
+    if m:
+        block.untils.append((m.group(1), int(m.group(2))))
+        return
+    m = re.match(r'args\s*"([^"]*)"\s*:\s*(.*)$', d, re.S)
+    if m:
+        block.args.append((m.group(1), m.group(2).strip()))
         return
     m = re.match(r"setup\s*:\s*(.*)$", d, re.S)
     if m:
@@ -327,6 +343,38 @@ def prepare_workdir(work, source_dir, phos):
         os.symlink(os.path.join(os.path.abspath(source_dir), "fixtures"), fixtures)
 
 
+def run_until(command, work, lines, timeout):
+    """Runs a command that goes on until Ctrl-C (a server): waits for its
+    first `lines` lines of output, then sends SIGINT, as a user would."""
+    env = dict(os.environ, LC_ALL="C", TZ="UTC", COLUMNS="200")
+    start = time.monotonic()
+    p = subprocess.Popen(["bash", "-c", "exec " + command], cwd=work, env=env, stdout=subprocess.PIPE,
+                         stderr=subprocess.STDOUT)
+    out = b""
+    deadline = start + timeout
+    try:
+        while out.count(b"\n") < lines and time.monotonic() < deadline:
+            ready, _, _ = select.select([p.stdout], [], [], max(0.0, deadline - time.monotonic()))
+            if not ready:
+                break
+            chunk = os.read(p.stdout.fileno(), 65536)
+            if not chunk:
+                break  # it ended by itself
+            out += chunk
+    finally:
+        if p.poll() is None:
+            p.send_signal(signal.SIGINT)
+            try:
+                p.wait(10)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait()
+        p.stdout.close()
+    text = out.decode("utf-8", "replace")
+    kept = text.split("\n")[:lines]
+    return "\n".join(kept) + "\n", 0 if out.count(b"\n") >= lines else 1, time.monotonic() - start
+
+
 def run(command, work, status, timeout):
     """Runs one command with bash in `work`; `$?` starts as `status`."""
     env = dict(os.environ, LC_ALL="C", TZ="UTC", COLUMNS="200")
@@ -413,7 +461,15 @@ def main():
                 skipped += 1
                 print("SKIP %s  $ %s\n     %s" % (where, shown, reason))
                 continue
-            out, rc, seconds = run(c.text, work, status, args.timeout)
+            command = c.text
+            for text, extra in block.args:
+                if text in command:
+                    command += " " + extra
+            until = next((n for text, n in block.untils if text in c.text), None)
+            if until is not None:
+                out, rc, seconds = run_until(command, work, until, args.timeout)
+            else:
+                out, rc, seconds = run(command, work, status, args.timeout)
             status = rc
             ran += 1
             actual = out.split("\n")
@@ -537,6 +593,16 @@ def self_test():
                len(c) == 2 and c[0].text.endswith("--dt 5") and c[0].output == ["t,r_1", "0,0"] and c[1].output == ["0"])
         expect("a directive applies to the next block", blocks[0].skips == [("editor", "a server")])
         expect("fenced blocks are read", blocks[1].commands[0].output == ["listening"])
+    served = parse(["<!-- readme-check: until \"phos editor\": 1 line -->", "<!-- readme-check: args \"phos editor\": --port 0 -->",
+                    "", "    $ build/bin/phos editor", "    phos editor: on http://127.0.0.1:8377/"])
+    expect("until and args directives are read",
+           len(served) == 1 and served[0].untils == [("phos editor", 1)] and served[0].args == [("phos editor", "--port 0")])
+    server = "%s -c \"import sys, time; print('first'); print('second'); sys.stdout.flush(); time.sleep(30)\"" % (
+        sys.executable)
+    start = time.monotonic()
+    out, rc, _ = run_until(server, tempfile.gettempdir(), 1, 20)
+    expect("a server's first lines are read and Ctrl-C stops it",
+           out == "first\n" and rc == 0 and time.monotonic() - start < 5)
     new = updated_lines(["phos fit session: (0.6 s)", "  nc = 1", "  report: r.html"],
                         ["phos fit session: (0.9 s)", "  nc = 1", "  joint refinement (written)", "  report: r.html"],
                         "    ", m, r)
