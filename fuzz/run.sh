@@ -1,0 +1,64 @@
+#!/usr/bin/env bash
+# Runs every fuzz harness (or those named) for FUZZ_SECONDS each, one after
+# the other, at the lowest CPU priority, on one core: libFuzzer with
+# -max_total_time, seeded from fixtures/ (and fuzz/seeds/), the corpus it
+# grows kept in build-fuzz/corpus/<target>. A crash, a sanitizer report, a
+# timeout (FUZZ_TIMEOUT s for one input) or running out of memory
+# (FUZZ_RSS_MB) stops that harness and writes the input to
+# build-fuzz/findings/<target>/; the script then exits 1. Each harness's
+# executions and the command go to build-fuzz/fuzz-summary.txt.
+#   FUZZ_SECONDS=60 fuzz/run.sh              (make fuzz)
+#   FUZZ_SECONDS=10 fuzz/run.sh scene gltf   (two of them)
+set -uo pipefail
+cd "$(dirname "$0")/.."
+ROOT=$PWD
+BIN=$ROOT/build-fuzz/bin
+SECONDS_EACH=${FUZZ_SECONDS:-60}
+TIMEOUT=${FUZZ_TIMEOUT:-10}
+RSS_MB=${FUZZ_RSS_MB:-2048}
+MAX_LEN=${FUZZ_MAX_LEN:-65536}
+TARGETS=("$@")
+[ ${#TARGETS[@]} -eq 0 ] && TARGETS=(material scene obj gltf constraints lab curve_csv)
+
+seeds() {  # the seed files of a target
+  case $1 in
+    material) ls fixtures/materials/*.json ;;
+    scene) ls fixtures/scenes/*.json ;;
+    obj) ls fixtures/scenes/meshes/*.obj ;;
+    gltf) ls fixtures/scenes/meshes/*.gltf ;;
+    constraints) ls fixtures/constraints/*.json ;;
+    lab) ls fuzz/seeds/lab/* ;;
+    curve_csv) ls fixtures/curves/*.csv fixtures/curves/*.dat fixtures/curves/*.txt fixtures/cameras/*.csv ;;
+  esac
+  [ -d "fuzz/regressions/$1" ] && ls -d "fuzz/regressions/$1"/* 2>/dev/null
+  return 0
+}
+
+status=0
+summary=$ROOT/build-fuzz/fuzz-summary.txt
+echo "# $(date -u +%FT%TZ), ${SECONDS_EACH} s per harness, $(nproc) cores" >>"$summary"
+for t in "${TARGETS[@]}"; do
+  exe=$BIN/fuzz-$t
+  [ -x "$exe" ] || { echo "fuzz: $exe missing (build it: cmake --preset fuzz -S fuzz && cmake --build build-fuzz)" >&2; exit 2; }
+  corpus=$ROOT/build-fuzz/corpus/$t seed=$ROOT/build-fuzz/seeds/$t findings=$ROOT/build-fuzz/findings/$t
+  mkdir -p "$corpus" "$seed" "$findings"
+  seeds "$t" | while read -r f; do cp -f "$f" "$seed/"; done
+  dict=()
+  [ -f "fuzz/$t.dict" ] && dict=(-dict="fuzz/$t.dict")
+  log=$ROOT/build-fuzz/fuzz-$t.log
+  cmd=(nice -n 19 "$exe" -max_total_time="$SECONDS_EACH" -timeout="$TIMEOUT" -rss_limit_mb="$RSS_MB"
+       -max_len="$MAX_LEN" -print_final_stats=1 -artifact_prefix="$findings/" "${dict[@]}" "$corpus" "$seed")
+  ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+    "${cmd[@]}" >"$log" 2>&1
+  rc=$?
+  runs=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$log" | grep -o '[0-9]*$' | tail -1)
+  line="$t: ${runs:-?} executions in ${SECONDS_EACH} s, exit $rc: ${cmd[*]}"
+  echo "fuzz: $line"
+  echo "$line" >>"$summary"
+  if [ $rc -ne 0 ]; then
+    status=1
+    echo "fuzz: $t found a problem; the input is in $findings/, the log in $log:" >&2
+    grep -m5 -E "ERROR|SUMMARY|runtime error|internal error|terminate|logic_error" "$log" >&2
+  fi
+done
+exit $status

@@ -1,0 +1,71 @@
+// Every input that ever crashed, hung or gave an internal error (issue 16,
+// found by mutating the fixtures and by the fuzz harnesses) is kept in
+// fuzz/regressions/<target>/ and run here through the harness's own function
+// (fuzz/targets.h), under the ASan + UBSan build of CI: each must be refused
+// in one line. The loaders' unit tests check the messages of most of them;
+// the lab config and the command-line option have theirs here.
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <stdexcept>
+#include <string>
+
+#include "fuzz/targets.h"
+#include "phos/acquire/lab.h"
+#include "phos/util/error.h"
+#include "test_util.h"
+
+namespace phos {
+namespace {
+
+const std::filesystem::path kRegressions = std::filesystem::path(PHOS_FUZZ_ROOT) / "fuzz/regressions";
+
+TEST(FuzzRegressions, EveryInputThatEverCrashedIsRefusedInOneLine) {
+  int inputs = 0;
+  for (const fuzz::Target& target : fuzz::kTargets) {
+    const std::filesystem::path dir = kRegressions / target.name;
+    if (!std::filesystem::is_directory(dir)) continue;
+    for (const auto& entry : std::filesystem::directory_iterator(dir)) {
+      const std::string data = testing::ReadText(entry.path());
+      try {
+        EXPECT_FALSE(target.run(data)) << entry.path() << " was accepted";
+      } catch (const std::exception& e) {
+        ADD_FAILURE() << entry.path() << ": " << e.what();
+      }
+      ++inputs;
+    }
+  }
+  EXPECT_GE(inputs, 15);  // the cases of issue 16, and what the harnesses found
+}
+
+// Issue 16: a lab config with a camera region of 1e9 crashed (ASan SEGV in
+// the camera); 1e10 does not even fit the int it was cast to.
+TEST(FuzzRegressions, ALabCameraRegionIsWholePixelsOfARealSensor) {
+  testing::TempDir dir;
+  auto error_of = [&](const std::string& region) {
+    testing::WriteText(dir / "lab.json", R"({"schema": "phos.lab/1", "camera": {"aravis": "Fake_1", "region": )" + region +
+                                             R"(}, "lights": {"backend": "none", "channels": {"led405": {"line": 1}}}})");
+    return testing::ErrorOfType<UserError>([&] { LoadLabConfig(dir / "lab.json"); });
+  };
+  EXPECT_EQ(error_of("[0, 0, 128, 96]"), "(no error)");
+  EXPECT_EQ(error_of("[0, 0, 1e9, 1e9]"),
+            (dir / "lab.json").string() + ": camera.region[2]: expected a whole number from 1 to 65536, got 1e+09");
+  EXPECT_EQ(error_of("[1e10, 0, 16, 16]"),
+            (dir / "lab.json").string() + ": camera.region[0]: expected a whole number from 0 to 65536, got 1e+10");
+  EXPECT_EQ(error_of("[65530, 0, 16, 16]"), (dir / "lab.json").string() +
+                                                ": camera.region: the region reaches past 65536 pixels, the largest sensor "
+                                                "phos accepts");
+}
+
+// Issue 18 item 5: NaN and infinity in a numeric option.
+TEST(FuzzRegressions, NonFiniteOptionValuesAreRefused) {
+  const std::string curve = testing::Fixture("curves/charge.csv").string();
+  EXPECT_TRUE(testing::IsOneLineUserError(testing::RunPhos("fit decay-curve " + curve + " --from nan"),
+                                          "--from: expected a finite number, got nan"));
+  EXPECT_TRUE(testing::IsOneLineUserError(testing::RunPhos("fit charge-curve " + curve + " --to 1e999"),
+                                          "--to: expected a finite number, got 1e999"));
+}
+
+}  // namespace
+}  // namespace phos
