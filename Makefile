@@ -1,12 +1,16 @@
 # phos: the two set-up commands of the README, and a few more.
 #   make demo   install what is missing (apt), build in Release, run the main job
-#   make test   install what is missing, build under ASan+UBSan, run every test (ctest)
+#   make test   install what is missing, build under ASan+UBSan, run every test (ctest),
+#               then every fuzz harness for FUZZ_CI_SECONDS (10 s) each
 # Other targets: build (Release only), bench (benchmarks, Release), study
-# (regenerate the integrator error, Glassner and nc trade studies in docs/), clean.
+# (regenerate the integrator error, Glassner and nc trade studies in docs/),
+# fuzz (the libFuzzer harnesses for FUZZ_SECONDS each, docs/fuzzing.md), clean.
 
 JOBS ?= $(shell nproc)
+FUZZ_SECONDS ?= 60
+FUZZ_CI_SECONDS ?= 10
 
-.PHONY: all bootstrap build demo test bench study clean
+.PHONY: all bootstrap build demo test bench study fuzz fuzz-build clean
 
 all: build
 
@@ -24,6 +28,7 @@ test: bootstrap
 	@cmake --preset asan >/dev/null
 	@cmake --build --preset asan -j $(JOBS)
 	@ctest --preset asan -j $(JOBS)
+	@$(MAKE) --no-print-directory fuzz FUZZ_SECONDS=$(FUZZ_CI_SECONDS)
 
 bench: build
 	@bash scripts/bench.sh
@@ -35,5 +40,14 @@ study: build
 	@build/bin/phos-dss-study --out docs
 	@build/bin/phos-appearance-study --out docs
 
+# The harnesses (fuzz/, its own CMake project: clang, libFuzzer, ASan + UBSan,
+# only the loaders' sources), each run for FUZZ_SECONDS, one at a time.
+fuzz-build: bootstrap
+	@cd fuzz && cmake --preset fuzz >/dev/null
+	@cmake --build build-fuzz -j $(JOBS)
+
+fuzz: fuzz-build
+	@FUZZ_SECONDS=$(FUZZ_SECONDS) bash fuzz/run.sh
+
 clean:
-	rm -rf build build-asan results
+	rm -rf build build-asan build-fuzz results
