@@ -76,6 +76,7 @@ TEST(PlotColors, ChannelsAreRedGreenAndBlue) {
     EXPECT_TRUE(c[2] > c[0] && c[2] > c[1]) << name;
   }
   EXPECT_EQ(ChannelColor("bottle"), "");
+  EXPECT_EQ(ChannelColor("r_1"), "");  // a state, not a channel
   EXPECT_EQ(ChannelColor("value"), "");
   EXPECT_EQ(ChannelOrPaletteColor("value", 2), PaletteColor(2));
   EXPECT_EQ(ChannelOrPaletteColor("G", 0), ChannelColor("G"));

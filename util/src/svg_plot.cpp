@@ -125,7 +125,7 @@ const std::string& PaletteColor(int index) {
 std::string ChannelColor(std::string_view channel) {
   std::string first;
   for (char c : channel) {
-    if (c == ' ' || c == '(' || c == '_' || c == ',') break;
+    if (c == ' ' || c == '(' || c == ',') break;
     first += static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
   }
   if (first == "r" || first == "red") return "#D62728";
