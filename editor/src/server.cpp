@@ -105,17 +105,20 @@ void RejectUnknownParameters(const httplib::Request& request, std::initializer_l
 // with every byte).
 class DeadlineStream : public httplib::Stream {
  public:
-  DeadlineStream(int fd, Clock::time_point read_deadline, Clock::duration write_timeout)
-      : fd_(fd), read_deadline_(read_deadline), write_timeout_(write_timeout) {}
+  // At most max_read_bytes are read from the connection: httplib bounds each
+  // header line but not their number.
+  DeadlineStream(int fd, Clock::time_point read_deadline, Clock::duration write_timeout, std::size_t max_read_bytes)
+      : fd_(fd), read_deadline_(read_deadline), write_timeout_(write_timeout), left_to_read_(max_read_bytes) {}
 
   bool is_readable() const override { return begin_ < end_ || Wait(POLLIN, read_deadline_); }
   bool is_writable() const override { return Wait(POLLOUT, WriteDeadline()); }
 
   ssize_t read(char* ptr, size_t size) override {
     if (begin_ == end_) {
-      if (!Wait(POLLIN, read_deadline_)) return -1;
-      const ssize_t n = ::recv(fd_, buffer_, sizeof buffer_, 0);
+      if (left_to_read_ == 0 || !Wait(POLLIN, read_deadline_)) return -1;
+      const ssize_t n = ::recv(fd_, buffer_, std::min(sizeof buffer_, left_to_read_), 0);
       if (n <= 0) return n;
+      left_to_read_ -= static_cast<std::size_t>(n);
       begin_ = 0;
       end_ = static_cast<std::size_t>(n);
     }
@@ -167,6 +170,7 @@ class DeadlineStream : public httplib::Stream {
   int fd_;
   Clock::time_point read_deadline_;
   Clock::duration write_timeout_;
+  std::size_t left_to_read_;
   mutable bool write_started_ = false;
   mutable Clock::time_point write_deadline_;
   char buffer_[4096];
@@ -275,6 +279,12 @@ void Serve(EditSession& session, const ServerOptions& options, const std::functi
                                  std::to_string(request.get_header_value_count(header)) + " times; expected once");
         return httplib::Server::HandlerResponse::Handled;
       }
+    // cpp-httplib 0.11 applies max_body_bytes to Content-Length only: a
+    // chunked body of 13 MB was read whole. The page always sends a length.
+    if (request.has_header("Transfer-Encoding")) {
+      Error(response, 411, "request: Transfer-Encoding is not accepted; send the body with a Content-Length");
+      return httplib::Server::HandlerResponse::Handled;
+    }
     const std::string here = ":" + std::to_string(port);
     const std::string host = request.get_header_value("Host");
     const bool loopback = options.bind == "127.0.0.1" || options.bind == "localhost";
@@ -463,9 +473,11 @@ void Serve(EditSession& session, const ServerOptions& options, const std::functi
     const int yes = 1;
     ::setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &yes, sizeof yes);
     Connection& connection = connections.emplace_back();
-    connection.thread = std::thread([&server, fd, read_timeout, write_timeout, done = connection.done] {
+    // The request line and headers in at most 64 KiB (the page sends under 1 KiB), then the body.
+    const std::size_t max_read_bytes = options.max_body_bytes + 64 * 1024;
+    connection.thread = std::thread([&server, fd, read_timeout, write_timeout, max_read_bytes, done = connection.done] {
       {
-        DeadlineStream stream(fd, Clock::now() + read_timeout, write_timeout);
+        DeadlineStream stream(fd, Clock::now() + read_timeout, write_timeout, max_read_bytes);
         server.HandleOne(stream);
       }
       LingerAndClose(fd);
