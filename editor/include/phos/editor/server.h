@@ -5,7 +5,9 @@
 //  - requests whose Origin is not the page's own, or whose Host is not the
 //    address it listens on (cross-site requests, DNS rebinding): 403;
 //  - a Host or Origin header given twice: 400;
-//  - bodies over max_body_bytes: 413;
+//  - bodies over max_body_bytes: 413; bodies with a Transfer-Encoding: 411
+//    (httplib does not hold chunked bodies to the limit); more than 64 KiB
+//    of request line and headers: the request fails (400);
 //  - malformed JSON, bad or unknown fields or query parameters, numbers beyond
 //    a double (1e400), over-long names: 400 with {"error": one line naming the
 //    field}, nothing changed;
