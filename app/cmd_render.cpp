@@ -13,6 +13,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "cli_finite.h"
 #include "commands.h"
 #include "phos/model/material.h"
 #include "phos/render/night_vision.h"
@@ -230,7 +231,7 @@ void RegisterRender(CLI::App& app) {
                   "Pick the transport for a time budget per frame: each is timed on this scene, and the best\n"
                   "expected quality that fits is used (direct, dss, path 4 to 1024 spp; the qualities are the\n"
                   "trade study's SSIM against the path tracer, docs/dss-trade.md)")
-      ->check(CLI::PositiveNumber);
+      ->check(kFinite)->check(CLI::PositiveNumber);
   cmd->add_option("--quality", args->quality,
                   "Pick the cheapest transport whose expected SSIM reaches this (0 to 1; e.g. 0.9)")
       ->check(CLI::Range(1e-9, 1.0));
@@ -241,11 +242,11 @@ void RegisterRender(CLI::App& app) {
   cmd->add_option("--width", args->width, "Override the camera's width in pixels")->check(CLI::Range(1, 16384));
   cmd->add_option("--height", args->height, "Override the camera's height in pixels")->check(CLI::Range(1, 16384));
   cmd->add_option("--exposure", args->exposure, "PNG exposure (default: the camera's); EXR files are never scaled")
-      ->check(CLI::PositiveNumber);
+      ->check(kFinite)->check(CLI::PositiveNumber);
   cmd->add_option("--night-vision", args->night_vision_cd,
                   "Also write frame-NNNN-night.png as a dark-adapted eye sees it (Thompson et al. 2002:\n"
                   "blue shift, loss of acuity, grain); the value is the luminance in cd/m^2 of radiance 1")
-      ->check(CLI::PositiveNumber);
+      ->check(kFinite)->check(CLI::PositiveNumber);
   cmd->add_option("--contact-sheet", args->contact_sheet, "Also write every frame side by side, labelled with its time, to this PNG");
   cmd->add_option("--material", args->materials,
                   "OBJECT=FILE: give the object of that name this phosphor material (repeatable),\n"

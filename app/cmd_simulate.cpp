@@ -8,6 +8,7 @@
 #include <sstream>
 #include <string>
 
+#include "cli_finite.h"
 #include "commands.h"
 #include "phos/model/material.h"
 #include "phos/model/simulate.h"
@@ -141,7 +142,7 @@ void RunSimulate(const SimulateArgs& args) {
   if (args.decay_s < 0) ThrowUserError("", "--decay-s", "expected seconds >= 0, got " + FormatDouble(args.decay_s));
   if (args.charge_s + args.decay_s <= 0) ThrowUserError("", "--charge-s", "nothing to simulate: give --charge-s or --decay-s > 0");
   std::vector<double> E(static_cast<std::size_t>(nb), 0.0);
-  if (!args.irradiance.empty()) E = ParseBandValues(args.irradiance, nb, "--irradiance", 0.0, 1e300);
+  if (!args.irradiance.empty()) E = ParseBandValues(args.irradiance, nb, "--irradiance", 0.0, kMaxIrradiance);
   else if (args.charge_s > 0) ThrowUserError("", "--irradiance", "required when --charge-s > 0");
 
   SimulationOptions options;
@@ -172,14 +173,15 @@ void RegisterSimulate(CLI::App& app) {
   auto args = std::make_shared<SimulateArgs>();
   CLI::App* cmd = app.add_subcommand("simulate", Summary("simulate"));
   cmd->add_option("--material", args->material, "material file (phos.material/1)")->required();
-  cmd->add_option("--charge-s", args->charge_s, "seconds of charging under --irradiance (default 0)");
+  cmd->add_option("--charge-s", args->charge_s, "seconds of charging under --irradiance (default 0)")->check(kFinite);
   cmd->add_option("--irradiance", args->irradiance,
                   "band-integrated irradiance E while charging: one number (every band) or a comma list,\n"
                   "one value per band of the material; bands whose ke is unknown must get 0");
-  cmd->add_option("--decay-s", args->decay_s, "seconds of darkness after the charge (default 0)");
+  cmd->add_option("--decay-s", args->decay_s, "seconds of darkness after the charge (default 0)")->check(kFinite);
   cmd->add_option("--dt", args->dt_s,
                   "sample interval and step in seconds (default 1); the end of the schedule is sampled too\n"
-                  "when --dt does not divide it");
+                  "when --dt does not divide it")
+      ->check(kFinite);
   cmd->add_option("--integrator", args->integrator,
                   "exact (default: closed form, stable for any step), euler (the paper's; refused past\n"
                   "h*k > 2, warned past h*k > 1), rk4 (refused past h*k > 2.785), reference (adaptive\n"

@@ -65,6 +65,15 @@ TEST(FuzzRegressions, NonFiniteOptionValuesAreRefused) {
                                           "--from: expected a finite number, got nan"));
   EXPECT_TRUE(testing::IsOneLineUserError(testing::RunPhos("fit charge-curve " + curve + " --to 1e999"),
                                           "--to: expected a finite number, got 1e999"));
+  const std::string green = testing::Fixture("materials/green.json").string();
+  EXPECT_TRUE(testing::IsOneLineUserError(
+      testing::RunPhos("simulate --material " + green + " --charge-s nan --irradiance 1,1,1,0,0,0,0,0"),
+      "--charge-s: expected a finite number, got nan"));
+  EXPECT_TRUE(testing::IsOneLineUserError(testing::RunPhos("simulate --material " + green + " --r0 0 --decay-s inf"),
+                                          "--decay-s: expected a finite number, got inf"));
+  EXPECT_TRUE(testing::IsOneLineUserError(
+      testing::RunPhos("simulate --material " + green + " --charge-s 1 --irradiance 1e300,1,1,0,0,0,0,0"),
+      "--irradiance: expected values in [0, 1e+09], got 1e+300"));
 }
 
 }  // namespace
