@@ -11,7 +11,6 @@
 #include <set>
 #include <thread>
 
-#include <fcntl.h>
 #include <netdb.h>
 #include <netinet/in.h>
 #include <netinet/tcp.h>
@@ -57,7 +56,9 @@ nlohmann::json ParseBody(const std::string& text) {
     std::string field;
     for (const std::string& key : keys)
       if (!key.empty()) field += (field.empty() ? "" : ".") + key;
-    ThrowUserError("request", field, "a number beyond the range of a double (" + std::string(e.what()).substr(std::string(e.what()).find("] ") + 2) + ")");
+    std::string what = e.what();  // "[json.exception.out_of_range.406] number overflow parsing '1e400'"
+    if (auto close = what.find("] "); close != std::string::npos) what = what.substr(close + 2);
+    ThrowUserError("request", field, "a number beyond the range of a double (" + what + ")");
   } catch (const nlohmann::json::exception& e) {
     std::string what = e.what();
     if (auto close = what.find("] "); close != std::string::npos) what = what.substr(close + 2);
