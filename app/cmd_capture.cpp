@@ -17,6 +17,7 @@
 #include "commands.h"
 #include "phos/acquire/lab.h"
 #include "phos/acquire/protocols.h"
+#include "phos/acquire/session_records.h"
 #include "phos/acquire/sim_lab.h"
 #include "phos/model/material.h"
 #include "phos/render/renderer.h"
@@ -24,6 +25,7 @@
 #include "phos/util/format.h"
 #include "phos/util/json.h"
 #include "phos/util/svg_plot.h"
+#include "phos/util/version.h"
 
 namespace phos::app {
 namespace {
@@ -232,7 +234,7 @@ nlohmann::json StartRecord(const std::string& protocol, const Devices& devices, 
           {"sample", devices.sample},
           {"devices", devices.description},
           {"settings", std::move(settings)},
-          {"versions", {{"phos", "0.1.0"}}}};
+          {"versions", {{"phos", kVersion}}}};
 }
 
 // The calibration sources of this lab: the config's, or the simulated lab's.
@@ -245,7 +247,13 @@ std::vector<CalibrationLine> CalibrationLinesOf(const Devices& devices) {
 
 // ---- previews: what a session captured, to look at ----------------------
 
-std::vector<nlohmann::json> FrameLines(const fs::path& dir) { return ReadJsonLines(dir / "frames.jsonl"); }
+// The frame records as the protocols wrote them (typed reading first, so a
+// malformed record is one line naming it).
+std::vector<nlohmann::json> FrameLines(const fs::path& dir) {
+  std::vector<nlohmann::json> lines;
+  for (const FrameRecord& frame : ReadFrameRecords(dir).frames) lines.push_back(frame.ToJson());
+  return lines;
+}
 
 // A contact sheet of a session's frames, each scaled by its exposure so the
 // fading shows (one brightness scale for all), labelled with the delay.
@@ -288,6 +296,7 @@ void WriteFramesContactSheet(const fs::path& session_dir, const fs::path& out, i
 void WriteCurvesPlot(const fs::path& session_dir, const std::string& protocol, const fs::path& out) {
   const std::vector<nlohmann::json> lines = FrameLines(session_dir);
   std::map<std::string, PlotSeries> series;
+  std::map<std::string, std::size_t> light_order;
   for (const nlohmann::json& line : lines) {
     if (!line.contains("mean_signal_dn")) continue;
     const std::vector<double> means = line["mean_signal_dn"];
@@ -300,7 +309,14 @@ void WriteCurvesPlot(const fs::path& session_dir, const std::string& protocol, c
       s.markers = true;
       s.x.push_back(protocol == "excitation" ? line.value("charge_s", 0.0) : line.value("delay_after_light_off_s", 0.0));
       s.y.push_back(means[c] / exposure);
-      if (names.size() == 3) s.color = c == 0 ? "#d62728" : c == 1 ? "#2ca02c" : "#1f77b4";
+      // Channels are red, green and blue in every plot; in the excitation
+      // plot each light has its own line style (solid, dashed, dots).
+      s.color = ChannelOrPaletteColor(names[c], static_cast<int>(c));
+      if (protocol == "excitation") {
+        const int light_index = static_cast<int>(light_order.try_emplace(line.value("light", ""), light_order.size()).first->second);
+        s.dashed = light_index % 3 == 1;
+        s.line = light_index % 3 != 2;
+      }
     }
   }
   std::vector<PlotSeries> all;
@@ -311,7 +327,6 @@ void WriteCurvesPlot(const fs::path& session_dir, const std::string& protocol, c
       std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return s.x[a] < s.x[b]; });
       PlotSeries sorted = s;
       for (std::size_t i = 0; i < order.size(); ++i) sorted.x[i] = s.x[order[i]], sorted.y[i] = s.y[order[i]];
-      sorted.color.clear();
       all.push_back(sorted);
     } else {
       all.push_back(s);
@@ -392,9 +407,39 @@ void Previews(const std::string& protocol, const fs::path& session_dir, const fs
   }
 }
 
+// The light channels a protocol's settings name.
+std::vector<std::pair<std::string, std::string>> LightsNamed(const std::string& protocol, const nlohmann::json& s) {
+  std::vector<std::pair<std::string, std::string>> named;  // option, channel
+  auto add = [&](const char* option, const nlohmann::json& v) {
+    if (v.is_string()) named.push_back({option, v.get<std::string>()});
+  };
+  if (protocol == "decay" || protocol == "spectrum") add("--light", s.value("charge_light", nlohmann::json()));
+  if (protocol == "excitation")
+    for (const nlohmann::json& light : s.value("lights", nlohmann::json::array())) add("--light", light);
+  if (protocol == "lvf-calibration") {
+    for (const nlohmann::json& line : s.value("lines", nlohmann::json::array()))
+      add("calibration_lines", line.value("light", nlohmann::json()));
+    add("flat_light", s.value("flat_light", nlohmann::json()));
+  }
+  return named;
+}
+
+// Every channel a plan names exists on the devices: checked before the
+// session folder is created, so a typo leaves nothing behind to block the rerun.
+void CheckLightsExist(const Plan& plan, const Devices& devices) {
+  const std::vector<std::string> channels = devices.lights->channels();
+  for (const auto& [option, channel] : LightsNamed(plan.protocol, plan.settings))
+    if (std::find(channels.begin(), channels.end(), channel) == channels.end()) {
+      std::string known;
+      for (const std::string& c : channels) known += (known.empty() ? "" : ", ") + c;
+      ThrowUserError("", option, "unknown channel '" + channel + "' (this lab has: " + known + ")");
+    }
+}
+
 void RunNewSession(const Plan& plan, CaptureArgs& args) {
   Devices devices(args);
   // Bad settings are refused before the folder exists.
+  CheckLightsExist(plan, devices);
   SessionWriter session(args.out, StartRecord(plan.protocol, devices, plan.settings));
   RunProtocol(plan, devices, session, false);
   PrintSession(plan.protocol, args.out);
@@ -412,39 +457,82 @@ struct AllArgs : CaptureArgs {
   int tail_frames = ExcitationProtocolOptions{}.tail_frames;
 };
 
-// Runs (or, resuming, finishes) every part of an `all` folder in order.
+void PrintNotes(const std::string& protocol, const std::vector<std::string>& notes) {
+  for (const std::string& note : notes) std::printf("  %-16s %s\n", protocol.c_str(), note.c_str());
+}
+
+// Moves an interrupted (or bad) part aside whole, to start it over.
+void MovePartAside(const fs::path& dir, const std::string& protocol, const std::string& why) {
+  const fs::path part = dir / protocol;
+  std::error_code ec;
+  fs::path aside;
+  for (int n = 1; fs::exists(aside = dir / (protocol + ".interrupted-" + std::to_string(n)), ec); ++n) {
+  }
+  fs::rename(part, aside, ec);
+  if (ec) ThrowUserError(part.string(), "", "cannot move the part aside: " + ec.message());
+  std::printf("  %-16s %s; kept as %s, starting over\n", protocol.c_str(), why.c_str(), aside.filename().string().c_str());
+}
+
+// The first problem of a check that resume cannot repair (a malformed record
+// in the middle of a file, a stop.json that does not parse): "" if none.
+// Torn last lines, stale temporaries and bad frames it can.
+std::string UnrepairableProblem(const SessionCheck& check) {
+  std::size_t repairable = check.bad_frames.size() + (check.torn_frames ? 1 : 0) + (check.torn_events ? 1 : 0);
+  if (check.stop && check.stop->frames >= 0 && check.stop->frames != check.frames) ++repairable;  // the stop goes
+  if (check.problems.size() > repairable) {
+    for (const std::string& problem : check.problems)
+      if (problem.find("torn") == std::string::npos && problem.find("stop.json: counts") == std::string::npos) {
+        bool is_frame = false;
+        for (const SessionCheck::BadFrame& bad : check.bad_frames) is_frame |= problem.find(bad.frame.file) != std::string::npos;
+        if (!is_frame) return problem;
+      }
+  }
+  return "";
+}
+
+// Runs (or, resuming, finishes) every part of an `all` folder in order. A
+// part that says it is complete is checked first: kept only if its records
+// and frames are whole.
 void RunAllParts(const fs::path& dir, const nlohmann::json& parts, Devices& devices, int resume_count) {
   for (const std::string& protocol : kAllOrder) {
     const fs::path part = dir / protocol;
     const Plan plan{protocol, parts.at(protocol)};
     std::error_code ec;
-    if (fs::exists(part / "stop.json", ec) && ReadJsonFile(part / "stop.json").value("how", "") == "complete") {
-      std::printf("  %-16s complete already: kept\n", protocol.c_str());
-      continue;
-    }
     if (fs::exists(part / "session.json", ec)) {
+      const SessionCheck check = CheckSession(part);
+      if (const std::string problem = UnrepairableProblem(check); !problem.empty())
+        ThrowUserError(problem, "", "cannot be repaired by resume; see 'phos capture verify'");
+      if (check.complete() && check.clean()) {
+        std::printf("  %-16s complete already: kept\n", protocol.c_str());
+        continue;
+      }
+      if (protocol == "decay" && !check.bad_frames.empty()) {
+        const SessionCheck::BadFrame& bad = check.bad_frames.front();
+        ThrowUserError((part / bad.frame.file).string(), "",
+                       bad.problem + ": a decay frame cannot be measured again (the glow it saw is gone); "
+                       "the folder stays incomplete: restore the frame, or move the decay part aside to capture it anew");
+      }
       if (Resumable(protocol)) {
-        std::printf("  %-16s interrupted: resuming where it stopped\n", protocol.c_str());
-        std::unique_ptr<SessionWriter> session = SessionWriter::Reopen(part);
+        std::printf("  %-16s %s: resuming where it stopped\n", protocol.c_str(),
+                    check.complete() ? "complete but not whole" : "interrupted");
+        std::vector<std::string> notes;
+        std::unique_ptr<SessionWriter> session = SessionWriter::Reopen(part, true, &notes);
+        PrintNotes(protocol, notes);
         RunProtocol(plan, devices, *session, true);
         continue;
       }
       // A decay or spectrum cannot go on: the glow kept fading unobserved.
       // Its frames are kept aside and the part starts over.
-      fs::path aside;
-      for (int n = 1; fs::exists(aside = dir / (protocol + ".interrupted-" + std::to_string(n)), ec); ++n) {
-      }
-      fs::rename(part, aside, ec);
-      if (ec) ThrowUserError(part.string(), "", "cannot move the interrupted part aside: " + ec.message());
-      std::printf("  %-16s interrupted: a %s cannot continue (the glow faded unobserved); kept as %s, starting over\n",
-                  protocol.c_str(), protocol.c_str(), aside.filename().string().c_str());
+      MovePartAside(dir, protocol,
+                    check.complete() ? "complete but not whole (" + check.problems.front() + ")"
+                                     : "interrupted: a " + protocol + " cannot continue (the glow faded unobserved)");
     }
     nlohmann::json start = StartRecord(protocol, devices, plan.settings);
     start["part_of"] = dir.filename().string();
     if (resume_count > 0) start["resume"] = resume_count;
     SessionWriter session(part, start);
     RunProtocol(plan, devices, session, false);
-    std::printf("  %-16s %d frames\n", protocol.c_str(), session.frame_count());
+    std::printf("  %-16s %d frames\n", protocol.c_str(), static_cast<int>(ReadFrameRecords(part).frames.size()));
   }
 }
 
@@ -492,13 +580,15 @@ void RunCaptureAll(AllArgs args) {
   parts["decay"] = ToJson(decay);
   parts["excitation"] = ToJson(excitation);
 
+  for (const std::string& protocol : kAllOrder) CheckLightsExist({protocol, parts[protocol]}, devices);
+
   // The folder's own record: the plan of all parts, and how it ended.
   SessionWriter top(args.out, StartRecord("all", devices, {{"parts", parts}, {"order", kAllOrder}}));
   std::printf("phos capture all -> %s\n", args.out.c_str());
   try {
     RunAllParts(args.out, parts, devices, 0);
   } catch (const std::exception& e) {
-    top.Stop("failed", e.what());
+    top.StopQuietly("failed", e.what());  // the error to report is the first one
     throw;
   }
   top.Stop("complete");
@@ -510,40 +600,111 @@ void RunCaptureAll(AllArgs args) {
 
 void RunCaptureResume(const std::string& dir_text) {
   const fs::path dir = dir_text;
-  std::error_code ec;
-  if (!fs::is_regular_file(dir / "session.json", ec))
-    ThrowUserError(dir.string(), "", "is not a capture session (no session.json)");
-  const nlohmann::json start = ReadJsonFile(dir / "session.json");
-  const std::string protocol = start.value("protocol", "");
-  if (fs::exists(dir / "stop.json", ec) && ReadJsonFile(dir / "stop.json").value("how", "") == "complete") {
-    std::printf("phos capture resume: %s completed already; nothing to do\n", dir.string().c_str());
-    return;
-  }
+  const SessionRecord start = ReadSessionRecord(dir);
+  const std::string& protocol = start.protocol;
+  const nlohmann::json start_json = ReadJsonFile(dir / "session.json");
   if (protocol == "all") {
-    std::unique_ptr<SessionWriter> top = SessionWriter::Reopen(dir);
-    int resumes = 1;
-    for (const nlohmann::json& event : ReadJsonLines(dir / "events.jsonl")) resumes += event.value("event", "") == "resume";
-    Devices devices(start, dir, resumes);
+    std::optional<StopRecord> stop = ReadStopRecord(dir);
+    bool parts_whole = true;
+    for (const std::string& part : kAllOrder) {
+      const SessionCheck check = CheckSession(dir / part);
+      parts_whole = parts_whole && check.complete() && check.clean();
+    }
+    if (stop && stop->how == "complete" && parts_whole) {
+      std::printf("phos capture resume: %s completed already, and every part is whole; nothing to do\n",
+                  dir.string().c_str());
+      return;
+    }
+    std::vector<std::string> notes;
+    std::unique_ptr<SessionWriter> top = SessionWriter::Reopen(dir, true, &notes);
+    int resumes = 0;
+    for (const nlohmann::json& event : ReadEventRecords(dir)) resumes += event["event"] == "resume";
+    Devices devices(start_json, dir, resumes);
     std::printf("phos capture resume: %s (all)\n", dir.string().c_str());
+    PrintNotes("all", notes);
     try {
-      RunAllParts(dir, start.at("settings").at("parts"), devices, resumes);
+      RunAllParts(dir, RequiredKey<nlohmann::json>(start.settings, "parts", (dir / "session.json").string() + ": settings"),
+                  devices, resumes);
     } catch (const std::exception& e) {
-      top->Stop("failed", e.what());
+      top->StopQuietly("failed", e.what());
       throw;
     }
     top->Stop("complete");
     FinishAll(dir);
     return;
   }
-  if (!Resumable(protocol))
+  const SessionCheck check = CheckSession(dir);
+  if (check.complete() && check.clean()) {
+    std::printf("phos capture resume: %s completed already; nothing to do\n", dir.string().c_str());
+    return;
+  }
+  if (const std::string problem = UnrepairableProblem(check); !problem.empty())
+    ThrowUserError(problem, "", "cannot be repaired by resume; see 'phos capture verify'");
+  if (!Resumable(protocol)) {
+    if (!check.bad_frames.empty()) {
+      const SessionCheck::BadFrame& bad = check.bad_frames.front();
+      ThrowUserError((dir / bad.frame.file).string(), "",
+                     bad.problem + ": a " + protocol + " frame cannot be measured again (the glow it saw is gone); "
+                     "the session stays incomplete: capture it anew into a new folder");
+    }
     ThrowUserError(dir.string(), "resume",
                    "a " + protocol + " cannot be continued: the glow kept fading while nothing watched; its frames are "
                    "kept here, run 'phos capture " + protocol + "' again into a new folder");
-  std::unique_ptr<SessionWriter> session = SessionWriter::Reopen(dir);
-  Devices devices(start, dir, 1);
-  RunProtocol({protocol, start.value("settings", nlohmann::json::object())}, devices, *session, true);
+  }
+  std::vector<std::string> notes;
+  std::unique_ptr<SessionWriter> session = SessionWriter::Reopen(dir, true, &notes);
+  for (const std::string& note : notes) std::printf("phos capture resume: %s\n", note.c_str());
+  Devices devices(start_json, dir, 1);
+  RunProtocol({protocol, start.settings}, devices, *session, true);
   PrintSession(protocol, dir);
   Previews(protocol, dir, dir);
+}
+
+// ---- verify ----------------------------------------------------------------
+
+struct VerifyArgs {
+  std::string dir;
+  bool json = false;
+};
+
+// Checks a session (and every part of an `all` folder): one line per
+// problem; returns how many.
+std::size_t RunCaptureVerify(const VerifyArgs& args) {
+  const fs::path dir = args.dir;
+  const SessionRecord start = ReadSessionRecord(dir);
+  std::vector<std::pair<fs::path, SessionCheck>> checks;
+  checks.push_back({dir, CheckSession(dir)});
+  if (start.protocol == "all")
+    for (const std::string& part : kAllOrder) {
+      std::error_code ec;
+      if (fs::exists(dir / part / "session.json", ec)) checks.push_back({dir / part, CheckSession(dir / part)});
+      else if (checks.front().second.complete()) checks.front().second.problems.push_back((dir / part).string() + ": missing, in a folder whose stop.json says complete");
+    }
+  std::size_t problems = 0;
+  nlohmann::json report = nlohmann::json::array();
+  for (const auto& [path, check] : checks) {
+    problems += check.problems.size();
+    const std::string state = check.complete() ? "complete" : check.stop ? check.stop->how : "interrupted (no stop.json)";
+    if (args.json) {
+      report.push_back({{"session", path.string()}, {"protocol", check.protocol}, {"frames", check.frames},
+                        {"state", state}, {"problems", check.problems},
+                        {"bad_frames", [&] {
+                           nlohmann::json bad = nlohmann::json::array();
+                           for (const SessionCheck::BadFrame& b : check.bad_frames) bad.push_back({{"file", b.frame.file}, {"problem", b.problem}});
+                           return bad;
+                         }()},
+                        {"stale_temporaries", check.stale_temporaries.size()}});
+      continue;
+    }
+    for (const std::string& problem : check.problems) std::printf("%s\n", problem.c_str());
+    if (check.problems.empty())
+      std::printf("ok: %s (%s, %d frames, %s%s)\n", path.string().c_str(), check.protocol.c_str(), check.frames,
+                  state.c_str(),
+                  check.stale_temporaries.empty() ? "" : (", " + std::to_string(check.stale_temporaries.size()) +
+                                                          " stale temporaries that resume removes").c_str());
+  }
+  if (args.json) std::printf("%s\n", nlohmann::json{{"clean", problems == 0}, {"sessions", report}}.dump(2).c_str());
+  return problems;
 }
 
 // ---- options ---------------------------------------------------------------
@@ -717,6 +878,21 @@ void RegisterCapture(CLI::App& app) {
       "decay or spectrum cannot continue (the glow faded unobserved): phos says so and keeps its frames.");
   resume->add_option("DIR", *resume_dir, "the session folder")->required();
   resume->callback([resume_dir] { RunCaptureResume(*resume_dir); });
+
+  auto verify_args = std::make_shared<VerifyArgs>();
+  CLI::App* verify = capture->add_subcommand(
+      "verify",
+      "Check a session folder (every part of an `all` folder): every record parses, every listed frame\n"
+      "exists with its recorded size and XXH3 checksum and reads as an image, stop.json counts what\n"
+      "frames.jsonl lists, a torn last line is found. One line per problem; exit 0 when whole, 2 otherwise.\n"
+      "Changes nothing (resume repairs what can be).");
+  verify->add_option("DIR", verify_args->dir, "the session folder")->required();
+  verify->add_flag("--json", verify_args->json, "print the findings as JSON (default: one line per problem)");
+  verify->callback([verify_args] {
+    // Problems found: the summary line on stderr and exit code 2, as for any bad input.
+    if (const std::size_t problems = RunCaptureVerify(*verify_args); problems > 0)
+      ThrowUserError(verify_args->dir, "", std::to_string(problems) + " problem(s) found (listed above)");
+  });
 }
 
 }  // namespace phos::app

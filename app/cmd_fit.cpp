@@ -17,6 +17,7 @@
 
 #include "commands.h"
 #include "phos/acquire/session.h"
+#include "phos/acquire/session_records.h"
 #include "phos/fit/decay_fit.h"
 #include "phos/fit/decay_map.h"
 #include "phos/fit/session_fit.h"
@@ -190,29 +191,31 @@ void RunFitSession(const SessionArgs& args) {
 
 struct MapArgs {
   std::string session, out, weights = "poisson";
-  bool no_background = false;
+  bool no_background = false, json = false;
 };
 
 void RunFitMap(const MapArgs& args) {
   namespace fs = std::filesystem;
   const fs::path dir = args.session;
   std::error_code ec;
-  if (!fs::is_regular_file(dir / "session.json", ec))
-    ThrowUserError(dir.string(), "", "is not a capture session (no session.json)");
-  const std::string protocol = ReadJsonFile(dir / "session.json").value("protocol", "");
+  const std::string protocol = ReadSessionRecord(dir).protocol;
   if (protocol != "decay")
     ThrowUserError(dir.string(), "", "is a '" + protocol + "' session; a decay map needs a decay session");
-  std::vector<nlohmann::json> lines;
-  for (nlohmann::json& line : ReadJsonLines(dir / "frames.jsonl"))
-    if (line.contains("file")) lines.push_back(std::move(line));
+  // Typed records, every frame checked against its size and checksum first:
+  // a map is never built on a bad frame.
+  const FrameRecords records = ReadFrameRecords(dir);
+  RequireGoodFrames(dir, records);
+  if (records.torn) std::printf("phos fit map: %s: torn last line left out ('phos capture resume' repairs it)\n",
+                                (dir / "frames.jsonl").string().c_str());
+  const std::vector<FrameRecord>& lines = records.frames;
   DecayMapInput input;
   int clipped = 0;
   std::vector<std::string> channel_names;
   {
     ProgressBar reading("reading frames", lines.size());
-    for (const nlohmann::json& line : lines) {
+    for (const FrameRecord& line : lines) {
       reading.Advance();
-      if (line.value("saturated_fraction", 0.0) > 0) {
+      if (line.protocol.value("saturated_fraction", 0.0) > 0) {
         ++clipped;
         continue;
       }
@@ -223,17 +226,17 @@ void RunFitMap(const MapArgs& args) {
         input.channels = frame.channels;
         channel_names = frame.channel_names;
       } else if (frame.width != input.width || frame.height != input.height || frame.channels != input.channels) {
-        ThrowUserError(dir.string(), line["file"].get<std::string>(), "differs in size from the first frame");
+        ThrowUserError((dir / line.file).string(), "", "differs in size from the first frame");
       }
       std::vector<float> rate(frame.pixels.size());
       for (std::size_t i = 0; i < rate.size(); ++i)
         rate[i] = static_cast<float>((frame.pixels[i] - frame.black_level_dn) / frame.exposure_s);
       input.frames.push_back(std::move(rate));
       input.exposure_s.push_back(frame.exposure_s);
-      input.t_s.push_back(line.value("delay_after_light_off_s", 0.0) + frame.exposure_s / 2);
+      input.t_s.push_back(line.protocol.value("delay_after_light_off_s", 0.0) + frame.exposure_s / 2);
     }
   }
-  if (clipped > 0) std::printf("phos fit map: %d clipped frame(s) left out\n", clipped);
+  if (clipped > 0 && !args.json) std::printf("phos fit map: %d clipped frame(s) left out\n", clipped);
   DecayMapOptions options;
   options.background = !args.no_background;
   options.weighting = ParseWeightsOption(args.weights);
@@ -241,6 +244,10 @@ void RunFitMap(const MapArgs& args) {
   const DecayMap map = FitDecayMap(input, options, dir.string(), [&](std::size_t) { fitting.Advance(); });
   fitting.Finish();
 
+  // A map with no finite rate anywhere is no result (a frame record's
+  // exposure out of range, a session of dark frames): an error, not exit 0.
+  if (std::none_of(map.kr.begin(), map.kr.end(), [](float k) { return std::isfinite(k); }))
+    ThrowUserError(dir.string(), "", "no pixel has a finite decay rate: nothing written (are the frames dark or clipped?)");
   fs::create_directories(args.out, ec);
   if (ec) ThrowUserError(args.out, "", "cannot create the output folder: " + ec.message());
   // One float EXR: kr, then amplitude and background per camera channel, then rms.
@@ -273,6 +280,22 @@ void RunFitMap(const MapArgs& args) {
   for (std::size_t p = 0; p < pixels; ++p)
     grey[p] = std::isfinite(map.kr[p]) ? std::clamp((map.kr[p] - lo) / std::max(hi - lo, 1e-12f), 0.0f, 1.0f) : 0.0f;
   WriteFloatImage(fs::path(args.out) / "kr.png", map.width, map.height, {"Y"}, grey);
+  if (args.json) {
+    std::printf("%s\n", nlohmann::json({{"width", map.width},
+                                        {"height", map.height},
+                                        {"frames", input.frames.size()},
+                                        {"clipped_frames", clipped},
+                                        {"seconds", map.seconds},
+                                        {"exr", exr.string()},
+                                        {"channels", names},
+                                        {"kr_median_per_s", median},
+                                        {"kr_p01_per_s", lo},
+                                        {"kr_p99_per_s", hi},
+                                        {"pixels_without_decay", map.no_decay}})
+                              .dump()
+                              .c_str());
+    return;
+  }
   std::printf("phos fit map: %dx%d pixels, %zu frames, fitted in %s s -> %s (kr, amplitude.*, background.*, rms), kr.png\n",
               map.width, map.height, input.frames.size(), FormatShort(map.seconds).c_str(), exr.string().c_str());
   std::printf("  kr: median %s /s, 1%%-99%% %s to %s /s; %zu pixel(s) without a decay\n", FormatShort(median).c_str(),
@@ -285,8 +308,54 @@ struct BatchArgs {
   std::vector<std::string> inputs;
   std::string out, weights = "poisson";
   int jobs = 0, components = 0;
-  bool reports = true;
+  bool reports = true, json = false;
 };
+
+// <item>.done.json: an item of a batch is done. Written last (after the
+// material and the report), through a rename; a record that does not parse
+// or lacks a field means "not done", so the item is fitted again.
+struct BatchDoneRecord {
+  std::string item;
+  int n_components = 0;
+  double kr_per_s = 0, seconds = 0;
+  std::vector<std::string> notes;
+
+  nlohmann::json ToJson() const {
+    return {{"item", item}, {"n_components", n_components}, {"kr", kr_per_s}, {"seconds", seconds}, {"notes", notes}};
+  }
+  // nullopt (and why) when the record is not a whole one.
+  static std::optional<BatchDoneRecord> FromJson(const nlohmann::json& j, std::string* why) {
+    BatchDoneRecord r;
+    if (!j.is_object()) return *why = "not a JSON object", std::nullopt;
+    if (!j.contains("item") || !j["item"].is_string()) return *why = "no item", std::nullopt;
+    if (!j.contains("n_components") || !j["n_components"].is_number_integer() || j["n_components"].get<int>() < 1 ||
+        j["n_components"].get<int>() > 4)
+      return *why = "no n_components of 1-4", std::nullopt;
+    if (!j.contains("kr") || !j["kr"].is_number() || !(j["kr"].get<double>() > 0) || !std::isfinite(j["kr"].get<double>()))
+      return *why = "no finite kr > 0", std::nullopt;
+    if (!j.contains("seconds") || !j["seconds"].is_number()) return *why = "no seconds", std::nullopt;
+    r.item = j["item"].get<std::string>();
+    r.n_components = j["n_components"].get<int>();
+    r.kr_per_s = j["kr"].get<double>();
+    r.seconds = j["seconds"].get<double>();
+    if (j.contains("notes") && j["notes"].is_array())
+      for (const nlohmann::json& note : j["notes"])
+        if (note.is_string()) r.notes.push_back(note.get<std::string>());
+    return r;
+  }
+};
+
+// The done record of an item, if whole ("why" says what is wrong otherwise).
+std::optional<BatchDoneRecord> ReadBatchDone(const std::filesystem::path& path, std::string* why) {
+  std::error_code ec;
+  if (!std::filesystem::exists(path, ec)) return *why = "", std::nullopt;
+  try {
+    return BatchDoneRecord::FromJson(ReadJsonFile(path), why);
+  } catch (const UserError& e) {
+    *why = "does not parse";
+    return std::nullopt;
+  }
+}
 
 // The capture folders named: each input is one, or holds them as subfolders.
 std::vector<std::filesystem::path> BatchItems(const std::vector<std::string>& inputs) {
@@ -340,14 +409,15 @@ void RunFitBatch(const BatchArgs& args) {
   for (std::size_t i = 0; i < items.size(); ++i) {
     rows[i].name = items[i].filename().string();
     const fs::path done = fs::path(args.out) / (rows[i].name + ".done.json");
-    if (fs::exists(done, ec)) {
-      const nlohmann::json record = ReadJsonFile(done);
+    std::string why;
+    if (const std::optional<BatchDoneRecord> record = ReadBatchDone(done, &why)) {
       rows[i].status = "kept";
-      rows[i].nc = record.value("n_components", 0);
-      rows[i].kr = record.value("kr", 0.0);
-      rows[i].seconds = record.value("seconds", 0.0);
+      rows[i].nc = record->n_components;
+      rows[i].kr = record->kr_per_s;
+      rows[i].seconds = record->seconds;
       rows[i].detail = "done in an earlier run";
     } else {
+      if (!why.empty()) rows[i].detail = "its .done.json " + why + ": fitted again";
       todo.push_back(i);
     }
   }
@@ -366,11 +436,11 @@ void RunFitBatch(const BatchArgs& args) {
         row.nc = fit.decay->n_components;
         row.kr = fit.material.states[0].kr;
         row.seconds = fit.seconds;
+        const std::string earlier = row.detail;
         row.detail = fit.notes.empty() ? "" : std::to_string(fit.notes.size()) + " note(s): " + fit.notes.front();
-        WriteFileAtomically(base.string() + ".done.json",
-                            nlohmann::json({{"item", items[i].string()}, {"n_components", row.nc}, {"kr", row.kr},
-                                            {"seconds", row.seconds}, {"notes", fit.notes}})
-                                    .dump(2) + "\n");
+        if (!earlier.empty()) row.detail = earlier + (row.detail.empty() ? "" : "; " + row.detail);
+        const BatchDoneRecord done{items[i].string(), row.nc, row.kr, row.seconds, fit.notes};
+        WriteFileAtomically(base.string() + ".done.json", done.ToJson().dump(2) + "\n");
         fs::remove(base.string() + ".failed.txt", ec);
       } catch (const std::exception& e) {
         // One item's bad data must not stop the others; it is said, and kept.
@@ -391,11 +461,14 @@ void RunFitBatch(const BatchArgs& args) {
 
   // One summary table, on screen and as CSV.
   std::string csv = "item,status,n_components,kr_per_s,seconds,detail\n";
-  std::printf("%-24s %-7s %3s %12s %8s  %s\n", "item", "status", "nc", "kr (1/s)", "s", "detail");
+  if (!args.json) std::printf("%-24s %-7s %3s %12s %8s  %s\n", "item", "status", "nc", "kr (1/s)", "s", "detail");
   int failed = 0;
+  nlohmann::json json_rows = nlohmann::json::array();
   for (const Row& row : rows) {
     failed += row.status == "failed";
-    std::printf("%-24s %-7s %3d %12s %8s  %s\n", row.name.c_str(), row.status.c_str(), row.nc,
+    json_rows.push_back({{"item", row.name}, {"status", row.status}, {"n_components", row.nc}, {"kr_per_s", row.kr},
+                         {"seconds", row.seconds}, {"detail", row.detail}});
+    if (!args.json) std::printf("%-24s %-7s %3d %12s %8s  %s\n", row.name.c_str(), row.status.c_str(), row.nc,
                 row.status == "failed" ? "-" : FormatShort(row.kr).c_str(), FormatShort(row.seconds).c_str(),
                 row.detail.c_str());
     std::string detail = row.detail;
@@ -404,7 +477,12 @@ void RunFitBatch(const BatchArgs& args) {
         .append(FormatDouble(row.kr)).append(",").append(FormatDouble(row.seconds)).append(",\"").append(detail).append("\"\n");
   }
   WriteFileAtomically(fs::path(args.out) / "summary.csv", csv);
-  std::printf("phos fit batch: %zu item(s), %zu fitted now, %zu kept, %d failed -> %s (summary.csv)\n", rows.size(),
+  if (args.json)
+    std::printf("%s\n", nlohmann::json({{"items", json_rows}, {"fitted_now", todo.size() - failed},
+                                        {"kept", rows.size() - todo.size()}, {"failed", failed}, {"out", args.out}})
+                              .dump()
+                              .c_str());
+  else std::printf("phos fit batch: %zu item(s), %zu fitted now, %zu kept, %d failed -> %s (summary.csv)\n", rows.size(),
               todo.size() - failed, rows.size() - todo.size(), failed, args.out.c_str());
   if (failed > 0)
     ThrowUserError("", "fit batch", std::to_string(failed) + " item(s) could not be fitted (see the table and " +
@@ -455,6 +533,7 @@ void RegisterFit(CLI::App& app) {
   mp->add_option("--out", map_args->out, "output folder")->required();
   mp->add_option("--weights", map_args->weights, "poisson (default) or none");
   mp->add_flag("--no-background", map_args->no_background, "no background term (dark signal already removed)");
+  mp->add_flag("--json", map_args->json, "print one JSON object (size, frames, kr percentiles, outputs)");
   mp->callback([map_args] { RunFitMap(*map_args); });
 
   auto batch = std::make_shared<BatchArgs>();
@@ -470,6 +549,7 @@ void RegisterFit(CLI::App& app) {
   b->add_option("--jobs", batch->jobs, "items fitted at once (default: the number of cores)");
   b->add_option("--components", batch->components, "fix the number of states (1-4; default: BIC)");
   b->add_option("--weights", batch->weights, "poisson (default) or none");
+  b->add_flag("--json", batch->json, "print one JSON object (the rows of the summary table) instead of the table");
   b->callback([batch] { RunFitBatch(*batch); });
 }
 

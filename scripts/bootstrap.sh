@@ -15,6 +15,8 @@ PACKAGES=(
   libembree-dev libopenimageio-dev openimageio-tools libopenexr-dev libtbb-dev
   # render: mesh loaders (OBJ, glTF 2.0)
   libtinyobjloader-dev libtinygltf-dev libstb-dev
+  # session records: XXH3 checksums of frame files
+  libxxhash-dev
   # contact-sheet labels
   fonts-dejavu-core
   # tests and benchmarks
@@ -25,6 +27,8 @@ PACKAGES=(
   nlohmann-json3-dev libcli11-dev libcpp-httplib-dev
   # the editor page's browser test (Playwright drives Debian's Chromium)
   chromium nodejs
+  # the README test (scripts/readme_check.py)
+  python3
 )
 
 missing=()

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <atomic>
 #include <csignal>
+#include <cstdio>
 #include <cstdlib>
 #include <mutex>
 
@@ -46,8 +47,26 @@ std::atomic<SignalCleanup> g_cleanup{nullptr};
 extern "C" void SwitchOffAndExit(int signal_number) {
   // Not async-signal-safe in general, but the process ends right after, and
   // a lab would rather the lights go off than the process end cleanly.
-  if (g_guarded != nullptr) g_guarded->AllOff();
-  if (SignalCleanup cleanup = g_cleanup.load()) cleanup(signal_number);
+  // The channels that were on, by name, for the session's events.jsonl.
+  static char names[32][128];
+  static const char* switched_off[32];
+  int count = 0;
+  if (g_guarded != nullptr) {
+    for (const std::string& channel : g_guarded->channels()) {
+      if (!g_guarded->IsOn(channel)) continue;
+      try {
+        g_guarded->Set(channel, false);
+      } catch (...) {
+        continue;  // the hardware refused: nothing to log as off
+      }
+      if (count < 32) {
+        std::snprintf(names[count], sizeof names[count], "%s", channel.c_str());
+        switched_off[count] = names[count];
+        ++count;
+      }
+    }
+  }
+  if (SignalCleanup cleanup = g_cleanup.load()) cleanup(signal_number, switched_off, count);
   std::_Exit(128 + signal_number);
 }
 }  // namespace

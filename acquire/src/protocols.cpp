@@ -3,9 +3,11 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <set>
 
 #include "phos/util/error.h"
 #include "phos/util/format.h"
+#include "phos/acquire/session_records.h"
 #include "phos/util/json.h"
 
 namespace phos {
@@ -266,20 +268,25 @@ ExcitationDone ReadExcitationDone(const std::filesystem::path& session_dir) {
     int frames = 0, expected = 1;
   };
   std::map<std::pair<std::string, double>, Measurement> measurements;
-  for (const nlohmann::json& line : ReadJsonLines(session_dir / "frames.jsonl")) {
-    if (!line.contains("light") || !line.contains("charge_s") || !line.contains("mean_signal_dn") ||
-        !line.contains("adc_bits") || !line.contains("black_level_dn"))
-      continue;
-    const double range = std::pow(2.0, line["adc_bits"].get<int>()) - 1 - line["black_level_dn"].get<double>();
+  for (const FrameRecord& frame : ReadFrameRecords(session_dir).frames) {
+    const nlohmann::json& line = frame.protocol;
+    if (!line.contains("light") || !line.contains("charge_s") || !line.contains("mean_signal_dn")) continue;
+    const std::string where = (session_dir / "frames.jsonl").string() + ": frame " + std::to_string(frame.seq);
+    const double range = std::pow(2.0, frame.adc_bits) - 1 - frame.black_level_dn;
     double brightest = 0;
-    for (double mean : line["mean_signal_dn"]) brightest = std::max(brightest, mean / range);
+    for (const nlohmann::json& mean : line["mean_signal_dn"]) {
+      if (!mean.is_number()) ThrowUserError(where, "mean_signal_dn", "expected numbers, got " + DescribeJson(mean));
+      brightest = std::max(brightest, mean.get<double>() / range);
+    }
     // Sessions from before the decay tail have one frame per charge and no light_off_s.
-    const double off = line.value("light_off_s", static_cast<double>(measurements.size()));
-    Measurement& m = measurements[{line["light"].get<std::string>(), off}];
-    m.charge_s = line["charge_s"].get<double>();
-    m.expected = line.value("tail_frames", 0) + 1;
+    const double off = line.contains("light_off_s") ? RequiredKey<double>(line, "light_off_s", where)
+                                                    : static_cast<double>(measurements.size());
+    Measurement& m = measurements[{RequiredKey<std::string>(line, "light", where), off}];
+    m.charge_s = RequiredKey<double>(line, "charge_s", where);
+    m.expected = (line.contains("tail_frames") ? RequiredKey<int>(line, "tail_frames", where) : 0) + 1;
     ++m.frames;
-    if (line.value("tail", 0) == m.expected - 1) m.response = brightest / line.value("exposure_s", 1.0);
+    const int tail = line.contains("tail") ? RequiredKey<int>(line, "tail", where) : 0;
+    if (tail == m.expected - 1) m.response = brightest / frame.exposure_s;
   }
   ExcitationDone done;
   for (const auto& [key, m] : measurements)
@@ -408,10 +415,28 @@ LvfCalibrationResult RunLvfCalibrationProtocol(Camera& camera, Lights& lights, C
 }
 
 std::vector<std::string> ReadLvfCalibrationDone(const std::filesystem::path& session_dir) {
-  // A source is done once the event "calibrated" names it ("" = the dark frame).
+  // A source is done once the event "calibrated" names it ("" = the dark
+  // frame) and frames.jsonl still lists its well-exposed frame: a frame set
+  // aside, or a lost frame list, means measuring it again.
+  std::set<int> well_exposed;
+  std::vector<std::string> calibrated;
+  for (const nlohmann::json& event : ReadEventRecords(session_dir)) {
+    const std::string name = event["event"].get<std::string>();
+    if (name == "exposure" && event.value("well_exposed", false) && event.contains("seq") && event["seq"].is_number_integer())
+      well_exposed.insert(event["seq"].get<int>());
+    if (name == "calibrated" && event.contains("light") && event["light"].is_string())
+      calibrated.push_back(event["light"].get<std::string>());
+  }
+  std::set<std::string> listed;
+  for (const FrameRecord& frame : ReadFrameRecords(session_dir).frames) {
+    if (!well_exposed.count(frame.seq)) continue;
+    const nlohmann::json& p = frame.protocol;
+    if (p.value("kind", "") == "dark") listed.insert("");
+    else if (p.contains("light") && p["light"].is_string()) listed.insert(p["light"].get<std::string>());
+  }
   std::vector<std::string> done;
-  for (const nlohmann::json& event : ReadJsonLines(session_dir / "events.jsonl"))
-    if (event.value("event", "") == "calibrated") done.push_back(event.value("light", ""));
+  for (const std::string& light : calibrated)
+    if (listed.count(light) && std::find(done.begin(), done.end(), light) == done.end()) done.push_back(light);
   return done;
 }
 

@@ -3,8 +3,11 @@
 #include <fcntl.h>
 #include <unistd.h>
 
-#include <chrono>
+#include <algorithm>
 #include <atomic>
+#include <cerrno>
+#include <chrono>
+#include <set>
 #include <csignal>
 #include <cstring>
 #include <cstdio>
@@ -36,42 +39,124 @@ std::string UtcNow() {
   return text;
 }
 
-// The session a signal would abort: its stop.json path and the records to
-// write there, prepared in advance because a signal handler may only make
-// system calls (open, write, fsync, rename).
+// The sessions a signal would abort (a part inside an `all` folder, and the
+// folder itself): their stop.json paths and records, and events.jsonl for
+// the lights the handler switched off, prepared in advance because a signal
+// handler may only make system calls (open, write, fsync, rename).
 struct AbortRecord {
+  std::atomic<bool> armed{false};
   char temporary[4096];
   char final_path[4096];
+  char events_path[4096];
   char sigint[512];
   char sigterm[512];
 };
-AbortRecord g_abort_record;
-std::atomic<bool> g_abort_armed{false};
+constexpr int kAbortSlots = 4;
+AbortRecord g_abort_records[kAbortSlots];
 
-void WriteAbortRecord(int signal_number) {
-  if (!g_abort_armed.load()) return;
-  const char* text = signal_number == SIGINT ? g_abort_record.sigint : g_abort_record.sigterm;
-  const int fd = ::open(g_abort_record.temporary, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd < 0) return;
-  const ssize_t ignored = ::write(fd, text, std::strlen(text));
-  (void)ignored;
-  ::fsync(fd);
-  ::close(fd);
-  ::rename(g_abort_record.temporary, g_abort_record.final_path);
+void WriteAll(int fd, const char* text, std::size_t size) {
+  while (size > 0) {
+    const ssize_t n = ::write(fd, text, size);
+    if (n <= 0) return;
+    text += n;
+    size -= static_cast<std::size_t>(n);
+  }
 }
 
-void ArmAbortRecord(const std::filesystem::path& dir) {
+void WriteAbortRecords(int signal_number, const char* const* switched_off, int switched_off_count) {
+  for (AbortRecord& record : g_abort_records) {
+    if (!record.armed.load()) continue;
+    // The lights the handler switched off, one whole line each (no time: the
+    // protocol's clock is not reachable from here; the line says who did it).
+    const int events = ::open(record.events_path, O_WRONLY | O_APPEND | O_CLOEXEC);
+    if (events >= 0) {
+      for (int i = 0; i < switched_off_count; ++i) {
+        char line[512];
+        const int n = std::snprintf(line, sizeof line,
+                                    "{\"event\":\"light\",\"channel\":\"%s\",\"on\":false,\"by\":\"signal handler\","
+                                    "\"signal\":\"%s\"}\n",
+                                    switched_off[i], signal_number == SIGINT ? "SIGINT" : "SIGTERM");
+        if (n > 0 && n < static_cast<int>(sizeof line)) WriteAll(events, line, static_cast<std::size_t>(n));
+      }
+      ::fsync(events);
+      ::close(events);
+    }
+    const char* text = signal_number == SIGINT ? record.sigint : record.sigterm;
+    const int fd = ::open(record.temporary, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+    if (fd < 0) continue;
+    WriteAll(fd, text, std::strlen(text));
+    ::fsync(fd);
+    ::close(fd);
+    ::rename(record.temporary, record.final_path);
+  }
+}
+
+int ArmAbortRecord(const std::filesystem::path& dir) {
   const std::string final_path = (dir / "stop.json").string();
   const std::string temporary = final_path + ".tmp.signal";
-  if (final_path.size() >= sizeof g_abort_record.final_path) return;  // too long to prepare: no record
-  std::snprintf(g_abort_record.final_path, sizeof g_abort_record.final_path, "%s", final_path.c_str());
-  std::snprintf(g_abort_record.temporary, sizeof g_abort_record.temporary, "%s", temporary.c_str());
-  std::snprintf(g_abort_record.sigint, sizeof g_abort_record.sigint,
-                "{\n  \"how\": \"aborted\",\n  \"why\": \"SIGINT (interrupted); lights switched off; frames.jsonl lists every frame kept\"\n}\n");
-  std::snprintf(g_abort_record.sigterm, sizeof g_abort_record.sigterm,
-                "{\n  \"how\": \"aborted\",\n  \"why\": \"SIGTERM (terminated); lights switched off; frames.jsonl lists every frame kept\"\n}\n");
-  g_abort_armed.store(true);
-  SetSignalCleanup(WriteAbortRecord);
+  const std::string events_path = (dir / "events.jsonl").string();
+  if (temporary.size() >= sizeof g_abort_records[0].temporary) return -1;  // too long to prepare: no record
+  for (int slot = 0; slot < kAbortSlots; ++slot) {
+    AbortRecord& record = g_abort_records[slot];
+    if (record.armed.load()) continue;
+    std::snprintf(record.final_path, sizeof record.final_path, "%s", final_path.c_str());
+    std::snprintf(record.temporary, sizeof record.temporary, "%s", temporary.c_str());
+    std::snprintf(record.events_path, sizeof record.events_path, "%s", events_path.c_str());
+    std::snprintf(record.sigint, sizeof record.sigint,
+                  "{\n  \"how\": \"aborted\",\n  \"why\": \"SIGINT (interrupted); lights switched off; frames.jsonl lists every frame kept\"\n}\n");
+    std::snprintf(record.sigterm, sizeof record.sigterm,
+                  "{\n  \"how\": \"aborted\",\n  \"why\": \"SIGTERM (terminated); lights switched off; frames.jsonl lists every frame kept\"\n}\n");
+    record.armed.store(true);
+    SetSignalCleanup(WriteAbortRecords);
+    return slot;
+  }
+  return -1;
+}
+
+void DisarmAbortRecord(int slot) {
+  if (slot >= 0) g_abort_records[slot].armed.store(false);
+}
+
+// Makes a rename durable: the folder's entry is on disk too.
+void SyncDirectory(const std::filesystem::path& dir) {
+  const int fd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (fd < 0) return;
+  ::fsync(fd);
+  ::close(fd);
+}
+
+void SyncFile(const std::filesystem::path& path) {
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NOFOLLOW);
+  if (fd < 0) ThrowUserError(path.string(), "", std::string("cannot reopen to flush: ") + std::strerror(errno));
+  const bool synced = ::fsync(fd) == 0;
+  ::close(fd);
+  if (!synced) ThrowUserError(path.string(), "", "could not be flushed to disk (disk full?)");
+}
+
+// Temporaries a crash leaves: frames/NNNNNN.tif.tmp.tif, stop.json.tmp.*,
+// and the temporaries of WriteFileAtomically (<name>.tmp.<pid>).
+bool IsTemporary(const std::string& name) { return name.find(".tmp.") != std::string::npos; }
+
+std::vector<std::filesystem::path> StaleTemporaries(const std::filesystem::path& dir) {
+  std::vector<std::filesystem::path> stale;
+  std::error_code ec;
+  for (const std::filesystem::path& folder : {dir, dir / "frames"})
+    for (const auto& entry : std::filesystem::directory_iterator(folder, ec))
+      if (entry.is_regular_file(ec) && IsTemporary(entry.path().filename().string())) stale.push_back(entry.path());
+  std::sort(stale.begin(), stale.end());
+  return stale;
+}
+
+// The highest frame number a file in frames/ carries (a frame written
+// without its record, or set aside, still holds its number).
+int HighestFrameFile(const std::filesystem::path& dir) {
+  int highest = 0;
+  std::error_code ec;
+  for (const auto& entry : std::filesystem::directory_iterator(dir / "frames", ec)) {
+    const std::string name = entry.path().filename().string();
+    if (name.size() >= 10 && name.find_first_not_of("0123456789") == 6) highest = std::max(highest, std::atoi(name.c_str()));
+  }
+  return highest;
 }
 
 }  // namespace
@@ -80,72 +165,110 @@ SessionWriter::SessionWriter(std::filesystem::path dir, nlohmann::json start_rec
   std::error_code ec;
   if (std::filesystem::exists(dir_, ec) && !std::filesystem::is_empty(dir_, ec))
     ThrowUserError(dir_.string(), "", "already holds files: a new session needs a new or empty folder (to go on with an interrupted one, use resume)");
-  std::filesystem::create_directories(dir_ / "frames", ec);
-  if (ec) ThrowUserError(dir_.string(), "", "cannot create the session folder: " + ec.message());
   start_record["uid"] = NewUid();
   start_record["started_utc"] = UtcNow();
   start_record["schema"] = "phos.session/1";
+  // Through the typed record, so what is written is what every reader reads.
+  const SessionRecord record = SessionRecord::FromJson(start_record, (dir_ / "session.json").string());
+  std::filesystem::create_directories(dir_ / "frames", ec);
+  if (ec) ThrowUserError(dir_.string(), "", "cannot create the session folder: " + ec.message());
   WriteFileAtomically(dir_ / "session.json", start_record.dump(2) + "\n");
   start_record_ = std::move(start_record);
-  ArmAbortRecord(dir_);
+  abort_slot_ = ArmAbortRecord(dir_);
 }
 
-std::unique_ptr<SessionWriter> SessionWriter::Reopen(std::filesystem::path dir) {
-  return std::unique_ptr<SessionWriter>(new SessionWriter(ReopenTag{}, std::move(dir)));
+std::unique_ptr<SessionWriter> SessionWriter::Reopen(std::filesystem::path dir, bool set_aside_bad_frames,
+                                                     std::vector<std::string>* notes) {
+  return std::unique_ptr<SessionWriter>(new SessionWriter(ReopenTag{}, std::move(dir), set_aside_bad_frames, notes));
 }
 
-SessionWriter::SessionWriter(ReopenTag, std::filesystem::path dir) : dir_(std::move(dir)) {
-  std::error_code ec;
-  if (!std::filesystem::is_regular_file(dir_ / "session.json", ec))
-    ThrowUserError(dir_.string(), "", "is not a capture session (no session.json)");
+SessionWriter::SessionWriter(ReopenTag, std::filesystem::path dir, bool set_aside_bad_frames,
+                             std::vector<std::string>* notes)
+    : dir_(std::move(dir)) {
+  std::vector<std::string> ignored_notes;
+  if (notes == nullptr) notes = &ignored_notes;
+  ReadSessionRecord(dir_);  // typed: a broken start record is one line
   start_record_ = ReadJsonFile(dir_ / "session.json");
-  nlohmann::json previous_stop;
-  if (std::filesystem::exists(dir_ / "stop.json", ec)) {
-    previous_stop = ReadJsonFile(dir_ / "stop.json");
-    if (previous_stop.value("how", "") == "complete")
-      ThrowUserError(dir_.string(), "", "completed already: nothing to resume");
+  const SessionCheck check = CheckSession(dir_);
+  if (check.complete() && check.clean()) ThrowUserError(dir_.string(), "", "completed already: nothing to resume");
+  if (!check.bad_frames.empty() && !set_aside_bad_frames) {
+    const SessionCheck::BadFrame& bad = check.bad_frames.front();
+    ThrowUserError((dir_ / bad.frame.file).string(), "",
+                   bad.problem + ": a " + check.protocol + " frame cannot be measured again (the glow it saw is gone); "
+                   "the session stays incomplete (" + std::to_string(check.bad_frames.size()) + " bad frame(s))");
   }
+  // Repairs, each said: torn lines aside, stale temporaries removed.
+  std::vector<nlohmann::json> repairs;
+  for (const char* name : {"frames.jsonl", "events.jsonl"}) {
+    const JsonLinesFile file = ReadJsonLinesFile(dir_ / name);
+    if (!file.torn) continue;
+    const std::filesystem::path aside = SetAsideTornLine(dir_ / name, file);
+    notes->push_back(std::string(name) + ": its last line was torn (a crash mid-write); kept aside in " +
+                     aside.filename().string());
+    repairs.push_back({{"torn_line", name}, {"line", file.torn_line}, {"kept_in", aside.filename().string()}});
+  }
+  for (const std::filesystem::path& stale : check.stale_temporaries) {
+    std::error_code ec;
+    std::filesystem::remove(stale, ec);
+    const std::string relative = std::filesystem::relative(stale, dir_, ec).string();
+    notes->push_back("removed the stale temporary " + relative);
+    repairs.push_back({{"removed_temporary", relative}});
+  }
+  nlohmann::json previous_stop = check.stop ? check.stop->ToJson() : nlohmann::json("none (killed, or the machine went down)");
   // Number on from the highest frame recorded or present on disk.
-  for (const nlohmann::json& line : ReadJsonLines(dir_ / "frames.jsonl"))
-    if (line.contains("seq")) frames_ = std::max(frames_, line["seq"].get<int>());
-  for (const auto& entry : std::filesystem::directory_iterator(dir_ / "frames", ec)) {
-    const std::string name = entry.path().filename().string();
-    if (name.size() >= 10 && name.find_first_not_of("0123456789") == 6) frames_ = std::max(frames_, std::atoi(name.c_str()));
-  }
-  Event({{"event", "resume"},
-         {"resumed_utc", UtcNow()},
-         {"previous_stop", previous_stop.is_null() ? nlohmann::json("none (killed, or the machine went down)") : previous_stop}});
+  for (const FrameRecord& frame : ReadFrameRecords(dir_).frames) frames_ = std::max(frames_, frame.seq);
+  frames_ = std::max(frames_, HighestFrameFile(dir_));
+  nlohmann::json resume = {{"event", "resume"}, {"resumed_utc", UtcNow()}, {"previous_stop", previous_stop}};
+  if (!repairs.empty()) resume["repairs"] = repairs;
+  Event(resume);
+  if (!check.bad_frames.empty()) SetAsideBadFrames(check.bad_frames, notes);
+  std::error_code ec;
   std::filesystem::remove(dir_ / "stop.json", ec);
-  ArmAbortRecord(dir_);
+  abort_slot_ = ArmAbortRecord(dir_);
+}
+
+void SessionWriter::SetAsideBadFrames(const std::vector<SessionCheck::BadFrame>& bad, std::vector<std::string>* notes) {
+  std::set<int> bad_seq;
+  for (const SessionCheck::BadFrame& b : bad) {
+    bad_seq.insert(b.frame.seq);
+    std::error_code ec;
+    const std::filesystem::path file = dir_ / b.frame.file;
+    std::string kept = "(no file)";
+    if (std::filesystem::exists(std::filesystem::symlink_status(file, ec))) {
+      std::filesystem::path aside;
+      for (int k = 1; std::filesystem::exists(aside = file.string() + ".bad-" + std::to_string(k), ec); ++k) {
+      }
+      std::filesystem::rename(file, aside, ec);
+      if (ec) ThrowUserError(file.string(), "", "cannot set the bad frame aside: " + ec.message());
+      kept = std::filesystem::relative(aside, dir_, ec).string();
+    }
+    Event({{"event", "frame_set_aside"}, {"why", b.problem}, {"kept_as", kept}, {"record", b.frame.ToJson()}});
+    notes->push_back(b.frame.file + " " + b.problem + ": set aside as " + kept + ", to be measured again");
+  }
+  // frames.jsonl without them, replaced whole (the records are in events.jsonl).
+  std::string text;
+  for (const JsonLine& line : ReadJsonLinesFile(dir_ / "frames.jsonl").records) {
+    const nlohmann::json& seq = line.value.contains("seq") ? line.value["seq"] : nlohmann::json();
+    if (seq.is_number_integer() && bad_seq.count(seq.get<int>())) continue;
+    text += line.value.dump() + "\n";
+  }
+  WriteFileAtomically(dir_ / "frames.jsonl", text);
+  SyncFile(dir_ / "frames.jsonl");
+  SyncDirectory(dir_);
 }
 
 SessionWriter::~SessionWriter() {
-  if (!stopped_) {
-    try {
-      Stop("failed", "ended without a stop record (an error or exception interrupted the protocol)");
-    } catch (...) {
-    }
-  }
+  if (!stopped_) StopQuietly("failed", "ended without a stop record (an error or exception interrupted the protocol)");
 }
 
-void SessionWriter::AppendLine(const std::string& file, const nlohmann::json& line) {
-  const std::string text = line.dump() + "\n";
-  const std::string path = (dir_ / file).string();
-  const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_APPEND | O_CLOEXEC, 0644);
-  if (fd < 0) ThrowUserError(path, "", "cannot open for appending");
-  const ssize_t written = ::write(fd, text.data(), text.size());
-  const bool synced = ::fsync(fd) == 0;
-  ::close(fd);
-  if (written != static_cast<ssize_t>(text.size()) || !synced)
-    ThrowUserError(path, "", "could not record a line (disk full?): what was recorded before it is intact");
-}
+void SessionWriter::AppendLine(const std::string& file, const nlohmann::json& line) { AppendJsonLine(dir_ / file, line); }
 
 void SessionWriter::Event(nlohmann::json event) { AppendLine("events.jsonl", event); }
 
 std::string SessionWriter::WriteFrame(const Frame& frame, nlohmann::json extra) {
-  ++frames_;
+  const int seq = frames_ + 1;
   char name[32];
-  std::snprintf(name, sizeof name, "frames/%06d.tif", frames_);
+  std::snprintf(name, sizeof name, "frames/%06d.tif", seq);
   const std::filesystem::path final_path = dir_ / name;
   const std::filesystem::path temporary = dir_ / (std::string(name) + ".tmp.tif");
   auto out = OIIO::ImageOutput::create(temporary.string());
@@ -157,45 +280,153 @@ std::string SessionWriter::WriteFrame(const Frame& frame, nlohmann::json extra) 
   spec.attribute("ExposureTime", static_cast<float>(frame.exposure_s));  // EXIF; frames.jsonl holds the rest
   if (!out->open(temporary.string(), spec) || !out->write_image(OIIO::TypeDesc::UINT16, frame.pixels.data()) ||
       !out->close()) {
+    const std::string why = out->geterror();
     std::error_code ignored;
     std::filesystem::remove(temporary, ignored);
-    ThrowUserError(final_path.string(), "", "could not write the frame (disk full?): " + out->geterror());
+    ThrowUserError(final_path.string(), "", "could not write the frame (disk full?): " + why);
+  }
+  // Complete on disk before it has a name, and named before it has a record.
+  FileDigest digest;
+  try {
+    SyncFile(temporary);
+    digest = DigestFile(temporary);
+  } catch (const UserError&) {
+    std::error_code ignored;
+    std::filesystem::remove(temporary, ignored);
+    ThrowUserError(final_path.string(), "", "could not write the frame (disk full?): it did not reach the disk whole");
   }
   std::error_code ec;
   std::filesystem::rename(temporary, final_path, ec);
   if (ec) ThrowUserError(final_path.string(), "", "could not move the frame into place: " + ec.message());
-  extra["file"] = name;
-  extra["seq"] = frames_;
-  extra["t_start_s"] = frame.t_start_s;
-  extra["exposure_s"] = frame.exposure_s;
-  extra["gain"] = frame.gain;
-  extra["black_level_dn"] = frame.black_level_dn;
-  extra["adc_bits"] = frame.adc_bits;
-  extra["sensor_temperature_c"] = frame.sensor_temperature_c;
-  if (frame.camera_timestamp_ns != 0) extra["camera_timestamp_ns"] = frame.camera_timestamp_ns;
-  AppendLine("frames.jsonl", extra);
+  SyncDirectory(dir_ / "frames");
+  frames_ = seq;  // the number is used, with or without its record
+  FrameRecord record;
+  record.file = name;
+  record.seq = seq;
+  record.t_start_s = frame.t_start_s;
+  record.exposure_s = frame.exposure_s;
+  record.gain = frame.gain;
+  record.black_level_dn = frame.black_level_dn;
+  record.adc_bits = frame.adc_bits;
+  record.sensor_temperature_c = frame.sensor_temperature_c;
+  record.camera_timestamp_ns = frame.camera_timestamp_ns;
+  record.size_bytes = digest.size_bytes;
+  record.xxh3 = digest.xxh3;
+  record.protocol = std::move(extra);
+  AppendLine("frames.jsonl", record.ToJson());
   return name;
 }
 
 void SessionWriter::Stop(const std::string& how, const std::string& why) {
-  g_abort_armed.store(false);  // from here on, a signal finds the session already ended
-  nlohmann::json stop = {{"how", how}, {"frames", frames_}, {"stopped_utc", UtcNow()}};
-  if (!why.empty()) stop["why"] = why;
+  DisarmAbortRecord(abort_slot_);  // from here on, a signal finds the session already ended
+  abort_slot_ = -1;
   stopped_ = true;
-  WriteFileAtomically(dir_ / "stop.json", stop.dump(2) + "\n");
+  StopRecord stop;
+  stop.how = how;
+  stop.why = why;
+  stop.stopped_utc = UtcNow();
+  // Counted from the records written, never from a counter.
+  stop.frames = static_cast<int>(ReadFrameRecords(dir_).frames.size());
+  WriteFileAtomically(dir_ / "stop.json", stop.ToJson().dump(2) + "\n");
+  SyncFile(dir_ / "stop.json");
+  SyncDirectory(dir_);
+}
+
+void SessionWriter::StopQuietly(const std::string& how, const std::string& why) noexcept {
+  try {
+    Stop(how, why);
+  } catch (...) {
+    // A full disk can refuse the stop record too; the missing stop.json then
+    // says "interrupted", which resume handles.
+  }
+}
+
+// ---- checking ----------------------------------------------------------------
+
+SessionCheck CheckSession(const std::filesystem::path& dir, bool decode_frames) {
+  SessionCheck check;
+  auto problem = [&](const std::string& text) { check.problems.push_back(text); };
+  std::error_code ec;
+  try {
+    check.protocol = ReadSessionRecord(dir).protocol;
+  } catch (const UserError& e) {
+    problem(e.what());
+  }
+  try {
+    check.stop = ReadStopRecord(dir);
+  } catch (const UserError& e) {
+    problem(e.what());
+  }
+  FrameRecords records;
+  bool frames_read = false;
+  try {
+    records = ReadFrameRecords(dir);
+    frames_read = true;
+  } catch (const UserError& e) {
+    problem(e.what());
+  }
+  check.frames = static_cast<int>(records.frames.size());
+  if (records.torn) {
+    check.torn_frames = true;
+    problem((dir / "frames.jsonl").string() + ": its last line is torn (a crash mid-write); resume keeps it aside");
+  }
+  try {
+    const JsonLinesFile events = ReadJsonLinesFile(dir / "events.jsonl");
+    if (events.torn) {
+      check.torn_events = true;
+      problem((dir / "events.jsonl").string() + ":" + std::to_string(events.torn_line) +
+              ": torn last line (a crash mid-write); resume keeps it aside");
+    }
+  } catch (const UserError& e) {
+    problem(e.what());
+  }
+  check.stale_temporaries = StaleTemporaries(dir);
+  // Frames: each file whole, as recorded, and an image of the session's size.
+  int width = 0, height = 0, channels = 0;
+  for (std::size_t i = 0; i < records.frames.size(); ++i) {
+    const FrameRecord& frame = records.frames[i];
+    std::string what = CheckFrameFile(dir, frame);
+    if (what.empty() && decode_frames) {
+      try {
+        const Frame image = ReadFrame(dir / frame.file);
+        if (width == 0) width = image.width, height = image.height, channels = image.channels;
+        if (image.width != width || image.height != height || image.channels != channels)
+          what = "is " + std::to_string(image.width) + "x" + std::to_string(image.height) + "x" +
+                 std::to_string(image.channels) + " where the session's frames are " + std::to_string(width) + "x" +
+                 std::to_string(height) + "x" + std::to_string(channels);
+      } catch (const UserError& e) {
+        what = "does not read as an image";
+      }
+    }
+    if (!what.empty()) {
+      check.bad_frames.push_back({frame, records.lines[i], what});
+      problem((dir / frame.file).string() + ": " + what + " (frames.jsonl:" + std::to_string(records.lines[i]) + ")");
+    }
+  }
+  if (check.stop && frames_read) {
+    const bool has_list = std::filesystem::exists(dir / "frames.jsonl", ec);
+    if (check.stop->frames >= 0 && check.stop->frames != check.frames)
+      problem((dir / "stop.json").string() + ": counts " + std::to_string(check.stop->frames) +
+              " frames where frames.jsonl lists " + std::to_string(check.frames));
+    if (check.complete() && check.protocol != "all" && !has_list)
+      problem((dir / "frames.jsonl").string() + ": missing, in a session whose stop.json says complete");
+  }
+  return check;
 }
 
 Frame ReadFrame(const std::filesystem::path& session_dir, const nlohmann::json& line) {
-  if (!line.is_object() || !line.contains("file") || !line["file"].is_string())
-    ThrowUserError((session_dir / "frames.jsonl").string(), "", "a frame line has no file");
-  Frame frame = ReadFrame(session_dir / line["file"].get<std::string>());
-  frame.exposure_s = line.value("exposure_s", frame.exposure_s);
-  frame.gain = line.value("gain", 1.0);
-  frame.black_level_dn = line.value("black_level_dn", 0.0);
-  frame.adc_bits = line.value("adc_bits", 16);
-  frame.t_start_s = line.value("t_start_s", 0.0);
-  frame.sensor_temperature_c = line.value("sensor_temperature_c", 0.0);
-  frame.camera_timestamp_ns = line.value("camera_timestamp_ns", std::uint64_t{0});
+  return ReadFrame(session_dir, FrameRecord::FromJson(line, (session_dir / "frames.jsonl").string()));
+}
+
+Frame ReadFrame(const std::filesystem::path& session_dir, const FrameRecord& record) {
+  Frame frame = ReadFrame(session_dir / record.file);
+  frame.exposure_s = record.exposure_s;
+  frame.gain = record.gain;
+  frame.black_level_dn = record.black_level_dn;
+  frame.adc_bits = record.adc_bits;
+  frame.t_start_s = record.t_start_s;
+  frame.sensor_temperature_c = record.sensor_temperature_c;
+  frame.camera_timestamp_ns = record.camera_timestamp_ns;
   return frame;
 }
 

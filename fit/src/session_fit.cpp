@@ -8,6 +8,7 @@
 #include <map>
 #include <numeric>
 
+#include "phos/acquire/session_records.h"
 #include "phos/model/rate_equation.h"
 #include "phos/model/spectral.h"
 #include "phos/util/error.h"
@@ -110,15 +111,27 @@ std::vector<double> SolveNonNegative(const std::vector<std::vector<double>>& A, 
   return x;
 }
 
-nlohmann::json SessionStart(const fs::path& dir) {
-  if (!fs::is_regular_file(dir / "session.json"))
-    ThrowUserError(dir.string(), "", "is not a capture session (no session.json)");
-  return ReadJsonFile(dir / "session.json");
-}
+// The start record as JSON, read through its typed reader first (a missing
+// or mistyped key is one line naming it).
+nlohmann::json SessionStart(const fs::path& dir) { return ReadSessionRecord(dir).ToJson(); }
 
 std::string StopHow(const fs::path& dir) {
-  if (!fs::exists(dir / "stop.json")) return "none (killed, or still running)";
-  return ReadJsonFile(dir / "stop.json").value("how", "?");
+  const std::optional<StopRecord> stop = ReadStopRecord(dir);
+  return stop ? stop->how : "none (killed, or still running)";
+}
+
+// A part's frame records, typed (session_records.h), every listed frame's
+// file checked against its recorded size and checksum as resume does: a fit
+// is never built on a bad frame. A torn last line (a crash mid-write) is
+// left out and said in a note.
+std::vector<nlohmann::json> SessionFrames(const fs::path& part, std::vector<std::string>* notes = nullptr) {
+  const FrameRecords records = ReadFrameRecords(part);
+  RequireGoodFrames(part, records);
+  if (records.torn && notes)
+    notes->push_back((part / "frames.jsonl").string() + ": torn last line left out ('phos capture resume' repairs it)");
+  std::vector<nlohmann::json> lines;
+  for (const FrameRecord& frame : records.frames) lines.push_back(frame.ToJson());
+  return lines;
 }
 
 
@@ -132,7 +145,7 @@ LvfCalibrationFit FitLvfCalibration(const fs::path& dir) {
   fit.flat_irradiance = settings.value("flat_irradiance", 1.0);
   // The last unclipped frame of each source is its well-exposed one.
   std::map<std::string, nlohmann::json> last;
-  for (const nlohmann::json& line : ReadJsonLines(dir / "frames.jsonl")) {
+  for (const nlohmann::json& line : SessionFrames(dir)) {
     if (!line.contains("column_mean_dn") || Clipped(line)) continue;
     last[line.value("kind", "") == "dark" ? std::string("(dark)") : line.value("light", "")] = line;
   }
@@ -262,7 +275,7 @@ SpectrumFit FitEmissionSpectrum(const fs::path& dir, const LvfCalibrationFit& ca
         A[x][b] += sensitivity(nm) * std::exp(-0.5 * std::pow((nm - c) / sigma, 2)) * kStepNm / bands.width_nm(b);
     }
   }
-  for (const nlohmann::json& line : ReadJsonLines(dir / "frames.jsonl")) {
+  for (const nlohmann::json& line : SessionFrames(dir)) {
     if (line.value("kind", "") != "spectrum" || !line.contains("column_mean_dn") || Clipped(line)) continue;
     const double peak = line.value("peak_column_fraction", 0.0);
     if (peak < low || peak > high) continue;  // not well exposed: the protocol stepped past it
@@ -319,7 +332,7 @@ struct DecayStage {
 Curve ReadDecayCurve(const fs::path& part, std::vector<std::string>* notes) {
   Curve curve;
   int clipped = 0;
-  for (const nlohmann::json& line : ReadJsonLines(part / "frames.jsonl")) {
+  for (const nlohmann::json& line : SessionFrames(part, notes)) {
     if (!line.contains("mean_signal_dn")) continue;
     if (Clipped(line)) {
       ++clipped;
@@ -402,7 +415,7 @@ std::vector<ExcitationMeasurement> ReadExcitationMeasurements(const fs::path& pa
   };
   std::map<std::pair<std::string, double>, Group> groups;
   std::size_t order = 0;
-  for (const nlohmann::json& line : ReadJsonLines(part / "frames.jsonl")) {
+  for (const nlohmann::json& line : SessionFrames(part, notes)) {
     if (!line.contains("light") || !line.contains("mean_signal_dn") || !line.contains("charge_s")) continue;
     const std::string light = line["light"].get<std::string>();
     const double off = line.value("light_off_s", static_cast<double>(order++));
@@ -518,9 +531,11 @@ struct LightSwitch {
 
 std::vector<LightSwitch> ReadSwitches(const fs::path& part, const std::string& light) {
   std::vector<LightSwitch> switches;
-  for (const nlohmann::json& event : ReadJsonLines(part / "events.jsonl"))
-    if (event.value("event", "") == "light" && event.value("channel", "") == light)
-      switches.push_back({event.value("t_s", 0.0), event.value("on", false)});
+  // Switches without a time (the signal handler's) end a session; none is before a fitted frame.
+  for (const nlohmann::json& event : ReadEventRecords(part))
+    if (event["event"] == "light" && event.value("channel", "") == light && event.contains("t_s") &&
+        event.contains("on") && event["on"].is_boolean())
+      switches.push_back({event["t_s"].get<double>(), event["on"].get<bool>()});
   return switches;
 }
 
@@ -778,7 +793,24 @@ JointFit JointRefine(const Curve& decay_curve, const DecayFitSummary& decay,
   return joint;
 }
 
+namespace {
+SessionFit FitSessionStages(const fs::path& dir, const SessionFitOptions& options);
+}  // namespace
+
 SessionFit FitSession(const fs::path& dir, const SessionFitOptions& options) {
+  // The typed readers name a bad core field; a protocol's nested value that
+  // is missing or mistyped (a band irradiance, a setting) is named here.
+  try {
+    return FitSessionStages(dir, options);
+  } catch (const nlohmann::json::exception& e) {
+    std::string what = e.what();
+    if (auto close = what.find("] "); close != std::string::npos) what = what.substr(close + 2);
+    ThrowUserError(dir.string(), "", "a session record has a missing or mistyped value: " + what);
+  }
+}
+
+namespace {
+SessionFit FitSessionStages(const fs::path& dir, const SessionFitOptions& options) {
   const auto started = std::chrono::steady_clock::now();
   const nlohmann::json top = SessionStart(dir);
   if (top.value("protocol", "") != "all")
@@ -917,6 +949,8 @@ SessionFit FitSession(const fs::path& dir, const SessionFitOptions& options) {
   result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
   return result;
 }
+
+}  // namespace
 
 MaterialComparison CompareMaterials(const Material& fitted, const Material& truth) {
   MaterialComparison c;

@@ -93,7 +93,7 @@ std::string SessionReportHtml(const SessionFit& fit, const std::string& title,
           residual(fit.decay_curve.names[c]);
       data.markers = true;
       data.line = false;
-      data.color = model.color = residual.color = PaletteColor(c);
+      data.color = model.color = residual.color = ChannelOrPaletteColor(fit.decay_curve.names[c], c);
       model.dashed = true;
       residual.markers = true;
       for (std::size_t j = 0; j < fit.decay_curve.size(); ++j) {

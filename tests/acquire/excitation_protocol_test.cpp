@@ -122,7 +122,7 @@ TEST(ExcitationProtocol, BadOptionsAreClearErrors) {
   Material orange = LoadMaterial(testing::Fixture("materials/orange.json"));
   SimulatedLab lab(orange, std::vector<double>(8, 0.8), DefaultLights(), DefaultCameraModel(), clock);
   testing::TempDir dir;
-  SessionWriter session(dir / "s", {});
+  SessionWriter session(dir / "s", {{"protocol", "excitation"}});
   ExcitationProtocolOptions options;
   EXPECT_THROW(RunExcitationProtocol(lab, lab.lights(), clock, session, options), UserError);  // no light
   options.lights = {"laser"};

@@ -80,7 +80,7 @@ void ExpectSignalSwitchesOff(int signal_number, const std::string& name) {
   pid_t child = fork();
   ASSERT_GE(child, 0);
   if (child == 0) {
-    SessionWriter session(dir / "session", {{"protocol", "test"}});
+    SessionWriter session(dir / "session", {{"protocol", "decay"}});
     FileLights lights(state);
     LightsOffGuard guard(lights);
     lights.Set("lamp", true);
@@ -107,7 +107,7 @@ TEST(LightsOffGuard, ASignalAfterTheSessionEndedLeavesItsRecord) {
   pid_t child = fork();
   ASSERT_GE(child, 0);
   if (child == 0) {
-    SessionWriter session(dir / "session", {{"protocol", "test"}});
+    SessionWriter session(dir / "session", {{"protocol", "decay"}});
     session.Stop("complete");
     FileLights lights((dir / "lamp").string());
     LightsOffGuard guard(lights);

@@ -68,6 +68,12 @@ TEST(CaptureDecayCommand, BadInputGivesOneLineAndExitCode2) {
     EXPECT_TRUE(testing::IsOneLineUserError(result, c.expected)) << c.arguments;
   }
   EXPECT_EQ(testing::ReadText(dir / "full" / "keep.txt"), "precious");
+  // Options are checked before the session folder exists: a typo leaves
+  // nothing behind that would block the rerun.
+  for (const char* name : {"a", "b", "c", "d", "e"}) EXPECT_FALSE(std::filesystem::exists(dir / name)) << name;
+  auto typo = RunPhos("capture all" + orange + " --out " + (dir / "f").string() + " --excite led420 led4566");
+  EXPECT_TRUE(testing::IsOneLineUserError(typo, "unknown channel 'led4566'"));
+  EXPECT_FALSE(std::filesystem::exists(dir / "f"));
 }
 
 TEST(CaptureDecayCommand, ALightTheSampleCannotTakeFailsTheSessionWithTheReason) {

@@ -66,8 +66,9 @@ class LightsOffGuard {
 };
 
 // A function the SIGINT/SIGTERM handler calls after switching the lights off
-// and before the process ends; it must be async-signal-safe (nullptr: none).
-using SignalCleanup = void (*)(int signal_number);
+// and before the process ends, with the channels it switched off (so the
+// session can log them); it must be async-signal-safe (nullptr: none).
+using SignalCleanup = void (*)(int signal_number, const char* const* switched_off, int switched_off_count);
 void SetSignalCleanup(SignalCleanup cleanup);
 
 }  // namespace phos
