@@ -109,7 +109,7 @@ void RunRecorded(SessionWriter& session, Lights& lights, const Clock& clock, con
     session.Event({{"t_s", clock.now_s()}, {"event", "protocol"}, {"protocol", protocol}, {"phase", "end"}});
     session.Stop("complete");
   } catch (const std::exception& e) {
-    session.Stop("failed", e.what());
+    session.StopQuietly("failed", e.what());  // on a full disk this fails too: the error to report is the first
     try {
       lights.AllOff();
     } catch (...) {
