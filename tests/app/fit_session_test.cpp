@@ -273,6 +273,34 @@ TEST(FitMapCommand, MapsASpatiallyVaryingSample) {
   EXPECT_TRUE(std::filesystem::exists(dir / "map" / "kr.png"));
   EXPECT_TRUE(testing::IsOneLineUserError(RunPhos("fit map " + (dir / "nothing").string() + " --out " +
                                                   (dir / "m2").string()), "is not a capture session"));
+
+  // Downstream readers check frames as resume does (docs/capture.md): a torn
+  // last record is left out with a note; a truncated frame is refused in one
+  // line naming it; a record whose exposure is out of range (5e-324 s made
+  // every pixel NaN) too; nothing is written for a refused map.
+  std::filesystem::copy(dir / "s", dir / "torn", std::filesystem::copy_options::recursive);
+  const std::string frames = testing::ReadText(dir / "torn" / "frames.jsonl");
+  testing::WriteText(dir / "torn" / "frames.jsonl", frames.substr(0, frames.size() - 40));
+  auto torn = RunPhos("fit map " + (dir / "torn").string() + " --out " + (dir / "m3").string());
+  EXPECT_EQ(torn.exit_code, 0) << torn.err;
+  EXPECT_NE(torn.out.find("torn last line left out"), std::string::npos) << torn.out;
+  std::filesystem::copy(dir / "s", dir / "cut", std::filesystem::copy_options::recursive);
+  std::filesystem::resize_file(dir / "cut" / "frames" / "000005.tif", 1000);
+  EXPECT_TRUE(testing::IsOneLineUserError(
+      RunPhos("fit map " + (dir / "cut").string() + " --out " + (dir / "m4").string()),
+      "frames/000005.tif: is 1000 bytes where its record says"));
+  EXPECT_FALSE(std::filesystem::exists(dir / "m4"));
+  std::filesystem::copy(dir / "s", dir / "tiny", std::filesystem::copy_options::recursive);
+  std::string tiny = frames;
+  const std::size_t at = tiny.find("\"exposure_s\":");
+  tiny.replace(at, tiny.find(',', at) - at, "\"exposure_s\":5e-324");
+  testing::WriteText(dir / "tiny" / "frames.jsonl", tiny);
+  EXPECT_TRUE(testing::IsOneLineUserError(
+      RunPhos("fit map " + (dir / "tiny").string() + " --out " + (dir / "m5").string()), "frames.jsonl:1: exposure_s"));
+  auto verify = RunPhos("capture verify " + (dir / "cut").string());
+  EXPECT_EQ(verify.exit_code, 2);
+  EXPECT_NE(verify.out.find("000005.tif"), std::string::npos) << verify.out;
+  EXPECT_EQ(RunPhos("capture verify " + (dir / "s").string()).exit_code, 0);
 }
 
 }  // namespace
