@@ -50,6 +50,8 @@ struct Devices {
   // Real.
   std::unique_ptr<OpenedLab> real;
   LabConfig lab_config;
+  // After `real`, so it stands down before the lights close.
+  std::unique_ptr<LightsGuardian> guardian;
 
   Camera* camera = nullptr;
   Lights* lights = nullptr;
@@ -97,6 +99,8 @@ struct Devices {
   void OpenLabConfig(const fs::path& path) {
     lab_config = LoadLabConfig(path);
     real = OpenLab(lab_config);
+    // Real lights stay off even if capture dies by kill -9 (LightsGuardian).
+    guardian = std::make_unique<LightsGuardian>(*real->lights);
     camera = real->camera.get();
     lights = real->lights.get();
     clock = &real->clock;

@@ -2,8 +2,14 @@
 
 #include <algorithm>
 #include <atomic>
+#include <fcntl.h>
+#include <sys/prctl.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
 #include <csignal>
 #include <cstdio>
+#include <cerrno>
 #include <cstdlib>
 #include <mutex>
 
@@ -72,6 +78,53 @@ extern "C" void SwitchOffAndExit(int signal_number) {
 }  // namespace
 
 void SetSignalCleanup(SignalCleanup cleanup) { g_cleanup.store(cleanup); }
+
+LightsGuardian::LightsGuardian(Lights& lights) {
+  int fds[2];
+  if (::pipe2(fds, O_CLOEXEC) != 0) ThrowUserError("", "lights", "cannot start the lights guardian (pipe)");
+  const pid_t parent = ::getpid();
+  const pid_t pid = ::fork();
+  if (pid < 0) {
+    ::close(fds[0]);
+    ::close(fds[1]);
+    ThrowUserError("", "lights", "cannot start the lights guardian (fork)");
+  }
+  if (pid == 0) {
+    // The guardian. Only the read end stays open here, so EOF means
+    // capture has gone.
+    ::close(fds[1]);
+    std::signal(SIGINT, SIG_IGN);
+    std::signal(SIGTERM, SIG_IGN);
+    std::signal(SIGPIPE, SIG_IGN);
+    ::prctl(PR_SET_NAME, "phos-guardian");
+    char byte = 0;
+    ssize_t n;
+    do {
+      n = ::read(fds[0], &byte, 1);
+    } while (n < 0 && errno == EINTR);
+    if (n == 1 && byte == 'd') ::_exit(0);  // stood down: capture ended normally
+    // Capture died (or its parent changed: it was killed before we read).
+    (void)parent;
+    try {
+      lights.AllOff();
+    } catch (...) {
+    }
+    ::_exit(0);
+  }
+  ::close(fds[0]);
+  pid_ = pid;
+  pipe_fd_ = fds[1];
+}
+
+LightsGuardian::~LightsGuardian() {
+  if (pipe_fd_ >= 0) {
+    const char stand_down = 'd';
+    const ssize_t ignored = ::write(pipe_fd_, &stand_down, 1);
+    (void)ignored;
+    ::close(pipe_fd_);
+  }
+  if (pid_ > 0) ::waitpid(pid_, nullptr, 0);
+}
 
 LightsOffGuard::LightsOffGuard(Lights& lights) : lights_(lights) {
   if (g_guarded == nullptr) {

@@ -68,7 +68,7 @@ void WriteAbortRecords(int signal_number, const char* const* switched_off, int s
     if (!record.armed.load()) continue;
     // The lights the handler switched off, one whole line each (no time: the
     // protocol's clock is not reachable from here; the line says who did it).
-    const int events = ::open(record.events_path, O_WRONLY | O_APPEND | O_CLOEXEC);
+    const int events = ::open(record.events_path, O_WRONLY | O_APPEND | O_CREAT | O_CLOEXEC, 0644);
     if (events >= 0) {
       for (int i = 0; i < switched_off_count; ++i) {
         char line[512];

@@ -95,10 +95,56 @@ void ExpectSignalSwitchesOff(int signal_number, const std::string& name) {
   ASSERT_TRUE(WIFEXITED(status));
   EXPECT_EQ(WEXITSTATUS(status), 128 + signal_number);
   EXPECT_EQ(testing::ReadText(state), "off");
-  // The open session says it was aborted, and by which signal.
+  // The open session says it was aborted, and by which signal, and its
+  // events say the lamp went off (the handler's own line).
   nlohmann::json stop = ReadJsonFile(dir / "session" / "stop.json");
   EXPECT_EQ(stop["how"], "aborted");
   EXPECT_NE(stop["why"].get<std::string>().find(name), std::string::npos) << stop.dump();
+  const std::vector<nlohmann::json> events = testing::ReadJsonLines(dir / "session" / "events.jsonl");
+  ASSERT_FALSE(events.empty());
+  EXPECT_EQ(events.back()["channel"], "lamp");
+  EXPECT_EQ(events.back()["on"], false);
+  EXPECT_EQ(events.back()["by"], "signal handler");
+}
+
+// kill -9 reaches no handler: the guardian process switches the lamp off
+// when capture is gone.
+TEST(LightsGuardian, SwitchesOffWhenCaptureIsKilledWithSigkill) {
+  testing::TempDir dir;
+  const std::string state = (dir / "lamp").string();
+  const std::string ready = (dir / "ready").string();
+  pid_t child = fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    FileLights lights(state);
+    LightsGuardian guardian(lights);
+    lights.Set("lamp", true);
+    std::ofstream(ready) << guardian.pid();
+    for (;;) pause();
+  }
+  for (int i = 0; i < 500 && !std::ifstream(ready); ++i) usleep(10000);
+  ASSERT_EQ(testing::ReadText(state), "on");
+  const int guardian = std::stoi(testing::ReadText(ready));
+  kill(child, SIGKILL);
+  waitpid(child, nullptr, 0);
+  // The guardian is not our child: wait for the lamp to go off (at most 5 s).
+  EXPECT_GT(guardian, 0);
+  for (int i = 0; i < 500 && testing::ReadText(state) != "off"; ++i) usleep(10000);
+  EXPECT_EQ(testing::ReadText(state), "off");
+}
+
+// A normal end stands the guardian down: it does not touch the lights.
+TEST(LightsGuardian, StandsDownAtANormalEnd) {
+  testing::TempDir dir;
+  const std::string state = (dir / "lamp").string();
+  FileLights lights(state);
+  {
+    LightsGuardian guardian(lights);
+    EXPECT_GT(guardian.pid(), 0);
+  }
+  lights.Set("lamp", true);  // after the guardian has gone: nothing switches it off
+  usleep(50000);
+  EXPECT_EQ(testing::ReadText(state), "on");
 }
 
 TEST(LightsOffGuard, ASignalAfterTheSessionEndedLeavesItsRecord) {

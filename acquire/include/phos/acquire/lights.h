@@ -65,6 +65,28 @@ class LightsOffGuard {
   Lights& lights_;
 };
 
+// Lights off even when capture dies by kill -9, a crash or the OOM killer,
+// which no handler sees. The guardian is a child process forked when the
+// lights are opened: it inherits their handles (GPIO line requests are file
+// descriptors, shared across fork), ignores SIGINT and SIGTERM (a Ctrl-C to
+// the terminal reaches the whole process group, and the guardian must
+// outlive capture), and blocks reading a pipe whose only writer is capture.
+// When capture ends in any way, the pipe closes: the guardian switches every
+// light off through its own copy and exits. A normal end tells it to stand
+// down first (the lights are off then). Its pid is for tests and logs.
+class LightsGuardian {
+ public:
+  explicit LightsGuardian(Lights& lights);
+  ~LightsGuardian();  // stands down
+  LightsGuardian(const LightsGuardian&) = delete;
+  LightsGuardian& operator=(const LightsGuardian&) = delete;
+  int pid() const { return pid_; }
+
+ private:
+  int pid_ = -1;
+  int pipe_fd_ = -1;  // the write end
+};
+
 // A function the SIGINT/SIGTERM handler calls after switching the lights off
 // and before the process ends, with the channels it switched off (so the
 // session can log them); it must be async-signal-safe (nullptr: none).
