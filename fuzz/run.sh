@@ -9,6 +9,7 @@
 # executions and the command go to build-fuzz/fuzz-summary.txt.
 #   FUZZ_SECONDS=60 fuzz/run.sh              (make fuzz)
 #   FUZZ_SECONDS=10 fuzz/run.sh scene gltf   (two of them)
+#   FUZZ_RUNS=1000000 fuzz/run.sh            (a million executions each, however long)
 set -uo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$PWD
@@ -36,7 +37,9 @@ seeds() {  # the seed files of a target
 
 status=0
 summary=$ROOT/build-fuzz/fuzz-summary.txt
-echo "# $(date -u +%FT%TZ), ${SECONDS_EACH} s per harness, $(nproc) cores" >>"$summary"
+budget_text="$SECONDS_EACH s"
+[ -n "${FUZZ_RUNS:-}" ] && budget_text="$FUZZ_RUNS runs"
+echo "# $(date -u +%FT%TZ), $budget_text per harness, $(nproc) cores" >>"$summary"
 for t in "${TARGETS[@]}"; do
   exe=$BIN/fuzz-$t
   [ -x "$exe" ] || { echo "fuzz: $exe missing (build it: cmake --preset fuzz -S fuzz && cmake --build build-fuzz)" >&2; exit 2; }
@@ -46,13 +49,16 @@ for t in "${TARGETS[@]}"; do
   dict=()
   [ -f "fuzz/$t.dict" ] && dict=(-dict="fuzz/$t.dict")
   log=$ROOT/build-fuzz/fuzz-$t.log
-  cmd=(nice -n 19 "$exe" -max_total_time="$SECONDS_EACH" -timeout="$TIMEOUT" -rss_limit_mb="$RSS_MB"
+  budget=(-max_total_time="$SECONDS_EACH")
+  [ -n "${FUZZ_RUNS:-}" ] && budget=(-runs="$FUZZ_RUNS")
+  cmd=(nice -n 19 "$exe" "${budget[@]}" -timeout="$TIMEOUT" -rss_limit_mb="$RSS_MB"
        -max_len="$MAX_LEN" -print_final_stats=1 -artifact_prefix="$findings/" "${dict[@]}" "$corpus" "$seed")
   ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
     "${cmd[@]}" >"$log" 2>&1
   rc=$?
   runs=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$log" | grep -o '[0-9]*$' | tail -1)
-  line="$t: ${runs:-?} executions in ${SECONDS_EACH} s, exit $rc: ${cmd[*]}"
+  took=$(grep -o 'Done [0-9]* runs in [0-9]* second' "$log" | grep -o 'in [0-9]*' | grep -o '[0-9]*' | tail -1)
+  line="$t: ${runs:-?} executions in ${took:-$SECONDS_EACH} s, exit $rc: ${cmd[*]}"
   echo "fuzz: $line"
   echo "$line" >>"$summary"
   if [ $rc -ne 0 ]; then
