@@ -33,4 +33,12 @@ inline std::string NonFiniteOptionValue(const std::string& text) {
 
 inline const CLI::Validator kFinite(NonFiniteOptionValue, "FINITE", "finite");
 
+// kFinite on every floating-point option of a command and its subcommands
+// (CLI11's type name FLOAT), so a command added later cannot forget one.
+inline void RequireFiniteNumbers(CLI::App& app) {
+  for (CLI::Option* option : app.get_options())
+    if (option->get_type_name().find("FLOAT") != std::string::npos) option->check(kFinite);
+  for (CLI::App* sub : app.get_subcommands([](CLI::App*) { return true; })) RequireFiniteNumbers(*sub);
+}
+
 }  // namespace phos::app

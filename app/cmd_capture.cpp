@@ -14,6 +14,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "cli_finite.h"
 #include "commands.h"
 #include "phos/acquire/lab.h"
 #include "phos/acquire/protocols.h"
@@ -897,6 +898,7 @@ void RegisterCapture(CLI::App& app) {
     if (const std::size_t problems = RunCaptureVerify(*verify_args); problems > 0)
       ThrowUserError(verify_args->dir, "", std::to_string(problems) + " problem(s) found (listed above)");
   });
+  RequireFiniteNumbers(*capture);
 }
 
 }  // namespace phos::app

@@ -15,6 +15,7 @@
 #include <OpenImageIO/imageio.h>
 #include <nlohmann/json.hpp>
 
+#include "cli_finite.h"
 #include "commands.h"
 #include "phos/acquire/session.h"
 #include "phos/acquire/session_records.h"
@@ -551,6 +552,7 @@ void RegisterFit(CLI::App& app) {
   b->add_option("--weights", batch->weights, "poisson (default) or none");
   b->add_flag("--json", batch->json, "print one JSON object (the rows of the summary table) instead of the table");
   b->callback([batch] { RunFitBatch(*batch); });
+  RequireFiniteNumbers(*fit);
 }
 
 }  // namespace phos::app

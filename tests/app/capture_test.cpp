@@ -62,6 +62,8 @@ TEST(CaptureDecayCommand, BadInputGivesOneLineAndExitCode2) {
       {"capture decay" + orange + " --out " + (dir / "full").string(), "already holds files"},
       {"capture decay" + orange + " --out " + (dir / "d").string() + " --light uv", "unknown channel 'uv'"},
       {"capture decay" + orange + " --out " + (dir / "e").string() + " --interval-s 0", "interval and duration must be > 0"},
+      {"capture decay" + orange + " --out " + (dir / "e").string() + " --charge-s inf", "--charge-s: expected a finite number, got inf"},
+      {"capture excitation" + orange + " --out " + (dir / "e").string() + " --reset-s nan", "expected a finite number, got nan"},
   };
   for (const Case& c : cases) {
     auto result = RunPhos(c.arguments);
