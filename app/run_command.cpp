@@ -11,6 +11,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include "cli_finite.h"
 #include "commands.h"
 #include "phos/util/error.h"
 
@@ -21,6 +22,7 @@ int RunCommand(int argc, char** argv, const char* command, void (*register_comma
   app.require_subcommand(1);
   app.failure_message(CLI::FailureMessage::simple);
   register_command(app);
+  RequireFiniteNumbers(app);  // NaN and infinity refused in every floating-point option of every command
   // The summary `phos --help` shows, whichever file registered the command.
   for (CLI::App* sub : app.get_subcommands({}))
     if (sub->get_name() == command) sub->description(Summary(command));
