@@ -5,6 +5,7 @@
 // with an interrupted session where that makes sense.
 
 #include <algorithm>
+#include <cstdarg>
 #include <cstdio>
 #include <map>
 #include <optional>
@@ -38,6 +39,7 @@ struct CaptureArgs {
   double sim_inset_radius = 0.5;
   double sim_albedo = 0.8;
   unsigned seed = 1;
+  bool json = false;
 };
 
 // The devices a protocol runs on: the simulated lab or a real one, behind
@@ -348,6 +350,40 @@ void WriteCurvesPlot(const fs::path& session_dir, const std::string& protocol, c
   WriteFileAtomically(out, PlotSvg(all, options));
 }
 
+// ---- what the user sees ----------------------------------------------------
+
+// With --json the progress lines are left out and the command ends with one
+// JSON object (JsonSummary). File-local: each phos-capture run is one command.
+bool g_json_output = false;
+
+void Say(const char* format, ...) __attribute__((format(printf, 1, 2)));
+void Say(const char* format, ...) {
+  if (g_json_output) return;
+  va_list args;
+  va_start(args, format);
+  std::vfprintf(stdout, format, args);
+  va_end(args);
+}
+
+// The folder and, for `all`, each part: protocol, frames listed, how it ended.
+void PrintJsonSummary(const fs::path& dir) {
+  auto part = [](const fs::path& path) {
+    const SessionCheck check = CheckSession(path, false);
+    return nlohmann::json{{"dir", path.string()},
+                          {"protocol", check.protocol},
+                          {"frames", check.frames},
+                          {"state", check.stop ? check.stop->how : "interrupted"},
+                          {"problems", check.problems}};
+  };
+  nlohmann::json summary = part(dir);
+  if (summary["protocol"] == "all") {
+    summary["parts"] = nlohmann::json::array();
+    for (const char* name : {"lvf-calibration", "spectrum", "decay", "excitation"})
+      if (fs::exists(dir / name / "session.json")) summary["parts"].push_back(part(dir / name));
+  }
+  std::printf("%s\n", summary.dump().c_str());
+}
+
 // ---- running protocols into a session -----------------------------------
 
 // Protocol settings (from options) and the code that runs them on devices,
@@ -400,7 +436,7 @@ bool Resumable(const std::string& protocol) { return protocol == "excitation" ||
 // What the user sees at the end of a session: where it is and what it holds.
 void PrintSession(const std::string& protocol, const fs::path& dir) {
   const std::vector<nlohmann::json> lines = FrameLines(dir);
-  std::printf("phos capture %s: %zu frames -> %s\n", protocol.c_str(), lines.size(), dir.string().c_str());
+  Say("phos capture %s: %zu frames -> %s\n", protocol.c_str(), lines.size(), dir.string().c_str());
 }
 
 void Previews(const std::string& protocol, const fs::path& session_dir, const fs::path& into) {
@@ -442,6 +478,7 @@ void CheckLightsExist(const Plan& plan, const Devices& devices) {
 }
 
 void RunNewSession(const Plan& plan, CaptureArgs& args) {
+  g_json_output = args.json;
   Devices devices(args);
   // Bad settings are refused before the folder exists.
   CheckLightsExist(plan, devices);
@@ -449,6 +486,7 @@ void RunNewSession(const Plan& plan, CaptureArgs& args) {
   RunProtocol(plan, devices, session, false);
   PrintSession(plan.protocol, args.out);
   Previews(plan.protocol, args.out, args.out);
+  if (g_json_output) PrintJsonSummary(args.out);
 }
 
 // ---- all -----------------------------------------------------------------
@@ -463,7 +501,7 @@ struct AllArgs : CaptureArgs {
 };
 
 void PrintNotes(const std::string& protocol, const std::vector<std::string>& notes) {
-  for (const std::string& note : notes) std::printf("  %-16s %s\n", protocol.c_str(), note.c_str());
+  for (const std::string& note : notes) Say("  %-16s %s\n", protocol.c_str(), note.c_str());
 }
 
 // Moves an interrupted (or bad) part aside whole, to start it over.
@@ -475,7 +513,7 @@ void MovePartAside(const fs::path& dir, const std::string& protocol, const std::
   }
   fs::rename(part, aside, ec);
   if (ec) ThrowUserError(part.string(), "", "cannot move the part aside: " + ec.message());
-  std::printf("  %-16s %s; kept as %s, starting over\n", protocol.c_str(), why.c_str(), aside.filename().string().c_str());
+  Say("  %-16s %s; kept as %s, starting over\n", protocol.c_str(), why.c_str(), aside.filename().string().c_str());
 }
 
 // The first problem of a check that resume cannot repair (a malformed record
@@ -508,7 +546,7 @@ void RunAllParts(const fs::path& dir, const nlohmann::json& parts, Devices& devi
       if (const std::string problem = UnrepairableProblem(check); !problem.empty())
         ThrowUserError(problem, "", "cannot be repaired by resume; see 'phos capture verify'");
       if (check.complete() && check.clean()) {
-        std::printf("  %-16s complete already: kept\n", protocol.c_str());
+        Say("  %-16s complete already: kept\n", protocol.c_str());
         continue;
       }
       if (protocol == "decay" && !check.bad_frames.empty()) {
@@ -518,7 +556,7 @@ void RunAllParts(const fs::path& dir, const nlohmann::json& parts, Devices& devi
                        "the folder stays incomplete: restore the frame, or move the decay part aside to capture it anew");
       }
       if (Resumable(protocol)) {
-        std::printf("  %-16s %s: resuming where it stopped\n", protocol.c_str(),
+        Say("  %-16s %s: resuming where it stopped\n", protocol.c_str(),
                     check.complete() ? "complete but not whole" : "interrupted");
         std::vector<std::string> notes;
         std::unique_ptr<SessionWriter> session = SessionWriter::Reopen(part, true, &notes);
@@ -537,7 +575,7 @@ void RunAllParts(const fs::path& dir, const nlohmann::json& parts, Devices& devi
     if (resume_count > 0) start["resume"] = resume_count;
     SessionWriter session(part, start);
     RunProtocol(plan, devices, session, false);
-    std::printf("  %-16s %d frames\n", protocol.c_str(), static_cast<int>(ReadFrameRecords(part).frames.size()));
+    Say("  %-16s %d frames\n", protocol.c_str(), static_cast<int>(ReadFrameRecords(part).frames.size()));
   }
 }
 
@@ -548,6 +586,7 @@ void FinishAll(const fs::path& dir) {
 }
 
 void RunCaptureAll(AllArgs args) {
+  g_json_output = args.json;
   Devices devices(args);
   nlohmann::json parts;
   const std::string charge_light =
@@ -589,7 +628,7 @@ void RunCaptureAll(AllArgs args) {
 
   // The folder's own record: the plan of all parts, and how it ended.
   SessionWriter top(args.out, StartRecord("all", devices, {{"parts", parts}, {"order", kAllOrder}}));
-  std::printf("phos capture all -> %s\n", args.out.c_str());
+  Say("phos capture all -> %s\n", args.out.c_str());
   try {
     RunAllParts(args.out, parts, devices, 0);
   } catch (const std::exception& e) {
@@ -598,12 +637,14 @@ void RunCaptureAll(AllArgs args) {
   }
   top.Stop("complete");
   FinishAll(args.out);
-  std::printf("  previews: decay-frames.png, decay-curve.svg, excitation-curves.svg, spectrum-frames.png\n");
+  Say("  previews: decay-frames.png, decay-curve.svg, excitation-curves.svg, spectrum-frames.png\n");
+  if (g_json_output) PrintJsonSummary(args.out);
 }
 
 // ---- resume ----------------------------------------------------------------
 
-void RunCaptureResume(const std::string& dir_text) {
+void RunCaptureResume(const std::string& dir_text, bool json) {
+  g_json_output = json;
   const fs::path dir = dir_text;
   const SessionRecord start = ReadSessionRecord(dir);
   const std::string& protocol = start.protocol;
@@ -616,8 +657,9 @@ void RunCaptureResume(const std::string& dir_text) {
       parts_whole = parts_whole && check.complete() && check.clean();
     }
     if (stop && stop->how == "complete" && parts_whole) {
-      std::printf("phos capture resume: %s completed already, and every part is whole; nothing to do\n",
+      Say("phos capture resume: %s completed already, and every part is whole; nothing to do\n",
                   dir.string().c_str());
+      if (g_json_output) PrintJsonSummary(dir);
       return;
     }
     std::vector<std::string> notes;
@@ -625,7 +667,7 @@ void RunCaptureResume(const std::string& dir_text) {
     int resumes = 0;
     for (const nlohmann::json& event : ReadEventRecords(dir)) resumes += event["event"] == "resume";
     Devices devices(start_json, dir, resumes);
-    std::printf("phos capture resume: %s (all)\n", dir.string().c_str());
+    Say("phos capture resume: %s (all)\n", dir.string().c_str());
     PrintNotes("all", notes);
     try {
       RunAllParts(dir, RequiredKey<nlohmann::json>(start.settings, "parts", (dir / "session.json").string() + ": settings"),
@@ -636,11 +678,13 @@ void RunCaptureResume(const std::string& dir_text) {
     }
     top->Stop("complete");
     FinishAll(dir);
+    if (g_json_output) PrintJsonSummary(dir);
     return;
   }
   const SessionCheck check = CheckSession(dir);
   if (check.complete() && check.clean()) {
-    std::printf("phos capture resume: %s completed already; nothing to do\n", dir.string().c_str());
+    Say("phos capture resume: %s completed already; nothing to do\n", dir.string().c_str());
+    if (g_json_output) PrintJsonSummary(dir);
     return;
   }
   if (const std::string problem = UnrepairableProblem(check); !problem.empty())
@@ -658,11 +702,12 @@ void RunCaptureResume(const std::string& dir_text) {
   }
   std::vector<std::string> notes;
   std::unique_ptr<SessionWriter> session = SessionWriter::Reopen(dir, true, &notes);
-  for (const std::string& note : notes) std::printf("phos capture resume: %s\n", note.c_str());
+  for (const std::string& note : notes) Say("phos capture resume: %s\n", note.c_str());
   Devices devices(start_json, dir, 1);
   RunProtocol({protocol, start.settings}, devices, *session, true);
   PrintSession(protocol, dir);
   Previews(protocol, dir, dir);
+  if (g_json_output) PrintJsonSummary(dir);
 }
 
 // ---- verify ----------------------------------------------------------------
@@ -729,6 +774,8 @@ void AddDeviceOptions(CLI::App* cmd, CaptureArgs& args) {
   cmd->add_option("--sim-inset-radius", args.sim_inset_radius, "the disk's radius, a fraction of the half-height (default 0.5)");
   cmd->add_option("--out", args.out, "session folder to create (new or empty)")->required();
   cmd->add_option("--seed", args.seed, "noise seed of the simulated camera (default 1)");
+  cmd->add_flag("--json", args.json, "print one JSON object at the end (the session, its parts, frames, how each ended)\n"
+                                     "instead of the progress lines");
 }
 
 struct DecayArgs : CaptureArgs {
@@ -881,8 +928,10 @@ void RegisterCapture(CLI::App& app) {
       "Go on with an interrupted session (killed, crashed, camera lost): excitation and LVF calibration go\n"
       "on from the next measurement; an `all` folder keeps its complete parts and finishes the rest. A\n"
       "decay or spectrum cannot continue (the glow faded unobserved): phos says so and keeps its frames.");
+  auto resume_json = std::make_shared<bool>(false);
   resume->add_option("DIR", *resume_dir, "the session folder")->required();
-  resume->callback([resume_dir] { RunCaptureResume(*resume_dir); });
+  resume->add_flag("--json", *resume_json, "print one JSON object at the end instead of the progress lines");
+  resume->callback([resume_dir, resume_json] { RunCaptureResume(*resume_dir, *resume_json); });
 
   auto verify_args = std::make_shared<VerifyArgs>();
   CLI::App* verify = capture->add_subcommand(

@@ -32,6 +32,18 @@ TEST(CaptureDecayCommand, WritesACompleteSession) {
   EXPECT_EQ(start["schema"], "phos.session/1");
   EXPECT_EQ(start["uid"].get<std::string>().size(), 32u);
   EXPECT_EQ(ReadJsonFile(dir / "s" / "stop.json")["how"], "complete");
+  EXPECT_EQ(ReadJsonFile(dir / "s" / "stop.json")["frames"], 12);
+  EXPECT_FALSE(start["versions"]["phos"].get<std::string>().empty());
+  // --json: one object, the same count; verify agrees and says so as JSON.
+  auto json = RunPhos("capture decay --sim-material " + testing::Fixture("materials/orange.json").string() + " --out " +
+                      (dir / "j").string() + " --charge-s 600 --duration-s 30 --json");
+  ASSERT_EQ(json.exit_code, 0) << json.err;
+  const nlohmann::json summary = nlohmann::json::parse(json.out);
+  EXPECT_EQ(summary["frames"], 12);
+  EXPECT_EQ(summary["state"], "complete");
+  auto verify = RunPhos("capture verify " + (dir / "j").string() + " --json");
+  ASSERT_EQ(verify.exit_code, 0) << verify.err;
+  EXPECT_EQ(nlohmann::json::parse(verify.out)["clean"], true);
 }
 
 TEST(CaptureExcitationCommand, WritesACompleteSession) {
