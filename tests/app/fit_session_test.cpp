@@ -233,12 +233,23 @@ TEST(FitBatchCommand, FitsInParallelResumesAndSummarizes) {
   EXPECT_EQ(testing::LineCount(summary), 5);  // header + 4 items
 
   // A crash after white's material but before its record: only white reruns.
+  // A record that does not parse, or lacks its fields, is "not done" too.
   std::filesystem::remove(dir / "out" / "white.done.json");
+  testing::WriteText(dir / "out" / "yellow.done.json", "{}");
   const std::string orange_before = testing::ReadText(dir / "out" / "orange.json");
   auto second = RunPhos(command);
-  EXPECT_NE(second.out.find("1 fitted now, 2 kept, 1 failed"), std::string::npos) << second.out;
+  EXPECT_NE(second.out.find("2 fitted now, 1 kept, 1 failed"), std::string::npos) << second.out;
+  EXPECT_NE(second.out.find("its .done.json no item: fitted again"), std::string::npos) << second.out;
   EXPECT_EQ(testing::ReadText(dir / "out" / "orange.json"), orange_before);
   EXPECT_TRUE(std::filesystem::exists(dir / "out" / "white.done.json"));
+  testing::WriteText(dir / "out" / "white.done.json", "{\"item\": ");
+  // An item with a truncated decay frame fails, naming the frame; the rest go on.
+  std::filesystem::resize_file(dir / "captures" / "orange" / "decay" / "frames" / "000003.tif", 100);
+  std::filesystem::remove(dir / "out" / "orange.done.json");
+  auto third = RunPhos(command);
+  EXPECT_NE(third.out.find("1 fitted now, 1 kept, 2 failed"), std::string::npos) << third.out;
+  EXPECT_NE(testing::ReadText(dir / "out" / "orange.failed.txt").find("decay/frames/000003.tif: is 100 bytes"),
+            std::string::npos);
 }
 
 
