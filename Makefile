@@ -1,14 +1,14 @@
 # phos: the two set-up commands of the README, and a few more.
 #   make demo   install what is missing (apt), build in Release, run the main job
 #   make test   install what is missing, build under ASan+UBSan, run every test (ctest),
-#               then every fuzz harness for FUZZ_CI_SECONDS (10 s) each
+#               then every fuzz harness for FUZZ_CI_SECONDS (4 s) each
 # Other targets: build (Release only), bench (benchmarks, Release), study
 # (regenerate the integrator error, Glassner and nc trade studies in docs/),
 # fuzz (the libFuzzer harnesses for FUZZ_SECONDS each, docs/fuzzing.md), clean.
 
 JOBS ?= $(shell nproc)
 FUZZ_SECONDS ?= 60
-FUZZ_CI_SECONDS ?= 10
+FUZZ_CI_SECONDS ?= 4
 
 .PHONY: all bootstrap build demo test bench study fuzz fuzz-build clean
 

@@ -16,6 +16,13 @@ function(phos_test part name)
   target_compile_definitions(${target} PRIVATE
     PHOS_FIXTURES_DIR="${PHOS_FIXTURES_DIR}"
     PHOS_BINARY="$<TARGET_FILE:phos>")
+  # Under the sanitizers, test code is built with AddressSanitizer only: the
+  # code under test (the libraries and commands) keeps UBSan, and the test
+  # files, 40% of what CI compiles, build about a third faster (the CI run
+  # must fit in 30 minutes on 2 cores).
+  if(PHOS_SANITIZE)
+    target_compile_options(${target} PRIVATE -fno-sanitize=undefined)
+  endif()
   add_dependencies(${target} phos)
   gtest_discover_tests(${target} DISCOVERY_TIMEOUT 60 PROPERTIES TIMEOUT 600)
 endfunction()
