@@ -53,8 +53,13 @@ for t in "${TARGETS[@]}"; do
   [ -n "${FUZZ_RUNS:-}" ] && budget=(-runs="$FUZZ_RUNS")
   cmd=(nice -n 19 "$exe" "${budget[@]}" -timeout="$TIMEOUT" -rss_limit_mb="$RSS_MB"
        -max_len="$MAX_LEN" -print_final_stats=1 -artifact_prefix="$findings/" "${dict[@]}" "$corpus" "$seed")
+  # nice alone does not keep the fuzzer off a build started from another
+  # terminal: with sched_autogroup each session is a scheduling group and
+  # nice weighs only within it (a nice-19 fuzzer took a whole core from a
+  # build here). So each fuzzer runs in a session of its own whose group is
+  # niced too.
   ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
-    "${cmd[@]}" >"$log" 2>&1
+    setsid --wait bash -c 'echo 19 > /proc/self/autogroup 2>/dev/null; exec "$@"' fuzz "${cmd[@]}" >"$log" 2>&1
   rc=$?
   runs=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$log" | grep -o '[0-9]*$' | tail -1)
   took=$(grep -o 'Done [0-9]* runs in [0-9]* second' "$log" | grep -o 'in [0-9]*' | grep -o '[0-9]*' | tail -1)
