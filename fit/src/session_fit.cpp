@@ -835,6 +835,10 @@ SessionFit FitSessionStages(const fs::path& dir, const SessionFitOptions& option
     return true;
   };
 
+  // Every part's frames checked first (size and checksum, as resume does): a
+  // damaged session is refused naming the frame, never fitted in part.
+  for (const char* part : {"lvf-calibration", "spectrum", "decay", "excitation"})
+    if (fs::exists(dir / part / "session.json")) RequireGoodFrames(dir / part, ReadFrameRecords(dir / part));
   // 1. LVF calibration.
   if (part_ok("lvf-calibration")) {
     try {
