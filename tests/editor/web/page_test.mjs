@@ -58,6 +58,9 @@ try {
   // The page.
   browser = await chromium.launch({ executablePath: "/usr/bin/chromium", args: ["--no-sandbox"] });
   const page = await browser.newPage({ viewport: { width: 1280, height: 820 }, acceptDownloads: true });
+  // Under AddressSanitizer (make test) every solve and frame is several times
+  // slower than in Release: wait up to 2 minutes for each, not Playwright's 30 s.
+  page.setDefaultTimeout(120000);
   const errors = [];
   page.on("pageerror", (error) => errors.push(error.message));
   await page.goto(url);
@@ -91,7 +94,11 @@ try {
   await page.waitForFunction(() => document.getElementById("view").complete);
   const box = await view.boundingBox();
   const place = async (frame) => {
-    await page.evaluate((f) => window.phos.setFrame(f), frame);
+    // Click only once the frame is shown: under AddressSanitizer a frame
+    // takes seconds, and a click on the previous one would pick the wrong time.
+    await Promise.all([page.waitForResponse((r) => r.url().includes("/api/frame")),
+                       page.evaluate((f) => window.phos.setFrame(f), frame)]);
+    await page.waitForFunction(() => document.getElementById("view").complete);
     const count = await page.evaluate(() => window.phos.state.constraints.length);
     await view.click({ position: { x: box.width * 0.5, y: box.height * 0.25 } });
     await page.waitForFunction((n) => window.phos.state.constraints.length === n + 1, count);

@@ -39,7 +39,7 @@ struct ServerOptions {
   // A request (line, headers, body) must arrive within read_timeout_s of its
   // connection, however slowly its bytes come; its response must leave within
   // write_timeout_s. One request per connection.
-  double read_timeout_s = 5;
+  double read_timeout_s = 30;  // a browser preconnects and may send its request many seconds later (seen under ASan)
   double write_timeout_s = 5;
   // Connections served at once, each on a thread of its own; more are answered
   // 503 at once. Slow clients hold only their own, up to the timeouts.
