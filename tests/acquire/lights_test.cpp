@@ -9,6 +9,8 @@
 #include <unistd.h>
 
 #include <csignal>
+#include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <gtest/gtest.h>
 
@@ -73,6 +75,17 @@ class FileLights final : public Lights {
   std::string path_;
 };
 
+// A forked child says it is ready by renaming a whole file into place, so
+// the parent never reads it half-written; the parent waits up to 5 s for it.
+void SayReady(const std::string& ready, const std::string& text) {
+  std::ofstream(ready + ".tmp") << text << std::flush;
+  std::rename((ready + ".tmp").c_str(), ready.c_str());
+}
+std::string WaitForReady(const std::string& ready) {
+  for (int i = 0; i < 500 && !std::filesystem::exists(ready); ++i) usleep(10000);
+  return testing::ReadText(ready);
+}
+
 void ExpectSignalSwitchesOff(int signal_number, const std::string& name) {
   testing::TempDir dir;
   const std::string state = (dir / "lamp").string();
@@ -84,14 +97,15 @@ void ExpectSignalSwitchesOff(int signal_number, const std::string& name) {
     FileLights lights(state);
     LightsOffGuard guard(lights);
     lights.Set("lamp", true);
-    std::ofstream(ready) << "1";
+    SayReady(ready, "1");
     for (;;) pause();  // a protocol charging for 90 minutes
   }
-  for (int i = 0; i < 500 && !std::ifstream(ready); ++i) usleep(10000);
-  ASSERT_EQ(testing::ReadText(state), "on");
+  WaitForReady(ready);
+  const std::string before = testing::ReadText(state);
   kill(child, signal_number);
   int status = 0;
   waitpid(child, &status, 0);
+  ASSERT_EQ(before, "on");
   ASSERT_TRUE(WIFEXITED(status));
   EXPECT_EQ(WEXITSTATUS(status), 128 + signal_number);
   EXPECT_EQ(testing::ReadText(state), "off");
@@ -119,14 +133,17 @@ TEST(LightsGuardian, SwitchesOffWhenCaptureIsKilledWithSigkill) {
     FileLights lights(state);
     LightsGuardian guardian(lights);
     lights.Set("lamp", true);
-    std::ofstream(ready) << guardian.pid();
+    SayReady(ready, std::to_string(guardian.pid()));
     for (;;) pause();
   }
-  for (int i = 0; i < 500 && !std::ifstream(ready); ++i) usleep(10000);
-  ASSERT_EQ(testing::ReadText(state), "on");
-  const int guardian = std::stoi(testing::ReadText(ready));
+  const std::string guardian_pid = WaitForReady(ready);
+  const std::string before = testing::ReadText(state);
+  // Killed before anything is asserted: a failed assertion must not leave
+  // the child (and its guardian) running, holding ctest's output open.
   kill(child, SIGKILL);
   waitpid(child, nullptr, 0);
+  ASSERT_EQ(before, "on");
+  const int guardian = std::atoi(guardian_pid.c_str());
   // The guardian is not our child: wait for the lamp to go off (at most 5 s).
   EXPECT_GT(guardian, 0);
   for (int i = 0; i < 500 && testing::ReadText(state) != "off"; ++i) usleep(10000);
@@ -157,10 +174,10 @@ TEST(LightsOffGuard, ASignalAfterTheSessionEndedLeavesItsRecord) {
     session.Stop("complete");
     FileLights lights((dir / "lamp").string());
     LightsOffGuard guard(lights);
-    std::ofstream(ready) << "1";
+    SayReady(ready, "1");
     for (;;) pause();
   }
-  for (int i = 0; i < 500 && !std::ifstream(ready); ++i) usleep(10000);
+  WaitForReady(ready);
   kill(child, SIGTERM);
   int status = 0;
   waitpid(child, &status, 0);
