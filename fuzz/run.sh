@@ -19,7 +19,7 @@ TIMEOUT=${FUZZ_TIMEOUT:-10}
 RSS_MB=${FUZZ_RSS_MB:-2048}
 MAX_LEN=${FUZZ_MAX_LEN:-65536}
 TARGETS=("$@")
-[ ${#TARGETS[@]} -eq 0 ] && TARGETS=(material scene obj gltf constraints lab curve_csv)
+[ ${#TARGETS[@]} -eq 0 ] && TARGETS=(material scene obj gltf constraints lab curve_csv session editor)
 
 seeds() {  # the seed files of a target
   case $1 in
@@ -30,6 +30,8 @@ seeds() {  # the seed files of a target
     constraints) ls fixtures/constraints/*.json ;;
     lab) ls fuzz/seeds/lab/* ;;
     curve_csv) ls fixtures/curves/*.csv fixtures/curves/*.dat fixtures/curves/*.txt fixtures/cameras/*.csv ;;
+    session) ls fuzz/seeds/session/* ;;
+    editor) ls fuzz/seeds/editor/* ;;
   esac
   [ -d "fuzz/regressions/$1" ] && ls -d "fuzz/regressions/$1"/* 2>/dev/null
   return 0

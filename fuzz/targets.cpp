@@ -13,6 +13,7 @@
 #include <nlohmann/json.hpp>
 
 #include "phos/acquire/lab.h"
+#include "phos/acquire/session_records.h"
 #include "phos/editor/solve.h"
 #include "phos/fit/curve.h"
 #include "phos/model/material.h"
@@ -116,9 +117,10 @@ bool Constraints(std::string_view data) {
 }
 
 bool LabConfig(std::string_view data) {
-  const std::filesystem::path path = ScratchDir() / "lab.json";
-  WriteFile(path, data);
-  return Refusal([&] { LoadLabConfig(path); });
+  // Named as a file beside fuzz/seeds/lab/led365.csv, so that an
+  // irradiance_csv of the seeds resolves (and is read: a CSV of its own).
+  static const std::filesystem::path path = FixturesDir().parent_path() / "fuzz/seeds/lab/fuzz-lab.json";
+  return Refusal([&] { LabConfigFromJson(data, path); });
 }
 
 bool CurveCsv(std::string_view data) {
@@ -139,6 +141,52 @@ bool CurveCsv(std::string_view data) {
     PeakAfterRise(curve);
     for (const auto& channel : curve.channels) SampleWeights(channel, Weighting::kPoisson);
   });
+}
+
+namespace {
+
+// A session folder of this process: session.json, and frames.jsonl,
+// events.jsonl and stop.json as hard links to it (one write of the input
+// serves the four readers), with frame files for the checks: 000001 as the
+// seeds record it (23 bytes, XXH3 f7fe1eae775cab43), 000002 a folder, 000003
+// a symbolic link to /dev/zero, 000004 empty; the others are missing.
+const std::filesystem::path& SessionDir() {
+  static const std::filesystem::path dir = [] {
+    const std::filesystem::path d = ScratchDir() / "session";
+    std::filesystem::create_directories(d / "frames/000002.tif");
+    WriteFile(d / "frames/000001.tif", std::string_view("II*\0phos fuzz frame 1\n", 23));
+    std::filesystem::create_symlink("/dev/zero", d / "frames/000003.tif");
+    WriteFile(d / "frames/000004.tif", "");
+    WriteFile(d / "session.json", "");
+    for (const char* name : {"frames.jsonl", "events.jsonl", "stop.json"})
+      std::filesystem::create_hard_link(d / "session.json", d / name);
+    return d;
+  }();
+  return dir;
+}
+
+}  // namespace
+
+bool SessionRecords(std::string_view data) {
+  const std::filesystem::path& dir = SessionDir();
+  WriteFile(dir / "session.json", data);  // truncates the one file the four names share
+  bool accepted = true;
+  accepted &= Refusal([&] { ReadSessionRecord(dir); });
+  accepted &= Refusal([&] { ReadStopRecord(dir); });
+  accepted &= Refusal([&] { ReadEventRecords(dir); });
+  accepted &= Refusal([&] {
+    const FrameRecords records = ReadFrameRecords(dir);
+    for (const FrameRecord& frame : records.frames) {
+      CheckFrameFile(dir, frame);
+      // What a writer records of an accepted frame, a reader accepts.
+      try {
+        FrameRecord::FromJson(frame.ToJson(), "fuzz: round trip");
+      } catch (const UserError& e) {
+        throw std::logic_error(std::string("an accepted frame record does not read back: ") + e.what());
+      }
+    }
+  });
+  return accepted;
 }
 
 }  // namespace phos::fuzz

@@ -22,8 +22,17 @@ bool Scene(std::string_view data);        // phos.scene/1 (meshes and materials 
 bool ObjMesh(std::string_view data);      // Wavefront OBJ
 bool GltfMesh(std::string_view data);     // glTF 2.0, JSON or binary (.glb)
 bool Constraints(std::string_view data);  // phos.constraints/1
-bool LabConfig(std::string_view data);    // phos.lab/1 (through a file: LoadLabConfig reads one)
+bool LabConfig(std::string_view data);    // phos.lab/1 (LabConfigFromJson, as LoadLabConfig reads a file)
 bool CurveCsv(std::string_view data);     // a curve table as fit decay-curve and charge-curve read it
+// The session records (acquire/session_records.h): the same bytes as
+// session.json, frames.jsonl, events.jsonl and stop.json of one session
+// folder, each read by its reader (and every frame listed checked against
+// its file). True when all four accept, false when any refuses.
+bool SessionRecords(std::string_view data);
+// One request to the editor's HTTP server (editor_target.cpp, not in
+// kTargets: it needs the renderer and the editor, which the regression test
+// does not link): the first byte picks the route, the rest is its JSON body.
+bool EditorRequest(std::string_view data);
 
 struct Target {
   const char* name;
@@ -31,7 +40,7 @@ struct Target {
 };
 inline constexpr Target kTargets[] = {
     {"material", Material},       {"scene", Scene},     {"obj", ObjMesh},         {"gltf", GltfMesh},
-    {"constraints", Constraints}, {"lab", LabConfig},   {"curve_csv", CurveCsv},
+    {"constraints", Constraints}, {"lab", LabConfig},   {"curve_csv", CurveCsv},      {"session", SessionRecords},
 };
 
 }  // namespace phos::fuzz

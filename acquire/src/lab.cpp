@@ -48,8 +48,10 @@ nlohmann::json LabConfig::ToJson() const {
           {"rig", rig}};
 }
 
-LabConfig LoadLabConfig(const std::filesystem::path& path) {
-  const nlohmann::json document = ReadJsonFile(path);
+LabConfig LoadLabConfig(const std::filesystem::path& path) { return LabConfigFromJson(ReadFileText(path), path); }
+
+LabConfig LabConfigFromJson(std::string_view text, const std::filesystem::path& path) {
+  const nlohmann::json document = ParseJsonText(text, path.string());
   JsonField root(document, path.string());
   root.RejectUnknownKeys(
       {"schema", "camera", "lights", "charge_light", "calibration_lines", "flat_field", "rig", "bands_nm", "note"});

@@ -58,6 +58,26 @@ TEST(FuzzRegressions, ALabCameraRegionIsWholePixelsOfARealSensor) {
                                                 "phos accepts");
 }
 
+// The fuzz harness reads lab configs from memory (LabConfigFromJson); a file
+// read by LoadLabConfig gives the same config and the same messages, and an
+// irradiance_csv is found beside the path given.
+TEST(FuzzRegressions, ALabConfigFromMemoryIsTheSameAsFromItsFile) {
+  testing::TempDir dir;
+  testing::WriteText(dir / "led.csv", "wavelength_nm,irradiance\n400,1\n500,2\n600,1\n");
+  const std::string good = R"({"schema": "phos.lab/1", "camera": {"aravis": "Fake_1"}, "lights": {"backend": "none",
+      "channels": {"led405": {"line": 1, "irradiance_csv": "led.csv"}}}})";
+  testing::WriteText(dir / "lab.json", good);
+  EXPECT_EQ(LabConfigFromJson(good, dir / "lab.json").ToJson(), LoadLabConfig(dir / "lab.json").ToJson());
+  EXPECT_EQ(LabConfigFromJson(good, dir / "lab.json").source, dir / "lab.json");
+  for (const std::string bad : {std::string("{"), std::string(R"({"schema": "phos.lab/2"})"),
+                                std::string(R"({"schema": "phos.lab/1", "camera": {"aravis": "Fake_1", "region": [0, 0, 1e9, 1]}})")}) {
+    testing::WriteText(dir / "lab.json", bad);
+    const std::string from_file = testing::ErrorOfType<UserError>([&] { LoadLabConfig(dir / "lab.json"); });
+    EXPECT_NE(from_file, "(no error)");
+    EXPECT_EQ(testing::ErrorOfType<UserError>([&] { LabConfigFromJson(bad, dir / "lab.json"); }), from_file);
+  }
+}
+
 // Issue 18 item 5: NaN and infinity in a numeric option.
 TEST(FuzzRegressions, NonFiniteOptionValuesAreRefused) {
   const std::string curve = testing::Fixture("curves/charge.csv").string();

@@ -8,6 +8,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -64,6 +65,10 @@ struct LabConfig {
 // Reads and checks a lab config; every problem is one UserError naming the
 // file and the field.
 LabConfig LoadLabConfig(const std::filesystem::path& path);
+// The same from the file's text: path names it in messages and in
+// LabConfig::source, and an irradiance_csv is relative to its folder
+// (LoadLabConfig is ReadFileText, then this; the fuzz harness calls it).
+LabConfig LabConfigFromJson(std::string_view text, const std::filesystem::path& path);
 
 // Lights on GPIO lines through libgpiod (v1.6 C++ API). All lines are
 // requested as outputs and driven to "off" at once (a lab powers up dark);
