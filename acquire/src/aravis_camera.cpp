@@ -26,6 +26,45 @@ void Check(GError* error, const std::string& camera, const std::string& what) {
   ThrowUserError("camera '" + camera + "'", what, message);
 }
 
+// One of the stream's counters by name, or 0 where the stream keeps none
+// (only GigE Vision streams count packets; asking Aravis for a counter a
+// stream did not declare prints a critical warning).
+std::uint64_t StreamCount(ArvStream* stream, const char* name) {
+  if (stream == nullptr || !ARV_IS_GV_STREAM(stream)) return 0;
+  const guint n = arv_stream_get_n_infos(stream);
+  for (guint i = 0; i < n; ++i) {
+    const char* info = arv_stream_get_info_name(stream, i);
+    if (info != nullptr && std::strcmp(info, name) == 0 && arv_stream_get_info_type(stream, i) == G_TYPE_UINT64)
+      return arv_stream_get_info_uint64(stream, i);
+  }
+  return 0;
+}
+
+// Why a buffer is not a whole frame, or "" when it is: its status, or fewer
+// bytes than its region needs (a trailer that came early).
+std::string WhyIncomplete(ArvBuffer* buffer) {
+  switch (arv_buffer_get_status(buffer)) {
+    case ARV_BUFFER_STATUS_SUCCESS: break;
+    case ARV_BUFFER_STATUS_TIMEOUT: return "timeout: packets lost and not resent in time";
+    case ARV_BUFFER_STATUS_MISSING_PACKETS: return "packets missing";
+    case ARV_BUFFER_STATUS_WRONG_PACKET_ID: return "a packet out of place";
+    case ARV_BUFFER_STATUS_SIZE_MISMATCH: return "larger than its buffer";
+    case ARV_BUFFER_STATUS_ABORTED: return "aborted";
+    case ARV_BUFFER_STATUS_CLEARED:
+    case ARV_BUFFER_STATUS_FILLING: return "never filled";
+    default: return "status " + std::to_string(static_cast<int>(arv_buffer_get_status(buffer)));
+  }
+  gint x = 0, y = 0, width = 0, height = 0;
+  arv_buffer_get_image_region(buffer, &x, &y, &width, &height);
+  const int container_bits = ARV_PIXEL_FORMAT_BIT_PER_PIXEL(arv_buffer_get_image_pixel_format(buffer));
+  if (container_bits != 8 && container_bits != 16) return "";  // refused as a format, not as the link's fault
+  size_t size = 0;
+  arv_buffer_get_image_data(buffer, &size);
+  const std::size_t needed = static_cast<std::size_t>(width) * height * (container_bits / 8);
+  if (size < needed) return std::to_string(size) + " of its " + std::to_string(needed) + " bytes";
+  return "";
+}
+
 }  // namespace
 
 void AravisCamera::EnableFakeInterface() { arv_enable_interface("Fake"); }
@@ -62,9 +101,11 @@ void AravisCamera::AllocateBuffers() {
   if (impl_->stream) g_object_unref(impl_->stream);
   impl_->stream = arv_camera_create_stream(impl_->camera, nullptr, nullptr, &error);
   Check(error, impl_->id, "stream");
+  // Lost packets are asked for again (Aravis's default, stated here since a
+  // frame is only kept whole): the camera resends them from its memory.
   if (ARV_IS_GV_STREAM(impl_->stream))
     g_object_set(impl_->stream, "socket-buffer", ARV_GV_STREAM_SOCKET_BUFFER_FIXED, "socket-buffer-size",
-                 8 * 1024 * 1024, nullptr);
+                 8 * 1024 * 1024, "packet-resend", ARV_GV_STREAM_PACKET_RESEND_ALWAYS, nullptr);
   const guint payload = arv_camera_get_payload(impl_->camera, &error);
   Check(error, impl_->id, "payload");
   for (int i = 0; i < 2; ++i) arv_stream_push_buffer(impl_->stream, arv_buffer_new_allocate(payload));
@@ -197,6 +238,22 @@ void AravisCamera::SetRegion(int x, int y, int width, int height) {
   AllocateBuffers();
 }
 
+void AravisCamera::set_max_retakes(int retakes) {
+  if (retakes < 0 || retakes > 100)
+    ThrowUserError("camera '" + impl_->id + "'", "retakes", "refuses " + std::to_string(retakes) + " (it takes 0 to 100)");
+  max_retakes_ = retakes;
+}
+
+AravisCamera::StreamStatistics AravisCamera::stream_statistics() const {
+  StreamStatistics s;
+  s.completed_frames = StreamCount(impl_->stream, "n_completed_buffers");
+  s.failed_frames = StreamCount(impl_->stream, "n_failures");
+  s.resend_requests = StreamCount(impl_->stream, "n_resend_requests");
+  s.resent_packets = StreamCount(impl_->stream, "n_resent_packets");
+  s.missing_packets = StreamCount(impl_->stream, "n_missing_packets");
+  return s;
+}
+
 AravisCamera::~AravisCamera() {
   if (!impl_) return;
   if (impl_->stream) g_object_unref(impl_->stream);
@@ -265,9 +322,31 @@ Frame AravisCamera::Capture(double exposure_s, double gain) {
 
   // A frame left from an earlier acquisition was exposed with other settings.
   while (ArvBuffer* stale = arv_stream_try_pop_buffer(impl_->stream)) arv_stream_push_buffer(impl_->stream, stale);
+  gint64 try_started_ns = 0;
+  const std::uint64_t resent_before = StreamCount(impl_->stream, "n_resent_packets");
+  const std::uint64_t missing_before = StreamCount(impl_->stream, "n_missing_packets");
+  const gint64 try_timeout_us = static_cast<gint64>((exposure_s + timeout_s_) * 1e6);
+  auto pop_this_frame = [&]() -> ArvBuffer* {
+    const gint64 deadline_us = g_get_monotonic_time() + try_timeout_us;
+    for (gint64 left_us = try_timeout_us; left_us > 0; left_us = deadline_us - g_get_monotonic_time()) {
+      ArvBuffer* popped = arv_stream_timeout_pop_buffer(impl_->stream, static_cast<guint64>(left_us));
+      if (popped == nullptr) return nullptr;
+      // A whole frame whose first packet reached the host before this try
+      // began was exposed before it (one that came in behind a frame held
+      // back while its lost packets were awaited, or one from earlier
+      // settings): it is dropped, so t_start_s and the settings are the
+      // frame's own. An incomplete one is retaken whatever its age.
+      if (arv_buffer_get_status(popped) != ARV_BUFFER_STATUS_SUCCESS ||
+          arv_buffer_get_system_timestamp(popped) >= static_cast<guint64>(try_started_ns))
+        return popped;
+      arv_stream_push_buffer(impl_->stream, popped);
+    }
+    return nullptr;
+  };
   ArvBuffer* buffer = nullptr;
-  for (int attempt = 1;; ++attempt) {
+  for (int retakes = 0;; ++retakes) {
     frame.t_start_s = clock_.now_s();
+    try_started_ns = g_get_real_time() * 1000;
     arv_camera_start_acquisition(impl_->camera, &error);
     Check(error, impl_->id, "acquisition");
     if (trigger_ == Trigger::kSoftware) {
@@ -279,7 +358,7 @@ Frame AravisCamera::Capture(double exposure_s, double gain) {
       frame.t_start_s = clock_.now_s();
       fire_hardware_trigger();
     }
-    buffer = arv_stream_timeout_pop_buffer(impl_->stream, static_cast<guint64>((exposure_s + timeout_s_) * 1e6));
+    buffer = pop_this_frame();
     arv_camera_stop_acquisition(impl_->camera, nullptr);
     if (buffer == nullptr && trigger_ == Trigger::kHardware)
       ThrowUserError("camera '" + impl_->id + "'", "acquisition",
@@ -287,13 +366,21 @@ Frame AravisCamera::Capture(double exposure_s, double gain) {
                          trigger_source_ + "' did not fire (check its wiring)");
     if (buffer == nullptr)
       ThrowUserError("camera '" + impl_->id + "'", "acquisition", "no frame arrived in time (disconnected?)");
-    if (arv_buffer_get_status(buffer) == ARV_BUFFER_STATUS_SUCCESS) break;
-    const int status = arv_buffer_get_status(buffer);
+    const std::string incomplete = WhyIncomplete(buffer);
+    if (incomplete.empty()) {
+      frame.retakes = retakes;
+      break;
+    }
     arv_stream_push_buffer(impl_->stream, buffer);
-    if (attempt == 3)
+    if (retakes == max_retakes_)
       ThrowUserError("camera '" + impl_->id + "'", "acquisition",
-                     "3 frames in a row arrived incomplete (status " + std::to_string(status) + "): check the link");
+                     std::to_string(retakes + 1) + " tries in a row arrived incomplete (the last: " + incomplete +
+                         "; " + std::to_string(StreamCount(impl_->stream, "n_missing_packets") - missing_before) +
+                         " packets missing, " +
+                         std::to_string(StreamCount(impl_->stream, "n_resent_packets") - resent_before) +
+                         " resent): check the link");
   }
+  frame.packets_resent = StreamCount(impl_->stream, "n_resent_packets") - resent_before;
   // The buffer goes back to the stream on every way out.
   struct Requeue {
     ArvStream* stream;

@@ -310,6 +310,8 @@ std::string SessionWriter::WriteFrame(const Frame& frame, nlohmann::json extra) 
   record.adc_bits = frame.adc_bits;
   record.sensor_temperature_c = frame.sensor_temperature_c;
   record.camera_timestamp_ns = frame.camera_timestamp_ns;
+  record.packets_resent = frame.packets_resent;
+  record.retakes = frame.retakes;
   record.size_bytes = digest.size_bytes;
   record.xxh3 = digest.xxh3;
   record.protocol = std::move(extra);
@@ -427,6 +429,8 @@ Frame ReadFrame(const std::filesystem::path& session_dir, const FrameRecord& rec
   frame.t_start_s = record.t_start_s;
   frame.sensor_temperature_c = record.sensor_temperature_c;
   frame.camera_timestamp_ns = record.camera_timestamp_ns;
+  frame.packets_resent = record.packets_resent;
+  frame.retakes = record.retakes;
   return frame;
 }
 

@@ -243,7 +243,7 @@ double NumberInRange(const nlohmann::json& j, const char* key, double lower, dou
 namespace {
 const char* const kFrameKeys[] = {"file",  "seq",         "t_start_s", "exposure_s",           "gain",
                                   "black_level_dn", "adc_bits", "sensor_temperature_c", "camera_timestamp_ns",
-                                  "size_bytes", "xxh3"};
+                                  "size_bytes", "xxh3", "packets_resent", "retakes"};
 }
 
 namespace {
@@ -304,6 +304,8 @@ nlohmann::json FrameRecord::ToJson() const {
   j["adc_bits"] = adc_bits;
   j["sensor_temperature_c"] = sensor_temperature_c;
   if (camera_timestamp_ns != 0) j["camera_timestamp_ns"] = camera_timestamp_ns;
+  j["packets_resent"] = packets_resent;
+  j["retakes"] = retakes;
   if (size_bytes) j["size_bytes"] = *size_bytes;
   if (!xxh3.empty()) j["xxh3"] = xxh3;
   return j;
@@ -329,6 +331,17 @@ FrameRecord FrameRecord::FromJson(const nlohmann::json& j, const std::string& wh
     if (!j["camera_timestamp_ns"].is_number_unsigned())
       KeyError(where, "camera_timestamp_ns", "expected a non-negative integer, got " + DescribeJson(j["camera_timestamp_ns"]));
     r.camera_timestamp_ns = j["camera_timestamp_ns"].get<std::uint64_t>();
+  }
+  if (j.contains("packets_resent")) {
+    if (!j["packets_resent"].is_number_unsigned())
+      KeyError(where, "packets_resent", "expected a non-negative integer, got " + DescribeJson(j["packets_resent"]));
+    r.packets_resent = j["packets_resent"].get<std::uint64_t>();
+  }
+  if (j.contains("retakes")) {
+    if (!j["retakes"].is_number_integer() || j["retakes"].get<std::int64_t>() < 0 ||
+        j["retakes"].get<std::int64_t>() > 1000)
+      KeyError(where, "retakes", "expected an integer from 0 to 1000, got " + DescribeJson(j["retakes"]));
+    r.retakes = j["retakes"].get<int>();
   }
   if (j.contains("size_bytes")) {
     if (!j["size_bytes"].is_number_unsigned())

@@ -101,6 +101,10 @@ TEST(SessionRecords, FrameRecordsRoundTripAndNameWhatIsWrong) {
       {"size_bytes", -3, "size_bytes: expected a non-negative integer"},
       {"mean_signal_dn", "bright", "mean_signal_dn: expected an array of numbers"},
       {"tail", 1.5, "tail: expected an integer"},
+      {"retakes", -1, "retakes: expected an integer from 0 to 1000"},
+      {"retakes", 1.5, "retakes: expected an integer from 0 to 1000"},
+      {"packets_resent", "3", "packets_resent: expected a non-negative integer"},
+      {"packets_resent", -2, "packets_resent: expected a non-negative integer"},
   };
   for (const Case& c : cases) {
     nlohmann::json bad = good;
@@ -114,6 +118,33 @@ TEST(SessionRecords, FrameRecordsRoundTripAndNameWhatIsWrong) {
       EXPECT_EQ(std::string(e.what()).rfind("s/frames.jsonl:1", 0), 0u) << e.what();
     }
   }
+}
+
+TEST(SessionRecords, TheLinksResendsAndRetakesAreRecordedAndOlderRecordsWithoutThemStillLoad) {
+  testing::TempDir dir;
+  CaptureExcitation(dir / "s");
+  const std::vector<JsonLine> lines = ReadJsonLinesFile(dir / "s" / "frames.jsonl").records;
+  ASSERT_FALSE(lines.empty());
+  // The simulated lab has no packet link: every frame came whole at once.
+  for (const JsonLine& line : lines) {
+    EXPECT_EQ(line.value.at("packets_resent"), 0) << line.line;
+    EXPECT_EQ(line.value.at("retakes"), 0) << line.line;
+  }
+  // As written by a camera that worked for it, through text, and back.
+  FrameRecord record = FrameRecord::FromJson(lines[0].value, "x");
+  record.packets_resent = 17;
+  record.retakes = 2;
+  const FrameRecord again = FrameRecord::FromJson(nlohmann::json::parse(record.ToJson().dump()), "x");
+  EXPECT_EQ(again.packets_resent, 17u);
+  EXPECT_EQ(again.retakes, 2);
+  EXPECT_FALSE(again.protocol.contains("retakes"));  // a record field, not a protocol's
+  // A session recorded before they were counted loads, with 0 for both.
+  nlohmann::json older = lines[0].value;
+  older.erase("packets_resent");
+  older.erase("retakes");
+  const FrameRecord old_record = FrameRecord::FromJson(older, "x");
+  EXPECT_EQ(old_record.packets_resent, 0u);
+  EXPECT_EQ(old_record.retakes, 0);
 }
 
 TEST(SessionRecords, ATornLastLineIsSkippedAndSetAsideNeverGluedOnto) {

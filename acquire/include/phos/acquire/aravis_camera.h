@@ -4,6 +4,7 @@
 // camera uses (ExposureTime or ExposureTimeAbs, Gain or GainRaw); no feature
 // name is hard-coded here. Tested against Aravis's own fake cameras.
 
+#include <cstdint>
 #include <functional>
 #include <memory>
 #include <string>
@@ -23,10 +24,31 @@ class AravisCamera final : public Camera {
 
   std::string description() const override;
   // Sets exposure and gain (refused values are UserErrors naming the
-  // camera's bounds), acquires one frame, and reads it as 16-bit. A frame
-  // that arrives incomplete (lost packets) is retaken, up to 3 tries.
+  // camera's bounds), acquires one frame, and reads it as 16-bit. On GigE
+  // Vision, lost packets are first asked for again (packet resend); a frame
+  // that still arrives incomplete (packets missing, a timeout, fewer bytes
+  // than its region) is never returned: it is retaken, up to max_retakes()
+  // times, and then the capture fails with one line. The frame records how
+  // many packets were resent and how many retakes it took.
   Frame Capture(double exposure_s, double gain) override;
   double max_exposure_s() const override;
+
+  // Retakes allowed per frame after an incomplete one (0 to 100). Each costs
+  // an exposure, and on a link that loses a frame now and then, 3 make a
+  // failure from chance alone rare; more in a row mean a broken link.
+  static constexpr int kDefaultMaxRetakes = 3;
+  void set_max_retakes(int retakes);
+  int max_retakes() const { return max_retakes_; }
+
+  // The GigE Vision stream's counts since its stream was built (a region,
+  // binning or format change builds a new one); all 0 on other interfaces.
+  struct StreamStatistics {
+    std::uint64_t completed_frames = 0, failed_frames = 0;
+    std::uint64_t resend_requests = 0;  // packets asked for again
+    std::uint64_t resent_packets = 0;   // of those, the ones that came
+    std::uint64_t missing_packets = 0;  // in frames that failed
+  };
+  StreamStatistics stream_statistics() const;
 
   // Region of interest in (binned) pixels (the payload, and so the stream's
   // buffers, follow it).
@@ -75,6 +97,7 @@ class AravisCamera final : public Camera {
   std::unique_ptr<Impl> impl_;
   const Clock& clock_;
   double timeout_s_;
+  int max_retakes_ = kDefaultMaxRetakes;
   std::uint64_t last_frame_id_ = 0, last_camera_timestamp_ns_ = 0;
 };
 

@@ -20,6 +20,12 @@ struct Frame {
   double t_start_s = 0;  // start of the exposure on the protocol's (host's) clock
   std::uint64_t camera_timestamp_ns = 0;  // the camera's own clock, where it has one
   double sensor_temperature_c = 0;
+  // What the link took to deliver the frame whole: packets the camera sent
+  // again on request (GigE Vision packet resend), and frames taken again
+  // because the one before arrived incomplete. A camera without a packet
+  // link (the simulated lab, Aravis's in-process fake) reports 0 resent.
+  std::uint64_t packets_resent = 0;
+  int retakes = 0;
 
   // Mean of one channel minus the black level, in DN.
   double MeanSignal(int channel) const;

@@ -90,6 +90,11 @@ struct FrameRecord {
   int adc_bits = 16;
   double sensor_temperature_c = 0;
   std::uint64_t camera_timestamp_ns = 0;  // 0: the camera gave none
+  // What the camera link took to deliver the frame whole: packets resent on
+  // request, and frames retaken because one arrived incomplete. Absent in
+  // sessions recorded before they were counted (read as 0).
+  std::uint64_t packets_resent = 0;
+  int retakes = 0;
   // The file's size and XXH3-64, written after the file was complete on
   // disk. Absent in sessions recorded before phos 0.2 (then only the file's
   // presence and, in resume and verify, its decoding are checked).
