@@ -6,6 +6,7 @@
 #include <cmath>
 #include <limits>
 #include <numeric>
+#include <set>
 #include <type_traits>
 
 #include <ceres/ceres.h>
@@ -654,6 +655,23 @@ std::vector<int> DistinctShapes(const std::vector<LibraryCurve>& row) {
   return keep;
 }
 
+// The cost within which two solutions make the same look: a millionth of
+// the cost (rounding), plus 1e-12 of the targets' energy (a relative error of
+// 1e-6 at every target).
+double SameLookTolerance(const Problem& p, double cost) {
+  double energy = 0;
+  for (const Constraint& c : p.constraints)
+    for (double v : c.radiance) energy += c.weight * v * v;
+  return cost * 1e-6 + 1e-12 * energy;
+}
+
+double SumOfLambda(const std::vector<std::vector<double>>& Lambda) {
+  double sum = 0;
+  for (const auto& per_band : Lambda)
+    for (double v : per_band) sum += v;
+  return sum;
+}
+
 bool HasBounds(const Problem& p) {
   for (const Constraint& c : p.constraints)
     if (c.kind != Constraint::Kind::kTarget) return true;
@@ -693,6 +711,9 @@ class CombinationCost {
     EmitInto(p_, s_, g_, Lambda_, Lp_);
     return CostOf(p_, s_, Lp_, residuals_);
   }
+  // The emitting centres, sum of Lambda over states and bands, of the last
+  // combination costed (the tie-break of LeastLambdaFirst).
+  double LambdaSum() const { return SumOfLambda(Lambda_); }
 
  private:
   const Problem& p_;
@@ -707,31 +728,66 @@ class CombinationCost {
   std::vector<std::vector<double>> Lambda_;
 };
 
+// A candidate: its cost, its emitting centres (sum of Lambda) and its
+// library curves.
+struct Candidate {
+  double cost = 0;
+  double Lambda_sum = 0;
+  std::vector<int> combination;
+};
+
+// Best cost first; among the candidates that make the same look as the best
+// (within SameLookTolerance), the fewest emitting centres first. Few
+// constraints leave many curves that meet them exactly (one target in the dark
+// is met by any kr, with Lambda scaled to it), and the cost alone would pick
+// among them by rounding: a fast decay with Lambda ~1e11, glowing 1e11 times
+// brighter while lit, under one build, a plausible one under another. The
+// least Lambda that makes the look is the material with the least phosphor:
+// for one dark target tau after the light, the kr whose glow there is most
+// efficient (about 1 / tau when saturated), and past kMaxLambda never.
+void LeastLambdaFirst(const Problem& p, std::vector<Candidate>& ranked) {
+  std::sort(ranked.begin(), ranked.end(), [](const Candidate& a, const Candidate& b) {
+    const bool a_ok = a.Lambda_sum <= kMaxLambda, b_ok = b.Lambda_sum <= kMaxLambda;
+    if (a_ok != b_ok) return a_ok;
+    return a.cost < b.cost || (a.cost == b.cost && a.combination < b.combination);
+  });
+  if (ranked.empty()) return;
+  const double same = ranked.front().cost + SameLookTolerance(p, ranked.front().cost);
+  const auto ties = std::find_if(ranked.begin(), ranked.end(), [&](const Candidate& c) {
+    return c.cost > same || c.Lambda_sum > kMaxLambda;
+  });
+  std::stable_sort(ranked.begin(), ties, [](const Candidate& a, const Candidate& b) { return a.Lambda_sum < b.Lambda_sum; });
+}
+
 // Candidates for the refinement: combinations of nc library curves (indices),
-// best full cost (bounds included) first. nc = 1: every curve. nc > 1: a beam
-// search, the best `beam` combinations of k curves each extended by every
-// curve of the library, so that a slow state that looks poor on its own (its
-// singles rank low) is still found as the partner of a fast one.
-std::vector<std::pair<double, std::vector<int>>> RankCombinations(const std::vector<LibraryCurve>& library, int nc,
-                                                                  CombinationCost& cost_of) {
-  std::vector<std::pair<double, std::vector<int>>> ranked;
-  for (int k = 0; k < static_cast<int>(library.size()); ++k) ranked.emplace_back(cost_of({k}), std::vector<int>{k});
-  std::sort(ranked.begin(), ranked.end());
+// in LeastLambdaFirst's order. nc = 1: every curve. nc > 1: a beam search,
+// the best `beam` combinations of k curves each extended by every curve of
+// the library, so that a slow state that looks poor on its own (its singles
+// rank low) is still found as the partner of a fast one.
+std::vector<Candidate> RankCombinations(const Problem& p, const std::vector<LibraryCurve>& library, int nc,
+                                        CombinationCost& cost_of) {
+  std::vector<Candidate> ranked;
+  for (int k = 0; k < static_cast<int>(library.size()); ++k) {
+    const double cost = cost_of({k});
+    ranked.push_back({cost, cost_of.LambdaSum(), {k}});
+  }
+  LeastLambdaFirst(p, ranked);
   const int beam = 16;
   for (int depth = 2; depth <= nc; ++depth) {
-    std::vector<std::pair<double, std::vector<int>>> next;
+    std::vector<Candidate> next;
+    std::set<std::vector<int>> seen;
     for (int c = 0; c < std::min<int>(beam, static_cast<int>(ranked.size())); ++c)
       for (int k = 0; k < static_cast<int>(library.size()); ++k) {
-        const std::vector<int>& combination = ranked[c].second;
+        const std::vector<int>& combination = ranked[c].combination;
         if (std::find(combination.begin(), combination.end(), k) != combination.end()) continue;
         std::vector<int> extended = combination;
         extended.push_back(k);
         std::sort(extended.begin(), extended.end());
-        next.emplace_back(cost_of(extended), extended);
+        if (!seen.insert(extended).second) continue;
+        const double cost = cost_of(extended);
+        next.push_back({cost, cost_of.LambdaSum(), std::move(extended)});
       }
-    std::sort(next.begin(), next.end());
-    next.erase(std::unique(next.begin(), next.end(), [](const auto& a, const auto& b) { return a.second == b.second; }),
-               next.end());
+    LeastLambdaFirst(p, next);
     ranked = std::move(next);
   }
   return ranked;
@@ -908,7 +964,7 @@ Solution Solve(const Problem& p, const SolveOptions& options) {
   }
   // 2. Candidates, ranked by the full cost with the closed-form Lambda.
   CombinationCost cost_of(p, s, t, library);
-  const std::vector<std::pair<double, std::vector<int>>> ranked = RankCombinations(library, nc, cost_of);
+  const std::vector<Candidate> ranked = RankCombinations(p, library, nc, cost_of);
   evaluations += static_cast<int>(ranked.size());
   auto params_of = [&](const std::vector<int>& combination) {
     Parameters x;
@@ -924,22 +980,31 @@ Solution Solve(const Problem& p, const SolveOptions& options) {
     return x;
   };
 
-  // 3. Refine the best candidates with Ceres; the best result wins. Starts
-  // differ in their set of kr: curves that differ only in kappa past
-  // saturation look the same, and would start the refinement from one place.
-  Parameters best = params_of(ranked.front().second);
+  // 3. Refine the best candidates with Ceres; the best result wins, and of
+  // results that make the same look, the one with the least Lambda (as in
+  // LeastLambdaFirst). Starts differ in their set of kr: curves that differ
+  // only in kappa past saturation look the same, and would start the
+  // refinement from one place.
+  Parameters best = params_of(ranked.front().combination);
   double best_cost = CostOf(p, s, EmittedAtSamples(p, s, lit, best));
+  const auto better = [&](const Parameters& x, double c) {
+    const double Lambda = SumOfLambda(x.Lambda), best_Lambda = SumOfLambda(best.Lambda);
+    if ((Lambda <= kMaxLambda) != (best_Lambda <= kMaxLambda)) return Lambda <= kMaxLambda;
+    const double same = SameLookTolerance(p, std::min(c, best_cost));
+    if (c < best_cost - same) return true;
+    return c <= best_cost + same && Lambda < best_Lambda;
+  };
   if (options.refine && n_lit > 0) {
     std::vector<std::vector<double>> kr_sets;
     for (std::size_t k = 0; k < ranked.size() && static_cast<int>(kr_sets.size()) < options.refine_starts; ++k) {
-      const Parameters x0 = params_of(ranked[k].second);
+      const Parameters x0 = params_of(ranked[k].combination);
       std::vector<double> kr_set = x0.kr;
       std::sort(kr_set.begin(), kr_set.end());
       if (std::find(kr_sets.begin(), kr_sets.end(), kr_set) != kr_sets.end()) continue;
       kr_sets.push_back(kr_set);
       const Parameters x = Refine(p, s, t, lit, x0, &evaluations);
       const double c = CostOf(p, s, EmittedAtSamples(p, s, lit, x));
-      if (c < best_cost) {
+      if (better(x, c)) {
         best_cost = c;
         best = x;
       }
