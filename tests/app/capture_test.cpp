@@ -287,10 +287,12 @@ TEST(CaptureWithALabConfig, BadConfigsAndMissingDevicesAreOneLine) {
 
 TEST(CaptureWithALabConfig, ACameraThatDisappearsMidRunFailsTheSessionAndKeepsItsFrames) {
   // Aravis's GigE Vision fake camera in its own process on loopback; it is
-  // killed two seconds into a decay that would last thirty.
+  // killed two seconds into a decay that would last thirty. It takes port
+  // 3956 on loopback, as the GigE fakes of tests/acquire/aravis_camera_test.cpp
+  // do: it waits its turn on their lock file (ctest runs both side by side).
   testing::TempDir dir;
   const std::string lab = WriteLab(dir, "127.0.0.1");
-  const std::string script = "arv-fake-gv-camera-0.8 -i 127.0.0.1 >/dev/null 2>&1 & F=$!; sleep 0.7; "
+  const std::string script = "exec 9>>/tmp/phos-aravis-gv-fake.lock; flock 9; arv-fake-gv-camera-0.8 -i 127.0.0.1 >/dev/null 2>&1 & F=$!; sleep 0.7; "
                              "(sleep 2; kill -9 $F) & " + std::string(PHOS_BINARY) + " capture decay --lab " + lab +
                              " --out " + (dir / "s").string() +
                              " --charge-s 0.1 --interval-s 0.2 --duration-s 30 --initial-exposure-s 0.01 "
