@@ -23,6 +23,7 @@
 #include "phos/fit/decay_map.h"
 #include "phos/fit/session_fit.h"
 #include "phos/model/material.h"
+#include "phos/util/atomic_file.h"
 #include "phos/util/error.h"
 #include "phos/util/format.h"
 #include "phos/util/json.h"
@@ -34,18 +35,16 @@ namespace {
 // Writes a float image with named channels (EXR) or 8-bit grey (PNG), whole or not at all.
 void WriteFloatImage(const std::filesystem::path& path, int width, int height, const std::vector<std::string>& names,
                      const std::vector<float>& pixels) {
-  const std::filesystem::path temporary = path.string() + ".tmp" + path.extension().string();
-  auto out = OIIO::ImageOutput::create(temporary.string());
-  if (!out) ThrowUserError(path.string(), "", "no writer: " + OIIO::geterror());
-  const bool png = path.extension() == ".png";
-  OIIO::ImageSpec spec(width, height, static_cast<int>(names.size()), png ? OIIO::TypeDesc::UINT8 : OIIO::TypeDesc::FLOAT);
-  spec.channelnames = names;
-  if (!png) spec.attribute("compression", "zip");
-  if (!out->open(temporary.string(), spec) || !out->write_image(OIIO::TypeDesc::FLOAT, pixels.data()) || !out->close())
-    ThrowUserError(path.string(), "", "could not write (disk full?): " + out->geterror());
-  std::error_code ec;
-  std::filesystem::rename(temporary, path, ec);
-  if (ec) ThrowUserError(path.string(), "", "could not move into place: " + ec.message());
+  WriteAtomically(path, [&](const std::filesystem::path& temporary) {
+    auto out = OIIO::ImageOutput::create(temporary.string());
+    if (!out) ThrowUserError(path.string(), "", "no writer: " + OIIO::geterror());
+    const bool png = path.extension() == ".png";
+    OIIO::ImageSpec spec(width, height, static_cast<int>(names.size()), png ? OIIO::TypeDesc::UINT8 : OIIO::TypeDesc::FLOAT);
+    spec.channelnames = names;
+    if (!png) spec.attribute("compression", "zip");
+    if (!out->open(temporary.string(), spec) || !out->write_image(OIIO::TypeDesc::FLOAT, pixels.data()) || !out->close())
+      ThrowUserError(path.string(), "", "could not write (disk full?): " + out->geterror());
+  });
 }
 
 struct SessionArgs {

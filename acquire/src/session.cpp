@@ -117,21 +117,6 @@ void DisarmAbortRecord(int slot) {
   if (slot >= 0) g_abort_records[slot].armed.store(false);
 }
 
-// Makes a rename durable: the folder's entry is on disk too.
-void SyncDirectory(const std::filesystem::path& dir) {
-  const int fd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-  if (fd < 0) return;
-  ::fsync(fd);
-  ::close(fd);
-}
-
-void SyncFile(const std::filesystem::path& path) {
-  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NOFOLLOW);
-  if (fd < 0) ThrowUserError(path.string(), "", std::string("cannot reopen to flush: ") + std::strerror(errno));
-  const bool synced = ::fsync(fd) == 0;
-  ::close(fd);
-  if (!synced) ThrowUserError(path.string(), "", "could not be flushed to disk (disk full?)");
-}
 
 // Temporaries a crash leaves: frames/NNNNNN.tif.tmp.tif, stop.json.tmp.*,
 // and the temporaries of WriteFileAtomically (<name>.tmp.<pid>).
@@ -270,34 +255,26 @@ std::string SessionWriter::WriteFrame(const Frame& frame, nlohmann::json extra) 
   char name[32];
   std::snprintf(name, sizeof name, "frames/%06d.tif", seq);
   const std::filesystem::path final_path = dir_ / name;
-  const std::filesystem::path temporary = dir_ / (std::string(name) + ".tmp.tif");
-  auto out = OIIO::ImageOutput::create(temporary.string());
-  if (!out) ThrowUserError(temporary.string(), "", "no TIFF writer: " + OIIO::geterror());
-  OIIO::ImageSpec spec(frame.width, frame.height, frame.channels, OIIO::TypeDesc::UINT16);
-  spec.channelnames = frame.channel_names;
-  spec.attribute("compression", "zip");  // lossless
-  spec.attribute("oiio:BitsPerSample", 16);
-  spec.attribute("ExposureTime", static_cast<float>(frame.exposure_s));  // EXIF; frames.jsonl holds the rest
-  if (!out->open(temporary.string(), spec) || !out->write_image(OIIO::TypeDesc::UINT16, frame.pixels.data()) ||
-      !out->close()) {
-    const std::string why = out->geterror();
-    std::error_code ignored;
-    std::filesystem::remove(temporary, ignored);
-    ThrowUserError(final_path.string(), "", "could not write the frame (disk full?): " + why);
-  }
   // Complete on disk before it has a name, and named before it has a record.
   FileDigest digest;
-  try {
-    SyncFile(temporary);
-    digest = DigestFile(temporary);
-  } catch (const UserError&) {
-    std::error_code ignored;
-    std::filesystem::remove(temporary, ignored);
-    ThrowUserError(final_path.string(), "", "could not write the frame (disk full?): it did not reach the disk whole");
-  }
-  std::error_code ec;
-  std::filesystem::rename(temporary, final_path, ec);
-  if (ec) ThrowUserError(final_path.string(), "", "could not move the frame into place: " + ec.message());
+  WriteAtomically(final_path, [&](const std::filesystem::path& temporary) {
+    auto out = OIIO::ImageOutput::create(temporary.string());
+    if (!out) ThrowUserError(temporary.string(), "", "no TIFF writer: " + OIIO::geterror());
+    OIIO::ImageSpec spec(frame.width, frame.height, frame.channels, OIIO::TypeDesc::UINT16);
+    spec.channelnames = frame.channel_names;
+    spec.attribute("compression", "zip");  // lossless
+    spec.attribute("oiio:BitsPerSample", 16);
+    spec.attribute("ExposureTime", static_cast<float>(frame.exposure_s));  // EXIF; frames.jsonl holds the rest
+    if (!out->open(temporary.string(), spec) || !out->write_image(OIIO::TypeDesc::UINT16, frame.pixels.data()) ||
+        !out->close())
+      ThrowUserError(final_path.string(), "", "could not write the frame (disk full?): " + out->geterror());
+    try {
+      SyncFile(temporary);
+      digest = DigestFile(temporary);
+    } catch (const UserError&) {
+      ThrowUserError(final_path.string(), "", "could not write the frame (disk full?): it did not reach the disk whole");
+    }
+  });
   SyncDirectory(dir_ / "frames");
   frames_ = seq;  // the number is used, with or without its record
   FrameRecord record;

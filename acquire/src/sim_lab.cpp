@@ -8,6 +8,7 @@
 #include "phos/util/csv.h"
 #include "phos/util/error.h"
 #include "phos/util/format.h"
+#include "phos/util/math.h"
 
 namespace phos {
 double Frame::MeanSignal(int channel) const {
@@ -171,8 +172,8 @@ SimulatedLab::Optics SimulatedLab::MakeOptics(bool through_lvf) const {
           if (band_of[i] >= 0) sample += albedo_[band_of[i]] * seen;
         }
         // Lambertian: radiance = reflectance * irradiance / pi.
-        optics.sample_reflect[s][x][c] = sources_[s].irradiance * sample / M_PI;
-        optics.white_reflect[s][x][c] = sources_[s].irradiance * white / M_PI;
+        optics.sample_reflect[s][x][c] = sources_[s].irradiance * sample / kPi;
+        optics.white_reflect[s][x][c] = sources_[s].irradiance * white / kPi;
       }
     }
   }

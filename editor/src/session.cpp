@@ -19,12 +19,12 @@
 #include "phos/util/error.h"
 #include "phos/util/format.h"
 #include "phos/util/json.h"
+#include "phos/util/math.h"
 
 namespace phos::editor {
 namespace {
 
 constexpr int kTimelineFrames = 200;
-constexpr double kPi = 3.14159265358979323846;
 // Bounds on what the page may ask, so that |T|^2 and the weights stay finite.
 constexpr double kMaxRadiance = 1e6;
 constexpr double kMaxWeight = 1e6;

@@ -16,11 +16,11 @@
 #include "phos/util/error.h"
 #include "phos/util/format.h"
 #include "phos/util/json.h"
+#include "phos/util/math.h"
 
 namespace phos::editor {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
 
 // The moments the cost looks at, per point: every target's time and every
 // frame start inside a bound's range (and its ends), sorted, with who uses each.

@@ -14,6 +14,7 @@
 #include "phos/util/error.h"
 #include "phos/util/format.h"
 #include "phos/util/json.h"
+#include "phos/util/math.h"
 #include "excitation_model.h"
 #include "relative_covariance.h"
 #include "solver_options.h"
@@ -244,7 +245,7 @@ SpectrumFit FitEmissionSpectrum(const fs::path& dir, const LvfCalibrationFit& ca
     const double c = calibration.CenterNm(x);
     std::vector<double> row(static_cast<std::size_t>(nodes), 0.0);
     for (double nm = c - 4 * sigma; nm <= c + 4 * sigma; nm += kStepNm) {
-      const double seen = calibration.flat_irradiance * lamp.Evaluate(nm) / M_PI *
+      const double seen = calibration.flat_irradiance * lamp.Evaluate(nm) / kPi *
                           std::exp(-0.5 * std::pow((nm - c) / sigma, 2)) * kStepNm;
       const int k0 = static_cast<int>(std::floor((nm - lo_nm) / kNodeNm));
       for (int k = std::max(0, k0); k <= std::min(nodes - 1, k0 + 1); ++k) row[k] += seen * hat(k, nm);

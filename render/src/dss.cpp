@@ -1,4 +1,6 @@
 #include "phos/render/dss.h"
+#include "phos/util/math.h"
+#include "phos/util/random.h"
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -10,26 +12,10 @@
 #include <limits>
 
 namespace phos::render {
-namespace {
-
-constexpr float kPi = 3.14159265358979f;
-
-// A reproducible uniform number in [0, 1) from three integers (splitmix64).
-float Hash01(std::uint64_t a, std::uint64_t b, std::uint64_t c) {
-  std::uint64_t x = a * 0x9E3779B97F4A7C15ull ^ (b + 0x632BE59BD9B4E019ull) * 0xBF58476D1CE4E5B9ull ^ c * 0x94D049BB133111EBull;
-  x ^= x >> 30;
-  x *= 0xBF58476D1CE4E5B9ull;
-  x ^= x >> 27;
-  x *= 0x94D049BB133111EBull;
-  x ^= x >> 31;
-  return static_cast<float>(x >> 40) / static_cast<float>(1ull << 24);
-}
-
-}  // namespace
 
 std::vector<Surfel> Surfelize(const SceneGeometry& geometry, const Vec3f& eye, float fov_deg,
                               const SurfelOptions& options) {
-  const float tan_half = std::tan(fov_deg * kPi / 360.0f);
+  const float tan_half = std::tan(fov_deg * kPiF / 360.0f);
   std::vector<Surfel> surfels;
   for (int o = 0; o < geometry.object_count(); ++o) {
     for (int t = 0; t < geometry.triangle_count(o); ++t) {
@@ -39,7 +25,7 @@ std::vector<Surfel> Surfelize(const SceneGeometry& geometry, const Vec3f& eye, f
       const Vec3f n = geometry.FrontNormal(o, t);
       const float d = ((a + b + c) / 3.0f - eye).norm();
       const float r_star = std::max(1e-6f, options.s * tan_half * (d + options.d_near_m));
-      const float target_area = kPi * r_star * r_star;
+      const float target_area = kPiF * r_star * r_star;
       if (area < target_area) {
         // Two-pass: one fine surfel, kept with probability area / target.
         if (Hash01(options.seed, static_cast<std::uint64_t>(o), static_cast<std::uint64_t>(t)) >= area / target_area) continue;
@@ -179,7 +165,7 @@ std::vector<Reach> ComputeReach(const GBuffer& g, const CameraRays& camera, cons
       Reach& R = reach[i];
       // getMaxDist: F <= A / (pi r^2) < epsilon beyond this distance; for
       // the dipole, where Rd(r) A falls below epsilon (per unit of E).
-      R.r_max = std::sqrt(s.area / (kPi * options.epsilon));
+      R.r_max = std::sqrt(s.area / (kPiF * options.epsilon));
       if (options.dipoles) {
         R.r_max = 0;
         for (int c = 0; c < C; ++c) {
@@ -361,8 +347,8 @@ struct ZCell {
 inline int CellOf(float x, float y) {
   const int ring = std::min(kRings - 1, static_cast<int>((x * x + y * y) * kRings));
   float angle = std::atan2(y, x);
-  if (angle < 0) angle += 2 * kPi;
-  const int sector = std::min(kSectors - 1, static_cast<int>(angle / (2 * kPi) * kSectors));
+  if (angle < 0) angle += 2 * kPiF;
+  const int sector = std::min(kSectors - 1, static_cast<int>(angle / (2 * kPiF) * kSectors));
   return ring * kSectors + sector;
 }
 
@@ -371,7 +357,7 @@ struct CellCentres {
   CellCentres() {
     for (int ring = 0; ring < kRings; ++ring)
       for (int sector = 0; sector < kSectors; ++sector) {
-        const float r = std::sqrt((ring + 0.5f) / kRings), a = (sector + 0.5f) * 2 * kPi / kSectors;
+        const float r = std::sqrt((ring + 0.5f) / kRings), a = (sector + 0.5f) * 2 * kPiF / kSectors;
         x[ring * kSectors + sector] = r * std::cos(a);
         y[ring * kSectors + sector] = r * std::sin(a);
       }
@@ -383,7 +369,7 @@ struct CellCentres {
 // parts of one wall that fall into one cell add up instead of hiding each
 // other; a surfel behind that surface is hidden.
 inline bool SameLayer(const Surfel& a, const Surfel& b) {
-  const float reach = std::sqrt(std::max(a.area, b.area) / kPi) * 1.5f;
+  const float reach = std::sqrt(std::max(a.area, b.area) / kPiF) * 1.5f;
   const Vec3f d = b.position - a.position;
   return std::fabs(d.dot(a.normal)) < reach && std::fabs(d.dot(b.normal)) < reach;
 }
@@ -412,7 +398,7 @@ inline void SplatIntoMap(const GBuffer& g, std::size_t p, const Vec3f& t, const 
   const Vec3f w = d / r;
   const float cos_p = g.normal[p].dot(w);
   if (cos_p <= 0) return;
-  const float F = s.area * cos_p * std::fabs(s.normal.dot(w)) / (kPi * r2 + s.area);
+  const float F = s.area * cos_p * std::fabs(s.normal.dot(w)) / (kPiF * r2 + s.area);
   if (!(F > 0)) return;
   const float x = w.dot(t), y = w.dot(b);  // the direction's point in the unit disk
   const float radius = std::sqrt(F);       // footprint of area pi F
@@ -527,7 +513,7 @@ std::vector<float> RayTracedOcclusion(const SceneGeometry& geometry, const GBuff
       for (int k = 0; k < rays; ++k) {
         // Cosine-distributed (Malley): a uniform disk point lifted to the hemisphere.
         const float u1 = Hash01(seed, p, 2 * static_cast<std::uint64_t>(k)), u2 = Hash01(seed, p, 2 * static_cast<std::uint64_t>(k) + 1);
-        const float r = std::sqrt(u1), phi = 2 * kPi * u2;
+        const float r = std::sqrt(u1), phi = 2 * kPiF * u2;
         const Vec3f d = r * std::cos(phi) * t + r * std::sin(phi) * b + std::sqrt(std::max(0.0f, 1 - u1)) * nrm;
         hits += geometry.Occluded(origin, d, 1e30f);
       }

@@ -7,6 +7,8 @@
 #include <embree3/rtcore.h>
 
 #include "phos/util/error.h"
+#include "phos/util/math.h"
+#include "phos/util/random.h"
 
 namespace phos::render {
 
@@ -201,24 +203,19 @@ float UnitSkyIrradiance(const SceneGeometry& geometry, const Environment& enviro
   const int side = std::max(1, static_cast<int>(std::lround(std::sqrt(static_cast<double>(rays)))));
   const Vec3f t = n.unitOrthogonal(), b = n.cross(t);
   const Vec3f origin = p + geometry.ray_epsilon() * n;
-  std::uint64_t state = seed * 0x9E3779B97F4A7C15ull + 0x632BE59BD9B4E019ull;
-  auto uniform = [&] {  // splitmix64
-    std::uint64_t z = (state += 0x9E3779B97F4A7C15ull);
-    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-    return static_cast<float>((z ^ (z >> 31)) >> 40) * (1.0f / 16777216.0f);
-  };
+  SplitMix64 random(seed * 0x9E3779B97F4A7C15ull + 0x632BE59BD9B4E019ull);
+  auto uniform = [&] { return random.UniformFloat(); };
   float sum = 0;
   for (int i = 0; i < side; ++i)
     for (int j = 0; j < side; ++j) {
       const float u1 = (static_cast<float>(i) + uniform()) / static_cast<float>(side);
       const float u2 = (static_cast<float>(j) + uniform()) / static_cast<float>(side);
-      const float r = std::sqrt(u1), phi = 6.28318530718f * u2;
+      const float r = std::sqrt(u1), phi = 2 * kPiF * u2;
       const Vec3f w = r * std::cos(phi) * t + r * std::sin(phi) * b + std::sqrt(std::max(0.0f, 1 - u1)) * n;
       if (count) ++*count;
       if (!geometry.Occluded(origin, w, 1e30f)) sum += environment.Shape(w.y());
     }
-  return 3.14159265f * sum / static_cast<float>(side * side);
+  return kPiF * sum / static_cast<float>(side * side);
 }
 
 CameraRays::CameraRays(const Scene& scene, double t_s) {
@@ -228,7 +225,7 @@ CameraRays::CameraRays(const Scene& scene, double t_s) {
   right_ = forward_.cross(scene.camera.up.cast<float>()).normalized();
   if (!right_.allFinite()) right_ = forward_.unitOrthogonal();  // looking along `up`
   up_ = right_.cross(forward_);
-  tan_half_y_ = std::tan(static_cast<float>(scene.camera.fov_deg) * 3.14159265358979f / 360.0f);
+  tan_half_y_ = std::tan(static_cast<float>(scene.camera.fov_deg) * kPiF / 360.0f);
   width_ = static_cast<float>(scene.camera.width);
   height_ = static_cast<float>(scene.camera.height);
   aspect_ = width_ / height_;

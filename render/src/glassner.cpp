@@ -9,6 +9,7 @@
 
 #include "phos/model/rate_equation.h"
 #include "phos/util/error.h"
+#include "phos/util/random.h"
 
 namespace phos::render {
 namespace {
@@ -114,13 +115,8 @@ Image EmittedRadianceGlassner(const SceneGeometry& geometry, double t_s, int tim
   Image image = ForEachPixel(geometry, [&](const Hit& hit, float* out, std::uint64_t pixel) {
     const Object& object = scene.objects[hit.object];
     const Material& material = *object.phosphor;
-    std::uint64_t state = seed * 0x9E3779B97F4A7C15ull ^ (pixel + 1) * 0xD1B54A32D192ED03ull;
-    auto uniform = [&] {  // SplitMix64
-      std::uint64_t z = (state += 0x9E3779B97F4A7C15ull);
-      z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-      z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-      return static_cast<double>((z ^ (z >> 31)) >> 11) * 0x1.0p-53;
-    };
+    SplitMix64 random(seed * 0x9E3779B97F4A7C15ull ^ (pixel + 1) * 0xD1B54A32D192ED03ull);
+    auto uniform = [&] { return random.UniformDouble(); };
     std::uint64_t cast = 0;
     std::vector<double> r(material.state_count(), 0.0);
     for (int i = 0; i < material.state_count(); ++i) {

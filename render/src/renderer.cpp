@@ -16,43 +16,28 @@
 #include "phos/render/dss.h"
 #include "phos/render/subsurface.h"
 #include "phos/render/volume.h"
+#include "phos/util/atomic_file.h"
 #include "phos/util/colour.h"
 #include "phos/util/error.h"
 #include "phos/util/format.h"
+#include "phos/util/math.h"
+#include "phos/util/random.h"
 
 namespace phos::render {
 namespace {
 
-constexpr float kPi = 3.14159265358979323846f;
 constexpr int kMaxBands = 64;
 
-// SplitMix64 (Steele, Lea and Flood 2014): a tiny, well-mixed generator whose
-// state is one word, so every pixel sample can have its own stream.
-struct Random {
-  std::uint64_t state;
-  explicit Random(std::uint64_t seed) : state(seed) {}
-  std::uint64_t Next() {
-    std::uint64_t z = (state += 0x9E3779B97F4A7C15ull);
-    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-    return z ^ (z >> 31);
-  }
-  float Uniform() { return static_cast<float>(Next() >> 40) * (1.0f / 16777216.0f); }  // [0, 1)
-};
-
-// A fixed per-pixel offset of the media's step grid (interleaved gradient
-// noise, Jimenez 2014): one sample per pixel shows noise, not banding.
-float PixelJitter(int x, int y) {
-  const float v = 52.9829189f * std::fmod(0.06711056f * static_cast<float>(x) + 0.00583715f * static_cast<float>(y), 1.0f);
-  return v - std::floor(v);
-}
+// A fixed per-pixel offset of the media's step grid: one sample per pixel
+// shows noise, not banding.
+float PixelJitter(int x, int y) { return InterleavedGradientNoise(x, y); }
 
 // Radiance or throughput per band, without allocation.
 using Bands = Eigen::Array<float, Eigen::Dynamic, 1, 0, kMaxBands, 1>;
 
 // Cosine-weighted direction about n (Malley's method).
 Vec3f SampleCosine(const Vec3f& n, float u1, float u2) {
-  const float r = std::sqrt(u1), phi = 2 * kPi * u2;
+  const float r = std::sqrt(u1), phi = 2 * kPiF * u2;
   const Vec3f t = n.unitOrthogonal(), b = n.cross(t);
   return (r * std::cos(phi) * t + r * std::sin(phi) * b + std::sqrt(std::max(0.0f, 1 - u1)) * n).normalized();
 }
@@ -206,11 +191,11 @@ class Tracer {
     Bands E;
     DirectIrradiance(hit.position, hit.front ? hit.normal : Vec3f(-hit.normal), E, rays,
                      options_.transport != Transport::kDss);
-    L += Albedo(hit.object) * E / kPi;  // Lambertian reflection (Eq. 8.2's reflected term)
+    L += Albedo(hit.object) * E / kPiF;  // Lambertian reflection (Eq. 8.2's reflected term)
     return Lm + T * L;
   }
 
-  Bands Path(Vec3f origin, Vec3f direction, Random& random, std::uint64_t& rays) const {
+  Bands Path(Vec3f origin, Vec3f direction, SplitMix64& random, std::uint64_t& rays) const {
     Bands L = Bands::Zero(nb_), beta = Bands::Ones(nb_), Le, E;
     float bsdf_pdf = 0;  // solid-angle pdf of the direction that led here (0: camera ray)
     for (int depth = 0; depth < options_.max_depth; ++depth) {
@@ -220,7 +205,7 @@ class Tracer {
         // The camera ray's media (single scattering; later bounces pass
         // through them unattenuated, see volume.h).
         Bands Lm = Bands::Zero(nb_);
-        beta *= Media(origin, direction, hit, random.Uniform(), Lm);
+        beta *= Media(origin, direction, hit, random.UniformFloat(), Lm);
         L += Lm;
       }
       if (!hit) {
@@ -246,12 +231,12 @@ class Tracer {
       if (albedo.maxCoeff() <= 0) break;
       // Next-event estimation: the lights (delta: no MIS) ...
       DirectIrradiance(hit.position, n_s, E, rays, /*sky=*/false);
-      L += beta * albedo * E / kPi;
+      L += beta * albedo * E / kPiF;
       // ... and one point on a glowing triangle.
       const Vec3f origin_s = hit.position + geometry_.ray_epsilon() * n_s;
       if (!emitters_.empty()) {
-        const auto& entry = emitters_.Pick(random.Uniform());
-        const float su = std::sqrt(random.Uniform()), u2 = random.Uniform();
+        const auto& entry = emitters_.Pick(random.UniformFloat());
+        const float su = std::sqrt(random.UniformFloat()), u2 = random.UniformFloat();
         const float b1 = su * (1 - u2), b2 = su * u2;  // uniform on the triangle
         const Vec3f q = geometry_.Point(entry.object, entry.triangle, b1, b2);
         const Vec3f nq = geometry_.FrontNormal(entry.object, entry.triangle);
@@ -270,20 +255,20 @@ class Tracer {
             at.front = true;
             Emission(at, Le);
             const float light_pdf = emitters_.AreaPdf(entry.object, entry.triangle, entry.area) * distance2 / cos_l;
-            const float p_bsdf = cos_s / kPi;
+            const float p_bsdf = cos_s / kPiF;
             const float weight = light_pdf * light_pdf / (light_pdf * light_pdf + p_bsdf * p_bsdf);
-            L += beta * albedo / kPi * Le * (cos_s * weight / light_pdf);
+            L += beta * albedo / kPiF * Le * (cos_s * weight / light_pdf);
           }
         }
       }
       // Continue the path: cosine sampling of the diffuse BSDF, f cos / pdf = albedo.
-      direction = SampleCosine(n_s, random.Uniform(), random.Uniform());
-      bsdf_pdf = n_s.dot(direction) / kPi;
+      direction = SampleCosine(n_s, random.UniformFloat(), random.UniformFloat());
+      bsdf_pdf = n_s.dot(direction) / kPiF;
       origin = origin_s;
       beta *= albedo;
       if (depth >= 3) {  // Russian roulette keeps the estimate unbiased
         const float survive = std::min(1.0f, beta.maxCoeff());
-        if (random.Uniform() >= survive) break;
+        if (random.UniformFloat() >= survive) break;
         beta /= survive;
       }
     }
@@ -355,14 +340,14 @@ Image RenderBands(const SceneGeometry& geometry, const CoupledSolver* solver, co
   tbb::parallel_for(0, height, [&](int y) {
     std::uint64_t rays = 0;
     for (int x = 0; x < width; ++x) {
-      Random random((std::uint64_t(options.seed) << 40) ^ (std::uint64_t(y) * std::uint64_t(width) + x) * 0x2545F4914F6CDD1Dull);
+      SplitMix64 random((std::uint64_t(options.seed) << 40) ^ (std::uint64_t(y) * std::uint64_t(width) + x) * 0x2545F4914F6CDD1Dull);
       Bands sum = Bands::Zero(nb);
       for (int s = 0; s < spp; ++s) {
         // One centred sample when there is one; jittered otherwise.
-        const float jx = spp == 1 ? 0.5f : random.Uniform(), jy = spp == 1 ? 0.5f : random.Uniform();
+        const float jx = spp == 1 ? 0.5f : random.UniformFloat(), jy = spp == 1 ? 0.5f : random.UniformFloat();
         const Vec3f direction = camera.Direction(static_cast<float>(x) + jx, static_cast<float>(y) + jy);
         sum += options.transport == Transport::kPath ? tracer.Path(camera.origin(), direction, random, rays)
-                                                     : tracer.Direct(camera.origin(), direction, spp == 1 ? PixelJitter(x, y) : random.Uniform(), rays);
+                                                     : tracer.Direct(camera.origin(), direction, spp == 1 ? PixelJitter(x, y) : random.UniformFloat(), rays);
       }
       sum /= static_cast<float>(spp);
       std::copy(sum.data(), sum.data() + nb, image.at(x, y));
@@ -396,7 +381,7 @@ Image RenderBands(const SceneGeometry& geometry, const CoupledSolver* solver, co
         tracer.DirectIrradiance(s.position, s.normal, E, rays);
         Bands B = tracer.Albedo(s.object) * E;
         Bands Le;
-        if (tracer.Emission(FrontHit(s), Le)) B += kPi * Le;
+        if (tracer.Emission(FrontHit(s), Le)) B += kPiF * Le;
         std::copy(B.data(), B.data() + nb, &radiosity[i * nb]);
         if (translucent && scene.objects[s.object].subsurface) std::copy(E.data(), E.data() + nb, &surfel_E[i * nb]);
       }
@@ -435,13 +420,13 @@ Image RenderBands(const SceneGeometry& geometry, const CoupledSolver* solver, co
         const Bands albedo = tracer.Albedo(g.object[p]);
         const float T = media ? intervals.T_end[p] : 1.0f;
         float* out = image.at(x, y);
-        for (int b = 0; b < nb; ++b) out[b] += T * albedo[b] * indirect.irradiance[p * nb + b] / kPi;
+        for (int b = 0; b < nb; ++b) out[b] += T * albedo[b] * indirect.irradiance[p * nb + b] / kPiF;
         if (sky && !scene.objects[g.object[p]].subsurface) {
           // Directional occlusion: the sky less what the surfels hide of it.
           const float gradient = static_cast<float>(scene.environment->gradient);
-          const float unit = std::max(0.0f, kPi * (1 - indirect.occlusion[p]) +
-                                                gradient * (2 * kPi / 3 * g.normal[p].y() - kPi * indirect.occlusion_y[p]));
-          for (int b = 0; b < nb; ++b) out[b] += T * albedo[b] * tracer.sky_L()[b] * unit / kPi;
+          const float unit = std::max(0.0f, kPiF * (1 - indirect.occlusion[p]) +
+                                                gradient * (2 * kPiF / 3 * g.normal[p].y() - kPiF * indirect.occlusion_y[p]));
+          for (int b = 0; b < nb; ++b) out[b] += T * albedo[b] * tracer.sky_L()[b] * unit / kPiF;
         }
       }
     });
@@ -459,7 +444,7 @@ Image RenderBands(const SceneGeometry& geometry, const CoupledSolver* solver, co
       }
       // The near field of each receiver (two target surfel radii at its
       // depth) from its own irradiance in closed form; the surfels send the rest.
-      const float tan_half = std::tan(static_cast<float>(scene.camera.fov_deg) * kPi / 360.0f);
+      const float tan_half = std::tan(static_cast<float>(scene.camera.fov_deg) * kPiF / 360.0f);
       std::vector<float> near(g.depth.size(), 0.0f);
       for (std::size_t p = 0; p < near.size(); ++p) near[p] = 2 * SurfelOptions{}.s * tan_half * g.depth[p];
       DssOptions sss_options = dss;
@@ -477,7 +462,7 @@ Image RenderBands(const SceneGeometry& geometry, const CoupledSolver* solver, co
           const Dipole* d = &dipoles[static_cast<std::size_t>(g.object[p]) * nb];
           float* out = image.at(x, y);
           for (int b = 0; b < nb; ++b)
-            out[b] += T * (E[b] * static_cast<float>(d[b].AnnulusIntegral(0, near[p])) + exitance.irradiance[p * nb + b]) / kPi;
+            out[b] += T * (E[b] * static_cast<float>(d[b].AnnulusIntegral(0, near[p])) + exitance.irradiance[p * nb + b]) / kPiF;
         }
         total_rays += rays;
       });
@@ -493,7 +478,7 @@ Image RenderBands(const SceneGeometry& geometry, const CoupledSolver* solver, co
           const std::vector<double>& albedo = scene.volumes[v].albedo;
           float* out = image.at(x, y);
           for (int b = 0; b < nb; ++b)
-            out[b] += intervals.delta_T[p] * static_cast<float>(albedo[b]) * in_medium.irradiance[p * nb + b] / (4 * kPi);
+            out[b] += intervals.delta_T[p] * static_cast<float>(albedo[b]) * in_medium.irradiance[p * nb + b] / (4 * kPiF);
         }
       });
     }
@@ -588,20 +573,12 @@ namespace {
 
 void WriteImageAtomically(const std::filesystem::path& path, const OIIO::ImageSpec& spec, OIIO::TypeDesc type,
                           const void* data) {
-  // ".name.tmp.ext": hidden, and the extension still tells OpenImageIO the format.
-  std::string name = ".";
-  name.append(path.filename().string()).append(".tmp").append(path.extension().string());
-  const std::filesystem::path temporary = path.parent_path() / name;
-  auto out = OIIO::ImageOutput::create(temporary.string());
-  if (!out) ThrowUserError(path.string(), "", "no image writer for this format: " + OIIO::geterror());
-  if (!out->open(temporary.string(), spec) || !out->write_image(type, data) || !out->close()) {
-    std::error_code ignored;
-    std::filesystem::remove(temporary, ignored);
-    ThrowUserError(path.string(), "", "could not write the image: " + out->geterror());
-  }
-  std::error_code ec;
-  std::filesystem::rename(temporary, path, ec);
-  if (ec) ThrowUserError(path.string(), "", "could not move the image into place: " + ec.message());
+  WriteAtomically(path, [&](const std::filesystem::path& temporary) {
+    auto out = OIIO::ImageOutput::create(temporary.string());
+    if (!out) ThrowUserError(path.string(), "", "no image writer for this format: " + OIIO::geterror());
+    if (!out->open(temporary.string(), spec) || !out->write_image(type, data) || !out->close())
+      ThrowUserError(path.string(), "", "could not write the image: " + out->geterror());
+  });
 }
 
 }  // namespace

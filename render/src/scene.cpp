@@ -11,11 +11,11 @@
 #include "phos/util/error.h"
 #include "phos/util/format.h"
 #include "phos/util/json.h"
+#include "phos/util/math.h"
 
 namespace phos::render {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
 
 // Every coordinate, size and direction of a scene lies in
 // [-kMaxCoordinate_m, kMaxCoordinate_m] (scene.h): Embree's float BVH

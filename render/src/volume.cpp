@@ -7,6 +7,7 @@
 #include <cmath>
 
 #include "phos/util/error.h"
+#include "phos/util/random.h"
 
 namespace phos::render {
 
@@ -341,8 +342,7 @@ IntervalMap BuildIntervalMap(const VolumeMedia& media, const GBuffer& g, const C
         if (!(T_end < 1.0f - 1e-6f)) continue;
         const float dT = (1 - T_end) / static_cast<float>(map.layers);
         // Interleaved gradient noise: a per-pixel offset of the points.
-        const float ign = 52.9829189f * std::fmod(0.06711056f * static_cast<float>(x) + 0.00583715f * static_cast<float>(y), 1.0f);
-        const float xi = ign - std::floor(ign);
+        const float xi = InterleavedGradientNoise(x, y);
         for (int k = 0; k < map.layers; ++k) targets[k] = std::max(1 - (static_cast<float>(k) + xi) * dT, 1e-30f);
         media.FindTransmittanceDepths(camera.origin(), d, t_max, targets, map.layers, distance, volume);
         map.delta_T[p] = dT;

@@ -89,28 +89,6 @@ std::vector<nlohmann::json> ReadJsonLines(const std::filesystem::path& path) {
   return records;
 }
 
-void WriteFileAtomically(const std::filesystem::path& path, std::string_view text) {
-  std::filesystem::path temporary = path;
-  temporary += ".tmp." + std::to_string(::getpid());
-  {
-    std::ofstream out(temporary, std::ios::binary | std::ios::trunc);
-    if (!out) ThrowUserError(path.string(), "", "cannot open the file for writing");
-    out.write(text.data(), static_cast<std::streamsize>(text.size()));
-    out.flush();
-    if (!out) {
-      std::error_code ignored;
-      std::filesystem::remove(temporary, ignored);
-      ThrowUserError(path.string(), "", "writing failed (disk full?)");
-    }
-  }
-  std::error_code ec;
-  std::filesystem::rename(temporary, path, ec);
-  if (ec) {
-    std::filesystem::remove(temporary, ec);
-    ThrowUserError(path.string(), "", "cannot replace the file: " + ec.message());
-  }
-}
-
 std::string DescribeJson(const nlohmann::json& value) {
   switch (value.type()) {
     case nlohmann::json::value_t::null: return "null";

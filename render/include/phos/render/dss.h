@@ -41,6 +41,7 @@
 
 #include "phos/render/geometry.h"
 #include "phos/render/subsurface.h"
+#include "phos/util/math.h"
 
 namespace phos::render {
 
@@ -183,7 +184,7 @@ inline float SurfelFormFactor(const Vec3f& p, const Vec3f& n, const Surfel& s, f
   const float cos_q = s.normal.dot(d) / r;  // > 0: the surfel faces away from p
   if (cos_q_out) *cos_q_out = cos_q;
   if (direction_y_out) *direction_y_out = d.y() / r;
-  return s.area * cos_p * std::fabs(cos_q) / (3.14159265f * r2 + s.area);
+  return s.area * cos_p * std::fabs(cos_q) / (kPiF * r2 + s.area);
 }
 
 }  // namespace phos::render

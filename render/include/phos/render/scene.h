@@ -21,6 +21,7 @@
 
 #include "phos/model/material.h"
 #include "phos/model/spectral.h"
+#include "phos/util/math.h"
 
 namespace phos::render {
 
@@ -166,7 +167,7 @@ struct Environment {
   double gradient = 0.0;  // in [-1, 1]: brighter overhead when > 0
   LightSchedule schedule;
   float Shape(float w_y) const { return static_cast<float>(1 + gradient * w_y); }
-  double UnoccludedIrradiance(double n_y) const { return 3.14159265358979 * (1 + 2.0 / 3.0 * gradient * n_y); }
+  double UnoccludedIrradiance(double n_y) const { return kPi * (1 + 2.0 / 3.0 * gradient * n_y); }
 };
 
 struct CameraKey {

@@ -16,6 +16,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "phos/util/math.h"
+
 namespace phos::render {
 
 struct Dipole {
@@ -39,7 +41,7 @@ struct Dipole {
   // Diffuse reflectance per unit area at distance r (Jensen et al. 2001, Eq. 5).
   float Rd(float r) const {
     const float d_r = std::sqrt(r * r + z_r * z_r), d_v = std::sqrt(r * r + z_v * z_v);
-    return alpha_prime / (4 * 3.14159265f) *
+    return alpha_prime / (4 * kPiF) *
            (z_r * (1 + sigma_tr * d_r) * std::exp(-sigma_tr * d_r) / (d_r * d_r * d_r) +
             z_v * (1 + sigma_tr * d_v) * std::exp(-sigma_tr * d_v) / (d_v * d_v * d_v));
   }
@@ -48,9 +50,9 @@ struct Dipole {
   double AnnulusIntegral(double a, double b) const {
     auto term = [&](double z) {
       const double da = std::sqrt(a * a + z * z), db = std::sqrt(b * b + z * z);
-      return 2 * 3.14159265358979 * z * (std::exp(-sigma_tr * da) / da - (std::isinf(b) ? 0.0 : std::exp(-sigma_tr * db) / db));
+      return 2 * kPi * z * (std::exp(-sigma_tr * da) / da - (std::isinf(b) ? 0.0 : std::exp(-sigma_tr * db) / db));
     };
-    return alpha_prime / (4 * 3.14159265358979) * (term(z_r) + term(z_v));
+    return alpha_prime / (4 * kPi) * (term(z_r) + term(z_v));
   }
   // What a surfel of `area` at distance r sends to a receiver, per unit of
   // its irradiance, from the part of it farther than near_m from the
@@ -67,15 +69,15 @@ struct Dipole {
   // near field is instead E(x) AnnulusIntegral(0, near_m) with the receiver's
   // own irradiance, and the surfels carry only what lies beyond.
   float SurfelKernel(float r_f, float area, float near_m = 0) const {
-    const double r = r_f, rho = std::sqrt(area / 3.14159265358979), lo = near_m;
+    const double r = r_f, rho = std::sqrt(area / kPi), lo = near_m;
     if (r + rho <= lo) return 0.0f;
     if (r <= 1e-9 * rho) return static_cast<float>(AnnulusIntegral(lo, std::max(lo, rho)));
     double sum = r < rho && rho - r > lo ? AnnulusIntegral(lo, rho - r) : 0.0;
     const double a = std::max(std::fabs(r - rho), lo), b = r + rho, mid = 0.5 * (a + b), half = 0.5 * (b - a);
     constexpr int kPoints = 12;
     for (int k = 0; k < kPoints; ++k) {
-      const double t = 3.14159265358979 * (k + 0.5) / kPoints;
-      const double u = mid - half * std::cos(t), du = half * std::sin(t) * 3.14159265358979 / kPoints;
+      const double t = kPi * (k + 0.5) / kPoints;
+      const double u = mid - half * std::cos(t), du = half * std::sin(t) * kPi / kPoints;
       const double c = std::clamp((u * u + r * r - rho * rho) / (2 * u * r), -1.0, 1.0);
       sum += Rd(static_cast<float>(u)) * 2 * std::acos(c) * u * du;
     }

@@ -28,6 +28,7 @@
 #include "phos/render/dss.h"
 #include "phos/render/geometry.h"
 #include "phos/render/scene.h"
+#include "phos/util/math.h"
 
 namespace phos::render {
 
@@ -35,7 +36,7 @@ namespace phos::render {
 // light's travel direction and the scattered direction; g > 0 scatters forward.
 inline float HenyeyGreenstein(float cos_theta, float g) {
   const float d = 1 + g * g - 2 * g * cos_theta;
-  return (1 - g * g) / (4 * 3.14159265f * d * std::sqrt(d));
+  return (1 - g * g) / (4 * kPiF * d * std::sqrt(d));
 }
 
 // A volume's grid: voxel addressing and trilinear sampling between voxel

@@ -15,6 +15,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include "phos/util/atomic_file.h"  // WriteFileAtomically, for the writers of JSON
+
 namespace phos {
 
 // The largest input file phos reads (material, scene, constraints, lab
@@ -39,9 +41,6 @@ nlohmann::json ReadJsonFile(const std::filesystem::path& path);
 // recorded. A missing file has no records.
 std::vector<nlohmann::json> ReadJsonLines(const std::filesystem::path& path);
 
-// Writes text to path through a temporary file and a rename, so a reader (or a
-// crash) never sees half a file and an existing file is replaced whole.
-void WriteFileAtomically(const std::filesystem::path& path, std::string_view text);
 
 class JsonField {
  public:

@@ -1,0 +1,42 @@
+#pragma once
+// The one way phos replaces a file: whole or not at all. A crash, a full disk
+// or a failed writer leaves the old file (or none), never a part of the new.
+// The bytes go to a temporary beside the file, "<name>.tmp.<pid><ext>" (the
+// extension kept for writers that choose the format by it, as OpenImageIO
+// does), then it is renamed over the file. The temporary is created afresh:
+// a stale one, or a symlink planted at its name, is unlinked first (never
+// followed), and it is opened with O_EXCL | O_NOFOLLOW.
+
+#include <filesystem>
+#include <functional>
+#include <string_view>
+
+namespace phos {
+
+struct AtomicWriteOptions {
+  // fsync the temporary before the rename and the folder after it: the
+  // rename then survives a power cut too (the capture's records and frames).
+  bool sync = false;
+};
+
+// `write` fills the temporary it is given (a regular file, empty, just
+// created); it throws on failure, and then the temporary is removed and the
+// error goes on to the caller with `path` unchanged.
+void WriteAtomically(const std::filesystem::path& path,
+                     const std::function<void(const std::filesystem::path& temporary)>& write,
+                     const AtomicWriteOptions& options = {});
+
+// Text (JSON, CSV, SVG) whole or not at all.
+void WriteFileAtomically(const std::filesystem::path& path, std::string_view text,
+                         const AtomicWriteOptions& options = {});
+
+// The temporary's name for `path` (what WriteAtomically writes to; a resume
+// recognises such names as leftovers by ".tmp.").
+std::filesystem::path AtomicTemporaryPath(const std::filesystem::path& path);
+
+// fsync a file (UserError naming it when the disk refuses) and a folder (its
+// entries: a rename made durable).
+void SyncFile(const std::filesystem::path& path);
+void SyncDirectory(const std::filesystem::path& dir);
+
+}  // namespace phos

@@ -1,0 +1,52 @@
+#pragma once
+// The one random-number generator of the renderer and its baselines, and the
+// one per-pixel noise. SplitMix64 (Steele, Lea and Flood 2014): a state of one
+// word, well mixed, so every pixel, sample and texel can have a stream of its
+// own from a seed made of its indices, and a render is the same on any number
+// of threads. The simulators (model/synthetic, the simulated lab) draw from
+// std::mt19937_64 through <random>'s distributions instead: long streams,
+// exactly reproducible on every machine.
+
+#include <cmath>
+#include <cstdint>
+
+namespace phos {
+
+class SplitMix64 {
+ public:
+  explicit SplitMix64(std::uint64_t state) : state_(state) {}
+  std::uint64_t Next() {
+    std::uint64_t z = (state_ += 0x9E3779B97F4A7C15ull);
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+    return z ^ (z >> 31);
+  }
+  // Uniform in [0, 1): 24 bits for a float, 53 for a double (every value exact).
+  float UniformFloat() { return static_cast<float>(Next() >> 40) * (1.0f / 16777216.0f); }
+  double UniformDouble() { return static_cast<double>(Next() >> 11) * 0x1.0p-53; }
+
+ private:
+  std::uint64_t state_;
+};
+
+// A reproducible uniform number in [0, 1) from three integers, without a
+// stream: SplitMix64's finaliser on a mix of them.
+inline float Hash01(std::uint64_t a, std::uint64_t b, std::uint64_t c) {
+  std::uint64_t x = a * 0x9E3779B97F4A7C15ull ^ (b + 0x632BE59BD9B4E019ull) * 0xBF58476D1CE4E5B9ull ^ c * 0x94D049BB133111EBull;
+  x ^= x >> 30;
+  x *= 0xBF58476D1CE4E5B9ull;
+  x ^= x >> 27;
+  x *= 0x94D049BB133111EBull;
+  x ^= x >> 31;
+  return static_cast<float>(x >> 40) / static_cast<float>(1ull << 24);
+}
+
+// Interleaved gradient noise (Jimenez 2014), in [0, 1): a fixed per-pixel
+// offset whose neighbours differ, so one sample per pixel shows fine noise,
+// not banding.
+inline float InterleavedGradientNoise(int x, int y) {
+  const float v = 52.9829189f * std::fmod(0.06711056f * static_cast<float>(x) + 0.00583715f * static_cast<float>(y), 1.0f);
+  return v - std::floor(v);
+}
+
+}  // namespace phos

@@ -1,0 +1,84 @@
+#include "phos/util/atomic_file.h"
+
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstring>
+#include <string>
+
+#include "phos/util/error.h"
+
+namespace phos {
+
+std::filesystem::path AtomicTemporaryPath(const std::filesystem::path& path) {
+  std::filesystem::path temporary = path;
+  temporary += ".tmp." + std::to_string(::getpid()) + path.extension().string();
+  return temporary;
+}
+
+void SyncDirectory(const std::filesystem::path& dir) {
+  const int fd = ::open(dir.empty() ? "." : dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (fd < 0) return;
+  ::fsync(fd);
+  ::close(fd);
+}
+
+void SyncFile(const std::filesystem::path& path) {
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NOFOLLOW);
+  if (fd < 0) ThrowUserError(path.string(), "", std::string("cannot reopen to flush: ") + std::strerror(errno));
+  const bool synced = ::fsync(fd) == 0;
+  ::close(fd);
+  if (!synced) ThrowUserError(path.string(), "", "could not be flushed to disk (disk full?)");
+}
+
+void WriteAtomically(const std::filesystem::path& path,
+                     const std::function<void(const std::filesystem::path& temporary)>& write,
+                     const AtomicWriteOptions& options) {
+  const std::filesystem::path temporary = AtomicTemporaryPath(path);
+  ::unlink(temporary.c_str());  // a stale temporary, or a symlink planted there: removed, not followed
+  const int fd = ::open(temporary.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC, 0644);
+  if (fd < 0) ThrowUserError(path.string(), "", std::string("cannot open the file for writing: ") + std::strerror(errno));
+  ::close(fd);
+  const auto remove_temporary = [&] {
+    std::error_code ignored;
+    std::filesystem::remove(temporary, ignored);
+  };
+  try {
+    write(temporary);
+    if (options.sync) SyncFile(temporary);
+  } catch (...) {
+    remove_temporary();
+    throw;
+  }
+  std::error_code ec;
+  std::filesystem::rename(temporary, path, ec);
+  if (ec) {
+    remove_temporary();
+    ThrowUserError(path.string(), "", "cannot replace the file: " + ec.message());
+  }
+  if (options.sync) SyncDirectory(path.parent_path());
+}
+
+void WriteFileAtomically(const std::filesystem::path& path, std::string_view text, const AtomicWriteOptions& options) {
+  WriteAtomically(
+      path,
+      [&](const std::filesystem::path& temporary) {
+        const int fd = ::open(temporary.c_str(), O_WRONLY | O_TRUNC | O_NOFOLLOW | O_CLOEXEC);
+        if (fd < 0) ThrowUserError(path.string(), "", std::string("cannot open the file for writing: ") + std::strerror(errno));
+        std::size_t written = 0;
+        while (written < text.size()) {
+          const ssize_t n = ::write(fd, text.data() + written, text.size() - written);
+          if (n < 0 && errno == EINTR) continue;
+          if (n <= 0) {
+            ::close(fd);
+            ThrowUserError(path.string(), "", "writing failed (disk full?)");
+          }
+          written += static_cast<std::size_t>(n);
+        }
+        if (::close(fd) != 0) ThrowUserError(path.string(), "", "writing failed (disk full?)");
+      },
+      options);
+}
+
+}  // namespace phos
