@@ -520,17 +520,7 @@ void MovePartAside(const fs::path& dir, const std::string& protocol, const std::
 // in the middle of a file, a stop.json that does not parse): "" if none.
 // Torn last lines, stale temporaries and bad frames it can.
 std::string UnrepairableProblem(const SessionCheck& check) {
-  std::size_t repairable = check.bad_frames.size() + (check.torn_frames ? 1 : 0) + (check.torn_events ? 1 : 0);
-  if (check.stop && check.stop->frames >= 0 && check.stop->frames != check.frames) ++repairable;  // the stop goes
-  if (check.problems.size() > repairable) {
-    for (const std::string& problem : check.problems)
-      if (problem.find("torn") == std::string::npos && problem.find("stop.json: counts") == std::string::npos) {
-        bool is_frame = false;
-        for (const SessionCheck::BadFrame& bad : check.bad_frames) is_frame |= problem.find(bad.frame.file) != std::string::npos;
-        if (!is_frame) return problem;
-      }
-  }
-  return "";
+  return check.unrepairable.empty() ? "" : check.unrepairable.front();
 }
 
 // Runs (or, resuming, finishes) every part of an `all` folder in order. A

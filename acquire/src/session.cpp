@@ -324,7 +324,14 @@ void SessionWriter::StopQuietly(const std::string& how, const std::string& why) 
 
 SessionCheck CheckSession(const std::filesystem::path& dir, bool decode_frames) {
   SessionCheck check;
-  auto problem = [&](const std::string& text) { check.problems.push_back(text); };
+  // What resume cannot mend (a record that does not read, a list missing
+  // under a complete stop) is also kept apart; torn lines, bad frames and a
+  // stop's miscount it mends.
+  auto problem = [&](const std::string& text) {
+    check.problems.push_back(text);
+    check.unrepairable.push_back(text);
+  };
+  auto repairable = [&](const std::string& text) { check.problems.push_back(text); };
   std::error_code ec;
   try {
     check.protocol = ReadSessionRecord(dir).protocol;
@@ -347,13 +354,13 @@ SessionCheck CheckSession(const std::filesystem::path& dir, bool decode_frames) 
   check.frames = static_cast<int>(records.frames.size());
   if (records.torn) {
     check.torn_frames = true;
-    problem((dir / "frames.jsonl").string() + ": its last line is torn (a crash mid-write); resume keeps it aside");
+    repairable((dir / "frames.jsonl").string() + ": its last line is torn (a crash mid-write); resume keeps it aside");
   }
   try {
     const JsonLinesFile events = ReadJsonLinesFile(dir / "events.jsonl");
     if (events.torn) {
       check.torn_events = true;
-      problem((dir / "events.jsonl").string() + ":" + std::to_string(events.torn_line) +
+      repairable((dir / "events.jsonl").string() + ":" + std::to_string(events.torn_line) +
               ": torn last line (a crash mid-write); resume keeps it aside");
     }
   } catch (const UserError& e) {
@@ -379,13 +386,13 @@ SessionCheck CheckSession(const std::filesystem::path& dir, bool decode_frames) 
     }
     if (!what.empty()) {
       check.bad_frames.push_back({frame, records.lines[i], what});
-      problem((dir / frame.file).string() + ": " + what + " (frames.jsonl:" + std::to_string(records.lines[i]) + ")");
+      repairable((dir / frame.file).string() + ": " + what + " (frames.jsonl:" + std::to_string(records.lines[i]) + ")");
     }
   }
   if (check.stop && frames_read) {
     const bool has_list = std::filesystem::exists(dir / "frames.jsonl", ec);
     if (check.stop->frames >= 0 && check.stop->frames != check.frames)
-      problem((dir / "stop.json").string() + ": counts " + std::to_string(check.stop->frames) +
+      repairable((dir / "stop.json").string() + ": counts " + std::to_string(check.stop->frames) +
               " frames where frames.jsonl lists " + std::to_string(check.frames));
     if (check.complete() && check.protocol != "all" && !has_list)
       problem((dir / "frames.jsonl").string() + ": missing, in a session whose stop.json says complete");

@@ -189,6 +189,28 @@ TEST(CaptureResumeCommand, SaysWhatCannotBeResumed) {
                                           "is not a capture session"));
 }
 
+TEST(CaptureResumeCommand, ARecordThatDoesNotReadIsNotRepairedAndNothingChanges) {
+  // A torn last line resume sets aside; a whole line in the middle that is
+  // not a frame record (here its exposure_s is a string) it cannot mend: it
+  // names it and leaves the folder as it was.
+  testing::TempDir dir;
+  const std::string orange = " --sim-material " + testing::Fixture("materials/orange.json").string();
+  ASSERT_EQ(RunPhos("capture decay" + orange + " --out " + (dir / "d").string() + " --charge-s 60 --duration-s 20").exit_code, 0);
+  std::vector<nlohmann::json> lines = ReadJsonLines(dir / "d" / "frames.jsonl");
+  ASSERT_GE(lines.size(), 3u);
+  lines[1]["exposure_s"] = "long";
+  std::string text;
+  for (const nlohmann::json& line : lines) text += line.dump() + "\n";
+  testing::WriteText(dir / "d" / "frames.jsonl", text);
+  const std::string stop = testing::ReadText(dir / "d" / "stop.json");
+  EXPECT_TRUE(testing::IsOneLineUserError(RunPhos("capture resume " + (dir / "d").string()),
+                                          "frames.jsonl:2: exposure_s"));
+  EXPECT_TRUE(testing::IsOneLineUserError(RunPhos("capture resume " + (dir / "d").string()),
+                                          "cannot be repaired by resume"));
+  EXPECT_EQ(testing::ReadText(dir / "d" / "frames.jsonl"), text);
+  EXPECT_EQ(testing::ReadText(dir / "d" / "stop.json"), stop);
+}
+
 TEST(CaptureSpectrumAndCalibrationCommands, WriteCompleteSessions) {
   testing::TempDir dir;
   const std::string orange = " --sim-material " + testing::Fixture("materials/orange.json").string();

@@ -45,6 +45,11 @@ struct SessionCheck {
   std::vector<std::filesystem::path> stale_temporaries;
   // Every problem as one line naming its file ("" prefix-free).
   std::vector<std::string> problems;
+  // Those of `problems` that resume cannot mend: a record that does not read
+  // as its type, a frame list missing under a complete stop. Resume mends the
+  // rest (torn last lines, bad frames of a part that can be remeasured, a
+  // stop record's miscount).
+  std::vector<std::string> unrepairable;
 
   bool complete() const { return stop && stop->how == "complete"; }
   bool clean() const { return problems.empty(); }
