@@ -4,13 +4,14 @@
 #               then every fuzz harness for FUZZ_CI_SECONDS (4 s) each
 # Other targets: build (Release only), bench (benchmarks, Release), study
 # (regenerate the integrator error, Glassner and nc trade studies in docs/),
-# fuzz (the libFuzzer harnesses for FUZZ_SECONDS each, docs/fuzzing.md), clean.
+# fuzz (the libFuzzer harnesses for FUZZ_SECONDS each, docs/fuzzing.md), format
+# (clang-format, .clang-format, on every tracked C++ file), clean.
 
 JOBS ?= $(shell nproc)
 FUZZ_SECONDS ?= 60
 FUZZ_CI_SECONDS ?= 4
 
-.PHONY: all bootstrap build demo test bench study fuzz fuzz-build clean
+.PHONY: all bootstrap build demo test bench study fuzz fuzz-build format clean
 
 all: build
 
@@ -51,3 +52,6 @@ fuzz: fuzz-build
 
 clean:
 	rm -rf build build-asan build-fuzz results
+
+format:
+	@git ls-files '*.cpp' '*.h' | xargs clang-format -i

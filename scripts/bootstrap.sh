@@ -23,6 +23,8 @@ PACKAGES=(
   libgtest-dev libgmock-dev libbenchmark-dev
   # the fuzz harnesses (fuzz/): clang 14 with libFuzzer and the sanitizer runtimes
   clang libclang-rt-14-dev
+  # make format (.clang-format)
+  clang-format
   # JSON, command line, HTTP (editor)
   nlohmann-json3-dev libcli11-dev libcpp-httplib-dev
   # the editor page's browser test (Playwright drives Debian's Chromium)
