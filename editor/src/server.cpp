@@ -32,9 +32,17 @@ using Clock = std::chrono::steady_clock;
 // Names (objects, presets) longer than this are refused before any lookup.
 constexpr std::size_t kMaxNameBytes = 256;
 
+// JSON for the wire. Bytes that are not UTF-8 become U+FFFD instead of an
+// exception: a parse error's message quotes the request's own bytes, and
+// encoding them threw inside the error handler, so a POST with a non-UTF-8
+// string was answered 500 (found by fuzz-editor; fuzz/regressions/editor/).
+std::string Dump(const nlohmann::json& value, int indent = -1) {
+  return value.dump(indent, ' ', false, nlohmann::json::error_handler_t::replace);
+}
+
 void Error(httplib::Response& response, int status, const std::string& message) {
   response.status = status;
-  response.set_content(nlohmann::json{{"error", message}}.dump(), "application/json");
+  response.set_content(Dump(nlohmann::json{{"error", message}}), "application/json");
 }
 
 // The request body as a JSON object. nlohmann refuses a number beyond
@@ -236,7 +244,7 @@ int BoundPort(int fd) {
 // A short response written straight to a socket we will not serve (too many
 // connections), without waiting on the client.
 void Refuse(int fd, int status, const std::string& reason, const std::string& message) {
-  const std::string body = nlohmann::json{{"error", message}}.dump();
+  const std::string body = Dump(nlohmann::json{{"error", message}});
   const std::string response = "HTTP/1.1 " + std::to_string(status) + " " + reason +
                                "\r\nContent-Type: application/json\r\nConnection: close\r\nContent-Length: " +
                                std::to_string(body.size()) + "\r\n\r\n" + body;
@@ -328,7 +336,7 @@ void Serve(EditSession& session, const ServerOptions& options, const std::functi
       }
     };
   };
-  auto state = [&](httplib::Response& response) { response.set_content(session.State().dump(), "application/json"); };
+  auto state = [&](httplib::Response& response) { response.set_content(Dump(session.State()), "application/json"); };
   auto body_of = [](const httplib::Request& request) { return ParseBody(request.body); };
 
   // The routes, by method, for 404 and 405 below.
@@ -403,7 +411,7 @@ void Serve(EditSession& session, const ServerOptions& options, const std::functi
     const std::string object = request.get_param_value("object");
     if (object.size() > kMaxNameBytes) ThrowUserError("request", "object", "longer than " + std::to_string(kMaxNameBytes) + " characters");
     const nlohmann::json material = session.MaterialJson(object);
-    response.set_content(material.dump(2) + "\n", "application/json");
+    response.set_content(Dump(material, 2) + "\n", "application/json");
     // Named after the object (lower case, '-' for the rest): no quote or
     // control character reaches the header.
     response.set_header("Content-Disposition", "attachment; filename=\"" + session.ExportFileName(object) + "\"");
@@ -414,7 +422,7 @@ void Serve(EditSession& session, const ServerOptions& options, const std::functi
     f.RejectUnknownKeys({"object", "path"});
     const std::string object = Name(f["object"]);
     const std::filesystem::path written = session.ExportMaterial(object, f["path"].String());
-    response.set_content(nlohmann::json{{"written", written.string()}}.dump(), "application/json");
+    response.set_content(Dump(nlohmann::json{{"written", written.string()}}), "application/json");
   }));
   // Anything else: 405 naming the methods of a route that exists, else 404.
   const auto unrouted = [&](const httplib::Request& request, httplib::Response& response) {

@@ -312,6 +312,11 @@ TEST(EditorServer, EveryBadValueIs400NamingTheField) {
   refused(server.Post("/api/preset", R"({"object": "back wall", "preset": "green", "extra": true})"), "extra");
   refused(server.Post("/api/constraints/update", R"({"index": 0, "rgb": [1e400, 0, 0]})"), "rgb");
   refused(server.Post("/api/constraints/remove", R"([1, 2])"), "object");
+  // Bytes that are not UTF-8 in a string: the parse error quotes them, and
+  // its answer was a 500 (fuzz-editor, fuzz/regressions/editor/).
+  refused(server.Post("/api/export", "{\"object\": \"left wall\", \"path\": \"edited/le\x9a\x8b\xd2.json\"}"),
+          "malformed JSON");
+  refused(server.Post("/api/constraints", "{\"x\": \"\xff\xfe\", \"y\": 64, \"t_s\": 35}"), "malformed JSON");
   refused(server.Get("/api/frame?t=abc"), "t");
   refused(server.Get("/api/frame?t=1e400"), "t");
   refused(server.Get("/api/frame?t=1&colour=red"), "colour");
