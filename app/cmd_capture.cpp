@@ -83,12 +83,9 @@ struct Devices {
       if (what == "lvf") lab->SetLvfInPath(in_place);
       if (what == "white_reference") lab->SetWhiteReferenceInView(in_place);
     };
-    description = {{"device", "sim"},
-                   {"camera", sim->description()},
-                   {"lights", sim->lights().channels()},
-                   {"clock", "virtual"},
-                   {"seed", seed},
-                   {"camera_csv", camera_csv}};
+    description = {
+        {"device", "sim"}, {"camera", sim->description()}, {"lights", sim->lights().channels()}, {"clock", "virtual"},
+        {"seed", seed},    {"camera_csv", camera_csv}};
     // What each light puts on the sample per band: the fit needs it for ke.
     nlohmann::json band_irradiance = nlohmann::json::object();
     for (const std::string& light : sim->lights().channels()) band_irradiance[light] = sim->SourceBandIrradiance(light);
@@ -121,7 +118,8 @@ struct Devices {
       if (!(args.sim_albedo >= 0 && args.sim_albedo <= 1))
         ThrowUserError("", "--sim-albedo", "expected a reflectance in [0, 1], got " + FormatDouble(args.sim_albedo));
       Material m = LoadMaterial(args.sim_material);
-      std::vector<double> a = m.albedo ? *m.albedo : std::vector<double>(static_cast<std::size_t>(m.band_count()), args.sim_albedo);
+      std::vector<double> a =
+          m.albedo ? *m.albedo : std::vector<double>(static_cast<std::size_t>(m.band_count()), args.sim_albedo);
       int width = 0, height = 0;
       if (!args.sim_size.empty()) {
         char x = 0;
@@ -138,7 +136,8 @@ struct Devices {
       if (args.lab.empty()) ThrowUserError("", "--device lab", "needs --lab LAB.json (the lab config; docs/lab.md)");
       OpenLabConfig(args.lab);
     } else {
-      ThrowUserError("", "--device", "expected 'sim' (the simulated lab) or 'lab' (real devices from --lab), got '" + device + "'");
+      ThrowUserError("", "--device",
+                     "expected 'sim' (the simulated lab) or 'lab' (real devices from --lab), got '" + device + "'");
     }
   }
 
@@ -151,9 +150,11 @@ struct Devices {
     }
     const nlohmann::json sample_json = start.value("sample", nlohmann::json::object());
     if (!sample_json.contains("material"))
-      ThrowUserError((session_dir / "session.json").string(), "sample", "has no material: cannot rebuild the simulated lab");
+      ThrowUserError((session_dir / "session.json").string(), "sample",
+                     "has no material: cannot rebuild the simulated lab");
     Material m = MaterialFromJson(sample_json["material"], (session_dir / "session.json").string());
-    std::vector<double> a = sample_json.value("albedo", std::vector<double>(static_cast<std::size_t>(m.band_count()), 0.8));
+    std::vector<double> a =
+        sample_json.value("albedo", std::vector<double>(static_cast<std::size_t>(m.band_count()), 0.8));
     // New noise on each resume: a resumed camera is not the same exposure again.
     std::optional<Material> inset;
     double inset_radius = 0.5;
@@ -171,8 +172,10 @@ struct Devices {
 // Protocol options <-> the "settings" of session.json, so resume runs the
 // protocol exactly as it started.
 nlohmann::json AutoExposureJson(const AutoExposure& a) {
-  return {{"initial_exposure_s", a.initial_exposure_s}, {"min_exposure_s", a.min_exposure_s},
-          {"max_exposure_s", a.max_exposure_s},         {"low_fraction", a.low_fraction},
+  return {{"initial_exposure_s", a.initial_exposure_s},
+          {"min_exposure_s", a.min_exposure_s},
+          {"max_exposure_s", a.max_exposure_s},
+          {"low_fraction", a.low_fraction},
           {"high_fraction", a.high_fraction}};
 }
 AutoExposure AutoExposureFrom(const nlohmann::json& j, AutoExposure a) {
@@ -185,16 +188,28 @@ AutoExposure AutoExposureFrom(const nlohmann::json& j, AutoExposure a) {
 }
 
 nlohmann::json ToJson(const DecayProtocolOptions& o) {
-  return {{"charge_light", o.charge_light},   {"charge_s", o.charge_s},
-          {"interval_s", o.interval_s},       {"duration_s", o.duration_s},
-          {"first_delay_s", o.first_delay_s}, {"early_frames", o.early_frames},
-          {"initial_exposure_s", o.initial_exposure_s}, {"max_exposure_s", o.max_exposure_s}, {"gain", o.gain}};
+  return {{"charge_light", o.charge_light},
+          {"charge_s", o.charge_s},
+          {"interval_s", o.interval_s},
+          {"duration_s", o.duration_s},
+          {"first_delay_s", o.first_delay_s},
+          {"early_frames", o.early_frames},
+          {"initial_exposure_s", o.initial_exposure_s},
+          {"max_exposure_s", o.max_exposure_s},
+          {"gain", o.gain}};
 }
 nlohmann::json ToJson(const ExcitationProtocolOptions& o) {
-  return {{"lights", o.lights},         {"reset_s", o.reset_s},       {"first_charge_s", o.first_charge_s},
-          {"max_charge_s", o.max_charge_s}, {"plateau_growth", o.plateau_growth}, {"delay_s", o.delay_s},
-          {"exposure_s", o.exposure_s}, {"gain", o.gain}, {"tail_frames", o.tail_frames},
-          {"tail_growth", o.tail_growth}, {"high_fraction", o.high_fraction}};
+  return {{"lights", o.lights},
+          {"reset_s", o.reset_s},
+          {"first_charge_s", o.first_charge_s},
+          {"max_charge_s", o.max_charge_s},
+          {"plateau_growth", o.plateau_growth},
+          {"delay_s", o.delay_s},
+          {"exposure_s", o.exposure_s},
+          {"gain", o.gain},
+          {"tail_frames", o.tail_frames},
+          {"tail_growth", o.tail_growth},
+          {"high_fraction", o.high_fraction}};
 }
 ExcitationProtocolOptions ExcitationFrom(const nlohmann::json& j) {
   ExcitationProtocolOptions o;
@@ -213,15 +228,24 @@ ExcitationProtocolOptions ExcitationFrom(const nlohmann::json& j) {
   return o;
 }
 nlohmann::json ToJson(const SpectrumProtocolOptions& o) {
-  return {{"charge_light", o.charge_light}, {"charge_s", o.charge_s},  {"recharge_s", o.recharge_s}, {"frames", o.frames},
-          {"first_delay_s", o.first_delay_s}, {"gain", o.gain}, {"exposure", AutoExposureJson(o.exposure)}};
+  return {{"charge_light", o.charge_light},
+          {"charge_s", o.charge_s},
+          {"recharge_s", o.recharge_s},
+          {"frames", o.frames},
+          {"first_delay_s", o.first_delay_s},
+          {"gain", o.gain},
+          {"exposure", AutoExposureJson(o.exposure)}};
 }
 nlohmann::json ToJson(const LvfCalibrationOptions& o) {
   nlohmann::json lines = nlohmann::json::array();
   for (const CalibrationLine& l : o.lines) lines.push_back({{"light", l.light}, {"wavelength_nm", l.wavelength_nm}});
-  return {{"lines", lines},   {"flat_light", o.flat_light}, {"flat_temperature_k", o.flat_temperature_k},
+  return {{"lines", lines},
+          {"flat_light", o.flat_light},
+          {"flat_temperature_k", o.flat_temperature_k},
           {"flat_irradiance", o.flat_irradiance},
-          {"gain", o.gain},   {"max_tries", o.max_tries},   {"exposure", AutoExposureJson(o.exposure)}};
+          {"gain", o.gain},
+          {"max_tries", o.max_tries},
+          {"exposure", AutoExposureJson(o.exposure)}};
 }
 LvfCalibrationOptions LvfCalibrationFrom(const nlohmann::json& j) {
   LvfCalibrationOptions o;
@@ -308,19 +332,21 @@ void WriteCurvesPlot(const fs::path& session_dir, const std::string& protocol, c
     if (!line.contains("mean_signal_dn")) continue;
     const std::vector<double> means = line["mean_signal_dn"];
     const double exposure = line.value("exposure_s", 1.0);
-    const std::vector<std::string> names = means.size() == 3 ? std::vector<std::string>{"R", "G", "B"}
-                                                             : std::vector<std::string>{"Y"};
+    const std::vector<std::string> names =
+        means.size() == 3 ? std::vector<std::string>{"R", "G", "B"} : std::vector<std::string>{"Y"};
     for (std::size_t c = 0; c < means.size() && c < names.size(); ++c) {
       const std::string key = protocol == "excitation" ? line.value("light", "") + " " + names[c] : names[c];
       PlotSeries& s = series.try_emplace(key, PlotSeries(key)).first->second;
       s.markers = true;
-      s.x.push_back(protocol == "excitation" ? line.value("charge_s", 0.0) : line.value("delay_after_light_off_s", 0.0));
+      s.x.push_back(protocol == "excitation" ? line.value("charge_s", 0.0)
+                                             : line.value("delay_after_light_off_s", 0.0));
       s.y.push_back(means[c] / exposure);
       // Channels are red, green and blue in every plot; in the excitation
       // plot each light has its own line style (solid, dashed, dots).
       s.color = ChannelOrPaletteColor(names[c], static_cast<int>(c));
       if (protocol == "excitation") {
-        const int light_index = static_cast<int>(light_order.try_emplace(line.value("light", ""), light_order.size()).first->second);
+        const int light_index =
+            static_cast<int>(light_order.try_emplace(line.value("light", ""), light_order.size()).first->second);
         s.dashed = light_index % 3 == 1;
         s.line = light_index % 3 != 2;
       }
@@ -509,8 +535,7 @@ void MovePartAside(const fs::path& dir, const std::string& protocol, const std::
   const fs::path part = dir / protocol;
   std::error_code ec;
   fs::path aside;
-  for (int n = 1; fs::exists(aside = dir / (protocol + ".interrupted-" + std::to_string(n)), ec); ++n) {
-  }
+  for (int n = 1; fs::exists(aside = dir / (protocol + ".interrupted-" + std::to_string(n)), ec); ++n) {}
   fs::rename(part, aside, ec);
   if (ec) ThrowUserError(part.string(), "", "cannot move the part aside: " + ec.message());
   Say("  %-16s %s; kept as %s, starting over\n", protocol.c_str(), why.c_str(), aside.filename().string().c_str());
@@ -541,13 +566,15 @@ void RunAllParts(const fs::path& dir, const nlohmann::json& parts, Devices& devi
       }
       if (protocol == "decay" && !check.bad_frames.empty()) {
         const SessionCheck::BadFrame& bad = check.bad_frames.front();
-        ThrowUserError((part / bad.frame.file).string(), "",
-                       bad.problem + ": a decay frame cannot be measured again (the glow it saw is gone); "
-                       "the folder stays incomplete: restore the frame, or move the decay part aside to capture it anew");
+        ThrowUserError(
+            (part / bad.frame.file).string(), "",
+            bad.problem +
+                ": a decay frame cannot be measured again (the glow it saw is gone); "
+                "the folder stays incomplete: restore the frame, or move the decay part aside to capture it anew");
       }
       if (Resumable(protocol)) {
         Say("  %-16s %s: resuming where it stopped\n", protocol.c_str(),
-                    check.complete() ? "complete but not whole" : "interrupted");
+            check.complete() ? "complete but not whole" : "interrupted");
         std::vector<std::string> notes;
         std::unique_ptr<SessionWriter> session = SessionWriter::Reopen(part, true, &notes);
         PrintNotes(protocol, notes);
@@ -579,11 +606,13 @@ void RunCaptureAll(AllArgs args) {
   g_json_output = args.json;
   Devices devices(args);
   nlohmann::json parts;
-  const std::string charge_light =
-      !args.light.empty() ? args.light : devices.simulated() ? "led405" : devices.lab_config.charge_light;
+  const std::string charge_light = !args.light.empty()   ? args.light
+                                   : devices.simulated() ? "led405"
+                                                         : devices.lab_config.charge_light;
   std::vector<std::string> excite = args.excite;
-  if (excite.empty()) excite = devices.simulated() ? std::vector<std::string>{"led420", "led456", "led494"}
-                                                   : std::vector<std::string>{charge_light};
+  if (excite.empty())
+    excite = devices.simulated() ? std::vector<std::string>{"led420", "led456", "led494"}
+                                 : std::vector<std::string>{charge_light};
   LvfCalibrationOptions calibration;
   calibration.lines = CalibrationLinesOf(devices);
   if (!devices.simulated()) {
@@ -605,7 +634,8 @@ void RunCaptureAll(AllArgs args) {
   excitation.exposure_s = 0.2;
   // Check every part's settings before anything is created.
   std::string error;
-  if (!calibration.IsValid(&error)) ThrowUserError("", "lvf-calibration", error + " (calibration_lines in the lab config)");
+  if (!calibration.IsValid(&error))
+    ThrowUserError("", "lvf-calibration", error + " (calibration_lines in the lab config)");
   if (!spectrum.IsValid(&error)) ThrowUserError("", "spectrum", error);
   if (!decay.IsValid(&error)) ThrowUserError("", "decay", error);
   if (!excitation.IsValid(&error)) ThrowUserError("", "excitation", error);
@@ -647,8 +677,7 @@ void RunCaptureResume(const std::string& dir_text, bool json) {
       parts_whole = parts_whole && check.complete() && check.clean();
     }
     if (stop && stop->how == "complete" && parts_whole) {
-      Say("phos capture resume: %s completed already, and every part is whole; nothing to do\n",
-                  dir.string().c_str());
+      Say("phos capture resume: %s completed already, and every part is whole; nothing to do\n", dir.string().c_str());
       if (g_json_output) PrintJsonSummary(dir);
       return;
     }
@@ -660,7 +689,8 @@ void RunCaptureResume(const std::string& dir_text, bool json) {
     Say("phos capture resume: %s (all)\n", dir.string().c_str());
     PrintNotes("all", notes);
     try {
-      RunAllParts(dir, RequiredKey<nlohmann::json>(start.settings, "parts", (dir / "session.json").string() + ": settings"),
+      RunAllParts(dir,
+                  RequiredKey<nlohmann::json>(start.settings, "parts", (dir / "session.json").string() + ": settings"),
                   devices, resumes);
     } catch (const std::exception& e) {
       top->StopQuietly("failed", e.what());
@@ -683,12 +713,15 @@ void RunCaptureResume(const std::string& dir_text, bool json) {
     if (!check.bad_frames.empty()) {
       const SessionCheck::BadFrame& bad = check.bad_frames.front();
       ThrowUserError((dir / bad.frame.file).string(), "",
-                     bad.problem + ": a " + protocol + " frame cannot be measured again (the glow it saw is gone); "
-                     "the session stays incomplete: capture it anew into a new folder");
+                     bad.problem + ": a " + protocol +
+                         " frame cannot be measured again (the glow it saw is gone); "
+                         "the session stays incomplete: capture it anew into a new folder");
     }
     ThrowUserError(dir.string(), "resume",
-                   "a " + protocol + " cannot be continued: the glow kept fading while nothing watched; its frames are "
-                   "kept here, run 'phos capture " + protocol + "' again into a new folder");
+                   "a " + protocol +
+                       " cannot be continued: the glow kept fading while nothing watched; its frames are "
+                       "kept here, run 'phos capture " +
+                       protocol + "' again into a new folder");
   }
   std::vector<std::string> notes;
   std::unique_ptr<SessionWriter> session = SessionWriter::Reopen(dir, true, &notes);
@@ -717,20 +750,30 @@ std::size_t RunCaptureVerify(const VerifyArgs& args) {
   if (start.protocol == "all")
     for (const std::string& part : kAllOrder) {
       std::error_code ec;
-      if (fs::exists(dir / part / "session.json", ec)) checks.push_back({dir / part, CheckSession(dir / part)});
-      else if (checks.front().second.complete()) checks.front().second.problems.push_back((dir / part).string() + ": missing, in a folder whose stop.json says complete");
+      if (fs::exists(dir / part / "session.json", ec))
+        checks.push_back({dir / part, CheckSession(dir / part)});
+      else if (checks.front().second.complete())
+        checks.front().second.problems.push_back((dir / part).string() +
+                                                 ": missing, in a folder whose stop.json says complete");
     }
   std::size_t problems = 0;
   nlohmann::json report = nlohmann::json::array();
   for (const auto& [path, check] : checks) {
     problems += check.problems.size();
-    const std::string state = check.complete() ? "complete" : check.stop ? check.stop->how : "interrupted (no stop.json)";
+    const std::string state = check.complete() ? "complete"
+                              : check.stop     ? check.stop->how
+                                               : "interrupted (no stop.json)";
     if (args.json) {
-      report.push_back({{"session", path.string()}, {"protocol", check.protocol}, {"frames", check.frames},
-                        {"state", state}, {"problems", check.problems},
-                        {"bad_frames", [&] {
+      report.push_back({{"session", path.string()},
+                        {"protocol", check.protocol},
+                        {"frames", check.frames},
+                        {"state", state},
+                        {"problems", check.problems},
+                        {"bad_frames",
+                         [&] {
                            nlohmann::json bad = nlohmann::json::array();
-                           for (const SessionCheck::BadFrame& b : check.bad_frames) bad.push_back({{"file", b.frame.file}, {"problem", b.problem}});
+                           for (const SessionCheck::BadFrame& b : check.bad_frames)
+                             bad.push_back({{"file", b.frame.file}, {"problem", b.problem}});
                            return bad;
                          }()},
                         {"stale_temporaries", check.stale_temporaries.size()}});
@@ -738,10 +781,12 @@ std::size_t RunCaptureVerify(const VerifyArgs& args) {
     }
     for (const std::string& problem : check.problems) std::printf("%s\n", problem.c_str());
     if (check.problems.empty())
-      std::printf("ok: %s (%s, %d frames, %s%s)\n", path.string().c_str(), check.protocol.c_str(), check.frames,
-                  state.c_str(),
-                  check.stale_temporaries.empty() ? "" : (", " + std::to_string(check.stale_temporaries.size()) +
-                                                          " stale temporaries that resume removes").c_str());
+      std::printf(
+          "ok: %s (%s, %d frames, %s%s)\n", path.string().c_str(), check.protocol.c_str(), check.frames, state.c_str(),
+          check.stale_temporaries.empty()
+              ? ""
+              : (", " + std::to_string(check.stale_temporaries.size()) + " stale temporaries that resume removes")
+                    .c_str());
   }
   if (args.json) std::printf("%s\n", nlohmann::json{{"clean", problems == 0}, {"sessions", report}}.dump(2).c_str());
   return problems;
@@ -750,8 +795,7 @@ std::size_t RunCaptureVerify(const VerifyArgs& args) {
 // ---- options ---------------------------------------------------------------
 
 void AddDeviceOptions(CLI::App* cmd, CaptureArgs& args) {
-  cmd->add_option("--device", args.device,
-                  "sim (the simulated lab; the default) or lab (real devices from --lab)");
+  cmd->add_option("--device", args.device, "sim (the simulated lab; the default) or lab (real devices from --lab)");
   cmd->add_option("--lab", args.lab, "lab config (phos.lab/1: camera, GPIO light channels; docs/lab.md)");
   cmd->add_option("--sim-material", args.sim_material, "material file of the simulated sample (--device sim)");
   cmd->add_option("--sim-albedo", args.sim_albedo, "sample reflectance when the material has none (default 0.8)");
@@ -761,11 +805,13 @@ void AddDeviceOptions(CLI::App* cmd, CaptureArgs& args) {
   cmd->add_option("--sim-size", args.sim_size, "simulated sensor size, WxH (default 64x48)");
   cmd->add_option("--sim-inset", args.sim_inset,
                   "a second material filling a centred disk of the sample (a spatially varying sample)");
-  cmd->add_option("--sim-inset-radius", args.sim_inset_radius, "the disk's radius, a fraction of the half-height (default 0.5)");
+  cmd->add_option("--sim-inset-radius", args.sim_inset_radius,
+                  "the disk's radius, a fraction of the half-height (default 0.5)");
   cmd->add_option("--out", args.out, "session folder to create (new or empty)")->required();
   cmd->add_option("--seed", args.seed, "noise seed of the simulated camera (default 1)");
-  cmd->add_flag("--json", args.json, "print one JSON object at the end (the session, its parts, frames, how each ended)\n"
-                                     "instead of the progress lines");
+  cmd->add_flag("--json", args.json,
+                "print one JSON object at the end (the session, its parts, frames, how each ended)\n"
+                "instead of the progress lines");
 }
 
 struct DecayArgs : CaptureArgs {
@@ -805,7 +851,8 @@ void RegisterCapture(CLI::App& app) {
   decay->add_option("--charge-s", decay_args->decay.charge_s, "seconds of charging (default 5400, 90 min)");
   decay->add_option("--interval-s", decay_args->decay.interval_s, "seconds between frames (default 5)");
   decay->add_option("--duration-s", decay_args->decay.duration_s, "seconds of decay to record (default 180)");
-  decay->add_option("--first-delay-s", decay_args->decay.first_delay_s, "light-off to the first exposure (default 0.005)");
+  decay->add_option("--first-delay-s", decay_args->decay.first_delay_s,
+                    "light-off to the first exposure (default 0.005)");
   decay->add_option("--early-frames", decay_args->decay.early_frames,
                     "frames between the first two slots, at delays halving from --interval-s / 2, so a state\n"
                     "that decays in under a second is seen by several frames (default 6; 0: none)");
@@ -830,7 +877,8 @@ void RegisterCapture(CLI::App& app) {
   excitation->add_option("--light", excitation_args->excitation.lights,
                          "light channel(s) to measure, one after the other (default led405)");
   excitation->add_option("--reset-s", excitation_args->excitation.reset_s, "darkness before each charge (default 900)");
-  excitation->add_option("--first-charge-s", excitation_args->excitation.first_charge_s, "first charge time (default 1)");
+  excitation->add_option("--first-charge-s", excitation_args->excitation.first_charge_s,
+                         "first charge time (default 1)");
   excitation->add_option("--max-charge-s", excitation_args->excitation.max_charge_s, "longest charge (default 4096)");
   excitation->add_option("--delay-s", excitation_args->excitation.delay_s, "light-off to the exposure (default 0.05)");
   excitation->add_option("--exposure-s", excitation_args->excitation.exposure_s, "exposure (default 1)");
@@ -857,7 +905,8 @@ void RegisterCapture(CLI::App& app) {
   AddDeviceOptions(spectrum, *spectrum_args);
   spectrum->add_option("--light", spectrum_args->light, "light channel to charge with (default led405)");
   spectrum->add_option("--charge-s", spectrum_args->spectrum.charge_s, "seconds of the first charge (default 600)");
-  spectrum->add_option("--recharge-s", spectrum_args->spectrum.recharge_s, "seconds of each later charge (default 300)");
+  spectrum->add_option("--recharge-s", spectrum_args->spectrum.recharge_s,
+                       "seconds of each later charge (default 300)");
   spectrum->add_option("--frames", spectrum_args->spectrum.frames, "well-exposed frames to average (default 4)");
   spectrum->callback([spectrum_args] {
     SpectrumArgs args = *spectrum_args;

@@ -38,7 +38,8 @@ void Run(const EditSolveArgs& args) {
 
   nlohmann::json result = editor::SolutionToJson(solution);
   if (baseline) {
-    result["baseline"] = {{"cost", baseline->cost}, {"seconds", baseline->seconds},
+    result["baseline"] = {{"cost", baseline->cost},
+                          {"seconds", baseline->seconds},
                           {"evaluations", baseline->evaluations},
                           {"method", "Table 8.2 grid, 10 values per parameter, nc = 1"}};
   } else {
@@ -74,13 +75,13 @@ void RegisterEdit(CLI::App& app) {
   CLI::App* edit = app.add_subcommand("edit", "Design a material by saying how it should look over time (Sec. 8.6)");
   edit->require_subcommand(1);
   auto args = std::make_shared<EditSolveArgs>();
-  CLI::App* solve = edit->add_subcommand(
-      "solve",
-      "Find the phosphor that meets space-time constraints at one point: targets ('this\n"
-      "radiance at t') and bounds ('at least this bright until t'), given the irradiance\n"
-      "there over time (phos.constraints/1, see docs/editor.md). Lambda is solved in closed\n"
-      "form for every (kr, ke) of a log-grid curve library, then Ceres refines the best.\n"
-      "Also runs the paper's grid search (Table 8.2) on the same input, for comparison.");
+  CLI::App* solve =
+      edit->add_subcommand("solve",
+                           "Find the phosphor that meets space-time constraints at one point: targets ('this\n"
+                           "radiance at t') and bounds ('at least this bright until t'), given the irradiance\n"
+                           "there over time (phos.constraints/1, see docs/editor.md). Lambda is solved in closed\n"
+                           "form for every (kr, ke) of a log-grid curve library, then Ceres refines the best.\n"
+                           "Also runs the paper's grid search (Table 8.2) on the same input, for comparison.");
   solve->add_option("constraints", args->constraints, "Constraints file (phos.constraints/1)")->required();
   solve->add_option("--states", args->states, "Excited states to solve for (default: the file's 'states')")
       ->check(CLI::Range(1, 3));

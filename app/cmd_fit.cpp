@@ -39,10 +39,12 @@ void WriteFloatImage(const std::filesystem::path& path, int width, int height, c
     auto out = OIIO::ImageOutput::create(temporary.string());
     if (!out) ThrowUserError(path.string(), "", "no writer: " + OIIO::geterror());
     const bool png = path.extension() == ".png";
-    OIIO::ImageSpec spec(width, height, static_cast<int>(names.size()), png ? OIIO::TypeDesc::UINT8 : OIIO::TypeDesc::FLOAT);
+    OIIO::ImageSpec spec(width, height, static_cast<int>(names.size()),
+                         png ? OIIO::TypeDesc::UINT8 : OIIO::TypeDesc::FLOAT);
     spec.channelnames = names;
     if (!png) spec.attribute("compression", "zip");
-    if (!out->open(temporary.string(), spec) || !out->write_image(OIIO::TypeDesc::FLOAT, pixels.data()) || !out->close())
+    if (!out->open(temporary.string(), spec) || !out->write_image(OIIO::TypeDesc::FLOAT, pixels.data()) ||
+        !out->close())
       ThrowUserError(path.string(), "", "could not write (disk full?): " + out->geterror());
   });
 }
@@ -62,7 +64,8 @@ nlohmann::json OptionalArrayJson(const std::vector<std::optional<double>>& value
 }
 
 // "0.1 +- 0.002, -, ..." per band.
-std::string BandValuesText(const std::vector<std::optional<double>>& values, const std::vector<std::optional<double>>& stderr_values) {
+std::string BandValuesText(const std::vector<std::optional<double>>& values,
+                           const std::vector<std::optional<double>>& stderr_values) {
   std::string text;
   for (std::size_t b = 0; b < values.size(); ++b) {
     text.append(b ? ", " : "");
@@ -78,7 +81,8 @@ std::string BandValuesText(const std::vector<std::optional<double>>& values, con
 
 nlohmann::json JointJson(const JointFit& j, bool written) {
   nlohmann::json ke = nlohmann::json::array();
-  for (const KeEstimate& k : j.ke) ke.push_back({{"ke", OptionalArrayJson(k.ke)}, {"ke_stderr", OptionalArrayJson(k.ke_stderr)}});
+  for (const KeEstimate& k : j.ke)
+    ke.push_back({{"ke", OptionalArrayJson(k.ke)}, {"ke_stderr", OptionalArrayJson(k.ke_stderr)}});
   return {{"kr", j.kr},
           {"kr_stderr", j.kr_stderr},
           {"a", j.a},
@@ -99,7 +103,8 @@ nlohmann::json ComparisonJson(const MaterialComparison& c) {
 }
 
 void PrintSessionFit(const SessionArgs& args, const SessionFit& fit) {
-  std::printf("phos fit session: %s -> %s (%s s)\n", args.dir.c_str(), args.out.c_str(), FormatShort(fit.seconds).c_str());
+  std::printf("phos fit session: %s -> %s (%s s)\n", args.dir.c_str(), args.out.c_str(),
+              FormatShort(fit.seconds).c_str());
   std::printf("  nc = %d: %s\n", fit.decay->n_components, fit.decay->choice.c_str());
   for (std::size_t i = 0; i < fit.material.states.size(); ++i) {
     const ExcitedState& state = fit.material.states[i];
@@ -113,12 +118,13 @@ void PrintSessionFit(const SessionArgs& args, const SessionFit& fit) {
     const JointFit& j = *fit.joint;
     std::string kr;
     for (std::size_t i = 0; i < j.kr.size(); ++i) kr.append(i ? ", " : "").append(FormatShort(j.kr[i]));
-    std::printf("  joint refinement%s: kr = %s /s; weighted sum of squares (decay + excitation) %s + %s = %s, "
-                "sequential %s + %s = %s%s\n",
-                fit.joint_written ? " (written)" : "", kr.c_str(), FormatShort(j.decay_joint).c_str(),
-                FormatShort(j.excitation_joint).c_str(), FormatShort(j.decay_joint + j.excitation_joint).c_str(),
-                FormatShort(j.decay_sequential).c_str(), FormatShort(j.excitation_sequential).c_str(),
-                FormatShort(j.decay_sequential + j.excitation_sequential).c_str(), j.converged ? "" : " (not converged)");
+    std::printf(
+        "  joint refinement%s: kr = %s /s; weighted sum of squares (decay + excitation) %s + %s = %s, "
+        "sequential %s + %s = %s%s\n",
+        fit.joint_written ? " (written)" : "", kr.c_str(), FormatShort(j.decay_joint).c_str(),
+        FormatShort(j.excitation_joint).c_str(), FormatShort(j.decay_joint + j.excitation_joint).c_str(),
+        FormatShort(j.decay_sequential).c_str(), FormatShort(j.excitation_sequential).c_str(),
+        FormatShort(j.decay_sequential + j.excitation_sequential).c_str(), j.converged ? "" : " (not converged)");
   }
   for (const std::string& note : fit.notes) std::printf("  note: %s\n", note.c_str());
   if (!args.report.empty()) std::printf("  report: %s\n", args.report.c_str());
@@ -126,7 +132,8 @@ void PrintSessionFit(const SessionArgs& args, const SessionFit& fit) {
 
 void PrintComparison(const std::string& compare, const MaterialComparison& c) {
   std::string kr_text;
-  for (double e : c.kr_relative_error) kr_text.append(kr_text.empty() ? "" : ", ").append(FormatShort(100 * e)).append("%");
+  for (double e : c.kr_relative_error)
+    kr_text.append(kr_text.empty() ? "" : ", ").append(FormatShort(100 * e)).append("%");
   std::printf("  against %s: kr off by %s; emission spectrum L1 %s\n", compare.c_str(), kr_text.c_str(),
               FormatShort(c.spectrum_l1).c_str());
   for (std::size_t i = 0; i < c.ke_relative_error_per_state.size(); ++i) {
@@ -152,7 +159,8 @@ void RunFitSession(const SessionArgs& args) {
   for (const std::string& file : {args.out, args.report}) {
     const std::filesystem::path parent = std::filesystem::path(file).parent_path();
     std::error_code ec;
-    if (!file.empty() && !parent.empty()) std::filesystem::create_directories(parent, ec);  // a failure is named by the write
+    if (!file.empty() && !parent.empty())
+      std::filesystem::create_directories(parent, ec);  // a failure is named by the write
   }
   SaveMaterial(fit.material, args.out);
   if (!args.report.empty())
@@ -205,8 +213,9 @@ void RunFitMap(const MapArgs& args) {
   // a map is never built on a bad frame.
   const FrameRecords records = ReadFrameRecords(dir);
   RequireGoodFrames(dir, records);
-  if (records.torn) std::printf("phos fit map: %s: torn last line left out ('phos capture resume' repairs it)\n",
-                                (dir / "frames.jsonl").string().c_str());
+  if (records.torn)
+    std::printf("phos fit map: %s: torn last line left out ('phos capture resume' repairs it)\n",
+                (dir / "frames.jsonl").string().c_str());
   const std::vector<FrameRecord>& lines = records.frames;
   DecayMapInput input;
   int clipped = 0;
@@ -247,7 +256,8 @@ void RunFitMap(const MapArgs& args) {
   // A map with no finite rate anywhere is no result (a frame record's
   // exposure out of range, a session of dark frames): an error, not exit 0.
   if (std::none_of(map.kr.begin(), map.kr.end(), [](float k) { return std::isfinite(k); }))
-    ThrowUserError(dir.string(), "", "no pixel has a finite decay rate: nothing written (are the frames dark or clipped?)");
+    ThrowUserError(dir.string(), "",
+                   "no pixel has a finite decay rate: nothing written (are the frames dark or clipped?)");
   fs::create_directories(args.out, ec);
   if (ec) ThrowUserError(args.out, "", "cannot create the output folder: " + ec.message());
   // One float EXR: kr, then amplitude and background per camera channel, then rms.
@@ -274,7 +284,8 @@ void RunFitMap(const MapArgs& args) {
   for (float k : map.kr)
     if (std::isfinite(k)) finite.push_back(k);
   std::sort(finite.begin(), finite.end());
-  const float lo = finite.empty() ? 0 : finite[finite.size() / 100], hi = finite.empty() ? 1 : finite[finite.size() * 99 / 100];
+  const float lo = finite.empty() ? 0 : finite[finite.size() / 100],
+              hi = finite.empty() ? 1 : finite[finite.size() * 99 / 100];
   const float median = finite.empty() ? std::nanf("") : finite[finite.size() / 2];
   std::vector<float> grey(pixels);
   for (std::size_t p = 0; p < pixels; ++p)
@@ -292,12 +303,13 @@ void RunFitMap(const MapArgs& args) {
                                         {"kr_p01_per_s", lo},
                                         {"kr_p99_per_s", hi},
                                         {"pixels_without_decay", map.no_decay}})
-                              .dump()
-                              .c_str());
+                            .dump()
+                            .c_str());
     return;
   }
-  std::printf("phos fit map: %dx%d pixels, %zu frames, fitted in %s s -> %s (kr, amplitude.*, background.*, rms), kr.png\n",
-              map.width, map.height, input.frames.size(), FormatShort(map.seconds).c_str(), exr.string().c_str());
+  std::printf(
+      "phos fit map: %dx%d pixels, %zu frames, fitted in %s s -> %s (kr, amplitude.*, background.*, rms), kr.png\n",
+      map.width, map.height, input.frames.size(), FormatShort(map.seconds).c_str(), exr.string().c_str());
   std::printf("  kr: median %s /s, 1%%-99%% %s to %s /s; %zu pixel(s) without a decay\n", FormatShort(median).c_str(),
               FormatShort(lo).c_str(), FormatShort(hi).c_str(), map.no_decay);
 }
@@ -331,7 +343,8 @@ struct BatchDoneRecord {
     if (!j.contains("n_components") || !j["n_components"].is_number_integer() || j["n_components"].get<int>() < 1 ||
         j["n_components"].get<int>() > 4)
       return *why = "no n_components of 1-4", std::nullopt;
-    if (!j.contains("kr") || !j["kr"].is_number() || !(j["kr"].get<double>() > 0) || !std::isfinite(j["kr"].get<double>()))
+    if (!j.contains("kr") || !j["kr"].is_number() || !(j["kr"].get<double>() > 0) ||
+        !std::isfinite(j["kr"].get<double>()))
       return *why = "no finite kr > 0", std::nullopt;
     if (!j.contains("seconds") || !j["seconds"].is_number()) return *why = "no seconds", std::nullopt;
     r.item = j["item"].get<std::string>();
@@ -371,8 +384,7 @@ std::vector<std::filesystem::path> BatchItems(const std::vector<std::string>& in
     if (!fs::is_directory(path, ec)) ThrowUserError(input, "", "is neither a capture folder nor a folder of them");
     std::vector<fs::path> found;
     for (const auto& entry : fs::directory_iterator(path, ec))
-      if (entry.is_directory() && fs::is_regular_file(entry.path() / "session.json"))
-        found.push_back(entry.path());
+      if (entry.is_directory() && fs::is_regular_file(entry.path() / "session.json")) found.push_back(entry.path());
     if (found.empty()) ThrowUserError(input, "", "holds no capture folder (no */session.json)");
     std::sort(found.begin(), found.end());
     items.insert(items.end(), found.begin(), found.end());
@@ -380,8 +392,9 @@ std::vector<std::filesystem::path> BatchItems(const std::vector<std::string>& in
   std::set<std::string> names;
   for (const fs::path& item : items)
     if (!names.insert(item.filename().string()).second)
-      ThrowUserError(item.string(), "", "two items are named '" + item.filename().string() +
-                                            "': outputs are named after the folder, so names must differ");
+      ThrowUserError(item.string(), "",
+                     "two items are named '" + item.filename().string() +
+                         "': outputs are named after the folder, so names must differ");
   return items;
 }
 
@@ -431,7 +444,8 @@ void RunFitBatch(const BatchArgs& args) {
       try {
         const SessionFit fit = FitSession(items[i], options);
         SaveMaterial(fit.material, base.string() + ".json");
-        if (args.reports) WriteFileAtomically(base.string() + ".html", SessionReportHtml(fit, "phos fit batch: " + row.name));
+        if (args.reports)
+          WriteFileAtomically(base.string() + ".html", SessionReportHtml(fit, "phos fit batch: " + row.name));
         row.status = "fitted";
         row.nc = fit.decay->n_components;
         row.kr = fit.material.states[0].kr;
@@ -448,8 +462,7 @@ void RunFitBatch(const BatchArgs& args) {
         row.detail = e.what();
         try {
           WriteFileAtomically(base.string() + ".failed.txt", std::string(e.what()) + "\n");
-        } catch (...) {
-        }
+        } catch (...) {}
       }
       progress.Advance();
     }
@@ -466,27 +479,47 @@ void RunFitBatch(const BatchArgs& args) {
   nlohmann::json json_rows = nlohmann::json::array();
   for (const Row& row : rows) {
     failed += row.status == "failed";
-    json_rows.push_back({{"item", row.name}, {"status", row.status}, {"n_components", row.nc}, {"kr_per_s", row.kr},
-                         {"seconds", row.seconds}, {"detail", row.detail}});
-    if (!args.json) std::printf("%-24s %-7s %3d %12s %8s  %s\n", row.name.c_str(), row.status.c_str(), row.nc,
-                row.status == "failed" ? "-" : FormatShort(row.kr).c_str(), FormatShort(row.seconds).c_str(),
-                row.detail.c_str());
+    json_rows.push_back({{"item", row.name},
+                         {"status", row.status},
+                         {"n_components", row.nc},
+                         {"kr_per_s", row.kr},
+                         {"seconds", row.seconds},
+                         {"detail", row.detail}});
+    if (!args.json)
+      std::printf("%-24s %-7s %3d %12s %8s  %s\n", row.name.c_str(), row.status.c_str(), row.nc,
+                  row.status == "failed" ? "-" : FormatShort(row.kr).c_str(), FormatShort(row.seconds).c_str(),
+                  row.detail.c_str());
     std::string detail = row.detail;
     std::replace(detail.begin(), detail.end(), '"', '\'');
-    csv.append(row.name).append(",").append(row.status).append(",").append(std::to_string(row.nc)).append(",")
-        .append(FormatDouble(row.kr)).append(",").append(FormatDouble(row.seconds)).append(",\"").append(detail).append("\"\n");
+    csv.append(row.name)
+        .append(",")
+        .append(row.status)
+        .append(",")
+        .append(std::to_string(row.nc))
+        .append(",")
+        .append(FormatDouble(row.kr))
+        .append(",")
+        .append(FormatDouble(row.seconds))
+        .append(",\"")
+        .append(detail)
+        .append("\"\n");
   }
   WriteFileAtomically(fs::path(args.out) / "summary.csv", csv);
   if (args.json)
-    std::printf("%s\n", nlohmann::json({{"items", json_rows}, {"fitted_now", todo.size() - failed},
-                                        {"kept", rows.size() - todo.size()}, {"failed", failed}, {"out", args.out}})
-                              .dump()
-                              .c_str());
-  else std::printf("phos fit batch: %zu item(s), %zu fitted now, %zu kept, %d failed -> %s (summary.csv)\n", rows.size(),
-              todo.size() - failed, rows.size() - todo.size(), failed, args.out.c_str());
+    std::printf("%s\n", nlohmann::json({{"items", json_rows},
+                                        {"fitted_now", todo.size() - failed},
+                                        {"kept", rows.size() - todo.size()},
+                                        {"failed", failed},
+                                        {"out", args.out}})
+                            .dump()
+                            .c_str());
+  else
+    std::printf("phos fit batch: %zu item(s), %zu fitted now, %zu kept, %d failed -> %s (summary.csv)\n", rows.size(),
+                todo.size() - failed, rows.size() - todo.size(), failed, args.out.c_str());
   if (failed > 0)
-    ThrowUserError("", "fit batch", std::to_string(failed) + " item(s) could not be fitted (see the table and " +
-                                        args.out + "/<item>.failed.txt)");
+    ThrowUserError(
+        "", "fit batch",
+        std::to_string(failed) + " item(s) could not be fitted (see the table and " + args.out + "/<item>.failed.txt)");
 }
 
 }  // namespace

@@ -55,8 +55,8 @@ struct LoadedCurve {
 LoadedCurve LoadCurve(const std::string& path, const CurveArgs& args) {
   CsvTable table = ReadCsv(path);
   if (table.header.size() < 2)
-    ThrowUserError(path, "header", "expected columns t,value[,value...], got " + std::to_string(table.header.size()) +
-                                       " column");
+    ThrowUserError(path, "header",
+                   "expected columns t,value[,value...], got " + std::to_string(table.header.size()) + " column");
   LoadedCurve loaded;
   loaded.file = path;
   Curve& curve = loaded.curve;
@@ -134,8 +134,8 @@ std::string JoinShort(const std::vector<double>& values, int digits) {
 // One file's result in the three forms a run may print.
 struct CurveResult {
   nlohmann::json json;
-  std::string text;               // one file, no --json
-  std::vector<std::string> row;   // several files, no --json
+  std::string text;              // one file, no --json
+  std::vector<std::string> row;  // several files, no --json
   std::vector<std::string> warnings;
 };
 
@@ -231,20 +231,21 @@ CurveResult FitDecayFile(const std::string& file, const CurveArgs& args, const D
   if (const std::optional<double> peak_s = PeakAfterRise(curve))
     loaded.warnings.push_back(file + ": the curve rises from its start to a peak at t = " + FormatShort(*peak_s, 6) +
                               " s before it falls (a charge followed by its decay?); it is fitted as a decay all the "
-                              "same: fit the decay alone with --from " + FormatShort(*peak_s, 6));
+                              "same: fit the decay alone with --from " +
+                              FormatShort(*peak_s, 6));
   const DecayFitSummary fit = FitDecay(curve, options, file);
   if (!args.plot.empty())
-    WritePlot(args.plot, curve, [&](int c, double t) { return EvaluateDecay(fit, c, t); },
-              "Decay fit: " + std::to_string(fit.n_components) + " component(s)", true);
+    WritePlot(
+        args.plot, curve, [&](int c, double t) { return EvaluateDecay(fit, c, t); },
+        "Decay fit: " + std::to_string(fit.n_components) + " component(s)", true);
 
   CurveResult result;
   result.warnings = loaded.warnings;
   nlohmann::json& j = result.json;
   j["components"] = nlohmann::json::array();
   for (const DecayComponent& component : fit.components) {
-    nlohmann::json k = {{"amplitude", component.amplitude[0]},
-                        {"rate", component.rate},
-                        {"rate_stderr", component.rate_stderr}};
+    nlohmann::json k = {
+        {"amplitude", component.amplitude[0]}, {"rate", component.rate}, {"rate_stderr", component.rate_stderr}};
     if (args.amplitude_stderr) k["amplitude_stderr"] = component.amplitude_stderr[0];
     if (curve.channel_count() > 1) {
       k["amplitudes"] = component.amplitude;
@@ -280,15 +281,20 @@ CurveResult FitDecayFile(const std::string& file, const CurveArgs& args, const D
   }
   if (options.background) {
     text += "  background";
-    for (int c = 0; c < curve.channel_count(); ++c) text += "  " + curve.names[c] + " " + FormatShort(fit.background[c], 6);
+    for (int c = 0; c < curve.channel_count(); ++c)
+      text += "  " + curve.names[c] + " " + FormatShort(fit.background[c], 6);
     text += "\n";
   }
   text += CurveNotes(loaded, args);
 
   std::vector<double> rates;
   for (const DecayComponent& component : fit.components) rates.push_back(component.rate);
-  result.row = {file, std::to_string(fit.n_components), JoinShort(rates, 6), FormatShort(fit.rss, 6),
-                options.background ? JoinShort(fit.background, 6) : "-", SamplesCell(loaded.order)};
+  result.row = {file,
+                std::to_string(fit.n_components),
+                JoinShort(rates, 6),
+                FormatShort(fit.rss, 6),
+                options.background ? JoinShort(fit.background, 6) : "-",
+                SamplesCell(loaded.order)};
   return result;
 }
 
@@ -363,8 +369,13 @@ CurveResult FitChargeFile(const std::string& file, const CurveArgs& args, const 
     L0.push_back(levels.L0);
     Linf.push_back(levels.Linf);
   }
-  result.row = {file, FormatShort(fit.rate, 6), FormatShort(fit.rate_stderr, 2), JoinShort(L0, 6), JoinShort(Linf, 6),
-                FormatShort(fit.rss, 6), SamplesCell(loaded.order)};
+  result.row = {file,
+                FormatShort(fit.rate, 6),
+                FormatShort(fit.rate_stderr, 2),
+                JoinShort(L0, 6),
+                JoinShort(Linf, 6),
+                FormatShort(fit.rss, 6),
+                SamplesCell(loaded.order)};
   return result;
 }
 
@@ -380,14 +391,16 @@ void RunChargeCurve(const CurveArgs& args) {
 // weights, the plot and --json. The callback sets args->files in the order
 // the command line named them (--csv and positional files mixed).
 void AddCurveOptions(CLI::App* command, const std::shared_ptr<CurveArgs>& args, void (*run)(const CurveArgs&)) {
-  CLI::Option* positional =
-      command->add_option("FILE", args->positional, "curve files (text tables, see above); several give one result each");
-  CLI::Option* csv = command->add_option("--csv", args->csv, "a curve file (may repeat; same as FILE)")
-                         ->allow_extra_args(false);
-  command->add_option("--from", args->from_s,
-                      "keep samples at t >= T (s, inclusive; default: from the first); t = 0 stays the file's")
+  CLI::Option* positional = command->add_option("FILE", args->positional,
+                                                "curve files (text tables, see above); several give one result each");
+  CLI::Option* csv =
+      command->add_option("--csv", args->csv, "a curve file (may repeat; same as FILE)")->allow_extra_args(false);
+  command
+      ->add_option("--from", args->from_s,
+                   "keep samples at t >= T (s, inclusive; default: from the first); t = 0 stays the file's")
       ->check(kFinite);
-  command->add_option("--to", args->to_s, "keep samples at t <= T (s, inclusive; default: to the last)")->check(kFinite);
+  command->add_option("--to", args->to_s, "keep samples at t <= T (s, inclusive; default: to the last)")
+      ->check(kFinite);
   command->add_option("--plot", args->plot, "write an SVG of the data against the fit (one file only)");
   command->add_flag("--json", args->json, "print one JSON object per file, one per line, each with \"file\"");
   command->callback([command, args, csv, positional, run] {
@@ -416,16 +429,18 @@ void RegisterFitCurve(CLI::App& fit) {
   auto decay = std::make_shared<CurveArgs>();
   CLI::App* d = fit.add_subcommand(
       "decay-curve",
-      std::string("Fit sum_i amplitude_i exp(-rate_i t) (+ background) to a decay curve; rates shared by every channel,\n"
-                  "amplitudes >= 0. The number of components is fixed (--components) or chosen by BIC up to\n"
-                  "--max-components (default 3). Uncertainties are 1 sigma, scaled by the reduced chi-square.\n"
-                  "A curve that rises to a peak first (a charge before the decay) is warned about (--from the peak).\n") +
+      std::string(
+          "Fit sum_i amplitude_i exp(-rate_i t) (+ background) to a decay curve; rates shared by every channel,\n"
+          "amplitudes >= 0. The number of components is fixed (--components) or chosen by BIC up to\n"
+          "--max-components (default 3). Uncertainties are 1 sigma, scaled by the reduced chi-square.\n"
+          "A curve that rises to a peak first (a charge before the decay) is warned about (--from the peak).\n") +
           kCurveFiles +
           "Several files: one table row each (file, nc, rates, rss, background, samples).\n"
           "JSON: {\"file\",\"components\":[{\"amplitude\",\"rate\",\"rate_stderr\",..}],\"rss\",\"n_components\",\n"
           "\"seconds\",\"samples\",\"time_order\",\"warnings\",..}");
   auto fixed = d->add_option("--components", decay->components, "fit exactly N components (1-4)");
-  auto chosen = d->add_option("--max-components", decay->max_components, "choose the count by BIC, up to N (1-4; default 3)");
+  auto chosen =
+      d->add_option("--max-components", decay->max_components, "choose the count by BIC, up to N (1-4; default 3)");
   fixed->excludes(chosen);
   d->add_option("--weights", decay->weights, "none or poisson (photon counting: weight 1/sqrt(value))")
       ->capture_default_str();

@@ -43,8 +43,9 @@ std::vector<double> BandEdges(const PlotArgs& args, int bands, const std::string
   for (std::size_t i = 1; i < edges.size(); ++i)
     if (!(edges[i] > edges[i - 1])) ThrowUserError("", "--bands-nm", "expected increasing band edges");
   if (static_cast<int>(edges.size()) != bands + 1)
-    ThrowUserError(input, "header", std::to_string(bands) + " L_ columns need " + std::to_string(bands + 1) +
-                                        " band edges, and --bands-nm gives " + std::to_string(edges.size()));
+    ThrowUserError(input, "header",
+                   std::to_string(bands) + " L_ columns need " + std::to_string(bands + 1) +
+                       " band edges, and --bands-nm gives " + std::to_string(edges.size()));
   return edges;
 }
 
@@ -68,13 +69,15 @@ void RunPlot(const PlotArgs& args) {
         }
         emitted.push_back(table.row_count() == 1 ? table.columns[c][0] : integral);
       }
-    if (emitted.empty()) ThrowUserError(input, "header", "no columns L_1..L_n (expected the output of 'phos simulate')");
+    if (emitted.empty())
+      ThrowUserError(input, "header", "no columns L_1..L_n (expected the output of 'phos simulate')");
     s.color = SpectrumColor(emitted, BandEdges(args, static_cast<int>(emitted.size()), input));
-    for (const PlotSeries& earlier : series) s.dashed = s.dashed || ColorDistance(earlier.color, s.color) < kAlikeColors;
+    for (const PlotSeries& earlier : series)
+      s.dashed = s.dashed || ColorDistance(earlier.color, s.color) < kAlikeColors;
 
     const auto peak = std::max_element(s.y.begin(), s.y.end());
-    nlohmann::json d = {{"file", input}, {"label", s.label}, {"color", s.color}, {"dashed", s.dashed},
-                        {"samples", table.row_count()}};
+    nlohmann::json d = {
+        {"file", input}, {"label", s.label}, {"color", s.color}, {"dashed", s.dashed}, {"samples", table.row_count()}};
     if (peak != s.y.end()) {
       d["peak_radiance"] = *peak;
       d["t_peak_s"] = s.x[static_cast<std::size_t>(peak - s.y.begin())];

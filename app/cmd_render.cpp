@@ -63,7 +63,8 @@ void Run(const RenderArgs& args) {
     if (equals == std::string::npos || equals == 0 || equals + 1 == assignment.size())
       ThrowUserError("", "--material", "expected OBJECT=FILE, got \"" + assignment + "\"");
     const std::string name = assignment.substr(0, equals), file = assignment.substr(equals + 1);
-    auto object = std::find_if(scene.objects.begin(), scene.objects.end(), [&](const Object& o) { return o.name == name; });
+    auto object =
+        std::find_if(scene.objects.begin(), scene.objects.end(), [&](const Object& o) { return o.name == name; });
     if (object == scene.objects.end()) ThrowUserError("", "--material", "the scene has no object '" + name + "'");
     auto material = std::make_shared<Material>(LoadMaterial(file));
     if (!(material->bands == scene.bands))
@@ -81,15 +82,18 @@ void Run(const RenderArgs& args) {
     // times out of order are refused rather than silently re-sorted.
     for (std::size_t i = 0; i < times.size(); ++i) {
       if (times[i] < scene.start_s)
-        ThrowUserError("", "--times", FormatDouble(times[i]) + " s is before the scene's start (" +
-                                          FormatDouble(scene.start_s) + " s): states are only known from there on");
+        ThrowUserError("", "--times",
+                       FormatDouble(times[i]) + " s is before the scene's start (" + FormatDouble(scene.start_s) +
+                           " s): states are only known from there on");
       if (i > 0 && times[i] < times[i - 1])
-        ThrowUserError("", "--times", "expected times in increasing order, got " + FormatDouble(times[i]) + " after " +
-                                          FormatDouble(times[i - 1]));
+        ThrowUserError("", "--times",
+                       "expected times in increasing order, got " + FormatDouble(times[i]) + " after " +
+                           FormatDouble(times[i - 1]));
     }
     // Past the scene's end is allowed (the frame an hour after lights-out), and said.
     if (!times.empty() && times.back() > scene.end_s)
-      std::fprintf(stderr, "phos render: warning: --times: %s s is past the scene's end (%s s); rendered all the same\n",
+      std::fprintf(stderr,
+                   "phos render: warning: --times: %s s is past the scene's end (%s s); rendered all the same\n",
                    FormatDouble(times.back()).c_str(), FormatDouble(scene.end_s).c_str());
   }
   std::error_code ec;
@@ -108,8 +112,10 @@ void Run(const RenderArgs& args) {
   std::string choice_line;
   if (choose) {
     // Measure each transport's cost on this scene at the first frame, then pick.
-    if (solver) solver->AdvanceTo(times.front());
-    else geometry.SetTime(times.front());
+    if (solver)
+      solver->AdvanceTo(times.front());
+    else
+      geometry.SetTime(times.front());
     const TransportChoice choice =
         ChooseTransport(MeasureTransportCandidates(geometry, solver.get(), options), args.budget_s, args.quality);
     options = choice.chosen.options;
@@ -117,19 +123,27 @@ void Run(const RenderArgs& args) {
     nlohmann::json candidates = nlohmann::json::array();
     std::string costs;
     for (const TransportCandidate& c : choice.candidates) {
-      candidates.push_back({{"transport", c.label}, {"estimated_s", c.estimated_s}, {"expected_ssim", c.expected_ssim}});
+      candidates.push_back(
+          {{"transport", c.label}, {"estimated_s", c.estimated_s}, {"expected_ssim", c.expected_ssim}});
       if (c.label != "path 16 spp" && c.label != "path 256 spp" && c.label != "path 1024 spp")
         costs += (costs.empty() ? "" : ", ") + c.label + " " + FormatShort(c.estimated_s, 2) + " s";
     }
-    choice_json = {{"chosen", choice.chosen.label}, {"estimated_s", choice.chosen.estimated_s},
-                   {"expected_ssim", choice.chosen.expected_ssim}, {"fits", choice.fits}, {"candidates", candidates}};
-    if (args.budget_s > 0) choice_json["budget_s"] = args.budget_s;
-    else choice_json["quality"] = args.quality;
+    choice_json = {{"chosen", choice.chosen.label},
+                   {"estimated_s", choice.chosen.estimated_s},
+                   {"expected_ssim", choice.chosen.expected_ssim},
+                   {"fits", choice.fits},
+                   {"candidates", candidates}};
+    if (args.budget_s > 0)
+      choice_json["budget_s"] = args.budget_s;
+    else
+      choice_json["quality"] = args.quality;
     choice_line = std::string(args.budget_s > 0 ? "budget " + FormatShort(args.budget_s) + " s per frame"
                                                 : "quality (SSIM) " + FormatShort(args.quality)) +
                   ": " + choice.chosen.label + " (estimated " + FormatShort(choice.chosen.estimated_s, 2) +
                   " s, expected SSIM " + FormatShort(choice.chosen.expected_ssim, 3) + ")" +
-                  (choice.fits ? "" : args.budget_s > 0 ? " - nothing fits, the fastest" : " - nothing reaches it, the best") +
+                  (choice.fits         ? ""
+                   : args.budget_s > 0 ? " - nothing fits, the fastest"
+                                       : " - nothing reaches it, the best") +
                   "; measured: " + costs;
   }
 
@@ -140,8 +154,10 @@ void Run(const RenderArgs& args) {
   for (std::size_t f = 0; f < times.size(); ++f) {
     const double t = times[f];
     const auto start = std::chrono::steady_clock::now();
-    if (solver) solver->AdvanceTo(t);
-    else geometry.SetTime(t);
+    if (solver)
+      solver->AdvanceTo(t);
+    else
+      geometry.SetTime(t);
     const double solver_s = Seconds(start);
     const auto render_start = std::chrono::steady_clock::now();
     FrameStats stats;
@@ -160,8 +176,13 @@ void Run(const RenderArgs& args) {
       sheet_frames.push_back(ToneMap(rgb, scene.camera.exposure));
       sheet_labels.push_back("t = " + FormatShort(t, 4) + " s");
     }
-    nlohmann::json entry = {{"t", t}, {"exr", exr.string()}, {"png", png.string()}, {"seconds", seconds},
-                            {"solver_seconds", solver_s}, {"render_seconds", render_s}, {"rays", stats.rays}};
+    nlohmann::json entry = {{"t", t},
+                            {"exr", exr.string()},
+                            {"png", png.string()},
+                            {"seconds", seconds},
+                            {"solver_seconds", solver_s},
+                            {"render_seconds", render_s},
+                            {"rays", stats.rays}};
     if (args.night_vision_cd > 0) {
       NightVisionOptions night;
       night.cd_per_unit = args.night_vision_cd;
@@ -177,17 +198,20 @@ void Run(const RenderArgs& args) {
   progress.Finish();
   if (!args.contact_sheet.empty()) WriteContactSheet(args.contact_sheet, sheet_frames, sheet_labels, 4);
 
-  nlohmann::json result = {{"scene", args.scene}, {"transport", TransportName(transport)},
-                           {"phosphorescence", solver != nullptr}, {"width", scene.camera.width},
-                           {"height", scene.camera.height}, {"frames", frames}};
+  nlohmann::json result = {
+      {"scene", args.scene},         {"transport", TransportName(transport)}, {"phosphorescence", solver != nullptr},
+      {"width", scene.camera.width}, {"height", scene.camera.height},         {"frames", frames}};
   if (choose) result["transport_choice"] = choice_json;
   if (solver) {
     const SolverStats& s = solver->stats();
-    result["solver"] = {{"texels", s.texels}, {"lit_steps", s.steps}, {"dark_jumps", s.dark_jumps},
-                        {"irradiance_updates", s.irradiance_updates}, {"shadow_rays", s.shadow_rays}};
+    result["solver"] = {{"texels", s.texels},
+                        {"lit_steps", s.steps},
+                        {"dark_jumps", s.dark_jumps},
+                        {"irradiance_updates", s.irradiance_updates},
+                        {"shadow_rays", s.shadow_rays}};
     if (const VolumeMedia* media = solver->media()) {
       const VolumeStats& v = media->stats();
-      result["solver"]["volumes"] = {{"voxels", v.voxels}, {"phosphor_voxels", v.phosphor_voxels},
+      result["solver"]["volumes"] = {{"voxels", v.voxels},         {"phosphor_voxels", v.phosphor_voxels},
                                      {"lit_voxels", v.lit_voxels}, {"lit_steps", v.steps},
                                      {"dark_jumps", v.dark_jumps}, {"light_updates", v.light_updates}};
     }
@@ -231,7 +255,8 @@ void RegisterRender(CLI::App& app) {
                   "Pick the transport for a time budget per frame: each is timed on this scene, and the best\n"
                   "expected quality that fits is used (direct, dss, path 4 to 1024 spp; the qualities are the\n"
                   "trade study's SSIM against the path tracer, docs/dss-trade.md)")
-      ->check(kFinite)->check(CLI::PositiveNumber);
+      ->check(kFinite)
+      ->check(CLI::PositiveNumber);
   cmd->add_option("--quality", args->quality,
                   "Pick the cheapest transport whose expected SSIM reaches this (0 to 1; e.g. 0.9)")
       ->check(CLI::Range(1e-9, 1.0));
@@ -242,12 +267,15 @@ void RegisterRender(CLI::App& app) {
   cmd->add_option("--width", args->width, "Override the camera's width in pixels")->check(CLI::Range(1, 16384));
   cmd->add_option("--height", args->height, "Override the camera's height in pixels")->check(CLI::Range(1, 16384));
   cmd->add_option("--exposure", args->exposure, "PNG exposure (default: the camera's); EXR files are never scaled")
-      ->check(kFinite)->check(CLI::PositiveNumber);
+      ->check(kFinite)
+      ->check(CLI::PositiveNumber);
   cmd->add_option("--night-vision", args->night_vision_cd,
                   "Also write frame-NNNN-night.png as a dark-adapted eye sees it (Thompson et al. 2002:\n"
                   "blue shift, loss of acuity, grain); the value is the luminance in cd/m^2 of radiance 1")
-      ->check(kFinite)->check(CLI::PositiveNumber);
-  cmd->add_option("--contact-sheet", args->contact_sheet, "Also write every frame side by side, labelled with its time, to this PNG");
+      ->check(kFinite)
+      ->check(CLI::PositiveNumber);
+  cmd->add_option("--contact-sheet", args->contact_sheet,
+                  "Also write every frame side by side, labelled with its time, to this PNG");
   cmd->add_option("--material", args->materials,
                   "OBJECT=FILE: give the object of that name this phosphor material (repeatable),\n"
                   "e.g. one just fitted by 'phos fit', without editing the scene");

@@ -31,20 +31,22 @@ struct SimulateArgs {
 };
 
 // "1" means the same irradiance in every band; "a,b,..." one value per band.
-std::vector<double> ParseBandValues(const std::string& text, int band_count, const std::string& option,
-                                    double lower, double upper) {
+std::vector<double> ParseBandValues(const std::string& text, int band_count, const std::string& option, double lower,
+                                    double upper) {
   std::vector<double> values;
   std::string bad;
   if (!ParseDoubleList(text, &values, &bad))
     ThrowUserError("", option, "expected a number or a comma-separated list of numbers, got \"" + bad + "\"");
   if (values.size() == 1) values.assign(static_cast<std::size_t>(band_count), values[0]);
   if (static_cast<int>(values.size()) != band_count)
-    ThrowUserError("", option, "expected 1 value or " + std::to_string(band_count) + " (one per band), got " +
-                                   std::to_string(values.size()));
+    ThrowUserError(
+        "", option,
+        "expected 1 value or " + std::to_string(band_count) + " (one per band), got " + std::to_string(values.size()));
   for (double v : values)
     if (v < lower || v > upper)
-      ThrowUserError("", option, "expected values in [" + FormatDouble(lower) + ", " + FormatDouble(upper) +
-                                     "], got " + FormatDouble(v));
+      ThrowUserError(
+          "", option,
+          "expected values in [" + FormatDouble(lower) + ", " + FormatDouble(upper) + "], got " + FormatDouble(v));
   return values;
 }
 
@@ -127,8 +129,8 @@ void SampleTheEnd(const Material& material, const std::vector<double>& E, const 
   rest.r0.assign(result->r.end() - result->nc, result->r.end());
   const double charge_left = std::max(0.0, args.charge_s - last);
   const SimulationResult tail = Simulate(
-      material, IrradianceSchedule::ChargeThenDecay(E, charge_left, charge_left > 0 ? args.decay_s : total - last), rest,
-      args.material);
+      material, IrradianceSchedule::ChargeThenDecay(E, charge_left, charge_left > 0 ? args.decay_s : total - last),
+      rest, args.material);
   result->t_s.push_back(total);
   result->r.insert(result->r.end(), tail.r.end() - tail.nc, tail.r.end());
   result->L.insert(result->L.end(), tail.L.end() - tail.nb, tail.L.end());
@@ -140,14 +142,18 @@ void RunSimulate(const SimulateArgs& args) {
   const int nb = material.band_count();
   if (args.charge_s < 0) ThrowUserError("", "--charge-s", "expected seconds >= 0, got " + FormatDouble(args.charge_s));
   if (args.decay_s < 0) ThrowUserError("", "--decay-s", "expected seconds >= 0, got " + FormatDouble(args.decay_s));
-  if (args.charge_s + args.decay_s <= 0) ThrowUserError("", "--charge-s", "nothing to simulate: give --charge-s or --decay-s > 0");
+  if (args.charge_s + args.decay_s <= 0)
+    ThrowUserError("", "--charge-s", "nothing to simulate: give --charge-s or --decay-s > 0");
   std::vector<double> E(static_cast<std::size_t>(nb), 0.0);
-  if (!args.irradiance.empty()) E = ParseBandValues(args.irradiance, nb, "--irradiance", 0.0, kMaxIrradiance);
-  else if (args.charge_s > 0) ThrowUserError("", "--irradiance", "required when --charge-s > 0");
+  if (!args.irradiance.empty())
+    E = ParseBandValues(args.irradiance, nb, "--irradiance", 0.0, kMaxIrradiance);
+  else if (args.charge_s > 0)
+    ThrowUserError("", "--irradiance", "required when --charge-s > 0");
 
   SimulationOptions options;
   auto integrator = ParseIntegrator(args.integrator);
-  if (!integrator) ThrowUserError("", "--integrator", "expected exact, euler, rk4 or reference, got \"" + args.integrator + "\"");
+  if (!integrator)
+    ThrowUserError("", "--integrator", "expected exact, euler, rk4 or reference, got \"" + args.integrator + "\"");
   options.integrator = *integrator;
   options.dt_s = args.dt_s;
   options.allow_unstable = args.allow_unstable;

@@ -77,7 +77,8 @@ int main(int argc, char** argv) {
   }
   if (argv[1][0] != '-') {
     std::string names;
-    for (const phos::app::CommandSummary& c : phos::app::kCommands) names += (names.empty() ? "" : ", ") + std::string(c.name);
+    for (const phos::app::CommandSummary& c : phos::app::kCommands)
+      names += (names.empty() ? "" : ", ") + std::string(c.name);
     std::fprintf(stderr, "phos: unknown command '%s' (commands: %s; see 'phos --help')\n", argv[1], names.c_str());
     return 2;
   }

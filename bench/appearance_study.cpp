@@ -82,7 +82,8 @@ CameraColour MakeCameraColour(const CameraModel& camera, const SpectralGrid& gri
   CameraColour c;
   for (int b = 0; b < grid.band_count(); ++b) {
     Tristimulus rgb;
-    for (int k = 0; k < 3; ++k) rgb[k] = camera.sensitivity[k].Integrate(grid.lower_nm(b), grid.upper_nm(b)) / grid.width_nm(b);
+    for (int k = 0; k < 3; ++k)
+      rgb[k] = camera.sensitivity[k].Integrate(grid.lower_nm(b), grid.upper_nm(b)) / grid.width_nm(b);
     c.band_rgb.push_back(rgb);
     c.band_xyz.push_back(Cie1931CmfBandMean(grid.lower_nm(b), grid.upper_nm(b)));
   }
@@ -192,7 +193,8 @@ void CaptureAll(const fs::path& phos, const Truth& truth, const fs::path& sessio
                               Quoted(session) + " >" + Quoted(log) + " 2>&1";
   int status = std::system(command.c_str());
   // 126/127: the binary could not be run, e.g. while a build relinks it; wait and try again.
-  for (int retry = 0; retry < 3 && WIFEXITED(status) && (WEXITSTATUS(status) == 126 || WEXITSTATUS(status) == 127); ++retry) {
+  for (int retry = 0; retry < 3 && WIFEXITED(status) && (WEXITSTATUS(status) == 126 || WEXITSTATUS(status) == 127);
+       ++retry) {
     sleep(10);
     status = std::system(command.c_str());
   }
@@ -201,7 +203,8 @@ void CaptureAll(const fs::path& phos, const Truth& truth, const fs::path& sessio
     std::string line, last;
     while (std::getline(in, line))
       if (!line.empty()) last = line;
-    throw std::runtime_error("phos capture all failed (exit code " + std::to_string(WIFEXITED(status) ? WEXITSTATUS(status) : -1) + "): " + last);
+    throw std::runtime_error("phos capture all failed (exit code " +
+                             std::to_string(WIFEXITED(status) ? WEXITSTATUS(status) : -1) + "): " + last);
   }
 }
 
@@ -209,9 +212,9 @@ void CaptureAll(const fs::path& phos, const Truth& truth, const fs::path& sessio
 
 struct FitResult {
   int nc = 0;
-  std::vector<double> dE00;  // per moment; NaN where the truth is black
+  std::vector<double> dE00;      // per moment; NaN where the truth is black
   std::vector<double> dE00_eye;  // the same through the CIE observer's XYZ instead of the camera's
-  std::string error;         // why there is none
+  std::string error;             // why there is none
 };
 
 struct Result {
@@ -233,7 +236,8 @@ FitResult FitAndCompare(const fs::path& session, const Truth& truth, int nc, con
     for (const Moment& m : Moments()) {
       const std::vector<double> true_Lp = GlowAt(truth.material, E, m), fitted_Lp = GlowAt(fitted, E, m);
       r.dE00.push_back(ExposedDifference(CameraXyz(colour, true_Lp), CameraXyz(colour, fitted_Lp)));
-      r.dE00_eye.push_back(ExposedDifference(OfRadiance(colour.band_xyz, true_Lp), OfRadiance(colour.band_xyz, fitted_Lp)));
+      r.dE00_eye.push_back(
+          ExposedDifference(OfRadiance(colour.band_xyz, true_Lp), OfRadiance(colour.band_xyz, fitted_Lp)));
     }
   } catch (const std::exception& e) {
     r.dE00.clear();
@@ -328,42 +332,47 @@ std::string IntroSection() {
       "nc = 1**. Here the photographs are the simulated camera's view of the true material, so the metric "
       "isolates the capture-and-fit pipeline: every material below was captured by `phos capture all` in the "
       "simulated lab (noise and all), fitted by `FitSession` with nc = 1 and with nc = 2 (`--components`), and the "
-      "fitted material's glow compared with the truth's at " + std::to_string(moments.size()) + " times: " +
-      std::to_string(kChargeTimesS.size()) + " during a " + FormatShort(kChargeS) + " s charge under " + kChargeLight +
+      "fitted material's glow compared with the truth's at " +
+      std::to_string(moments.size()) + " times: " + std::to_string(kChargeTimesS.size()) + " during a " +
+      FormatShort(kChargeS) + " s charge under " + kChargeLight +
       " (the decay protocol's light, its band irradiance from `SimulatedLab::SourceBandIrradiance`) from a "
       "dark-adapted sample, at t = ";
   for (std::size_t k = 0; k < kChargeTimesS.size(); ++k) md += (k ? ", " : "") + FormatShort(kChargeTimesS[k]);
   md += " s after light-on, and " + std::to_string(kDecayTimesS.size()) + " in the decay after it, at t = ";
   for (std::size_t k = 0; k < kDecayTimesS.size(); ++k) md += (k ? ", " : "") + FormatShort(kDecayTimesS[k]);
-  md += " s after light-off. The glow only: the charge light's reflection is the same for both and is left out "
-        "(as a long-pass filter in front of the camera would). Per-time values: [appearance.csv](appearance.csv); "
-        "plots: [appearance.svg](appearance.svg) (decay), [appearance-charge.svg](appearance-charge.svg) (charge).\n\n";
+  md +=
+      " s after light-off. The glow only: the charge light's reflection is the same for both and is left out "
+      "(as a long-pass filter in front of the camera would). Per-time values: [appearance.csv](appearance.csv); "
+      "plots: [appearance.svg](appearance.svg) (decay), [appearance-charge.svg](appearance-charge.svg) (charge).\n\n";
   return md;
 }
 
 std::string ConversionSection(const CameraColour& colour) {
   std::string md;
-  md += "## The conversion\n\n"
-        "1. **Camera RGB.** The simulated lab's default camera (`DefaultCameraModel`: Gaussian sensitivities at "
-        "600, 540 and 460 nm, 90 nm FWHM), noise-free and linear: each channel sees band b's radiance Lp[b] "
-        "weighted by the band mean of its sensitivity, the weight the simulated lab gives a sample's emission "
-        "(uniform density inside a band). Noise, black level and clipping are left out: they belong to a "
-        "photograph, not to the material.\n"
-        "2. **RGB to XYZ.** A 3x3 matrix M fitted by least squares (`FitColourMatrix`) so that the camera RGB of "
-        "each of the eight single-band spectra (radiance 1 in one band) maps onto its CIE 1931 XYZ, the band mean "
-        "of the colour matching functions (the multi-lobe fit of Wyman, Sloan and Shirley, JCGT 2013, the one the "
-        "renderer uses). Every glow is a non-negative mix of those eight spectra, which is why they are the "
-        "training set. This is a camera characterization: a camera's colour is never exactly the eye's (the "
-        "Luther condition), and the column *camera vs eye* below says by how much (CIEDE2000 between M times "
-        "the camera RGB and the CIE XYZ of the true glow, exposed the same way; mean over the times).\n"
-        "3. **Exposure.** At each time, like a photograph metered on the true material: one factor scales both "
-        "the true and the fitted XYZ so that the true Y is " + FormatShort(kMeteredY) + " of the white's "
-        "(middle grey). The fitted material is judged at the truth's exposure, so a brightness error counts "
-        "(about 6% of Y is one unit of L* at middle grey).\n"
-        "4. **CIELAB** against the D65 white (XYZ 0.95047, 1, 1.08883; CIE 15:2004), then **CIEDE2000** "
-        "(kL = kC = kH = 1, Sharma, Wu and Dalal 2005; `util/colour.h`, tested against their 34 pairs). "
-        "Below 1 is not perceptible.\n\n"
-        "M (rows X, Y, Z; columns camera R, G, B):\n\n";
+  md +=
+      "## The conversion\n\n"
+      "1. **Camera RGB.** The simulated lab's default camera (`DefaultCameraModel`: Gaussian sensitivities at "
+      "600, 540 and 460 nm, 90 nm FWHM), noise-free and linear: each channel sees band b's radiance Lp[b] "
+      "weighted by the band mean of its sensitivity, the weight the simulated lab gives a sample's emission "
+      "(uniform density inside a band). Noise, black level and clipping are left out: they belong to a "
+      "photograph, not to the material.\n"
+      "2. **RGB to XYZ.** A 3x3 matrix M fitted by least squares (`FitColourMatrix`) so that the camera RGB of "
+      "each of the eight single-band spectra (radiance 1 in one band) maps onto its CIE 1931 XYZ, the band mean "
+      "of the colour matching functions (the multi-lobe fit of Wyman, Sloan and Shirley, JCGT 2013, the one the "
+      "renderer uses). Every glow is a non-negative mix of those eight spectra, which is why they are the "
+      "training set. This is a camera characterization: a camera's colour is never exactly the eye's (the "
+      "Luther condition), and the column *camera vs eye* below says by how much (CIEDE2000 between M times "
+      "the camera RGB and the CIE XYZ of the true glow, exposed the same way; mean over the times).\n"
+      "3. **Exposure.** At each time, like a photograph metered on the true material: one factor scales both "
+      "the true and the fitted XYZ so that the true Y is " +
+      FormatShort(kMeteredY) +
+      " of the white's "
+      "(middle grey). The fitted material is judged at the truth's exposure, so a brightness error counts "
+      "(about 6% of Y is one unit of L* at middle grey).\n"
+      "4. **CIELAB** against the D65 white (XYZ 0.95047, 1, 1.08883; CIE 15:2004), then **CIEDE2000** "
+      "(kL = kC = kH = 1, Sharma, Wu and Dalal 2005; `util/colour.h`, tested against their 34 pairs). "
+      "Below 1 is not perceptible.\n\n"
+      "M (rows X, Y, Z; columns camera R, G, B):\n\n";
   for (const auto& row : colour.rgb_to_xyz)
     md += "    " + FormatShort(row[0], 5) + "  " + FormatShort(row[1], 5) + "  " + FormatShort(row[2], 5) + "\n";
   return md + "\n";
@@ -382,12 +391,13 @@ std::vector<double> TwoStateAverages(const std::vector<Result>& results, int k, 
 
 std::string FamilySection(const std::vector<Result>& results) {
   std::string md;
-  md += "## Per family\n\n"
-        "Mean over the family's materials of each material's average over the times; min and max over all "
-        "materials and times; how many materials average under 1 with nc = 2, and those that do not.\n\n"
-        "| family | materials | nc=1 mean | nc=1 min | nc=1 max | nc=2 mean | nc=2 min | nc=2 max | nc=2 average < 1 "
-        "| nc=2 average >= 1 |\n"
-        "|---|---|---|---|---|---|---|---|---|---|\n";
+  md +=
+      "## Per family\n\n"
+      "Mean over the family's materials of each material's average over the times; min and max over all "
+      "materials and times; how many materials average under 1 with nc = 2, and those that do not.\n\n"
+      "| family | materials | nc=1 mean | nc=1 min | nc=1 max | nc=2 mean | nc=2 min | nc=2 max | nc=2 average < 1 "
+      "| nc=2 average >= 1 |\n"
+      "|---|---|---|---|---|---|---|---|---|---|\n";
   for (const std::string family : kFamilies) {
     int materials = 0;
     std::string cells;
@@ -429,20 +439,25 @@ std::string MaterialSection(const std::vector<Result>& results, int random_count
                             double total_s, int threads) {
   const std::vector<Moment> moments = Moments();
   std::string md;
-  md += "## Per material\n\n"
-        "dE00 over the " + std::to_string(moments.size()) + " times: average, minimum and maximum, and at Fig. "
-        "8.13's two times (0.01 s and 20 s after light-off).\n\n"
-        "| material | family | true nc | nc=1 avg | nc=1 min | nc=1 max | nc=1 at 0.01 s / 20 s | nc=2 avg | nc=2 min "
-        "| nc=2 max | nc=2 at 0.01 s / 20 s | camera vs eye |\n"
-        "|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+  md +=
+      "## Per material\n\n"
+      "dE00 over the " +
+      std::to_string(moments.size()) +
+      " times: average, minimum and maximum, and at Fig. "
+      "8.13's two times (0.01 s and 20 s after light-off).\n\n"
+      "| material | family | true nc | nc=1 avg | nc=1 min | nc=1 max | nc=1 at 0.01 s / 20 s | nc=2 avg | nc=2 min "
+      "| nc=2 max | nc=2 at 0.01 s / 20 s | camera vs eye |\n"
+      "|---|---|---|---|---|---|---|---|---|---|---|---|\n";
   std::vector<std::string> notes;
   for (const Result& r : results) {
-    md += "| " + r.truth->name + " | " + r.truth->family + " | " + std::to_string(r.truth->material.state_count()) + " |";
+    md +=
+        "| " + r.truth->name + " | " + r.truth->family + " | " + std::to_string(r.truth->material.state_count()) + " |";
     for (const FitResult& f : r.fits) {
       const Stats s = StatsOf(f.dE00);
       md += " " + Cell(s.mean) + " | " + Cell(s.min) + " | " + Cell(s.max) + " | " + Cell(At(f.dE00, "decay", 0.01)) +
             " / " + Cell(At(f.dE00, "decay", 20)) + " |";
-      if (!f.error.empty()) notes.push_back(r.truth->name + ", nc = " + std::to_string(f.nc) + ": not fitted: " + f.error);
+      if (!f.error.empty())
+        notes.push_back(r.truth->name + ", nc = " + std::to_string(f.nc) + ": not fitted: " + f.error);
     }
     md += " " + Cell(StatsOf(r.camera_eye).mean) + " |\n";
     if (!r.error.empty()) notes.push_back(r.truth->name + ": not captured: " + r.error);
@@ -452,9 +467,11 @@ std::string MaterialSection(const std::vector<Result>& results, int random_count
     for (const std::string& n : notes) md += "- " + n + "\n";
   }
   md += "\nThe random family is `RandomTwoStateMaterial(seed)` (model/synthetic.h) for seeds 1 to " +
-        std::to_string(random_count) + ": rate ratios 2-50, fast shares 10-90%, as issue 13 asks the pipeline "
-        "to recover. " + std::to_string(material_count) + " materials, " + FormatShort(total_s, 3) + " s on " +
-        std::to_string(threads) + " threads.\n\n"
+        std::to_string(random_count) +
+        ": rate ratios 2-50, fast shares 10-90%, as issue 13 asks the pipeline "
+        "to recover. " +
+        std::to_string(material_count) + " materials, " + FormatShort(total_s, 3) + " s on " + std::to_string(threads) +
+        " threads.\n\n"
         "Made by `build/bin/phos-appearance-study --out docs` (`make study`).\n";
   return md;
 }
@@ -506,13 +523,15 @@ std::string PlotOfPhase(const std::vector<Result>& results, const std::string& p
 
 int main(int argc, char** argv) {
   using namespace phos;
-  CLI::App app{"The paper's appearance metric (Fig. 8.13): CIEDE2000 between each true material and its nc = 1 and "
-               "nc = 2 fits, as the simulated camera sees them over a charge and the decay after it."};
+  CLI::App app{
+      "The paper's appearance metric (Fig. 8.13): CIEDE2000 between each true material and its nc = 1 and "
+      "nc = 2 fits, as the simulated camera sees them over a charge and the decay after it."};
   std::string out = "docs", phos_binary = PHOS_BINARY;
   int random_count = 20, threads = 2;
   bool keep = false;
   app.add_option("--out", out, "folder for appearance.csv, .md, .svg and -charge.svg (default docs)");
-  app.add_option("--random", random_count, "random two-state materials, seeds 1..N (default 20)")->check(CLI::Range(0, 1000));
+  app.add_option("--random", random_count, "random two-state materials, seeds 1..N (default 20)")
+      ->check(CLI::Range(0, 1000));
   app.add_option("--threads", threads, "materials captured and fitted at once (default 2)")->check(CLI::Range(1, 64));
   app.add_option("--phos", phos_binary, "the phos binary that captures (default: this build's)");
   app.add_flag("--keep-sessions", keep, "keep the captured sessions (their folder is printed)");
@@ -524,13 +543,15 @@ int main(int argc, char** argv) {
     const std::vector<Truth> truths = Truths(random_count, scratch);
     const SpectralGrid grid = SpectralGrid::Paper();
     for (const Truth& t : truths)
-      if (!(t.material.bands == grid)) ThrowUserError(t.file.string(), "bands", "the study compares on the paper's 8 bands");
+      if (!(t.material.bands == grid))
+        ThrowUserError(t.file.string(), "bands", "the study compares on the paper's 8 bands");
     const CameraModel camera = DefaultCameraModel();
     const CameraColour colour = MakeCameraColour(camera, grid);
     // The charge light's band irradiance on the sample, as the lab measures it.
     VirtualClock clock;
-    const SimulatedLab lab(truths.front().material, std::vector<double>(static_cast<std::size_t>(grid.band_count()), 0.8),
-                           DefaultLights(), camera, clock);
+    const SimulatedLab lab(truths.front().material,
+                           std::vector<double>(static_cast<std::size_t>(grid.band_count()), 0.8), DefaultLights(),
+                           camera, clock);
     const std::vector<double> E = lab.SourceBandIrradiance(kChargeLight);
 
     std::printf("phos-appearance-study: %zu materials (capture all, then FitSession with nc = 1 and 2), %d at once\n",
@@ -540,18 +561,23 @@ int main(int argc, char** argv) {
       std::mutex print;
       ProgressBar progress("appearance study", truths.size());
       tbb::global_control limit(tbb::global_control::max_allowed_parallelism, static_cast<std::size_t>(threads));
-      tbb::parallel_for(std::size_t(0), truths.size(), [&](std::size_t i) {
-        results[i] = StudyMaterial(truths[i], phos_binary, scratch, keep, colour, E);
-        {
-          std::lock_guard<std::mutex> lock(print);
-          std::printf("%s\n", ProgressLine(results[i]).c_str());
-          std::fflush(stdout);
-        }
-        progress.Advance();
-      }, tbb::simple_partitioner());
+      tbb::parallel_for(
+          std::size_t(0), truths.size(),
+          [&](std::size_t i) {
+            results[i] = StudyMaterial(truths[i], phos_binary, scratch, keep, colour, E);
+            {
+              std::lock_guard<std::mutex> lock(print);
+              std::printf("%s\n", ProgressLine(results[i]).c_str());
+              std::fflush(stdout);
+            }
+            progress.Advance();
+          },
+          tbb::simple_partitioner());
     }
-    if (keep) std::printf("sessions kept in %s\n", scratch.string().c_str());
-    else fs::remove_all(scratch);
+    if (keep)
+      std::printf("sessions kept in %s\n", scratch.string().c_str());
+    else
+      fs::remove_all(scratch);
 
     const double total_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     WriteFileAtomically(fs::path(out) / "appearance.csv", Csv(results));

@@ -41,8 +41,9 @@ __attribute__((optimize("no-tree-loop-distribute-patterns"))) void CopyRange(con
 }
 
 void ParallelCopy(const std::vector<float>& b, std::vector<float>& a) {
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, a.size(), 1 << 16),
-                    [&](const tbb::blocked_range<std::size_t>& r) { CopyRange(b.data(), a.data(), r.begin(), r.end()); });
+  tbb::parallel_for(
+      tbb::blocked_range<std::size_t>(0, a.size(), 1 << 16),
+      [&](const tbb::blocked_range<std::size_t>& r) { CopyRange(b.data(), a.data(), r.begin(), r.end()); });
 }
 
 void BM_StreamCopy(benchmark::State& state) {
@@ -91,7 +92,8 @@ void ReportTraffic(benchmark::State& state, double bytes, double best_step_secon
   const double limit = bytes / copy_bytes_per_second;  // seconds at copy bandwidth
   state.counters["copy_GB/s"] = copy_bytes_per_second * 1e-9;
   state.SetBytesProcessed(static_cast<int64_t>(bytes) * state.iterations());
-  state.counters["texel_steps/s"] = benchmark::Counter(static_cast<double>(kTexels), benchmark::Counter::kIsIterationInvariantRate);
+  state.counters["texel_steps/s"] =
+      benchmark::Counter(static_cast<double>(kTexels), benchmark::Counter::kIsIterationInvariantRate);
   state.counters["limit_ms"] = limit * 1e3;
   state.counters["x_bandwidth_limit"] = per_step / limit;  // 1 = as fast as memory allows
 }

@@ -63,8 +63,8 @@ void BM_CoupledStepLit(benchmark::State& state) {
     benchmark::ClobberMemory();
   }
   state.counters["texels"] = static_cast<double>(c.solver->stats().texels);
-  state.counters["texel_steps/s"] = benchmark::Counter(static_cast<double>(c.solver->stats().texels),
-                                                       benchmark::Counter::kIsIterationInvariantRate);
+  state.counters["texel_steps/s"] =
+      benchmark::Counter(static_cast<double>(c.solver->stats().texels), benchmark::Counter::kIsIterationInvariantRate);
 }
 BENCHMARK(BM_CoupledStepLit)->Arg(10)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime();
 
@@ -77,8 +77,8 @@ void BM_CoupledStepDark(benchmark::State& state) {
     benchmark::ClobberMemory();
   }
   state.counters["texels"] = static_cast<double>(c.solver->stats().texels);
-  state.counters["texel_steps/s"] = benchmark::Counter(static_cast<double>(c.solver->stats().texels),
-                                                       benchmark::Counter::kIsIterationInvariantRate);
+  state.counters["texel_steps/s"] =
+      benchmark::Counter(static_cast<double>(c.solver->stats().texels), benchmark::Counter::kIsIterationInvariantRate);
 }
 BENCHMARK(BM_CoupledStepDark)->Arg(10)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime();
 
@@ -143,7 +143,8 @@ void BM_EmbreeCeilingIncoherent(benchmark::State& state) {
     std::atomic<int> hits{0};
     tbb::parallel_for(tbb::blocked_range<int>(0, kRays, 4096), [&](const tbb::blocked_range<int>& r) {
       int h = 0;
-      for (int i = r.begin(); i < r.end(); ++i) h += static_cast<bool>(c.geometry->Intersect(origins[i], directions[i]));
+      for (int i = r.begin(); i < r.end(); ++i)
+        h += static_cast<bool>(c.geometry->Intersect(origins[i], directions[i]));
       hits += h;
     });
     benchmark::DoNotOptimize(hits.load());

@@ -150,8 +150,8 @@ std::vector<float> MediumGlow(const Scene& scene, const SceneGeometry& geometry,
       for (std::size_t p = 0; p < n; ++p) {
         if (layer.object[p] < 0) continue;
         for (int b = 0; b < nb; ++b)
-          out[p] += map.delta_T[p] * static_cast<float>(scene.volumes[layer.object[p]].albedo[b]) * r.irradiance[p * nb + b] /
-                    (4 * 3.14159265f);
+          out[p] += map.delta_T[p] * static_cast<float>(scene.volumes[layer.object[p]].albedo[b]) *
+                    r.irradiance[p * nb + b] / (4 * 3.14159265f);
       }
     }
     return out;
@@ -165,7 +165,8 @@ std::vector<float> MediumGlow(const Scene& scene, const SceneGeometry& geometry,
         if (layer.object[p] < 0) continue;
         double sum = 0;
         for (int k = 0; k < directions; ++k) {
-          const float z = 1 - 2 * u(random), phi = 2 * 3.14159265f * u(random), r = std::sqrt(std::max(0.0f, 1 - z * z));
+          const float z = 1 - 2 * u(random), phi = 2 * 3.14159265f * u(random),
+                      r = std::sqrt(std::max(0.0f, 1 - z * z));
           const Vec3f d(r * std::cos(phi), r * std::sin(phi), z);
           Lp_at(geometry.Intersect(layer.position[p], d), L);
           for (int b = 0; b < nb; ++b) sum += scene.volumes[layer.object[p]].albedo[b] * L[b];
@@ -191,7 +192,9 @@ struct Run {
 int main(int argc, char** argv) {
   using namespace phos;
   using namespace phos::render;
-  CLI::App app{"Deep screen space against ray-traced and path-traced truth, Monte Carlo and screen space: error against time\n(occlusion, the glow's bounce, media, the sky, translucency)."};
+  CLI::App app{
+      "Deep screen space against ray-traced and path-traced truth, Monte Carlo and screen space: error against "
+      "time\n(occlusion, the glow's bounce, media, the sky, translucency)."};
   std::string out = "docs";
   int size = 128, reference_rays = 2048;
   app.add_option("--out", out, "folder for the CSVs, plots and dss-trade.md (default docs)");
@@ -205,7 +208,8 @@ int main(int argc, char** argv) {
     for (const std::string& name : views) {
       Scene scene = LoadScene(fs::path(PHOS_FIXTURES_DIR) / "scenes" / (name + ".json"));
       // Keep the view's aspect ratio, `size` pixels high.
-      scene.camera.width = static_cast<int>(std::lround(size * static_cast<double>(scene.camera.width) / scene.camera.height));
+      scene.camera.width =
+          static_cast<int>(std::lround(size * static_cast<double>(scene.camera.width) / scene.camera.height));
       scene.camera.height = size;
       SceneGeometry geometry(scene);
       const CameraRays camera(scene, 0);
@@ -244,9 +248,10 @@ int main(int argc, char** argv) {
             options.epsilon = epsilon;
             const DssResult r = SplatDeepScreenSpace(g, camera, surfels, {}, options);
             const double seconds = Seconds(t0);
-            runs.push_back({name, "deep screen space",
-                            "s=" + FormatShort(s) + " levels=" + std::to_string(levels) + " epsilon=" + FormatShort(epsilon),
-                            seconds, Compare(r.occlusion, truth, g), levels, epsilon, s});
+            runs.push_back(
+                {name, "deep screen space",
+                 "s=" + FormatShort(s) + " levels=" + std::to_string(levels) + " epsilon=" + FormatShort(epsilon),
+                 seconds, Compare(r.occlusion, truth, g), levels, epsilon, s});
           }
       for (float s : {0.04f, 0.02f}) {
         const auto t0 = std::chrono::steady_clock::now();
@@ -256,8 +261,8 @@ int main(int argc, char** argv) {
         const std::vector<Surfel> surfels = Surfelize(geometry, camera.origin(), fov, surfel_options);
         const DssResult r = SplatBouncedZBuffer(g, camera, surfels, {}, {});
         const double seconds = Seconds(t0);
-        runs.push_back({name, "bounced z-buffer", "s=" + FormatShort(s) + " levels=3", seconds, Compare(r.occlusion, truth, g),
-                        3, 1e-6f, s});
+        runs.push_back({name, "bounced z-buffer", "s=" + FormatShort(s) + " levels=3", seconds,
+                        Compare(r.occlusion, truth, g), 3, 1e-6f, s});
       }
       progress.Advance();
     }
@@ -292,7 +297,8 @@ int main(int argc, char** argv) {
         std::vector<float> v(static_cast<std::size_t>(image.width) * image.height, 0.0f);
         for (int y = 0; y < image.height; ++y)
           for (int x = 0; x < image.width; ++x)
-            for (int b = 0; b < image.channels; ++b) v[static_cast<std::size_t>(y) * image.width + x] += image.at(x, y)[b];
+            for (int b = 0; b < image.channels; ++b)
+              v[static_cast<std::size_t>(y) * image.width + x] += image.at(x, y)[b];
         return v;
       };
       std::vector<float> truth_sum = band_sum(truth);
@@ -301,7 +307,8 @@ int main(int argc, char** argv) {
       auto add = [&](const std::string& method, const std::string& parameters, const Image& image, double t) {
         std::vector<float> v = band_sum(image);
         for (float& x : v) x /= peak;
-        glow.push_back({"cornell-phosphor t=40 s (glow only)", method, parameters, t, Compare(v, truth_sum, g), 0, 0, 0});
+        glow.push_back(
+            {"cornell-phosphor t=40 s (glow only)", method, parameters, t, Compare(v, truth_sum, g), 0, 0, 0});
       };
       // (Each frame is rendered before its time is read: argument order is unspecified.)
       const Image direct = render(Transport::kDirect, 1, 0, &seconds);
@@ -315,12 +322,24 @@ int main(int argc, char** argv) {
         add("path tracer", "spp=" + std::to_string(spp), path, seconds);
       }
     }
-    std::string glow_md = "\n## The glow's bounce (what phos uses it for)\n\nThe Cornell box 10 s after its LED went off, " +
-                          std::to_string(size) + " px, summed over the bands and relative to the brightest pixel, against the path tracer at " +
-                          std::to_string(4 * reference_rays / 8) + " samples per pixel.\n\n| method | parameters | seconds | RMSE | SSIM |\n|---|---|---|---|---|\n";
+    std::string glow_md =
+        "\n## The glow's bounce (what phos uses it for)\n\nThe Cornell box 10 s after its LED went off, " +
+        std::to_string(size) +
+        " px, summed over the bands and relative to the brightest pixel, against the path tracer at " +
+        std::to_string(4 * reference_rays / 8) +
+        " samples per pixel.\n\n| method | parameters | seconds | RMSE | SSIM |\n|---|---|---|---|---|\n";
     for (const Run& r : glow) {
-      glow_md.append("| ").append(r.method).append(" | ").append(r.parameters).append(" | ").append(FormatShort(r.seconds))
-          .append(" | ").append(FormatShort(r.error.rmse)).append(" | ").append(FormatShort(r.error.ssim)).append(" |\n");
+      glow_md.append("| ")
+          .append(r.method)
+          .append(" | ")
+          .append(r.parameters)
+          .append(" | ")
+          .append(FormatShort(r.seconds))
+          .append(" | ")
+          .append(FormatShort(r.error.rmse))
+          .append(" | ")
+          .append(FormatShort(r.error.ssim))
+          .append(" |\n");
       runs.push_back(r);
     }
 
@@ -328,9 +347,11 @@ int main(int argc, char** argv) {
     // marched: the march's step against a fine reference (a sixteenth of a
     // voxel, the same one sample per pixel), on the two media fixtures.
     std::vector<Run> media_runs;
-    for (const auto& [name, t] : std::vector<std::pair<std::string, double>>{{"dust-sheets", 1.5}, {"glowing-liquid", 10.0}}) {
+    for (const auto& [name, t] :
+         std::vector<std::pair<std::string, double>>{{"dust-sheets", 1.5}, {"glowing-liquid", 10.0}}) {
       Scene scene = LoadScene(fs::path(PHOS_FIXTURES_DIR) / "scenes" / (name + ".json"));
-      scene.camera.width = static_cast<int>(std::lround(size * static_cast<double>(scene.camera.width) / scene.camera.height));
+      scene.camera.width =
+          static_cast<int>(std::lround(size * static_cast<double>(scene.camera.width) / scene.camera.height));
       scene.camera.height = size;
       SceneGeometry geometry(scene);
       CoupledSolver solver(scene, geometry);
@@ -355,8 +376,8 @@ int main(int argc, char** argv) {
       for (float step : {4.0f, 2.0f, 1.0f, 0.5f, 0.25f}) {
         std::vector<float> v = BandSum(render(step, 1, &seconds));
         for (float& x : v) x /= peak;
-        media_runs.push_back({name + " t=" + FormatShort(t) + " s (media)", "ray march", "step=" + FormatShort(step) + " voxel",
-                              seconds, Compare(v, truth, all), 0, 0, 0});
+        media_runs.push_back({name + " t=" + FormatShort(t) + " s (media)", "ray march",
+                              "step=" + FormatShort(step) + " voxel", seconds, Compare(v, truth, all), 0, 0, 0});
       }
     }
 
@@ -385,34 +406,48 @@ int main(int argc, char** argv) {
       const CameraRays camera(scene, 40);
       const GBuffer g = RenderGBuffer(geometry, scene, 40);
       solver.media()->PrepareLighting(40);
-      std::vector<float> truth = MediumGlow(scene, geometry, solver, BuildIntervalMap(*solver.media(), g, camera, 16), camera, 512, 3);
+      std::vector<float> truth =
+          MediumGlow(scene, geometry, solver, BuildIntervalMap(*solver.media(), g, camera, 16), camera, 512, 3);
       const float peak = *std::max_element(truth.begin(), truth.end());
       for (float& v : truth) v /= peak;
       const GBuffer all = AllPixels(size, size);
       auto run = [&](const std::string& method, int layers, int directions) {
         const auto t0 = std::chrono::steady_clock::now();
         const GBuffer gb = RenderGBuffer(geometry, scene, 40);
-        std::vector<float> v = MediumGlow(scene, geometry, solver, BuildIntervalMap(*solver.media(), gb, camera, layers), camera,
-                                          directions, 11);
+        std::vector<float> v = MediumGlow(
+            scene, geometry, solver, BuildIntervalMap(*solver.media(), gb, camera, layers), camera, directions, 11);
         const double seconds = Seconds(t0);
         for (float& x : v) x /= peak;
-        media_runs.push_back({"cornell fog t=40 s (glow in the medium)", method,
-                              "layers=" + std::to_string(layers) + (directions ? " rays=" + std::to_string(directions) : ""),
-                              seconds, Compare(v, truth, all), 0, 0, 0});
+        media_runs.push_back(
+            {"cornell fog t=40 s (glow in the medium)", method,
+             "layers=" + std::to_string(layers) + (directions ? " rays=" + std::to_string(directions) : ""), seconds,
+             Compare(v, truth, all), 0, 0, 0});
       };
       for (int layers : {1, 2, 4, 8, 16}) run("deep screen space (interval map)", layers, 0);
       for (int directions : {1, 4, 16, 64}) run("monte carlo (interval map)", 4, directions);
       run("monte carlo (interval map)", 16, 16);
     }
-    std::string media_md = "\n## Media\n\nRay-marched single scattering and glow against a march of a sixteenth of a voxel "
-                           "(the same one sample per pixel); the glow that the media scatter of glowing surfaces against 16 "
-                           "interval-map points per pixel with 512 Monte Carlo rays each. " + std::to_string(size) +
-                           " px high, band sums relative to the brightest pixel, every pixel counted.\n\n"
-                           "| view | method | parameters | seconds | RMSE | SSIM |\n|---|---|---|---|---|---|\n";
+    std::string media_md =
+        "\n## Media\n\nRay-marched single scattering and glow against a march of a sixteenth of a voxel "
+        "(the same one sample per pixel); the glow that the media scatter of glowing surfaces against 16 "
+        "interval-map points per pixel with 512 Monte Carlo rays each. " +
+        std::to_string(size) +
+        " px high, band sums relative to the brightest pixel, every pixel counted.\n\n"
+        "| view | method | parameters | seconds | RMSE | SSIM |\n|---|---|---|---|---|---|\n";
     for (const Run& r : media_runs) {
-      media_md.append("| ").append(r.view).append(" | ").append(r.method).append(" | ").append(r.parameters).append(" | ")
-          .append(FormatShort(r.seconds)).append(" | ").append(FormatShort(r.error.rmse)).append(" | ")
-          .append(FormatShort(r.error.ssim)).append(" |\n");
+      media_md.append("| ")
+          .append(r.view)
+          .append(" | ")
+          .append(r.method)
+          .append(" | ")
+          .append(r.parameters)
+          .append(" | ")
+          .append(FormatShort(r.seconds))
+          .append(" | ")
+          .append(FormatShort(r.error.rmse))
+          .append(" | ")
+          .append(FormatShort(r.error.ssim))
+          .append(" |\n");
       runs.push_back(r);
     }
 
@@ -422,7 +457,8 @@ int main(int argc, char** argv) {
     std::vector<Run> effect_runs;
     {
       Scene scene = LoadScene(fs::path(PHOS_FIXTURES_DIR) / "scenes" / "dusk-sign.json");
-      scene.camera.width = static_cast<int>(std::lround(size * static_cast<double>(scene.camera.width) / scene.camera.height));
+      scene.camera.width =
+          static_cast<int>(std::lround(size * static_cast<double>(scene.camera.width) / scene.camera.height));
       scene.camera.height = size;
       SceneGeometry geometry(scene);
       geometry.SetTime(30);
@@ -445,7 +481,8 @@ int main(int argc, char** argv) {
         for (std::size_t p = 0; p < n; ++p)
           if (g.object[p] >= 0)
             E[p] = std::max(0.0f, static_cast<float>(3.14159265 * (1 - r.occlusion[p]) +
-                                                      env.gradient * (2 * 3.14159265 / 3 * g.normal[p].y() - 3.14159265 * r.occlusion_y[p])));
+                                                     env.gradient * (2 * 3.14159265 / 3 * g.normal[p].y() -
+                                                                     3.14159265 * r.occlusion_y[p])));
         return E;
       };
       const std::string view = "dusk-sign t=30 s (sky irradiance)";
@@ -455,16 +492,21 @@ int main(int argc, char** argv) {
         std::vector<float> E = sky_rays(g, rays);
         const double seconds = Seconds(t0);
         for (float& v : E) v /= peak;
-        effect_runs.push_back({view, "monte carlo (sky rays)", "rays=" + std::to_string(rays), seconds, Compare(E, truth, truth_g), 0, 0, 0});
+        effect_runs.push_back({view, "monte carlo (sky rays)", "rays=" + std::to_string(rays), seconds,
+                               Compare(E, truth, truth_g), 0, 0, 0});
       }
-      for (const auto& [method, s_value, levels] : std::vector<std::tuple<std::string, float, int>>{
-               {"deep screen space", 0.04f, 2}, {"deep screen space", 0.04f, 3}, {"deep screen space", 0.04f, 5},
-               {"deep screen space", 0.02f, 3}, {"bounced z-buffer", 0.04f, 3}}) {
+      for (const auto& [method, s_value, levels] :
+           std::vector<std::tuple<std::string, float, int>>{{"deep screen space", 0.04f, 2},
+                                                            {"deep screen space", 0.04f, 3},
+                                                            {"deep screen space", 0.04f, 5},
+                                                            {"deep screen space", 0.02f, 3},
+                                                            {"bounced z-buffer", 0.04f, 3}}) {
         const auto t0 = std::chrono::steady_clock::now();
         const GBuffer g = RenderGBuffer(geometry, scene, 30);
         SurfelOptions surfel_options;
         surfel_options.s = s_value;
-        const std::vector<Surfel> surfels = Surfelize(geometry, camera.origin(), static_cast<float>(scene.camera.fov_deg), surfel_options);
+        const std::vector<Surfel> surfels =
+            Surfelize(geometry, camera.origin(), static_cast<float>(scene.camera.fov_deg), surfel_options);
         DssOptions options;
         options.levels = levels;
         const DssResult r = method == "bounced z-buffer" ? SplatBouncedZBuffer(g, camera, surfels, {}, options)
@@ -485,14 +527,16 @@ int main(int argc, char** argv) {
     // transport's), whose error is the bleeding it misses.
     {
       Scene scene = LoadScene(fs::path(PHOS_FIXTURES_DIR) / "scenes" / "translucent-shadow.json");
-      scene.camera.width = static_cast<int>(std::lround(size * static_cast<double>(scene.camera.width) / scene.camera.height));
+      scene.camera.width =
+          static_cast<int>(std::lround(size * static_cast<double>(scene.camera.width) / scene.camera.height));
       scene.camera.height = size;
       SceneGeometry geometry(scene);
       geometry.SetTime(2);
       const CameraRays camera(scene, 2);
       const int band = 4, wax = 1;
       const Subsurface& sss = *scene.objects[wax].subsurface;
-      std::vector<Dipole> dipoles(scene.objects.size(), Dipole::From(sss.sigma_a_per_m[band], sss.sigma_s_prime_per_m[band], sss.eta));
+      std::vector<Dipole> dipoles(scene.objects.size(),
+                                  Dipole::From(sss.sigma_a_per_m[band], sss.sigma_s_prime_per_m[band], sss.eta));
       const Light& lamp = scene.lights[0];
       const LightPose pose = PoseAt(lamp, 2);
       auto irradiance = [&](const Vec3f& p, const Vec3f& normal) {
@@ -508,7 +552,8 @@ int main(int argc, char** argv) {
         surfel_options.s = s_value;
         std::vector<Surfel> entering;
         std::vector<float> E_in;
-        for (const Surfel& s : Surfelize(geometry, camera.origin(), static_cast<float>(scene.camera.fov_deg), surfel_options)) {
+        for (const Surfel& s :
+             Surfelize(geometry, camera.origin(), static_cast<float>(scene.camera.fov_deg), surfel_options)) {
           if (s.object != wax) continue;
           const float E = irradiance(s.position, s.normal);
           if (E <= 0) continue;
@@ -526,7 +571,9 @@ int main(int argc, char** argv) {
         std::vector<float> M(g.object.size(), 0.0f);
         for (std::size_t p = 0; p < M.size(); ++p)
           if (g.object[p] == wax)
-            M[p] = irradiance(g.position[p], g.normal[p]) * static_cast<float>(dipoles[wax].AnnulusIntegral(0, near[p])) + r.irradiance[p];
+            M[p] =
+                irradiance(g.position[p], g.normal[p]) * static_cast<float>(dipoles[wax].AnnulusIntegral(0, near[p])) +
+                r.irradiance[p];
         *seconds = Seconds(t0);
         return M;
       };
@@ -555,22 +602,44 @@ int main(int argc, char** argv) {
       std::vector<float> M = exitance(0.04f, true, &seconds);
       add("exact gather (dipole)", "s=0.04", M, seconds);
     }
-    std::string effects_md = "\n## Directional occlusion and subsurface scattering\n\nThe sky's irradiance on dusk-sign "
-                             "against 1024 sky rays per pixel; the wax's exitance against the exact gather of surfels at s = 0.02 "
-                             "(band sums relative to the brightest pixel; " + std::to_string(size) + " px high).\n\n"
-                             "| view | method | parameters | seconds | RMSE | SSIM |\n|---|---|---|---|---|---|\n";
+    std::string effects_md =
+        "\n## Directional occlusion and subsurface scattering\n\nThe sky's irradiance on dusk-sign "
+        "against 1024 sky rays per pixel; the wax's exitance against the exact gather of surfels at s = 0.02 "
+        "(band sums relative to the brightest pixel; " +
+        std::to_string(size) +
+        " px high).\n\n"
+        "| view | method | parameters | seconds | RMSE | SSIM |\n|---|---|---|---|---|---|\n";
     for (const Run& r : effect_runs) {
-      effects_md.append("| ").append(r.view).append(" | ").append(r.method).append(" | ").append(r.parameters).append(" | ")
-          .append(FormatShort(r.seconds)).append(" | ").append(FormatShort(r.error.rmse)).append(" | ")
-          .append(FormatShort(r.error.ssim)).append(" |\n");
+      effects_md.append("| ")
+          .append(r.view)
+          .append(" | ")
+          .append(r.method)
+          .append(" | ")
+          .append(r.parameters)
+          .append(" | ")
+          .append(FormatShort(r.seconds))
+          .append(" | ")
+          .append(FormatShort(r.error.rmse))
+          .append(" | ")
+          .append(FormatShort(r.error.ssim))
+          .append(" |\n");
       runs.push_back(r);
     }
 
     std::string csv = "view,method,parameters,seconds,rmse,ssim\n";
     for (const Run& r : runs)
-      csv.append(r.view).append(",").append(r.method).append(",").append(r.parameters).append(",")
-          .append(FormatDouble(r.seconds)).append(",").append(FormatDouble(r.error.rmse)).append(",")
-          .append(FormatDouble(r.error.ssim)).append("\n");
+      csv.append(r.view)
+          .append(",")
+          .append(r.method)
+          .append(",")
+          .append(r.parameters)
+          .append(",")
+          .append(FormatDouble(r.seconds))
+          .append(",")
+          .append(FormatDouble(r.error.rmse))
+          .append(",")
+          .append(FormatDouble(r.error.ssim))
+          .append("\n");
     fs::create_directories(out);
     WriteFileAtomically(fs::path(out) / "dss-trade.csv", csv);
 
@@ -608,13 +677,16 @@ int main(int argc, char** argv) {
     std::string budget_csv = "budget_s,method,parameters,seconds,rmse,ssim\n";
     PlotSeries dss_curve("deep screen space, best within budget"), mc_curve("monte carlo, best within budget");
     dss_curve.markers = mc_curve.markers = true;
-    std::string md = "<!-- written by: build/bin/phos-dss-study --out docs -->\n# Deep screen space: error against time\n\n"
-                     "Ambient occlusion at " + std::to_string(size) + " px high on the fixture views " +
-                     "(cornell-phosphor, still-life), against ray-traced occlusion with " + std::to_string(reference_rays) +
-                     " cosine-distributed rays per pixel. Times include the G-buffer; errors are means over the views. "
-                     "All runs: [dss-trade.csv](dss-trade.csv), plot [dss-trade.svg](dss-trade.svg).\n\n"
-                     "| budget (s) | DSS: best settings | DSS s | DSS RMSE | DSS SSIM | Monte Carlo: best | MC s | MC RMSE | MC SSIM |\n"
-                     "|---|---|---|---|---|---|---|---|---|\n";
+    std::string md =
+        "<!-- written by: build/bin/phos-dss-study --out docs -->\n# Deep screen space: error against time\n\n"
+        "Ambient occlusion at " +
+        std::to_string(size) + " px high on the fixture views " +
+        "(cornell-phosphor, still-life), against ray-traced occlusion with " + std::to_string(reference_rays) +
+        " cosine-distributed rays per pixel. Times include the G-buffer; errors are means over the views. "
+        "All runs: [dss-trade.csv](dss-trade.csv), plot [dss-trade.svg](dss-trade.svg).\n\n"
+        "| budget (s) | DSS: best settings | DSS s | DSS RMSE | DSS SSIM | Monte Carlo: best | MC s | MC RMSE | MC "
+        "SSIM |\n"
+        "|---|---|---|---|---|---|---|---|---|\n";
     for (double budget : {0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 4.0}) {
       auto best = [&](const std::string& method) {
         std::string chosen;
@@ -625,23 +697,53 @@ int main(int argc, char** argv) {
       };
       const std::string d = best("deep screen space"), m = best("monte carlo");
       md.append("| ").append(FormatShort(budget)).append(" | ");
-      if (d.empty()) md.append("- | - | - | - | ");
+      if (d.empty())
+        md.append("- | - | - | - | ");
       else {
         const auto v = mean["deep screen space"][d];
-        md.append(d).append(" | ").append(FormatShort(v.first)).append(" | ").append(FormatShort(v.second)).append(" | ")
-            .append(FormatShort(mean_ssim["deep screen space"][d])).append(" | ");
-        budget_csv.append(FormatDouble(budget)).append(",deep screen space,").append(d).append(",").append(FormatDouble(v.first))
-            .append(",").append(FormatDouble(v.second)).append(",").append(FormatDouble(mean_ssim["deep screen space"][d])).append("\n");
+        md.append(d)
+            .append(" | ")
+            .append(FormatShort(v.first))
+            .append(" | ")
+            .append(FormatShort(v.second))
+            .append(" | ")
+            .append(FormatShort(mean_ssim["deep screen space"][d]))
+            .append(" | ");
+        budget_csv.append(FormatDouble(budget))
+            .append(",deep screen space,")
+            .append(d)
+            .append(",")
+            .append(FormatDouble(v.first))
+            .append(",")
+            .append(FormatDouble(v.second))
+            .append(",")
+            .append(FormatDouble(mean_ssim["deep screen space"][d]))
+            .append("\n");
         dss_curve.x.push_back(budget);
         dss_curve.y.push_back(v.second);
       }
-      if (m.empty()) md.append("- | - | - | - |\n");
+      if (m.empty())
+        md.append("- | - | - | - |\n");
       else {
         const auto v = mean["monte carlo"][m];
-        md.append(m).append(" | ").append(FormatShort(v.first)).append(" | ").append(FormatShort(v.second)).append(" | ")
-            .append(FormatShort(mean_ssim["monte carlo"][m])).append(" |\n");
-        budget_csv.append(FormatDouble(budget)).append(",monte carlo,").append(m).append(",").append(FormatDouble(v.first))
-            .append(",").append(FormatDouble(v.second)).append(",").append(FormatDouble(mean_ssim["monte carlo"][m])).append("\n");
+        md.append(m)
+            .append(" | ")
+            .append(FormatShort(v.first))
+            .append(" | ")
+            .append(FormatShort(v.second))
+            .append(" | ")
+            .append(FormatShort(mean_ssim["monte carlo"][m]))
+            .append(" |\n");
+        budget_csv.append(FormatDouble(budget))
+            .append(",monte carlo,")
+            .append(m)
+            .append(",")
+            .append(FormatDouble(v.first))
+            .append(",")
+            .append(FormatDouble(v.second))
+            .append(",")
+            .append(FormatDouble(mean_ssim["monte carlo"][m]))
+            .append("\n");
         mc_curve.x.push_back(budget);
         mc_curve.y.push_back(v.second);
       }

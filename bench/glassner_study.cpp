@@ -86,7 +86,8 @@ int Run(int argc, char** argv) {
   int size = 96, max_samples = 4096;
   app.add_option("--out", out, "Folder for glassner-comparison.{csv,md,svg}");
   app.add_option("--size", size, "Image width and height in pixels")->check(CLI::Range(8, 1024));
-  app.add_option("--max-samples", max_samples, "Most time samples per pixel for the baseline")->check(CLI::Range(1, 1 << 16));
+  app.add_option("--max-samples", max_samples, "Most time samples per pixel for the baseline")
+      ->check(CLI::Range(1, 1 << 16));
   CLI11_PARSE(app, argc, argv);
   std::filesystem::create_directories(out);
 
@@ -108,8 +109,10 @@ int Run(int argc, char** argv) {
     }
     SceneGeometry geometry(scene);
     CoupledSolver solver(scene, geometry);
-    summary << "\n### " << scenario << (scenario == "weak" ? " (LED at 1%: r stays small)" : " (the fixture's LED: r nears 1)")
-            << "\n\n| T (s) | ours: ms/frame | ours: error | Glassner at ours' time | Glassner (1 sample) / ours: error | Glassner at ours' error | time ratio |\n"
+    summary << "\n### " << scenario
+            << (scenario == "weak" ? " (LED at 1%: r stays small)" : " (the fixture's LED: r nears 1)")
+            << "\n\n| T (s) | ours: ms/frame | ours: error | Glassner at ours' time | Glassner (1 sample) / ours: "
+               "error | Glassner at ours' error | time ratio |\n"
             << "|---|---|---|---|---|---|---|\n";
     for (double T : frame_times) {
       solver.AdvanceTo(T - 1.0 / 30);
@@ -225,7 +228,8 @@ int Run(int argc, char** argv) {
      << " pixels, on this machine (2 cores). Data: glassner-comparison.csv; plot: glassner-comparison.svg.\n"
      << "Error: RMS over pixels and bands of the emitted radiance against the exact solution at each pixel's point.\n"
      << "Ours: one frame of a 30 fps sequence (advance the texels 1/30 s, look them up). Glassner: no state; every\n"
-     << "frame integrates the whole past with temporal importance sampling, one shadow ray per sample while the LED is on.\n"
+     << "frame integrates the whole past with temporal importance sampling, one shadow ray per sample while the LED is "
+        "on.\n"
      << summary.str();
   WriteFileAtomically(std::filesystem::path(out) / "glassner-comparison.md", md.str());
   std::printf("%s", md.str().c_str());

@@ -123,8 +123,7 @@ int RunStudy(const std::string& out_dir, const std::string& fixtures) {
           const long double truth = TruthL(m, a, result.t_s[s]);
           const double error = static_cast<double>(std::fabs(L - truth) / peak);
           max_error = std::isfinite(L) ? std::max(max_error, error) : INFINITY;
-          if (s + 1 == result.sample_count())
-            final_error = static_cast<double>(std::fabs(L - truth) / truth);
+          if (s + 1 == result.sample_count()) final_error = static_cast<double>(std::fabs(L - truth) / truth);
         }
         std::string status = "ok";
         for (const std::string& w : result.warnings) status = w.rfind("unstable", 0) == 0 ? "unstable" : "not-monotone";
@@ -151,12 +150,15 @@ int RunStudy(const std::string& out_dir, const std::string& fixtures) {
   // Worst case over the materials, per integrator and step: the plots and table.
   std::vector<PlotSeries> vs_cost, vs_step;
   std::ostringstream table;
-  table << "| integrator | largest step with error <= 1e-3 | its cost (ns/texel/s) | largest step with error <= 1e-6 | its cost (ns/texel/s) |\n";
+  table << "| integrator | largest step with error <= 1e-3 | its cost (ns/texel/s) | largest step with error <= 1e-6 | "
+           "its cost (ns/texel/s) |\n";
   table << "|---|---|---|---|---|\n";
   for (Integrator integrator : kIntegrators) {
     PlotSeries cost_series{IntegratorName(integrator)}, step_series{IntegratorName(integrator)};
     cost_series.markers = step_series.markers = true;
-    struct Best { double dt = 0, cost = 0; } loose, tight;
+    struct Best {
+      double dt = 0, cost = 0;
+    } loose, tight;
     for (double h : steps_s) {
       double worst = 0, cost = 0;
       bool unstable = false;
@@ -199,18 +201,20 @@ int RunStudy(const std::string& out_dir, const std::string& fixtures) {
      << "Worst case over the 8 presets; cost measured in the same run (batch kernel, float, 2 cores).\n\n"
      << table.str();
   WriteFileAtomically(out_dir + "/integrator-study.md", md.str());
-  std::printf("\nwrote %s/integrator-study.csv (%zu runs), integrator-study.md, integrator-study.svg, "
-              "integrator-error-vs-step.svg\n",
-              out_dir.c_str(), rows.size());
+  std::printf(
+      "\nwrote %s/integrator-study.csv (%zu runs), integrator-study.md, integrator-study.svg, "
+      "integrator-error-vs-step.svg\n",
+      out_dir.c_str(), rows.size());
   return 0;
 }
 
 }  // namespace phos
 
 int main(int argc, char** argv) {
-  CLI::App app{"Error against cost of the four integrators of Eq. 8.1 on the Table 8.1 presets\n"
-               "(charge 120 s under E = 1 in bands 1-3, then 240 s dark; steps 1 ms to 100 s).",
-               "phos-integrator-study"};
+  CLI::App app{
+      "Error against cost of the four integrators of Eq. 8.1 on the Table 8.1 presets\n"
+      "(charge 120 s under E = 1 in bands 1-3, then 240 s dark; steps 1 ms to 100 s).",
+      "phos-integrator-study"};
   std::string out = "docs", fixtures = PHOS_FIXTURES_DIR;
   app.add_option("--out", out, "folder for integrator-study.csv and the SVG plots (default docs)");
   app.add_option("--fixtures", fixtures, "the fixtures folder (default: the source tree's)");

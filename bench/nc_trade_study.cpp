@@ -67,8 +67,8 @@ struct Capture {
 
 Curve CaptureDecay(const Material& material, const fs::path& dir) {
   VirtualClock clock;
-  SimulatedLab lab(material, std::vector<double>(static_cast<std::size_t>(material.band_count()), 0.8),
-                   DefaultLights(), DefaultCameraModel(), clock);
+  SimulatedLab lab(material, std::vector<double>(static_cast<std::size_t>(material.band_count()), 0.8), DefaultLights(),
+                   DefaultCameraModel(), clock);
   DecayProtocolOptions options;
   options.charge_light = "led405";
   fs::remove_all(dir);
@@ -130,8 +130,9 @@ double Median(std::vector<double> v) {
 
 int main(int argc, char** argv) {
   using namespace phos;
-  CLI::App app{"The nc trade (Sec. 8.4.4): fit error against simulation cost for nc = 1, 2, 3 on the Table 8.1 "
-               "presets, captured in the simulated lab."};
+  CLI::App app{
+      "The nc trade (Sec. 8.4.4): fit error against simulation cost for nc = 1, 2, 3 on the Table 8.1 "
+      "presets, captured in the simulated lab."};
   std::string out = "docs";
   app.add_option("--out", out, "folder for nc-trade.csv, nc-trade.md and nc-trade.svg (default docs)");
   CLI11_PARSE(app, argc, argv);
@@ -162,7 +163,8 @@ int main(int argc, char** argv) {
             const DecayFitSummary fit = FitDecay(curve, options, name);
             std::vector<double> errors;
             for (std::size_t j = 0; j < curve.size(); ++j)
-              errors.push_back(std::fabs(EvaluateDecay(fit, 0, curve.t_s[j]) - curve.channels[0][j]) / curve.channels[0][j]);
+              errors.push_back(std::fabs(EvaluateDecay(fit, 0, curve.t_s[j]) - curve.channels[0][j]) /
+                               curve.channels[0][j]);
             row.median = Median(errors);
             row.last = errors.back();
             row.bic = fit.bic.empty() ? std::nan("") : fit.bic.back();
@@ -179,22 +181,34 @@ int main(int argc, char** argv) {
 
     std::string csv = "preset,family,nc,median_relative_error,last_sample_relative_error,step_ns_per_texel\n";
     for (const Row& r : rows)
-      csv.append(r.preset).append(",").append(r.family).append(",").append(std::to_string(r.nc)).append(",")
-          .append(FormatDouble(r.median)).append(",").append(FormatDouble(r.last)).append(",").append(FormatDouble(cost[r.nc])).append("\n");
+      csv.append(r.preset)
+          .append(",")
+          .append(r.family)
+          .append(",")
+          .append(std::to_string(r.nc))
+          .append(",")
+          .append(FormatDouble(r.median))
+          .append(",")
+          .append(FormatDouble(r.last))
+          .append(",")
+          .append(FormatDouble(cost[r.nc]))
+          .append("\n");
     WriteFileAtomically(fs::path(out) / "nc-trade.csv", csv);
 
     // Per family: each preset's error at nc = 2, 3 as a share of its nc = 1
     // error, then the median over presets (the paper's way of stating it).
-    std::string md = "<!-- written by: build/bin/phos-nc-study --out docs (make study) -->\n"
-                     "# The nc trade: fit error against simulation cost\n\n"
-                     "Each Table 8.1 preset with a measured ke, captured in the simulated lab (decay after a "
-                     "90-minute charge under led405, frames every 5 s for 180 s), fitted with nc = 1, 2, 3 "
-                     "(`FitDecay`, Poisson weights, background). Error: |fit - data| / data over the frames "
-                     "(median, and at the last frame). Cost: one lit step of the renderer's batch kernel "
-                     "(`AdvanceBatch`, exact, 8 bands, 1M texels, best of 7), per texel. Per-preset numbers: "
-                     "[nc-trade.csv](nc-trade.csv).\n\n"
-                     "| family | nc | median error / nc=1's (median over presets) | last-sample error / nc=1's | step ns/texel | cost / nc=1's |\n"
-                     "|---|---|---|---|---|---|\n";
+    std::string md =
+        "<!-- written by: build/bin/phos-nc-study --out docs (make study) -->\n"
+        "# The nc trade: fit error against simulation cost\n\n"
+        "Each Table 8.1 preset with a measured ke, captured in the simulated lab (decay after a "
+        "90-minute charge under led405, frames every 5 s for 180 s), fitted with nc = 1, 2, 3 "
+        "(`FitDecay`, Poisson weights, background). Error: |fit - data| / data over the frames "
+        "(median, and at the last frame). Cost: one lit step of the renderer's batch kernel "
+        "(`AdvanceBatch`, exact, 8 bands, 1M texels, best of 7), per texel. Per-preset numbers: "
+        "[nc-trade.csv](nc-trade.csv).\n\n"
+        "| family | nc | median error / nc=1's (median over presets) | last-sample error / nc=1's | step ns/texel | "
+        "cost / nc=1's |\n"
+        "|---|---|---|---|---|---|\n";
     std::vector<PlotSeries> series;
     int color = 0;
     for (const std::string family : {"preset", "trap spread"}) {
@@ -213,9 +227,19 @@ int main(int argc, char** argv) {
             last_ratio.push_back(this_nc->last / one->last);
           }
         }
-        md.append("| ").append(family).append(" | ").append(std::to_string(nc)).append(" | ")
-            .append(FormatShort(100 * Median(median_ratio))).append("% | ").append(FormatShort(100 * Median(last_ratio)))
-            .append("% | ").append(FormatShort(cost[nc])).append(" | ").append(FormatShort(cost[nc] / cost[1])).append(" |\n");
+        md.append("| ")
+            .append(family)
+            .append(" | ")
+            .append(std::to_string(nc))
+            .append(" | ")
+            .append(FormatShort(100 * Median(median_ratio)))
+            .append("% | ")
+            .append(FormatShort(100 * Median(last_ratio)))
+            .append("% | ")
+            .append(FormatShort(cost[nc]))
+            .append(" | ")
+            .append(FormatShort(cost[nc] / cost[1]))
+            .append(" |\n");
       }
       for (const std::string& name : presets) {
         PlotSeries s(name + (family == std::string("preset") ? "" : " (trap spread)"));
@@ -231,8 +255,9 @@ int main(int argc, char** argv) {
         ++color;
       }
     }
-    md.append("\nPaper (Sec. 8.4.4, measured materials): nc = 2 cut the median error to 8% of one's, nc = 3 to 4%, "
-              "at about +50% evaluation time per extra state.\n");
+    md.append(
+        "\nPaper (Sec. 8.4.4, measured materials): nc = 2 cut the median error to 8% of one's, nc = 3 to 4%, "
+        "at about +50% evaluation time per extra state.\n");
     WriteFileAtomically(fs::path(out) / "nc-trade.md", md);
     PlotOptions options;
     options.title = "nc trade: median fit error against simulation cost (markers: nc = 1, 2, 3)";

@@ -109,10 +109,11 @@ std::string Get(int port, const std::string& target) {
 // What an input may change, and must leave as it found it.
 nlohmann::json Snapshot(const editor::EditSession& session) {
   const nlohmann::json state = session.State();
-  nlohmann::json s = {{"states", state["states"]}, {"falloff", state["falloff"]}, {"constraints", nlohmann::json::array()}};
+  nlohmann::json s = {
+      {"states", state["states"]}, {"falloff", state["falloff"]}, {"constraints", nlohmann::json::array()}};
   for (const auto& c : state["constraints"])
-    s["constraints"].push_back({{"object", c["object"]}, {"t_s", c["t_s"]}, {"rgb", c["rgb"]}, {"weight", c["weight"]},
-                                {"kind", c["kind"]}});
+    s["constraints"].push_back(
+        {{"object", c["object"]}, {"t_s", c["t_s"]}, {"rgb", c["rgb"]}, {"weight", c["weight"]}, {"kind", c["kind"]}});
   for (const auto& o : state["objects"]) s["materials"].push_back(o["material"]);
   return s;
 }
@@ -120,8 +121,9 @@ nlohmann::json Snapshot(const editor::EditSession& session) {
 // A request the harness makes itself (setting up, putting back): must succeed.
 nlohmann::json Must(int port, const std::string& request) {
   const Response r = Send(port, request);
-  if (r.status != 200) throw std::logic_error("the editor refused the harness's own request (" + std::to_string(r.status) +
-                                              "): " + r.body + "; request: " + request.substr(0, 200));
+  if (r.status != 200)
+    throw std::logic_error("the editor refused the harness's own request (" + std::to_string(r.status) +
+                           "): " + r.body + "; request: " + request.substr(0, 200));
   return nlohmann::json::parse(r.body);
 }
 
@@ -168,15 +170,16 @@ Editor& TheEditor() {
     }
     if (e->constraint.is_null()) throw std::logic_error("no pixel of the harness's takes a constraint");
     e->start_state = Snapshot(*e->session);
-    std::fprintf(stderr, "fuzz-editor: port %d, constraint %s, exports under %s\n", e->port, e->constraint.dump().c_str(),
-                 e->root.c_str());
+    std::fprintf(stderr, "fuzz-editor: port %d, constraint %s, exports under %s\n", e->port,
+                 e->constraint.dump().c_str(), e->root.c_str());
     return e;
   }();
   return *editor;
 }
 
 // The preset each phosphorescent object of cornell-phosphor.json starts with.
-const std::map<std::string, std::string> kStartPresets = {{"back wall", "green"}, {"left wall", "blue"}, {"right wall", "green"}};
+const std::map<std::string, std::string> kStartPresets = {
+    {"back wall", "green"}, {"left wall", "blue"}, {"right wall", "green"}};
 
 // Puts back what an accepted request changed.
 void PutBack(Editor& e, int route, std::string_view body, const Response& response) {
@@ -188,7 +191,10 @@ void PutBack(Editor& e, int route, std::string_view body, const Response& respon
       break;
     case 1:  // constraint 0 changed: its fields back
       Must(port, Post(port, "/api/constraints/update",
-                      nlohmann::json{{"index", 0}, {"rgb", start["rgb"]}, {"t_s", start["t_s"]}, {"weight", start["weight"]},
+                      nlohmann::json{{"index", 0},
+                                     {"rgb", start["rgb"]},
+                                     {"t_s", start["t_s"]},
+                                     {"weight", start["weight"]},
                                      {"kind", start["kind"]}}
                           .dump()));
       break;
@@ -202,9 +208,7 @@ void PutBack(Editor& e, int route, std::string_view body, const Response& respon
       Must(port, Post(port, "/api/preset", nlohmann::json{{"object", object}, {"preset", it->second}}.dump()));
       break;
     }
-    case 4:
-      Must(port, Post(port, "/api/settings", R"({"states": 1, "falloff": 0})"));
-      break;
+    case 4: Must(port, Post(port, "/api/settings", R"({"states": 1, "falloff": 0})")); break;
     case 5: {  // an export: what it wrote must be under the root; then the root is emptied
       const std::filesystem::path written = nlohmann::json::parse(response.body)["written"].get<std::string>();
       const std::string root = std::filesystem::weakly_canonical(e.root).string() + "/";
@@ -213,8 +217,7 @@ void PutBack(Editor& e, int route, std::string_view body, const Response& respon
       for (const auto& entry : std::filesystem::directory_iterator(e.root)) std::filesystem::remove_all(entry.path());
       return;  // nothing of the session changed
     }
-    default:
-      return;
+    default: return;
   }
   if (Snapshot(*e.session) != e.start_state)
     throw std::logic_error("the session did not come back to its start: " + Snapshot(*e.session).dump());
@@ -247,7 +250,8 @@ bool EditorRequest(std::string_view data) {
     return true;
   }
   if (response.status != 400)
-    throw std::logic_error("the editor answered " + std::to_string(response.status) + ": " + response.body.substr(0, 400));
+    throw std::logic_error("the editor answered " + std::to_string(response.status) + ": " +
+                           response.body.substr(0, 400));
   nlohmann::json error;
   try {
     error = nlohmann::json::parse(response.body);

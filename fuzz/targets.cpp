@@ -70,7 +70,8 @@ void WriteFile(const std::filesystem::path& path, std::string_view data) {
 
 void RequireFinite(const std::vector<double>& values, const char* what) {
   for (double v : values)
-    if (!std::isfinite(v)) throw std::logic_error(std::string("an accepted material simulated to a non-finite ") + what);
+    if (!std::isfinite(v))
+      throw std::logic_error(std::string("an accepted material simulated to a non-finite ") + what);
 }
 
 }  // namespace
@@ -97,11 +98,13 @@ bool Material(std::string_view data) {
 }
 
 bool Scene(std::string_view data) {
-  return Refusal([&] { render::SceneFromJson(ParseJsonText(data, "fuzz.json"), FixturesDir() / "scenes", "fuzz.json"); });
+  return Refusal(
+      [&] { render::SceneFromJson(ParseJsonText(data, "fuzz.json"), FixturesDir() / "scenes", "fuzz.json"); });
 }
 
 bool ObjMesh(std::string_view data) {
-  return Refusal([&] { render::ParseMesh(data, ".obj", FixturesDir() / "scenes/meshes", "fuzz.obj", "", "fuzz.json: mesh"); });
+  return Refusal(
+      [&] { render::ParseMesh(data, ".obj", FixturesDir() / "scenes/meshes", "fuzz.obj", "", "fuzz.json: mesh"); });
 }
 
 bool GltfMesh(std::string_view data) {

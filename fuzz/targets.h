@@ -39,8 +39,8 @@ struct Target {
   bool (*run)(std::string_view);
 };
 inline constexpr Target kTargets[] = {
-    {"material", Material},       {"scene", Scene},     {"obj", ObjMesh},         {"gltf", GltfMesh},
-    {"constraints", Constraints}, {"lab", LabConfig},   {"curve_csv", CurveCsv},      {"session", SessionRecords},
+    {"material", Material},       {"scene", Scene},   {"obj", ObjMesh},        {"gltf", GltfMesh},
+    {"constraints", Constraints}, {"lab", LabConfig}, {"curve_csv", CurveCsv}, {"session", SessionRecords},
 };
 
 }  // namespace phos::fuzz

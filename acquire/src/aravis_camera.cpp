@@ -128,7 +128,8 @@ void AravisCamera::SetPixelFormat(const std::string& name) {
   if (std::find(formats.begin(), formats.end(), name) == formats.end()) {
     std::string known;
     for (const std::string& f : formats) known += (known.empty() ? "" : ", ") + f;
-    ThrowUserError("camera '" + impl_->id + "'", "pixel format", "does not offer '" + name + "' (it has: " + known + ")");
+    ThrowUserError("camera '" + impl_->id + "'", "pixel format",
+                   "does not offer '" + name + "' (it has: " + known + ")");
   }
   GError* error = nullptr;
   arv_camera_set_pixel_format_from_string(impl_->camera, name.c_str(), &error);
@@ -221,7 +222,8 @@ void AravisCamera::SetTrigger(Trigger trigger, const std::string& source) {
     if (std::find(sources.begin(), sources.end(), wanted) == sources.end()) {
       std::string known;
       for (const std::string& f : sources) known += (known.empty() ? "" : ", ") + f;
-      ThrowUserError("camera '" + impl_->id + "'", "trigger", "has no trigger source '" + wanted + "' (it has: " + known + ")");
+      ThrowUserError("camera '" + impl_->id + "'", "trigger",
+                     "has no trigger source '" + wanted + "' (it has: " + known + ")");
     }
     // FrameStart on the rising edge of `wanted`, acquisition continuous (armed).
     arv_camera_set_trigger(impl_->camera, wanted.c_str(), &error);
@@ -240,7 +242,8 @@ void AravisCamera::SetRegion(int x, int y, int width, int height) {
 
 void AravisCamera::set_max_retakes(int retakes) {
   if (retakes < 0 || retakes > 100)
-    ThrowUserError("camera '" + impl_->id + "'", "retakes", "refuses " + std::to_string(retakes) + " (it takes 0 to 100)");
+    ThrowUserError("camera '" + impl_->id + "'", "retakes",
+                   "refuses " + std::to_string(retakes) + " (it takes 0 to 100)");
   max_retakes_ = retakes;
 }
 
@@ -266,7 +269,8 @@ std::string AravisCamera::description() const {
   if (error) g_clear_error(&error);
   const char* model = arv_camera_get_model_name(impl_->camera, &error);
   if (error) g_clear_error(&error);
-  return std::string("Aravis camera '") + impl_->id + "' (" + (vendor ? vendor : "?") + " " + (model ? model : "?") + ")";
+  return std::string("Aravis camera '") + impl_->id + "' (" + (vendor ? vendor : "?") + " " + (model ? model : "?") +
+         ")";
 }
 
 double AravisCamera::max_exposure_s() const {

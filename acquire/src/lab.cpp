@@ -27,7 +27,8 @@ nlohmann::json LabConfig::ToJson() const {
     if (!c.band_irradiance.empty()) channels_json[c.name]["band_irradiance"] = c.band_irradiance;
   }
   nlohmann::json lines = nlohmann::json::array();
-  for (const CalibrationLine& l : calibration_lines) lines.push_back({{"light", l.light}, {"wavelength_nm", l.wavelength_nm}});
+  for (const CalibrationLine& l : calibration_lines)
+    lines.push_back({{"light", l.light}, {"wavelength_nm", l.wavelength_nm}});
   nlohmann::json camera_json = {{"aravis", camera}, {"binning", {binning_x, binning_y}}, {"timeout_s", timeout_s}};
   if (!pixel_format.empty()) camera_json["pixel_format"] = pixel_format;
   if (region) camera_json["region"] = *region;
@@ -38,14 +39,15 @@ nlohmann::json LabConfig::ToJson() const {
       camera_json["trigger"] = {{"hardware", trigger_source}, {"gpio_channel", trigger_channel}};
       break;
   }
-  return {{"schema", "phos.lab/1"},
-          {"camera", camera_json},
-          {"lights", {{"backend", lights_backend}, {"chip", chip}, {"channels", channels_json}}},
-          {"charge_light", charge_light},
-          {"calibration_lines", lines},
-          {"flat_field", {{"light", flat_light}, {"temperature_k", flat_temperature_k}, {"irradiance", flat_irradiance}}},
-          {"bands_nm", bands.edges_nm},
-          {"rig", rig}};
+  return {
+      {"schema", "phos.lab/1"},
+      {"camera", camera_json},
+      {"lights", {{"backend", lights_backend}, {"chip", chip}, {"channels", channels_json}}},
+      {"charge_light", charge_light},
+      {"calibration_lines", lines},
+      {"flat_field", {{"light", flat_light}, {"temperature_k", flat_temperature_k}, {"irradiance", flat_irradiance}}},
+      {"bands_nm", bands.edges_nm},
+      {"rig", rig}};
 }
 
 LabConfig LoadLabConfig(const std::filesystem::path& path) { return LabConfigFromJson(ReadFileText(path), path); }
@@ -65,7 +67,8 @@ LabConfig LabConfigFromJson(std::string_view text, const std::filesystem::path& 
   if (auto f = camera.Optional("pixel_format")) config.pixel_format = f->NonEmptyString();
   if (auto f = camera.Optional("binning")) {
     const std::vector<double> b = f->NumberArray(2, 1);
-    if (b[0] != std::floor(b[0]) || b[1] != std::floor(b[1]) || b[0] > 16 || b[1] > 16) f->Fail("expected 2 whole numbers in 1-16");
+    if (b[0] != std::floor(b[0]) || b[1] != std::floor(b[1]) || b[0] > 16 || b[1] > 16)
+      f->Fail("expected 2 whole numbers in 1-16");
     config.binning_x = static_cast<int>(b[0]);
     config.binning_y = static_cast<int>(b[1]);
   }
@@ -76,16 +79,20 @@ LabConfig LabConfigFromJson(std::string_view text, const std::filesystem::path& 
     std::array<int, 4> r{};
     for (int i = 0; i < 4; ++i) r[i] = f->At(i).Integer(i < 2 ? 0 : 1, kMaxSensorPixels);
     if (r[0] + r[2] > kMaxSensorPixels || r[1] + r[3] > kMaxSensorPixels)
-      f->Fail("the region reaches past " + std::to_string(kMaxSensorPixels) + " pixels, the largest sensor phos accepts");
+      f->Fail("the region reaches past " + std::to_string(kMaxSensorPixels) +
+              " pixels, the largest sensor phos accepts");
     config.region = r;
   }
   if (auto f = camera.Optional("timeout_s")) config.timeout_s = f->NumberInRange(0.1, 3600);
   if (auto f = camera.Optional("trigger")) {
     if (f->value().is_string()) {
       const std::string t = f->String();
-      if (t == "software") config.trigger = AravisCamera::Trigger::kSoftware;
-      else if (t == "free-run") config.trigger = AravisCamera::Trigger::kFreeRun;
-      else f->Fail("expected \"software\", \"free-run\" or {\"hardware\": \"Line1\", \"gpio_channel\": ...}");
+      if (t == "software")
+        config.trigger = AravisCamera::Trigger::kSoftware;
+      else if (t == "free-run")
+        config.trigger = AravisCamera::Trigger::kFreeRun;
+      else
+        f->Fail("expected \"software\", \"free-run\" or {\"hardware\": \"Line1\", \"gpio_channel\": ...}");
     } else {
       f->RejectUnknownKeys({"hardware", "gpio_channel"});
       config.trigger = AravisCamera::Trigger::kHardware;
@@ -125,7 +132,8 @@ LabConfig LabConfigFromJson(std::string_view text, const std::filesystem::path& 
       if (!f->value().is_boolean()) f->Fail("expected true or false");
       c.active_low = f->value().get<bool>();
     }
-    if (!used.insert(c.line).second) channel["line"].Fail("GPIO line " + std::to_string(c.line) + " is used by two channels");
+    if (!used.insert(c.line).second)
+      channel["line"].Fail("GPIO line " + std::to_string(c.line) + " is used by two channels");
     if (auto f = channel.Optional("irradiance_csv")) {
       // Relative to the config file, as a user writes it next to the config.
       std::filesystem::path csv = f->NonEmptyString();
@@ -144,7 +152,8 @@ LabConfig LabConfigFromJson(std::string_view text, const std::filesystem::path& 
     config.channels.push_back(c);
   }
   auto has_channel = [&](const std::string& name) {
-    return std::any_of(config.channels.begin(), config.channels.end(), [&](const LabChannel& c) { return c.name == name; });
+    return std::any_of(config.channels.begin(), config.channels.end(),
+                       [&](const LabChannel& c) { return c.name == name; });
   };
   if (config.trigger == AravisCamera::Trigger::kHardware && !has_channel(config.trigger_channel))
     camera["trigger"]["gpio_channel"].Fail("no light channel '" + config.trigger_channel + "' in lights.channels");
@@ -186,7 +195,8 @@ GpiodLights::GpiodLights(const std::string& chip, const std::vector<LabChannel>&
   try {
     impl_->chip.open(chip, gpiod::chip::OPEN_LOOKUP);
   } catch (const std::exception& e) {
-    ThrowUserError("GPIO chip '" + chip + "'", "open", std::string(e.what()) + " (is it the right chip? see gpiodetect)");
+    ThrowUserError("GPIO chip '" + chip + "'", "open",
+                   std::string(e.what()) + " (is it the right chip? see gpiodetect)");
   }
   impl_->channels = channels;
   for (const LabChannel& c : channels) {
@@ -208,8 +218,7 @@ GpiodLights::~GpiodLights() {
   // Off before the lines are released (a released line may float).
   try {
     AllOff();
-  } catch (...) {
-  }
+  } catch (...) {}
 }
 
 std::vector<std::string> GpiodLights::channels() const {
@@ -255,7 +264,8 @@ std::unique_ptr<OpenedLab> OpenLab(const LabConfig& config) {
   AravisCamera& camera = *lab->camera;
   if (!config.pixel_format.empty()) camera.SetPixelFormat(config.pixel_format);
   if (config.binning_x != 1 || config.binning_y != 1) camera.SetBinning(config.binning_x, config.binning_y);
-  if (config.region) camera.SetRegion((*config.region)[0], (*config.region)[1], (*config.region)[2], (*config.region)[3]);
+  if (config.region)
+    camera.SetRegion((*config.region)[0], (*config.region)[1], (*config.region)[2], (*config.region)[3]);
   camera.SetTrigger(config.trigger, config.trigger_source);
   if (config.trigger == AravisCamera::Trigger::kHardware) {
     Lights* lights = lab->lights.get();
@@ -274,8 +284,9 @@ std::unique_ptr<OpenedLab> OpenLab(const LabConfig& config) {
       std::fprintf(stderr, "phos capture: %s %s, then press Enter: ", in_place ? "put" : "remove", thing.c_str());
       std::string ignored;
       if (!std::getline(std::cin, ignored))
-        ThrowUserError("", "rig", "no operator to " + std::string(in_place ? "put " : "remove ") + thing +
-                                      " (stdin closed); set \"rig\": \"fixed\" for a rig that needs no change");
+        ThrowUserError("", "rig",
+                       "no operator to " + std::string(in_place ? "put " : "remove ") + thing +
+                           " (stdin closed); set \"rig\": \"fixed\" for a rig that needs no change");
     };
   } else {
     lab->rig = [](const std::string&, bool) {};

@@ -107,8 +107,7 @@ LightsGuardian::LightsGuardian(Lights& lights) {
     (void)parent;
     try {
       lights.AllOff();
-    } catch (...) {
-    }
+    } catch (...) {}
     ::_exit(0);
   }
   ::close(fds[0]);

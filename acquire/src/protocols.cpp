@@ -92,7 +92,8 @@ bool WellExposed(const AutoExposure& a, double brightest, const Frame& frame) {
   return brightest >= a.low_fraction && brightest <= a.high_fraction && frame.SaturatedFraction() == 0;
 }
 
-void RecordRig(SessionWriter& session, const RigChange& rig, const Clock& clock, const std::string& what, bool in_place) {
+void RecordRig(SessionWriter& session, const RigChange& rig, const Clock& clock, const std::string& what,
+               bool in_place) {
   rig(what, in_place);
   session.Event({{"t_s", clock.now_s()}, {"event", "rig"}, {"what", what}, {"in_place", in_place}});
 }
@@ -112,8 +113,7 @@ void RunRecorded(SessionWriter& session, Lights& lights, const Clock& clock, con
     session.StopQuietly("failed", e.what());  // on a full disk this fails too: the error to report is the first
     try {
       lights.AllOff();
-    } catch (...) {
-    }
+    } catch (...) {}
     throw;
   }
 }
@@ -122,7 +122,8 @@ void RunRecorded(SessionWriter& session, Lights& lights, const Clock& clock, con
 
 std::vector<double> DecayFrameDelays(const DecayProtocolOptions& options) {
   std::vector<double> delays = {options.first_delay_s};
-  for (int j = options.early_frames; j >= 1; --j) delays.push_back(options.first_delay_s + options.interval_s / std::ldexp(1.0, j));
+  for (int j = options.early_frames; j >= 1; --j)
+    delays.push_back(options.first_delay_s + options.interval_s / std::ldexp(1.0, j));
   for (int m = 1; options.first_delay_s + m * options.interval_s <= options.duration_s; ++m)
     delays.push_back(options.first_delay_s + m * options.interval_s);
   return delays;
@@ -234,13 +235,14 @@ ExcitationProtocolResult RunExcitationProtocol(Camera& camera, Lights& lights, C
       if (tail == 0 && (frame.SaturatedFraction() > 0 || brightest > options.high_fraction / 2))
         first_exposure[light] = std::max(first_exposure[light] / 2, 1e-4);
       // The next frame exposes longer, unless this one came close to clipping.
-      if (frame.SaturatedFraction() > 0) exposure /= options.tail_growth;
-      else if (brightest < options.high_fraction / options.tail_growth) exposure *= options.tail_growth;
+      if (frame.SaturatedFraction() > 0)
+        exposure /= options.tail_growth;
+      else if (brightest < options.high_fraction / options.tail_growth)
+        exposure *= options.tail_growth;
     }
     return response;
   };
-  if (!done.empty())
-    session.Event({{"t_s", clock.now_s()}, {"event", "resume"}, {"measurements_kept", done.size()}});
+  if (!done.empty()) session.Event({{"t_s", clock.now_s()}, {"event", "resume"}, {"measurements_kept", done.size()}});
   RunRecorded(session, lights, clock, "excitation", [&] {
     for (const std::string& light : options.lights) {
       // Doubling until the response stops growing.
@@ -325,21 +327,21 @@ SpectrumProtocolResult RunSpectrumProtocol(Camera& camera, Lights& lights, Clock
       clock.SleepUntil(off + options.first_delay_s);
       Frame frame = camera.Capture(std::min(exposure, camera.max_exposure_s()), options.gain);
       // The glow lands in a few columns per band; judge the exposure there.
-      const double brightest = RecordFrame(session, frame,
-                                           {{"kind", "spectrum"},
-                                            {"lvf", true},
-                                            {"delay_after_light_off_s", frame.t_start_s - off}});
+      const double brightest = RecordFrame(
+          session, frame, {{"kind", "spectrum"}, {"lvf", true}, {"delay_after_light_off_s", frame.t_start_s - off}});
       ++result.frames;
       const bool good = WellExposed(options.exposure, brightest, frame);
       result.well_exposed += good;
-      session.Event({{"t_s", clock.now_s()}, {"event", "exposure"}, {"seq", session.frame_count()}, {"well_exposed", good}});
+      session.Event(
+          {{"t_s", clock.now_s()}, {"event", "exposure"}, {"seq", session.frame_count()}, {"well_exposed", good}});
       exposure = NextExposure(options.exposure, exposure, brightest, frame);
     }
     RecordRig(session, rig, clock, "lvf", false);
     if (result.well_exposed < options.frames)
-      ThrowUserError("", "spectrum protocol",
-                     "only " + std::to_string(result.well_exposed) + " of " + std::to_string(options.frames) +
-                         " frames were well exposed (the glow is too faint through the filter even at the longest exposure)");
+      ThrowUserError(
+          "", "spectrum protocol",
+          "only " + std::to_string(result.well_exposed) + " of " + std::to_string(options.frames) +
+              " frames were well exposed (the glow is too faint through the filter even at the longest exposure)");
   });
   return result;
 }
@@ -349,7 +351,8 @@ bool LvfCalibrationOptions::IsValid(std::string* error) const {
   for (const CalibrationLine& line : lines)
     if (!(line.wavelength_nm > 200 && line.wavelength_nm < 1200))
       return *error = "wavelength of '" + line.light + "' must be in 200-1200 nm", false;
-  if (flat_light.empty() || !(flat_temperature_k > 0)) return *error = "need a flat-field lamp and its temperature", false;
+  if (flat_light.empty() || !(flat_temperature_k > 0))
+    return *error = "need a flat-field lamp and its temperature", false;
   if (max_tries < 1) return *error = "max tries must be >= 1", false;
   return exposure.IsValid(error);
 }
@@ -382,7 +385,8 @@ LvfCalibrationResult RunLvfCalibrationProtocol(Camera& camera, Lights& lights, C
       const double brightest = RecordFrame(session, frame, line);
       ++result.frames;
       good = light.empty() || WellExposed(options.exposure, brightest, frame);
-      session.Event({{"t_s", clock.now_s()}, {"event", "exposure"}, {"seq", session.frame_count()}, {"well_exposed", good}});
+      session.Event(
+          {{"t_s", clock.now_s()}, {"event", "exposure"}, {"seq", session.frame_count()}, {"well_exposed", good}});
       const double next = NextExposure(options.exposure, exposure, brightest, frame);
       if (!good && next == exposure) break;  // at a bound: more tries would change nothing
       exposure = next;
@@ -401,7 +405,8 @@ LvfCalibrationResult RunLvfCalibrationProtocol(Camera& camera, Lights& lights, C
     if (!is_done("")) expose("", {{"kind", "dark"}, {"lvf", true}});
     for (const CalibrationLine& line : options.lines)
       if (!is_done(line.light))
-        expose(line.light, {{"kind", "line"}, {"lvf", true}, {"light", line.light}, {"wavelength_nm", line.wavelength_nm}});
+        expose(line.light,
+               {{"kind", "line"}, {"lvf", true}, {"light", line.light}, {"wavelength_nm", line.wavelength_nm}});
     if (!is_done(options.flat_light))
       expose(options.flat_light, {{"kind", "flat"},
                                   {"lvf", true},
@@ -422,7 +427,8 @@ std::vector<std::string> ReadLvfCalibrationDone(const std::filesystem::path& ses
   std::vector<std::string> calibrated;
   for (const nlohmann::json& event : ReadEventRecords(session_dir)) {
     const std::string name = event["event"].get<std::string>();
-    if (name == "exposure" && event.value("well_exposed", false) && event.contains("seq") && event["seq"].is_number_integer())
+    if (name == "exposure" && event.value("well_exposed", false) && event.contains("seq") &&
+        event["seq"].is_number_integer())
       well_exposed.insert(event["seq"].get<int>());
     if (name == "calibrated" && event.contains("light") && event["light"].is_string())
       calibrated.push_back(event["light"].get<std::string>());
@@ -431,8 +437,10 @@ std::vector<std::string> ReadLvfCalibrationDone(const std::filesystem::path& ses
   for (const FrameRecord& frame : ReadFrameRecords(session_dir).frames) {
     if (!well_exposed.count(frame.seq)) continue;
     const nlohmann::json& p = frame.protocol;
-    if (p.value("kind", "") == "dark") listed.insert("");
-    else if (p.contains("light") && p["light"].is_string()) listed.insert(p["light"].get<std::string>());
+    if (p.value("kind", "") == "dark")
+      listed.insert("");
+    else if (p.contains("light") && p["light"].is_string())
+      listed.insert(p["light"].get<std::string>());
   }
   std::vector<std::string> done;
   for (const std::string& light : calibrated)

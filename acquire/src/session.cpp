@@ -103,9 +103,11 @@ int ArmAbortRecord(const std::filesystem::path& dir) {
     std::snprintf(record.temporary, sizeof record.temporary, "%s", temporary.c_str());
     std::snprintf(record.events_path, sizeof record.events_path, "%s", events_path.c_str());
     std::snprintf(record.sigint, sizeof record.sigint,
-                  "{\n  \"how\": \"aborted\",\n  \"why\": \"SIGINT (interrupted); lights switched off; frames.jsonl lists every frame kept\"\n}\n");
+                  "{\n  \"how\": \"aborted\",\n  \"why\": \"SIGINT (interrupted); lights switched off; frames.jsonl "
+                  "lists every frame kept\"\n}\n");
     std::snprintf(record.sigterm, sizeof record.sigterm,
-                  "{\n  \"how\": \"aborted\",\n  \"why\": \"SIGTERM (terminated); lights switched off; frames.jsonl lists every frame kept\"\n}\n");
+                  "{\n  \"how\": \"aborted\",\n  \"why\": \"SIGTERM (terminated); lights switched off; frames.jsonl "
+                  "lists every frame kept\"\n}\n");
     record.armed.store(true);
     SetSignalCleanup(WriteAbortRecords);
     return slot;
@@ -116,7 +118,6 @@ int ArmAbortRecord(const std::filesystem::path& dir) {
 void DisarmAbortRecord(int slot) {
   if (slot >= 0) g_abort_records[slot].armed.store(false);
 }
-
 
 // Temporaries a crash leaves: frames/NNNNNN.tif.tmp.tif, stop.json.tmp.*,
 // and the temporaries of WriteFileAtomically (<name>.tmp.<pid>).
@@ -139,7 +140,8 @@ int HighestFrameFile(const std::filesystem::path& dir) {
   std::error_code ec;
   for (const auto& entry : std::filesystem::directory_iterator(dir / "frames", ec)) {
     const std::string name = entry.path().filename().string();
-    if (name.size() >= 10 && name.find_first_not_of("0123456789") == 6) highest = std::max(highest, std::atoi(name.c_str()));
+    if (name.size() >= 10 && name.find_first_not_of("0123456789") == 6)
+      highest = std::max(highest, std::atoi(name.c_str()));
   }
   return highest;
 }
@@ -149,7 +151,9 @@ int HighestFrameFile(const std::filesystem::path& dir) {
 SessionWriter::SessionWriter(std::filesystem::path dir, nlohmann::json start_record) : dir_(std::move(dir)) {
   std::error_code ec;
   if (std::filesystem::exists(dir_, ec) && !std::filesystem::is_empty(dir_, ec))
-    ThrowUserError(dir_.string(), "", "already holds files: a new session needs a new or empty folder (to go on with an interrupted one, use resume)");
+    ThrowUserError(dir_.string(), "",
+                   "already holds files: a new session needs a new or empty folder (to go on with an interrupted one, "
+                   "use resume)");
   start_record["uid"] = NewUid();
   start_record["started_utc"] = UtcNow();
   start_record["schema"] = "phos.session/1";
@@ -179,8 +183,10 @@ SessionWriter::SessionWriter(ReopenTag, std::filesystem::path dir, bool set_asid
   if (!check.bad_frames.empty() && !set_aside_bad_frames) {
     const SessionCheck::BadFrame& bad = check.bad_frames.front();
     ThrowUserError((dir_ / bad.frame.file).string(), "",
-                   bad.problem + ": a " + check.protocol + " frame cannot be measured again (the glow it saw is gone); "
-                   "the session stays incomplete (" + std::to_string(check.bad_frames.size()) + " bad frame(s))");
+                   bad.problem + ": a " + check.protocol +
+                       " frame cannot be measured again (the glow it saw is gone); "
+                       "the session stays incomplete (" +
+                       std::to_string(check.bad_frames.size()) + " bad frame(s))");
   }
   // Repairs, each said: torn lines aside, stale temporaries removed.
   std::vector<nlohmann::json> repairs;
@@ -199,7 +205,8 @@ SessionWriter::SessionWriter(ReopenTag, std::filesystem::path dir, bool set_asid
     notes->push_back("removed the stale temporary " + relative);
     repairs.push_back({{"removed_temporary", relative}});
   }
-  nlohmann::json previous_stop = check.stop ? check.stop->ToJson() : nlohmann::json("none (killed, or the machine went down)");
+  nlohmann::json previous_stop =
+      check.stop ? check.stop->ToJson() : nlohmann::json("none (killed, or the machine went down)");
   // Number on from the highest frame recorded or present on disk.
   for (const FrameRecord& frame : ReadFrameRecords(dir_).frames) frames_ = std::max(frames_, frame.seq);
   frames_ = std::max(frames_, HighestFrameFile(dir_));
@@ -221,8 +228,7 @@ void SessionWriter::SetAsideBadFrames(const std::vector<SessionCheck::BadFrame>&
     std::string kept = "(no file)";
     if (std::filesystem::exists(std::filesystem::symlink_status(file, ec))) {
       std::filesystem::path aside;
-      for (int k = 1; std::filesystem::exists(aside = file.string() + ".bad-" + std::to_string(k), ec); ++k) {
-      }
+      for (int k = 1; std::filesystem::exists(aside = file.string() + ".bad-" + std::to_string(k), ec); ++k) {}
       std::filesystem::rename(file, aside, ec);
       if (ec) ThrowUserError(file.string(), "", "cannot set the bad frame aside: " + ec.message());
       kept = std::filesystem::relative(aside, dir_, ec).string();
@@ -246,7 +252,9 @@ SessionWriter::~SessionWriter() {
   if (!stopped_) StopQuietly("failed", "ended without a stop record (an error or exception interrupted the protocol)");
 }
 
-void SessionWriter::AppendLine(const std::string& file, const nlohmann::json& line) { AppendJsonLine(dir_ / file, line); }
+void SessionWriter::AppendLine(const std::string& file, const nlohmann::json& line) {
+  AppendJsonLine(dir_ / file, line);
+}
 
 void SessionWriter::Event(nlohmann::json event) { AppendLine("events.jsonl", event); }
 
@@ -272,7 +280,8 @@ std::string SessionWriter::WriteFrame(const Frame& frame, nlohmann::json extra) 
       SyncFile(temporary);
       digest = DigestFile(temporary);
     } catch (const UserError&) {
-      ThrowUserError(final_path.string(), "", "could not write the frame (disk full?): it did not reach the disk whole");
+      ThrowUserError(final_path.string(), "",
+                     "could not write the frame (disk full?): it did not reach the disk whole");
     }
   });
   SyncDirectory(dir_ / "frames");
@@ -361,7 +370,7 @@ SessionCheck CheckSession(const std::filesystem::path& dir, bool decode_frames) 
     if (events.torn) {
       check.torn_events = true;
       repairable((dir / "events.jsonl").string() + ":" + std::to_string(events.torn_line) +
-              ": torn last line (a crash mid-write); resume keeps it aside");
+                 ": torn last line (a crash mid-write); resume keeps it aside");
     }
   } catch (const UserError& e) {
     problem(e.what());
@@ -386,14 +395,15 @@ SessionCheck CheckSession(const std::filesystem::path& dir, bool decode_frames) 
     }
     if (!what.empty()) {
       check.bad_frames.push_back({frame, records.lines[i], what});
-      repairable((dir / frame.file).string() + ": " + what + " (frames.jsonl:" + std::to_string(records.lines[i]) + ")");
+      repairable((dir / frame.file).string() + ": " + what + " (frames.jsonl:" + std::to_string(records.lines[i]) +
+                 ")");
     }
   }
   if (check.stop && frames_read) {
     const bool has_list = std::filesystem::exists(dir / "frames.jsonl", ec);
     if (check.stop->frames >= 0 && check.stop->frames != check.frames)
       repairable((dir / "stop.json").string() + ": counts " + std::to_string(check.stop->frames) +
-              " frames where frames.jsonl lists " + std::to_string(check.frames));
+                 " frames where frames.jsonl lists " + std::to_string(check.frames));
     if (check.complete() && check.protocol != "all" && !has_list)
       problem((dir / "frames.jsonl").string() + ": missing, in a session whose stop.json says complete");
   }

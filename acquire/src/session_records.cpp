@@ -30,8 +30,9 @@ std::string ReadBoundedFile(const fs::path& path, std::uint64_t max_bytes) {
   const std::uint64_t size = fs::file_size(path, ec);
   if (ec) ThrowUserError(path.string(), "", "cannot read its size: " + ec.message());
   if (size > max_bytes)
-    ThrowUserError(path.string(), "", "is " + std::to_string(size) + " bytes, over the limit of " +
-                                          std::to_string(max_bytes) + " for a record file");
+    ThrowUserError(
+        path.string(), "",
+        "is " + std::to_string(size) + " bytes, over the limit of " + std::to_string(max_bytes) + " for a record file");
   std::ifstream in(path, std::ios::binary);
   if (!in) ThrowUserError(path.string(), "", "cannot open the file for reading");
   std::string text(size, '\0');
@@ -91,7 +92,8 @@ JsonLinesFile ReadJsonLinesFile(const fs::path& path) {
                      "not a JSON record (" + JsonError(e) + "); the file is corrupt past a torn line");
     }
     if (!value.is_object())
-      ThrowUserError(path.string() + ":" + std::to_string(line), "", "expected a JSON object, got " + DescribeJson(value));
+      ThrowUserError(path.string() + ":" + std::to_string(line), "",
+                     "expected a JSON object, got " + DescribeJson(value));
     file.records.push_back({line, std::move(value)});
     begin = end + 1;
     file.whole_bytes = begin;
@@ -139,7 +141,8 @@ void AppendJsonLine(const fs::path& path, const nlohmann::json& record) {
     ::fsync(fd);
     ::close(fd);
     ThrowUserError(path.string(), "",
-                   std::string("could not record a line: ") + (written < 0 ? std::strerror(write_errno) : "short write (disk full?)") +
+                   std::string("could not record a line: ") +
+                       (written < 0 ? std::strerror(write_errno) : "short write (disk full?)") +
                        "; every record before it is intact");
   }
   if (::fsync(fd) != 0) {
@@ -202,7 +205,8 @@ const nlohmann::json& KeyOf(const nlohmann::json& j, const char* key, const std:
 template <>
 double RequiredKey<double>(const nlohmann::json& j, const char* key, const std::string& where) {
   const nlohmann::json& v = KeyOf(j, key, where);
-  if (!v.is_number() || !std::isfinite(v.get<double>())) KeyError(where, key, "expected a finite number, got " + DescribeJson(v));
+  if (!v.is_number() || !std::isfinite(v.get<double>()))
+    KeyError(where, key, "expected a finite number, got " + DescribeJson(v));
   return v.get<double>();
 }
 template <>
@@ -233,7 +237,8 @@ double OptionalNumber(const nlohmann::json& j, const char* key, double fallback,
 double NumberInRange(const nlohmann::json& j, const char* key, double lower, double upper, const std::string& where) {
   const double v = RequiredKey<double>(j, key, where);
   if (!(v >= lower && v <= upper))
-    KeyError(where, key, "expected a number in [" + FormatDouble(lower) + ", " + FormatDouble(upper) + "], got " + FormatDouble(v));
+    KeyError(where, key,
+             "expected a number in [" + FormatDouble(lower) + ", " + FormatDouble(upper) + "], got " + FormatDouble(v));
   return v;
 }
 }  // namespace
@@ -241,9 +246,19 @@ double NumberInRange(const nlohmann::json& j, const char* key, double lower, dou
 // ---- frames.jsonl ----------------------------------------------------------
 
 namespace {
-const char* const kFrameKeys[] = {"file",  "seq",         "t_start_s", "exposure_s",           "gain",
-                                  "black_level_dn", "adc_bits", "sensor_temperature_c", "camera_timestamp_ns",
-                                  "size_bytes", "xxh3", "packets_resent", "retakes"};
+const char* const kFrameKeys[] = {"file",
+                                  "seq",
+                                  "t_start_s",
+                                  "exposure_s",
+                                  "gain",
+                                  "black_level_dn",
+                                  "adc_bits",
+                                  "sensor_temperature_c",
+                                  "camera_timestamp_ns",
+                                  "size_bytes",
+                                  "xxh3",
+                                  "packets_resent",
+                                  "retakes"};
 }
 
 namespace {
@@ -255,14 +270,22 @@ struct ProtocolField {
   Field type;
 };
 constexpr ProtocolField kProtocolFields[] = {
-    {"light", Field::kString},           {"kind", Field::kString},
-    {"charge_s", Field::kNonNegative},   {"light_off_s", Field::kNumber},
-    {"delay_after_light_off_s", Field::kNumber}, {"delay_s", Field::kNumber},
-    {"tail", Field::kInteger},           {"tail_frames", Field::kInteger},
-    {"mean_signal_dn", Field::kNumberArray}, {"column_mean_dn", Field::kNumberArray},
-    {"saturated_fraction", Field::kNonNegative}, {"peak_column_fraction", Field::kNonNegative},
-    {"wavelength_nm", Field::kNonNegative}, {"temperature_k", Field::kNonNegative},
-    {"irradiance", Field::kNonNegative}, {"lvf", Field::kBool},
+    {"light", Field::kString},
+    {"kind", Field::kString},
+    {"charge_s", Field::kNonNegative},
+    {"light_off_s", Field::kNumber},
+    {"delay_after_light_off_s", Field::kNumber},
+    {"delay_s", Field::kNumber},
+    {"tail", Field::kInteger},
+    {"tail_frames", Field::kInteger},
+    {"mean_signal_dn", Field::kNumberArray},
+    {"column_mean_dn", Field::kNumberArray},
+    {"saturated_fraction", Field::kNonNegative},
+    {"peak_column_fraction", Field::kNonNegative},
+    {"wavelength_nm", Field::kNonNegative},
+    {"temperature_k", Field::kNonNegative},
+    {"irradiance", Field::kNonNegative},
+    {"lvf", Field::kBool},
 };
 
 void CheckProtocolFields(const nlohmann::json& fields, const std::string& where) {
@@ -283,7 +306,8 @@ void CheckProtocolFields(const nlohmann::json& fields, const std::string& where)
         if (!v.is_boolean()) KeyError(where, f.key, "expected true or false, got " + DescribeJson(v));
         break;
       case Field::kNumberArray:
-        if (!v.is_array() || v.empty() || v.size() > 65536) KeyError(where, f.key, "expected an array of numbers, got " + DescribeJson(v));
+        if (!v.is_array() || v.empty() || v.size() > 65536)
+          KeyError(where, f.key, "expected an array of numbers, got " + DescribeJson(v));
         for (const nlohmann::json& x : v)
           if (!x.is_number() || !std::isfinite(x.get<double>()))
             KeyError(where, f.key, "expected finite numbers, got " + DescribeJson(x));
@@ -323,13 +347,15 @@ FrameRecord FrameRecord::FromJson(const nlohmann::json& j, const std::string& wh
   r.gain = j.contains("gain") ? NumberInRange(j, "gain", 1e-6, 1e6, where) : 1.0;
   r.black_level_dn = j.contains("black_level_dn") ? NumberInRange(j, "black_level_dn", 0, 4294967295.0, where) : 0.0;
   r.adc_bits = j.contains("adc_bits") ? RequiredKey<int>(j, "adc_bits", where) : 16;
-  if (r.adc_bits < 1 || r.adc_bits > 32) KeyError(where, "adc_bits", "expected 1 to 32, got " + std::to_string(r.adc_bits));
+  if (r.adc_bits < 1 || r.adc_bits > 32)
+    KeyError(where, "adc_bits", "expected 1 to 32, got " + std::to_string(r.adc_bits));
   if (r.black_level_dn >= std::ldexp(1.0, r.adc_bits) - 1)
     KeyError(where, "black_level_dn", "is at or above the ADC's range (" + std::to_string(r.adc_bits) + " bits)");
   r.sensor_temperature_c = OptionalNumber(j, "sensor_temperature_c", 0.0, where);
   if (j.contains("camera_timestamp_ns")) {
     if (!j["camera_timestamp_ns"].is_number_unsigned())
-      KeyError(where, "camera_timestamp_ns", "expected a non-negative integer, got " + DescribeJson(j["camera_timestamp_ns"]));
+      KeyError(where, "camera_timestamp_ns",
+               "expected a non-negative integer, got " + DescribeJson(j["camera_timestamp_ns"]));
     r.camera_timestamp_ns = j["camera_timestamp_ns"].get<std::uint64_t>();
   }
   if (j.contains("packets_resent")) {
@@ -369,7 +395,8 @@ FrameRecords ReadFrameRecords(const fs::path& session_dir) {
   for (const JsonLine& line : file.records) {
     const std::string where = path.string() + ":" + std::to_string(line.line);
     FrameRecord frame = FrameRecord::FromJson(line.value, where);
-    if (!seen.insert(frame.seq).second) ThrowUserError(where, "seq", "frame " + std::to_string(frame.seq) + " is listed twice");
+    if (!seen.insert(frame.seq).second)
+      ThrowUserError(where, "seq", "frame " + std::to_string(frame.seq) + " is listed twice");
     if (frame.seq < last)
       ThrowUserError(where, "seq", "frame " + std::to_string(frame.seq) + " comes after frame " + std::to_string(last));
     last = frame.seq;
@@ -406,18 +433,19 @@ void RequireGoodFrames(const fs::path& session_dir, const FrameRecords& records)
   for (std::size_t i = 0; i < records.frames.size(); ++i) {
     const std::string problem = CheckFrameFile(session_dir, records.frames[i]);
     if (!problem.empty())
-      ThrowUserError((session_dir / records.frames[i].file).string(), "",
-                     problem + " (frames.jsonl:" + std::to_string(records.lines[i]) +
-                         "); 'phos capture verify' lists every problem, 'phos capture resume' measures again what can be");
+      ThrowUserError(
+          (session_dir / records.frames[i].file).string(), "",
+          problem + " (frames.jsonl:" + std::to_string(records.lines[i]) +
+              "); 'phos capture verify' lists every problem, 'phos capture resume' measures again what can be");
   }
 }
 
 // ---- session.json ----------------------------------------------------------
 
 nlohmann::json SessionRecord::ToJson() const {
-  nlohmann::json j = {{"schema", schema},   {"protocol", protocol}, {"uid", uid},
-                      {"started_utc", started_utc}, {"sample", sample}, {"devices", devices},
-                      {"settings", settings}, {"versions", {{"phos", phos_version}}}};
+  nlohmann::json j = {
+      {"schema", schema}, {"protocol", protocol}, {"uid", uid},           {"started_utc", started_utc},
+      {"sample", sample}, {"devices", devices},   {"settings", settings}, {"versions", {{"phos", phos_version}}}};
   if (!part_of.empty()) j["part_of"] = part_of;
   if (resume > 0) j["resume"] = resume;
   return j;
@@ -426,11 +454,13 @@ nlohmann::json SessionRecord::ToJson() const {
 SessionRecord SessionRecord::FromJson(const nlohmann::json& j, const std::string& where) {
   SessionRecord r;
   r.schema = RequiredKey<std::string>(j, "schema", where);
-  if (r.schema != "phos.session/1") KeyError(where, "schema", "expected \"phos.session/1\", got " + DescribeJson(j["schema"]));
+  if (r.schema != "phos.session/1")
+    KeyError(where, "schema", "expected \"phos.session/1\", got " + DescribeJson(j["schema"]));
   r.protocol = RequiredKey<std::string>(j, "protocol", where);
   static const std::set<std::string> kProtocols = {"lvf-calibration", "spectrum", "decay", "excitation", "all"};
   if (!kProtocols.count(r.protocol))
-    KeyError(where, "protocol", "expected lvf-calibration, spectrum, decay, excitation or all, got " + DescribeJson(j["protocol"]));
+    KeyError(where, "protocol",
+             "expected lvf-calibration, spectrum, decay, excitation or all, got " + DescribeJson(j["protocol"]));
   r.uid = RequiredKey<std::string>(j, "uid", where);
   r.started_utc = RequiredKey<std::string>(j, "started_utc", where);
   r.sample = j.contains("sample") ? RequiredKey<nlohmann::json>(j, "sample", where) : nlohmann::json::object();
@@ -450,7 +480,8 @@ SessionRecord SessionRecord::FromJson(const nlohmann::json& j, const std::string
 SessionRecord ReadSessionRecord(const fs::path& session_dir) {
   const fs::path path = session_dir / "session.json";
   std::error_code ec;
-  if (!fs::is_regular_file(path, ec)) ThrowUserError(session_dir.string(), "", "is not a capture session (no session.json)");
+  if (!fs::is_regular_file(path, ec))
+    ThrowUserError(session_dir.string(), "", "is not a capture session (no session.json)");
   return SessionRecord::FromJson(ReadJsonFile(path), path.string());
 }
 

@@ -29,9 +29,7 @@ LightSource LedLight(const std::string& name, double center_nm, double fwhm_nm, 
   return {name, LedSpectrum(center_nm, fwhm_nm), irradiance};
 }
 
-LightSource WhiteLedLight(const std::string& name, double irradiance) {
-  return {name, WhiteLedSpectrum(), irradiance};
-}
+LightSource WhiteLedLight(const std::string& name, double irradiance) { return {name, WhiteLedSpectrum(), irradiance}; }
 
 LightSource HalogenLight(const std::string& name, double irradiance) {
   return {name, BlackbodySpectrum(3000, 350, 800), irradiance};
@@ -52,9 +50,7 @@ std::vector<LightSource> DefaultLights() {
   return lights;
 }
 
-std::vector<KnownLine> DefaultCalibrationLines() {
-  return {{"hg436", 435.8}, {"hg546", 546.1}, {"hene633", 632.8}};
-}
+std::vector<KnownLine> DefaultCalibrationLines() { return {{"hg436", 435.8}, {"hg546", 546.1}, {"hene633", 632.8}}; }
 
 CameraModel DefaultCameraModel() {
   CameraModel camera;
@@ -66,7 +62,8 @@ CameraModel CameraModelFromCsv(const std::filesystem::path& path) {
   const CsvTable table = ReadCsv(path);
   const int wavelength = table.Find("wavelength_nm");
   if (wavelength < 0) ThrowUserError(path.string(), "", "needs a column wavelength_nm (then one column per channel)");
-  if (table.header.size() < 2) ThrowUserError(path.string(), "", "needs at least one channel column beside wavelength_nm");
+  if (table.header.size() < 2)
+    ThrowUserError(path.string(), "", "needs at least one channel column beside wavelength_nm");
   if (table.row_count() < 2) ThrowUserError(path.string(), "", "needs at least 2 rows");
   const std::vector<double>& nm = table.columns[wavelength];
   for (std::size_t i = 1; i < nm.size(); ++i)
@@ -91,8 +88,12 @@ CameraModel CameraModelFromCsv(const std::filesystem::path& path) {
 
 SimulatedLab::SimulatedLab(Material material, std::vector<double> albedo, std::vector<LightSource> lights,
                            CameraModel camera, Clock& clock)
-    : material_(std::move(material)), albedo_(std::move(albedo)), sources_(std::move(lights)),
-      camera_(std::move(camera)), clock_(clock), rng_(camera_.seed) {
+    : material_(std::move(material)),
+      albedo_(std::move(albedo)),
+      sources_(std::move(lights)),
+      camera_(std::move(camera)),
+      clock_(clock),
+      rng_(camera_.seed) {
   const int nb = material_.band_count();
   PHOS_CHECK(static_cast<int>(albedo_.size()) == nb);
   if (camera_.sensitivity.empty()) camera_.sensitivity = DefaultCameraModel().sensitivity;
@@ -148,7 +149,8 @@ SimulatedLab::Optics SimulatedLab::MakeOptics(bool through_lvf) const {
 
   Optics optics;
   optics.emission.assign(columns, std::vector<std::vector<double>>(channels, std::vector<double>(nb, 0.0)));
-  optics.sample_reflect.assign(sources_.size(), std::vector<std::vector<double>>(columns, std::vector<double>(channels, 0.0)));
+  optics.sample_reflect.assign(sources_.size(),
+                               std::vector<std::vector<double>>(columns, std::vector<double>(channels, 0.0)));
   optics.white_reflect = optics.sample_reflect;
   const double sigma = camera_.lvf.fwhm_nm / 2.3548;
   std::vector<double> transmission(static_cast<std::size_t>(n), 1.0);
@@ -163,7 +165,8 @@ SimulatedLab::Optics SimulatedLab::MakeOptics(bool through_lvf) const {
       // assumption), so its weight is the band mean of sensitivity x filter.
       for (int i = 0; i < n; ++i)
         if (band_of[i] >= 0)
-          optics.emission[x][c][band_of[i]] += sensitivity[c][i] * transmission[i] * kStepNm / material_.bands.width_nm(band_of[i]);
+          optics.emission[x][c][band_of[i]] +=
+              sensitivity[c][i] * transmission[i] * kStepNm / material_.bands.width_nm(band_of[i]);
       for (std::size_t s = 0; s < sources_.size(); ++s) {
         double sample = 0, white = 0;
         for (int i = 0; i < n; ++i) {
@@ -213,8 +216,10 @@ void SimulatedLab::AdvanceTo(double t_s) {
   // The irradiance since the last advance is the one now: every switch
   // advances the state first (before_change), so it held throughout.
   if (t_s <= t_state_) return;
-  const std::vector<double> a = ExcitationRates(material_, IrradianceNow(), "simulated sample '" + material_.name + "'");
-  for (int i = 0; i < material_.state_count(); ++i) r_[i] = ExactStep(r_[i], a[i], material_.states[i].kr, t_s - t_state_);
+  const std::vector<double> a =
+      ExcitationRates(material_, IrradianceNow(), "simulated sample '" + material_.name + "'");
+  for (int i = 0; i < material_.state_count(); ++i)
+    r_[i] = ExactStep(r_[i], a[i], material_.states[i].kr, t_s - t_state_);
   if (inset_) {
     const std::vector<double> b = ExcitationRates(*inset_, IrradianceNow(), "simulated inset '" + inset_->name + "'");
     for (int i = 0; i < inset_->state_count(); ++i)
@@ -248,8 +253,9 @@ std::vector<double> SimulatedLab::StateNow() {
 
 Frame SimulatedLab::Capture(double exposure_s, double gain) {
   if (!(exposure_s > 0) || exposure_s > camera_.max_exposure_s)
-    ThrowUserError("", "exposure", "the camera cannot expose for " + FormatDouble(exposure_s) + " s (0 to " +
-                                       FormatDouble(camera_.max_exposure_s) + " s)");
+    ThrowUserError("", "exposure",
+                   "the camera cannot expose for " + FormatDouble(exposure_s) + " s (0 to " +
+                       FormatDouble(camera_.max_exposure_s) + " s)");
   if (!(gain >= 1) || gain > 64) ThrowUserError("", "gain", "the camera cannot apply gain " + FormatDouble(gain));
   AdvanceTo(clock_.now_s());
   Frame frame;
@@ -277,8 +283,8 @@ Frame SimulatedLab::Capture(double exposure_s, double gain) {
     for (int i = 0; i < material.state_count(); ++i) {
       const ExcitedState& s = material.states[i];
       const double k = a[i] + s.kr, r_inf = k > 0 ? a[i] / k : 0;
-      const double r_integral = k > 0 ? r_inf * exposure_s + (r[i] - r_inf) * -std::expm1(-k * exposure_s) / k
-                                      : r[i] * exposure_s;
+      const double r_integral =
+          k > 0 ? r_inf * exposure_s + (r[i] - r_inf) * -std::expm1(-k * exposure_s) / k : r[i] * exposure_s;
       for (int b = 0; b < nb; ++b) emission[b] += s.Lambda[b] * s.kr * r_integral;
     }
     return emission;

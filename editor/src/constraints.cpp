@@ -14,7 +14,8 @@ Problem LoadProblem(const std::filesystem::path& path) { return ProblemFromJson(
 
 Problem ProblemFromJson(const nlohmann::json& json, const std::string& source) {
   const JsonField root(json, source);
-  root.RejectUnknownKeys({"schema", "description", "bands_nm", "dt_s", "irradiance", "albedo", "states", "constraints"});
+  root.RejectUnknownKeys(
+      {"schema", "description", "bands_nm", "dt_s", "irradiance", "albedo", "states", "constraints"});
   if (root["schema"].String() != "phos.constraints/1")
     root["schema"].Fail("expected \"phos.constraints/1\", got " + DescribeJson(root["schema"].value()));
   Problem p;
@@ -29,10 +30,12 @@ Problem ProblemFromJson(const nlohmann::json& json, const std::string& source) {
   if (irradiance.ArraySize() == 0) irradiance.Fail("expected at least one frame");
   if (irradiance.ArraySize() > 1000000) irradiance.Fail("more than a million frames");
   Point point;
-  for (std::size_t f = 0; f < irradiance.ArraySize(); ++f) point.irradiance.push_back(irradiance.At(f).NumberArray(nb, 0.0));
+  for (std::size_t f = 0; f < irradiance.ArraySize(); ++f)
+    point.irradiance.push_back(irradiance.At(f).NumberArray(nb, 0.0));
   point.albedo = root["albedo"].NumberArray(nb, 0.0);
   for (std::size_t b = 0; b < nb; ++b)
-    if (point.albedo[b] > 1) root["albedo"].At(b).Fail("expected an albedo in [0, 1], got " + FormatDouble(point.albedo[b]));
+    if (point.albedo[b] > 1)
+      root["albedo"].At(b).Fail("expected an albedo in [0, 1], got " + FormatDouble(point.albedo[b]));
   p.points.push_back(std::move(point));
   if (root.Has("states")) p.states = root["states"].Integer(1, 3);
   const JsonField constraints = root["constraints"];
@@ -46,12 +49,14 @@ Problem ProblemFromJson(const nlohmann::json& json, const std::string& source) {
     const int kinds = f.Has("radiance") + f.Has("at_least") + f.Has("at_most");
     if (kinds != 1) f.Fail("give exactly one of \"radiance\" (a target), \"at_least\" or \"at_most\"");
     const char* key = f.Has("radiance") ? "radiance" : f.Has("at_least") ? "at_least" : "at_most";
-    con.kind = f.Has("radiance") ? Constraint::Kind::kTarget
-               : f.Has("at_least") ? Constraint::Kind::kAtLeast : Constraint::Kind::kAtMost;
+    con.kind = f.Has("radiance")   ? Constraint::Kind::kTarget
+               : f.Has("at_least") ? Constraint::Kind::kAtLeast
+                                   : Constraint::Kind::kAtMost;
     con.radiance = f[key].NumberArray(nb, 0.0);
     con.until_s = con.t_s;
     if (f.Has("until_s")) {
-      if (con.kind == Constraint::Kind::kTarget) f["until_s"].Fail("a target holds at one time; ranges are for at_least and at_most");
+      if (con.kind == Constraint::Kind::kTarget)
+        f["until_s"].Fail("a target holds at one time; ranges are for at_least and at_most");
       con.until_s = f["until_s"].NumberInRange(con.t_s, p.end_s());
     }
     if (f.Has("weight")) con.weight = f["weight"].NumberAtLeast(0);

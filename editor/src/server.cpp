@@ -51,7 +51,8 @@ void Error(httplib::Response& response, int status, const std::string& message) 
 // follows the keys down to the one being read).
 nlohmann::json ParseBody(const std::string& text) {
   std::vector<std::string> keys;
-  const nlohmann::json::parser_callback_t follow = [&](int, nlohmann::json::parse_event_t event, nlohmann::json& parsed) {
+  const nlohmann::json::parser_callback_t follow = [&](int, nlohmann::json::parse_event_t event,
+                                                       nlohmann::json& parsed) {
     if (event == nlohmann::json::parse_event_t::object_start) keys.emplace_back();
     if (event == nlohmann::json::parse_event_t::key) keys.back() = parsed.get<std::string>();
     if (event == nlohmann::json::parse_event_t::object_end) keys.pop_back();
@@ -101,7 +102,8 @@ void RejectUnknownParameters(const httplib::Request& request, std::initializer_l
     if (std::find(known.begin(), known.end(), key) == known.end()) {
       std::string list;
       for (const std::string& k : known) list += (list.empty() ? "" : ", ") + k;
-      ThrowUserError("request", key.substr(0, 40), "unknown parameter (expected " + (list.empty() ? "none" : list) + ")");
+      ThrowUserError("request", key.substr(0, 40),
+                     "unknown parameter (expected " + (list.empty() ? "none" : list) + ")");
     }
     if (request.get_param_value_count(key) > 1) ThrowUserError("request", key, "given more than once");
   }
@@ -228,7 +230,8 @@ int Listen(const std::string& bind, int port) {
   }
   ::freeaddrinfo(found);
   if (fd < 0 && error == EADDRINUSE)
-    ThrowUserError("", "--port", where + " is in use (another phos editor?); pick another port, or --port 0 for any free one");
+    ThrowUserError("", "--port",
+                   where + " is in use (another phos editor?); pick another port, or --port 0 for any free one");
   if (fd < 0) ThrowUserError("", "--bind", "cannot listen on " + where + " (" + std::strerror(error) + ")");
   return fd;
 }
@@ -245,9 +248,10 @@ int BoundPort(int fd) {
 // connections), without waiting on the client.
 void Refuse(int fd, int status, const std::string& reason, const std::string& message) {
   const std::string body = Dump(nlohmann::json{{"error", message}});
-  const std::string response = "HTTP/1.1 " + std::to_string(status) + " " + reason +
-                               "\r\nContent-Type: application/json\r\nConnection: close\r\nContent-Length: " +
-                               std::to_string(body.size()) + "\r\n\r\n" + body;
+  const std::string response =
+      "HTTP/1.1 " + std::to_string(status) + " " + reason +
+      "\r\nContent-Type: application/json\r\nConnection: close\r\nContent-Length: " + std::to_string(body.size()) +
+      "\r\n\r\n" + body;
   ::send(fd, response.data(), response.size(), MSG_NOSIGNAL | MSG_DONTWAIT);
 }
 
@@ -284,8 +288,9 @@ void Serve(EditSession& session, const ServerOptions& options, const std::functi
   server.set_pre_routing_handler([&](const httplib::Request& request, httplib::Response& response) {
     for (const char* header : {"Host", "Origin"})
       if (request.get_header_value_count(header) > 1) {
-        Error(response, 400, std::string("request: ") + header + ": given " +
-                                 std::to_string(request.get_header_value_count(header)) + " times; expected once");
+        Error(response, 400,
+              std::string("request: ") + header + ": given " + std::to_string(request.get_header_value_count(header)) +
+                  " times; expected once");
         return httplib::Server::HandlerResponse::Handled;
       }
     // cpp-httplib 0.11 applies max_body_bytes to Content-Length only: a
@@ -312,15 +317,17 @@ void Serve(EditSession& session, const ServerOptions& options, const std::functi
   });
   // What httplib answers by itself (a body over the limit, a malformed
   // request line, a URI too long) gets the same one-line JSON as ours.
-  server.set_error_handler(httplib::Server::HandlerWithResponse([&](const httplib::Request&, httplib::Response& response) {
-    if (!response.body.empty()) return httplib::Server::HandlerResponse::Unhandled;
-    std::string message = "request: malformed HTTP request";
-    if (response.status == 413) message = "request: the body is larger than " + std::to_string(options.max_body_bytes) + " bytes";
-    if (response.status == 414) message = "request: the URI is too long";
-    if (response.status == 404) message = "request: no such route";
-    Error(response, response.status, message);
-    return httplib::Server::HandlerResponse::Handled;
-  }));
+  server.set_error_handler(
+      httplib::Server::HandlerWithResponse([&](const httplib::Request&, httplib::Response& response) {
+        if (!response.body.empty()) return httplib::Server::HandlerResponse::Unhandled;
+        std::string message = "request: malformed HTTP request";
+        if (response.status == 413)
+          message = "request: the body is larger than " + std::to_string(options.max_body_bytes) + " bytes";
+        if (response.status == 414) message = "request: the URI is too long";
+        if (response.status == 404) message = "request: no such route";
+        Error(response, response.status, message);
+        return httplib::Server::HandlerResponse::Handled;
+      }));
 
   // Every handler: one lock, and user errors become 400 with nothing changed
   // (the session validates a request completely before it edits anything).
@@ -342,95 +349,100 @@ void Serve(EditSession& session, const ServerOptions& options, const std::functi
   // The routes, by method, for 404 and 405 below.
   const std::set<std::string> get_routes = {"/", "/api/state", "/api/frame", "/api/material"};
   const std::set<std::string> post_routes = {"/api/constraints", "/api/constraints/update", "/api/constraints/remove",
-                                             "/api/preset", "/api/settings", "/api/export"};
+                                             "/api/preset",      "/api/settings",           "/api/export"};
 
   server.Get("/", handle([](const httplib::Request& request, httplib::Response& response) {
-    RejectUnknownParameters(request, {});
-    response.set_content(EditorPage(), "text/html; charset=utf-8");
-  }));
+               RejectUnknownParameters(request, {});
+               response.set_content(EditorPage(), "text/html; charset=utf-8");
+             }));
   server.Get("/api/state", handle([&](const httplib::Request& request, httplib::Response& response) {
-    RejectUnknownParameters(request, {});
-    state(response);
-  }));
+               RejectUnknownParameters(request, {});
+               state(response);
+             }));
   server.Get("/api/frame", handle([&](const httplib::Request& request, httplib::Response& response) {
-    RejectUnknownParameters(request, {"t", "exposure", "v"});  // v: the page's cache breaker
-    const double t = request.has_param("t") ? QueryNumber(request, "t") : session.scene().start_s;
-    double exposure = session.scene().camera.exposure;
-    if (request.has_param("exposure")) {
-      exposure = QueryNumber(request, "exposure");
-      if (!(exposure > 0 && exposure < 1e6))
-        ThrowUserError("request", "exposure", "expected a number > 0 and < 1e6, got " + request.get_param_value("exposure"));
-    }
-    const std::vector<unsigned char> png = session.FramePng(t, exposure);
-    response.set_content(std::string(png.begin(), png.end()), "image/png");
-    response.set_header("Cache-Control", "no-store");  // a frame changes with every edit
-  }));
+               RejectUnknownParameters(request, {"t", "exposure", "v"});  // v: the page's cache breaker
+               const double t = request.has_param("t") ? QueryNumber(request, "t") : session.scene().start_s;
+               double exposure = session.scene().camera.exposure;
+               if (request.has_param("exposure")) {
+                 exposure = QueryNumber(request, "exposure");
+                 if (!(exposure > 0 && exposure < 1e6))
+                   ThrowUserError("request", "exposure",
+                                  "expected a number > 0 and < 1e6, got " + request.get_param_value("exposure"));
+               }
+               const std::vector<unsigned char> png = session.FramePng(t, exposure);
+               response.set_content(std::string(png.begin(), png.end()), "image/png");
+               response.set_header("Cache-Control", "no-store");  // a frame changes with every edit
+             }));
   server.Post("/api/constraints", handle([&](const httplib::Request& request, httplib::Response& response) {
-    const nlohmann::json body = body_of(request);
-    const JsonField f(body, "request");
-    f.RejectUnknownKeys({"x", "y", "t_s"});
-    const int x = f["x"].Integer(-1000000, 1000000), y = f["y"].Integer(-1000000, 1000000);
-    session.AddConstraint(x, y, f["t_s"].Number());
-    state(response);
-  }));
+                const nlohmann::json body = body_of(request);
+                const JsonField f(body, "request");
+                f.RejectUnknownKeys({"x", "y", "t_s"});
+                const int x = f["x"].Integer(-1000000, 1000000), y = f["y"].Integer(-1000000, 1000000);
+                session.AddConstraint(x, y, f["t_s"].Number());
+                state(response);
+              }));
   server.Post("/api/constraints/update", handle([&](const httplib::Request& request, httplib::Response& response) {
-    const nlohmann::json body = body_of(request);
-    const JsonField f(body, "request");
-    f.RejectUnknownKeys({"index", "rgb", "t_s", "weight", "kind"});
-    session.UpdateConstraint(static_cast<std::size_t>(f["index"].Integer(0, 1000000)), body);
-    state(response);
-  }));
+                const nlohmann::json body = body_of(request);
+                const JsonField f(body, "request");
+                f.RejectUnknownKeys({"index", "rgb", "t_s", "weight", "kind"});
+                session.UpdateConstraint(static_cast<std::size_t>(f["index"].Integer(0, 1000000)), body);
+                state(response);
+              }));
   server.Post("/api/constraints/remove", handle([&](const httplib::Request& request, httplib::Response& response) {
-    const nlohmann::json body = body_of(request);
-    const JsonField f(body, "request");
-    f.RejectUnknownKeys({"index"});
-    session.RemoveConstraint(static_cast<std::size_t>(f["index"].Integer(0, 1000000)));
-    state(response);
-  }));
+                const nlohmann::json body = body_of(request);
+                const JsonField f(body, "request");
+                f.RejectUnknownKeys({"index"});
+                session.RemoveConstraint(static_cast<std::size_t>(f["index"].Integer(0, 1000000)));
+                state(response);
+              }));
   server.Post("/api/preset", handle([&](const httplib::Request& request, httplib::Response& response) {
-    const nlohmann::json body = body_of(request);
-    const JsonField f(body, "request");
-    f.RejectUnknownKeys({"object", "preset"});
-    session.SetPreset(Name(f["object"]), Name(f["preset"]));
-    state(response);
-  }));
+                const nlohmann::json body = body_of(request);
+                const JsonField f(body, "request");
+                f.RejectUnknownKeys({"object", "preset"});
+                session.SetPreset(Name(f["object"]), Name(f["preset"]));
+                state(response);
+              }));
   server.Post("/api/settings", handle([&](const httplib::Request& request, httplib::Response& response) {
-    const nlohmann::json body = body_of(request);
-    const JsonField f(body, "request");
-    f.RejectUnknownKeys({"states", "falloff"});
-    // Both read before either is applied: a bad falloff leaves the states as they were.
-    const std::optional<int> states = f.Has("states") ? std::optional<int>(f["states"].Integer(1, 3)) : std::nullopt;
-    const std::optional<double> falloff =
-        f.Has("falloff") ? std::optional<double>(f["falloff"].NumberInRange(0, 10)) : std::nullopt;
-    if (states) session.SetStates(*states);
-    if (falloff) session.SetPropagation(*falloff);
-    state(response);
-  }));
+                const nlohmann::json body = body_of(request);
+                const JsonField f(body, "request");
+                f.RejectUnknownKeys({"states", "falloff"});
+                // Both read before either is applied: a bad falloff leaves the states as they were.
+                const std::optional<int> states =
+                    f.Has("states") ? std::optional<int>(f["states"].Integer(1, 3)) : std::nullopt;
+                const std::optional<double> falloff =
+                    f.Has("falloff") ? std::optional<double>(f["falloff"].NumberInRange(0, 10)) : std::nullopt;
+                if (states) session.SetStates(*states);
+                if (falloff) session.SetPropagation(*falloff);
+                state(response);
+              }));
   server.Get("/api/material", handle([&](const httplib::Request& request, httplib::Response& response) {
-    RejectUnknownParameters(request, {"object"});
-    const std::string object = request.get_param_value("object");
-    if (object.size() > kMaxNameBytes) ThrowUserError("request", "object", "longer than " + std::to_string(kMaxNameBytes) + " characters");
-    const nlohmann::json material = session.MaterialJson(object);
-    response.set_content(Dump(material, 2) + "\n", "application/json");
-    // Named after the object (lower case, '-' for the rest): no quote or
-    // control character reaches the header.
-    response.set_header("Content-Disposition", "attachment; filename=\"" + session.ExportFileName(object) + "\"");
-  }));
+               RejectUnknownParameters(request, {"object"});
+               const std::string object = request.get_param_value("object");
+               if (object.size() > kMaxNameBytes)
+                 ThrowUserError("request", "object", "longer than " + std::to_string(kMaxNameBytes) + " characters");
+               const nlohmann::json material = session.MaterialJson(object);
+               response.set_content(Dump(material, 2) + "\n", "application/json");
+               // Named after the object (lower case, '-' for the rest): no quote or
+               // control character reaches the header.
+               response.set_header("Content-Disposition",
+                                   "attachment; filename=\"" + session.ExportFileName(object) + "\"");
+             }));
   server.Post("/api/export", handle([&](const httplib::Request& request, httplib::Response& response) {
-    const nlohmann::json body = body_of(request);
-    const JsonField f(body, "request");
-    f.RejectUnknownKeys({"object", "path"});
-    const std::string object = Name(f["object"]);
-    const std::filesystem::path written = session.ExportMaterial(object, f["path"].String());
-    response.set_content(Dump(nlohmann::json{{"written", written.string()}}), "application/json");
-  }));
+                const nlohmann::json body = body_of(request);
+                const JsonField f(body, "request");
+                f.RejectUnknownKeys({"object", "path"});
+                const std::string object = Name(f["object"]);
+                const std::filesystem::path written = session.ExportMaterial(object, f["path"].String());
+                response.set_content(Dump(nlohmann::json{{"written", written.string()}}), "application/json");
+              }));
   // Anything else: 405 naming the methods of a route that exists, else 404.
   const auto unrouted = [&](const httplib::Request& request, httplib::Response& response) {
     const bool get = get_routes.count(request.path) > 0, post = post_routes.count(request.path) > 0;
     if (get || post) {
       response.set_header("Allow", get ? "GET" : "POST");
-      Error(response, 405, "request: " + request.method + " " + request.path + ": method not allowed (use " +
-                               (get ? "GET" : "POST") + ")");
+      Error(response, 405,
+            "request: " + request.method + " " + request.path + ": method not allowed (use " + (get ? "GET" : "POST") +
+                ")");
     } else {
       Error(response, 404, "request: " + request.path.substr(0, 80) + ": no such route");
     }
@@ -454,8 +466,10 @@ void Serve(EditSession& session, const ServerOptions& options, const std::functi
     std::shared_ptr<std::atomic<bool>> done = std::make_shared<std::atomic<bool>>(false);
   };
   std::list<Connection> connections;
-  const auto read_timeout = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(options.read_timeout_s));
-  const auto write_timeout = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(options.write_timeout_s));
+  const auto read_timeout =
+      std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(options.read_timeout_s));
+  const auto write_timeout =
+      std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(options.write_timeout_s));
   const auto reap = [&] {
     for (auto it = connections.begin(); it != connections.end();) {
       if (*it->done) {

@@ -35,9 +35,7 @@ constexpr std::size_t kMaxPathBytes = 1024;
 constexpr std::size_t kMaxNameBytes = 200;
 
 // A request's text in a message: a name of 60 KiB is not repeated whole.
-std::string Shorten(const std::string& text) {
-  return text.size() <= 80 ? text : text.substr(0, 77) + "...";
-}
+std::string Shorten(const std::string& text) { return text.size() <= 80 ? text : text.substr(0, 77) + "..."; }
 
 // The names of a path relative to root, or a UserError: absolute, "..",
 // control characters (a NUL would cut the name short where it reaches the
@@ -45,12 +43,15 @@ std::string Shorten(const std::string& text) {
 // is touched.
 std::vector<std::string> NamesUnderRoot(const std::string& relative_path, const std::filesystem::path& root) {
   const auto outside = [&] {
-    ThrowUserError("", "path", "'" + Shorten(relative_path) + "' is outside the project's working folder " + root.string());
+    ThrowUserError("", "path",
+                   "'" + Shorten(relative_path) + "' is outside the project's working folder " + root.string());
   };
-  if (relative_path.empty()) ThrowUserError("", "path", "expected a path inside the working folder, such as edited/wall.json");
+  if (relative_path.empty())
+    ThrowUserError("", "path", "expected a path inside the working folder, such as edited/wall.json");
   if (relative_path.size() > kMaxPathBytes)
-    ThrowUserError("", "path", "has " + std::to_string(relative_path.size()) + " characters, more than " +
-                                   std::to_string(kMaxPathBytes));
+    ThrowUserError(
+        "", "path",
+        "has " + std::to_string(relative_path.size()) + " characters, more than " + std::to_string(kMaxPathBytes));
   for (unsigned char ch : relative_path)
     if (ch < 0x20 || ch == 0x7f)
       ThrowUserError("", "path", "contains a control character (code " + std::to_string(ch) + ")");
@@ -61,7 +62,8 @@ std::vector<std::string> NamesUnderRoot(const std::string& relative_path, const 
     const std::string name = relative_path.substr(start, end - start);
     if (name == "..") outside();
     if (name.size() > kMaxNameBytes)
-      ThrowUserError("", "path", "the name '" + Shorten(name) + "' is longer than " + std::to_string(kMaxNameBytes) + " bytes");
+      ThrowUserError("", "path",
+                     "the name '" + Shorten(name) + "' is longer than " + std::to_string(kMaxNameBytes) + " bytes");
     if (!name.empty() && name != ".") names.push_back(name);
     start = end + 1;
   }
@@ -109,7 +111,8 @@ std::filesystem::path WriteUnderRoot(const std::filesystem::path& root, const st
   std::string temporary;
   FileDescriptor file;
   for (int attempt = 0; attempt < 100 && file.fd < 0; ++attempt) {
-    temporary = "." + name + ".tmp" + (attempt == 0 ? "" : "." + std::to_string(::getpid()) + "." + std::to_string(attempt));
+    temporary =
+        "." + name + ".tmp" + (attempt == 0 ? "" : "." + std::to_string(::getpid()) + "." + std::to_string(attempt));
     file.fd = ::openat(folder.fd, temporary.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC, 0644);
     if (file.fd < 0 && errno != EEXIST) fail("cannot create a temporary file beside it");
   }
@@ -211,7 +214,8 @@ std::vector<double> EditSession::RgbToBands(const std::vector<double>& rgb) cons
   Eigen::Matrix3d M = Eigen::Matrix3d::Zero();
   for (int b = 0; b < nb; ++b)
     for (int c = 0; c < 3; ++c)
-      if (width[wide_band_[b]] > 0) M(c, wide_band_[b]) += xyz_to_rgb_weights_[c * nb + b] * scene_.bands.width_nm(b) / width[wide_band_[b]];
+      if (width[wide_band_[b]] > 0)
+        M(c, wide_band_[b]) += xyz_to_rgb_weights_[c * nb + b] * scene_.bands.width_nm(b) / width[wide_band_[b]];
   const Eigen::Vector3d wide = M.fullPivLu().solve(target).cwiseMax(0.0);
   std::vector<double> bands(nb);
   for (int b = 0; b < nb; ++b)
@@ -228,8 +232,9 @@ int EditSession::ObjectIndex(const std::string& name) const {
 void EditSession::AddConstraint(int x, int y, double t_s) {
   const render::Camera& camera = scene_.camera;
   if (x < 0 || y < 0 || x >= camera.width || y >= camera.height)
-    ThrowUserError("", "x, y", "pixel (" + std::to_string(x) + ", " + std::to_string(y) + ") is outside the " +
-                                   std::to_string(camera.width) + "x" + std::to_string(camera.height) + " image");
+    ThrowUserError("", "x, y",
+                   "pixel (" + std::to_string(x) + ", " + std::to_string(y) + ") is outside the " +
+                       std::to_string(camera.width) + "x" + std::to_string(camera.height) + " image");
   if (!(t_s >= scene_.start_s && t_s <= scene_.end_s))
     ThrowUserError("", "t_s", FormatDouble(t_s) + " s is outside the scene's time range");
   // The camera ray through the pixel's centre (the renderer's own camera).
@@ -237,9 +242,11 @@ void EditSession::AddConstraint(int x, int y, double t_s) {
   const render::CameraRays rays(scene_, scene_.start_s);
   const render::Hit hit = geometry_->Intersect(rays.origin(), rays.Direction(x + 0.5f, y + 0.5f));
   if (!hit || !scene_.objects[hit.object].phosphor)
-    ThrowUserError("", "x, y", "pixel (" + std::to_string(x) + ", " + std::to_string(y) + ") shows " +
-                                   (hit ? "'" + scene_.objects[hit.object].name + "', which is not phosphorescent" : "nothing"));
-  if (!hit.front) ThrowUserError("", "x, y", "that is the back of '" + scene_.objects[hit.object].name + "', which does not glow");
+    ThrowUserError("", "x, y",
+                   "pixel (" + std::to_string(x) + ", " + std::to_string(y) + ") shows " +
+                       (hit ? "'" + scene_.objects[hit.object].name + "', which is not phosphorescent" : "nothing"));
+  if (!hit.front)
+    ThrowUserError("", "x, y", "that is the back of '" + scene_.objects[hit.object].name + "', which does not glow");
   PlacedConstraint c;
   c.object = hit.object;
   c.position = hit.position;
@@ -257,16 +264,18 @@ void EditSession::AddConstraint(int x, int y, double t_s) {
     }
     c.irradiance.push_back(E);
   }
-  const std::string where = "pixel (" + std::to_string(x) + ", " + std::to_string(y) + ") on '" +
-                            scene_.objects[hit.object].name + "'";
+  const std::string where =
+      "pixel (" + std::to_string(x) + ", " + std::to_string(y) + ") on '" + scene_.objects[hit.object].name + "'";
   bool lit = false;
   for (const auto& E : c.irradiance)
     for (double e : E) lit = lit || e > 0;
   // An edge pixel's point can be shadowed by the neighbouring wall: nothing
   // charges there, and a target at it could only be met with Lambda = 0.
   if (!lit)
-    ThrowUserError("", "x, y", where + ": no light reaches that point at any time (an edge, or in shadow), so nothing "
-                                       "can charge it; click inside the lit surface");
+    ThrowUserError("", "x, y",
+                   where +
+                       ": no light reaches that point at any time (an edge, or in shadow), so nothing "
+                       "can charge it; click inside the lit surface");
   // The target starts as what the point looks like now.
   const render::Object& object = scene_.objects[hit.object];
   Problem probe;
@@ -279,9 +288,10 @@ void EditSession::AddConstraint(int x, int y, double t_s) {
   c.rgb = BandsToRgb(PredictRadiance(probe, known, {t_s - scene_.start_s})[0]);
   for (double& v : c.rgb) v = std::max(v, 0.0);
   if (*std::max_element(c.rgb.begin(), c.rgb.end()) <= 0)
-    ThrowUserError("", "x, y", where + " is black at t = " + FormatShort(t_s, 4) +
-                                   " s, and a target of zero would give it Lambda = 0 (no glow); place it at a time "
-                                   "when the point is lit or glows");
+    ThrowUserError("", "x, y",
+                   where + " is black at t = " + FormatShort(t_s, 4) +
+                       " s, and a target of zero would give it Lambda = 0 (no glow); place it at a time "
+                       "when the point is lit or glows");
   constraints_.push_back(c);
   Resolve();
 }
@@ -298,16 +308,21 @@ void EditSession::UpdateConstraint(std::size_t index, const nlohmann::json& fiel
     // The weight is 1 / |T|^2 and the solve meets a zero target with Lambda = 0:
     // the object would silently stop glowing.
     if (*std::max_element(c.rgb.begin(), c.rgb.end()) <= 0)
-      rgb.Fail("a target of [0, 0, 0] would give the object Lambda = 0 (no glow at all); give the colour it should have");
+      rgb.Fail(
+          "a target of [0, 0, 0] would give the object Lambda = 0 (no glow at all); give the colour it should have");
   }
   if (f.Has("t_s")) c.t_s = f["t_s"].NumberInRange(scene_.start_s, scene_.end_s);
   if (f.Has("weight")) c.weight = f["weight"].NumberInRange(0, kMaxWeight);
   if (f.Has("kind")) {
     const std::string kind = f["kind"].String();
-    if (kind == "target") c.kind = Constraint::Kind::kTarget;
-    else if (kind == "at_least") c.kind = Constraint::Kind::kAtLeast;
-    else if (kind == "at_most") c.kind = Constraint::Kind::kAtMost;
-    else f["kind"].Fail("expected target, at_least or at_most");
+    if (kind == "target")
+      c.kind = Constraint::Kind::kTarget;
+    else if (kind == "at_least")
+      c.kind = Constraint::Kind::kAtLeast;
+    else if (kind == "at_most")
+      c.kind = Constraint::Kind::kAtMost;
+    else
+      f["kind"].Fail("expected target, at_least or at_most");
   }
   constraints_[index] = c;  // only once every field is valid
   Resolve();
@@ -430,7 +445,8 @@ void EditSession::ApplyMaterials() {
             for (std::size_t k = 0; k < s.ke.size(); ++k)
               s.ke[k] = b.ke[k] && s.ke[k] ? std::optional<double>((1 - best_w) * *b.ke[k] + best_w * *s.ke[k])
                                            : std::nullopt;
-            for (std::size_t k = 0; k < s.Lambda.size(); ++k) s.Lambda[k] = (1 - best_w) * b.Lambda[k] + best_w * s.Lambda[k];
+            for (std::size_t k = 0; k < s.Lambda.size(); ++k)
+              s.Lambda[k] = (1 - best_w) * b.Lambda[k] + best_w * s.Lambda[k];
           }
         } else if (best_w < 0.5) {
           blended = std::make_shared<Material>(base);
@@ -494,21 +510,40 @@ nlohmann::json EditSession::State() const {
       error += std::pow(predicted[k] - c.rgb[k], 2);
       norm += c.rgb[k] * c.rgb[k];
     }
-    const char* kind = c.kind == Constraint::Kind::kTarget ? "target" : c.kind == Constraint::Kind::kAtLeast ? "at_least" : "at_most";
-    constraints.push_back({{"object", scene_.objects[c.object].name}, {"t_s", c.t_s}, {"rgb", c.rgb},
-                           {"weight", c.weight}, {"kind", kind}, {"predicted", predicted},
-                           {"relative_error", std::sqrt(error / std::max(norm, 1e-300))}, {"curve", curve}});
+    const char* kind = c.kind == Constraint::Kind::kTarget    ? "target"
+                       : c.kind == Constraint::Kind::kAtLeast ? "at_least"
+                                                              : "at_most";
+    constraints.push_back({{"object", scene_.objects[c.object].name},
+                           {"t_s", c.t_s},
+                           {"rgb", c.rgb},
+                           {"weight", c.weight},
+                           {"kind", kind},
+                           {"predicted", predicted},
+                           {"relative_error", std::sqrt(error / std::max(norm, 1e-300))},
+                           {"curve", curve}});
   }
   nlohmann::json solutions = nlohmann::json::array();
   for (const auto& [object, solution] : solutions_)
-    solutions.push_back({{"object", scene_.objects[object].name}, {"cost", solution.cost},
-                         {"feedback", solution.feedback}, {"seconds", solution.seconds},
+    solutions.push_back({{"object", scene_.objects[object].name},
+                         {"cost", solution.cost},
+                         {"feedback", solution.feedback},
+                         {"seconds", solution.seconds},
                          {"material", MaterialToJson(solution.material)}});
-  return {{"scene", scene_.name}, {"width", scene_.camera.width}, {"height", scene_.camera.height},
+  return {{"scene", scene_.name},
+          {"width", scene_.camera.width},
+          {"height", scene_.camera.height},
           {"exposure", scene_.camera.exposure},
-          {"start_s", scene_.start_s}, {"end_s", scene_.end_s}, {"dt_s", dt_s_}, {"timeline", timeline_},
-          {"objects", objects}, {"presets", presets}, {"states", states_}, {"falloff", falloff_},
-          {"constraints", constraints}, {"solutions", solutions}, {"solve_ms", last_solve_seconds_ * 1e3}};
+          {"start_s", scene_.start_s},
+          {"end_s", scene_.end_s},
+          {"dt_s", dt_s_},
+          {"timeline", timeline_},
+          {"objects", objects},
+          {"presets", presets},
+          {"states", states_},
+          {"falloff", falloff_},
+          {"constraints", constraints},
+          {"solutions", solutions},
+          {"solve_ms", last_solve_seconds_ * 1e3}};
 }
 
 std::vector<unsigned char> EditSession::FramePng(double t_s, double exposure) const {
@@ -548,8 +583,10 @@ std::string EditSession::ExportFileName(const std::string& object) const {
   const int o = ObjectIndex(object);
   std::string name;
   for (unsigned char ch : scene_.objects[o].name) {
-    if (std::isalnum(ch)) name += static_cast<char>(std::tolower(ch));
-    else if (!name.empty() && name.back() != '-') name += '-';
+    if (std::isalnum(ch))
+      name += static_cast<char>(std::tolower(ch));
+    else if (!name.empty() && name.back() != '-')
+      name += '-';
   }
   while (!name.empty() && name.back() == '-') name.pop_back();
   return (name.empty() ? std::string("material") : name.substr(0, kMaxNameBytes - 5)) + ".json";

@@ -21,7 +21,6 @@
 namespace phos::editor {
 namespace {
 
-
 // The moments the cost looks at, per point: every target's time and every
 // frame start inside a bound's range (and its ends), sorted, with who uses each.
 // The irradiance is piecewise constant, and the exact update (Eq. 8.1) over
@@ -29,9 +28,9 @@ namespace {
 // frames with equal irradiance and no sample inside are one step: a lit
 // stretch or a dark stretch costs one exponential, not one per frame.
 struct Step {
-  int frame = 0;     // a frame of the run (its irradiance holds throughout)
-  double h_s = 0;    // the run's length
-  int sample = -1;   // the sample that ends the step, or -1
+  int frame = 0;    // a frame of the run (its irradiance holds throughout)
+  double h_s = 0;   // the run's length
+  int sample = -1;  // the sample that ends the step, or -1
 };
 struct PointSamples {
   std::vector<double> t;    // sorted, unique
@@ -51,7 +50,8 @@ std::vector<Step> MakeSteps(const Point& point, double dt_s, const std::vector<d
       const double until = std::min(frame_end, t_samples[m]);
       const int f = std::min(frame, frames - 1);
       const bool ends_sample = until >= t_samples[m] - 1e-12;
-      const bool joins = !steps.empty() && steps.back().sample < 0 && point.irradiance[steps.back().frame] == point.irradiance[f];
+      const bool joins =
+          !steps.empty() && steps.back().sample < 0 && point.irradiance[steps.back().frame] == point.irradiance[f];
       if (joins) {
         steps.back().h_s += until - t;
       } else {
@@ -90,7 +90,8 @@ Samples MakeSamples(const Problem& p) {
     PointSamples& ps = s.points[q];
     for (double t : times[q])
       if (ps.t.empty() || t > ps.t.back() + 1e-9 * p.dt_s) ps.t.push_back(t);
-    for (double t : ps.t) ps.frame.push_back(std::clamp(static_cast<int>(std::floor(t / p.dt_s + 1e-9)), 0, frames - 1));
+    for (double t : ps.t)
+      ps.frame.push_back(std::clamp(static_cast<int>(std::floor(t / p.dt_s + 1e-9)), 0, frames - 1));
     ps.steps = MakeSteps(p.points[q], p.dt_s, ps.t);
   }
   auto index_of = [&](int q, double t) {
@@ -157,8 +158,8 @@ void Residuals(const Problem& p, const Samples& s, const Emitted<T>& Lp, T* out)
 int ResidualCount(const Problem& p, const Samples& s) {
   int count = 0;
   for (std::size_t c = 0; c < p.constraints.size(); ++c)
-    count += p.bands.band_count() * (p.constraints[c].kind == Constraint::Kind::kTarget
-                                         ? 1 : static_cast<int>(s.bound_samples[c].size()));
+    count += p.bands.band_count() *
+             (p.constraints[c].kind == Constraint::Kind::kTarget ? 1 : static_cast<int>(s.bound_samples[c].size()));
   return count;
 }
 
@@ -176,9 +177,9 @@ std::vector<int> LitBands(const Problem& p) {
 
 // Parameters of a candidate: per state kr, ke over the lit bands, Lambda over all bands.
 struct Parameters {
-  std::vector<double> kr;                  // [nc]
-  std::vector<std::vector<double>> ke;     // [nc][lit]
-  std::vector<std::vector<double>> Lambda; // [nc][nb]
+  std::vector<double> kr;                   // [nc]
+  std::vector<std::vector<double>> ke;      // [nc][lit]
+  std::vector<std::vector<double>> Lambda;  // [nc][nb]
 };
 
 // ke over `bands` (the lit ones, or all of them for the grid baseline) into a
@@ -247,7 +248,9 @@ void EmitInto(const Problem& p, const Samples& s, const std::vector<const StateC
 // The value of a double or of a Ceres Jet.
 inline double ValueOf(double x) { return x; }
 template <typename T, int N>
-double ValueOf(const ceres::Jet<T, N>& x) { return x.a; }
+double ValueOf(const ceres::Jet<T, N>& x) {
+  return x.a;
+}
 
 // Solves G x = b in place for a small symmetric positive definite G (n <= 5,
 // by Cholesky), in T, so that a Jet's derivatives follow G's and b's.
@@ -295,8 +298,10 @@ void NonNegativeSolve(const T (&G)[5][5], const T (&rhs)[5], int n, T (&x)[5]) {
     // the better edge, in closed form (the beam search's common case).
     const int i = ValueOf(rhs[0] * rhs[0] / G[0][0]) >= ValueOf(rhs[1] * rhs[1] / G[1][1]) ? 0 : 1;
     x[0] = x[1] = T(0.0);
-    if (ValueOf(rhs[i]) > 0) x[i] = rhs[i] / G[i][i];
-    else if (ValueOf(rhs[1 - i]) > 0) x[1 - i] = rhs[1 - i] / G[1 - i][1 - i];
+    if (ValueOf(rhs[i]) > 0)
+      x[i] = rhs[i] / G[i][i];
+    else if (ValueOf(rhs[1 - i]) > 0)
+      x[1 - i] = rhs[1 - i] / G[1 - i][1 - i];
     return;
   }
   SmallMatrix G_value(n, n);
@@ -323,10 +328,10 @@ void NonNegativeSolve(const T (&G)[5][5], const T (&rhs)[5], int n, T (&x)[5]) {
 // The targets' side of Eq. 8.7 for Lambda: per target its weight and its
 // radiance less the reflected light (what the emission must supply), per band.
 struct TargetSystem {
-  std::vector<int> constraint;          // per target: index into Problem::constraints
-  std::vector<double> weight;           // per target
-  std::vector<std::vector<double>> y;   // per target, per band
-  std::vector<double> wyy;              // per band: sum_targets w y^2
+  std::vector<int> constraint;         // per target: index into Problem::constraints
+  std::vector<double> weight;          // per target
+  std::vector<std::vector<double>> y;  // per target, per band
+  std::vector<double> wyy;             // per band: sum_targets w y^2
 };
 
 TargetSystem MakeTargetSystem(const Problem& p, const Samples& s) {
@@ -501,8 +506,8 @@ std::vector<std::string> Feedback(const Problem& p, const Samples& s, const std:
     for (double v : con.radiance) scale = std::max(scale, std::abs(v));
     if (results[c].residual > 0.1 * scale + 1e-12)
       notes.push_back(con.label + " (t = " + FormatDouble(con.t_s) + " s) is missed by " +
-                      FormatShort(results[c].residual, 3) + " (" + FormatShort(100 * results[c].residual / std::max(scale, 1e-300), 3) +
-                      "% of its largest band)");
+                      FormatShort(results[c].residual, 3) + " (" +
+                      FormatShort(100 * results[c].residual / std::max(scale, 1e-300), 3) + "% of its largest band)");
     if (con.kind == Constraint::Kind::kTarget) {
       const Point& point = p.points[con.point];
       const int frame = s.points[con.point].frame[s.target_sample[c]];
@@ -530,9 +535,10 @@ std::vector<std::string> Feedback(const Problem& p, const Samples& s, const std:
       if (!dark) continue;
       for (int band = 0; band < nb; ++band)
         if (b.radiance[band] > a.radiance[band] * (1 + 1e-6) + 1e-12) {
-          notes.push_back(a.label + " and " + b.label + " contradict: it is dark from " + FormatDouble(a.t_s) + " s to " +
-                          FormatDouble(b.t_s) + " s, where a glow can only fade, but band " + p.bands.BandName(band) +
-                          " rises from " + FormatShort(a.radiance[band], 3) + " to " + FormatShort(b.radiance[band], 3));
+          notes.push_back(a.label + " and " + b.label + " contradict: it is dark from " + FormatDouble(a.t_s) +
+                          " s to " + FormatDouble(b.t_s) + " s, where a glow can only fade, but band " +
+                          p.bands.BandName(band) + " rises from " + FormatShort(a.radiance[band], 3) + " to " +
+                          FormatShort(b.radiance[band], 3));
           break;
         }
     }
@@ -566,8 +572,9 @@ Solution Finish(const Problem& p, const Samples& s, const std::vector<int>& lit,
       for (int b = 0; b < nb; ++b) result.predicted.push_back(L(s.bound_samples[c].front(), b));
       for (int m : s.bound_samples[c])
         for (int b = 0; b < nb; ++b)
-          result.residual = std::max(result.residual, con.kind == Constraint::Kind::kAtLeast ? con.radiance[b] - L(m, b)
-                                                                                          : L(m, b) - con.radiance[b]);
+          result.residual =
+              std::max(result.residual,
+                       con.kind == Constraint::Kind::kAtLeast ? con.radiance[b] - L(m, b) : L(m, b) - con.radiance[b]);
     }
     solution.constraints.push_back(result);
   }
@@ -644,10 +651,14 @@ std::vector<int> DistinctShapes(const std::vector<LibraryCurve>& row) {
   for (int start = 0; start < n;) {
     int end = start;
     while (end + 1 < n && SameShape(row[end].g, row[end + 1].g)) ++end;
-    if (start == end) keep.push_back(start);
-    else if (start == 0 && end == n - 1) keep.push_back(NearestKappa(row, row[0].kr));  // one shape for every kappa
-    else if (start == 0) keep.push_back(end);   // the weak-light plateau: its strongest
-    else if (end == n - 1) keep.push_back(start);  // the saturated plateau: its weakest
+    if (start == end)
+      keep.push_back(start);
+    else if (start == 0 && end == n - 1)
+      keep.push_back(NearestKappa(row, row[0].kr));  // one shape for every kappa
+    else if (start == 0)
+      keep.push_back(end);  // the weak-light plateau: its strongest
+    else if (end == n - 1)
+      keep.push_back(start);  // the saturated plateau: its weakest
     else
       for (int k = start; k <= end; ++k) keep.push_back(k);
     start = end + 1;
@@ -753,10 +764,10 @@ void LeastLambdaFirst(const Problem& p, std::vector<Candidate>& ranked) {
   });
   if (ranked.empty()) return;
   const double same = ranked.front().cost + SameLookTolerance(p, ranked.front().cost);
-  const auto ties = std::find_if(ranked.begin(), ranked.end(), [&](const Candidate& c) {
-    return c.cost > same || c.Lambda_sum > kMaxLambda;
-  });
-  std::stable_sort(ranked.begin(), ties, [](const Candidate& a, const Candidate& b) { return a.Lambda_sum < b.Lambda_sum; });
+  const auto ties = std::find_if(ranked.begin(), ranked.end(),
+                                 [&](const Candidate& c) { return c.cost > same || c.Lambda_sum > kMaxLambda; });
+  std::stable_sort(ranked.begin(), ties,
+                   [](const Candidate& a, const Candidate& b) { return a.Lambda_sum < b.Lambda_sum; });
 }
 
 // Candidates for the refinement: combinations of nc library curves (indices),
@@ -853,7 +864,8 @@ Parameters Refine(const Problem& p, const Samples& s, const TargetSystem& t, con
   solver.logging_type = ceres::SILENT;
   ceres::Solver::Summary summary;
   {
-    auto* cost = new ceres::DynamicAutoDiffCostFunction<ProjectedEditCost, 8>(new ProjectedEditCost{&p, &s, &t, &lit, nc});
+    auto* cost =
+        new ceres::DynamicAutoDiffCostFunction<ProjectedEditCost, 8>(new ProjectedEditCost{&p, &s, &t, &lit, nc});
     cost->AddParameterBlock(nc);
     cost->AddParameterBlock(nc * n_lit);
     cost->SetNumResiduals(residuals);
@@ -925,7 +937,8 @@ Parameters WeakestExcitation(const Problem& p, const Samples& s, const TargetSys
       if (peak(weaker) < 0.75 * peak(x)) break;
       if (!HasBounds(p)) {  // Lambda follows (r_inf = a / (a + kr) drops a little); bounds would pull on it too
         std::vector<StateCurve<double>> g;
-        for (std::size_t j = 0; j < x.kr.size(); ++j) g.push_back(CurveOf(p, s, lit, weaker.kr[j], weaker.ke[j].data()));
+        for (std::size_t j = 0; j < x.kr.size(); ++j)
+          g.push_back(CurveOf(p, s, lit, weaker.kr[j], weaker.ke[j].data()));
         weaker.Lambda = BestLambda(p, s, t, Pointers(g));
       }
       bool representable = true;
@@ -1065,13 +1078,15 @@ std::optional<Solution> SolveGridBaseline(const Problem& p, std::string* why) {
             const Constraint& con = p.constraints[k];
             const Point& point = p.points[con.point];
             auto L = [&](int m) {
-              return Lambda * kr * r[con.point][m] + point.albedo[b] * point.irradiance[s.points[con.point].frame[m]][b] / kPi;
+              return Lambda * kr * r[con.point][m] +
+                     point.albedo[b] * point.irradiance[s.points[con.point].frame[m]][b] / kPi;
             };
             if (con.kind == Constraint::Kind::kTarget) {
               c += con.weight * std::pow(L(s.target_sample[k]) - con.radiance[b], 2);
             } else {
               for (int m : s.bound_samples[k]) {
-                const double miss = con.kind == Constraint::Kind::kAtLeast ? con.radiance[b] - L(m) : L(m) - con.radiance[b];
+                const double miss =
+                    con.kind == Constraint::Kind::kAtLeast ? con.radiance[b] - L(m) : L(m) - con.radiance[b];
                 if (miss > 0) c += con.weight * miss * miss;
               }
             }
@@ -1105,8 +1120,7 @@ Parameters ParametersOf(const Problem& p, const Material& material, const std::v
     for (int b : lit) {
       if (!state.ke[b])
         ThrowUserError(material.name, "states[" + std::to_string(i) + "].ke[" + std::to_string(b) + "]",
-                       "unknown (not measured) for band " + p.bands.BandName(b) + ", which " + p.source +
-                           " lights");
+                       "unknown (not measured) for band " + p.bands.BandName(b) + ", which " + p.source + " lights");
       ke.push_back(*state.ke[b]);
     }
     x.ke.push_back(ke);
@@ -1157,8 +1171,12 @@ nlohmann::json SolutionToJson(const Solution& solution) {
     residuals.push_back(c.residual);
     constraints.push_back({{"label", c.label}, {"residual", c.residual}, {"predicted", c.predicted}});
   }
-  return {{"material", MaterialToJson(solution.material)}, {"cost", solution.cost}, {"residuals", residuals},
-          {"constraints", constraints}, {"feedback", solution.feedback}, {"seconds", solution.seconds},
+  return {{"material", MaterialToJson(solution.material)},
+          {"cost", solution.cost},
+          {"residuals", residuals},
+          {"constraints", constraints},
+          {"feedback", solution.feedback},
+          {"seconds", solution.seconds},
           {"evaluations", solution.evaluations}};
 }
 

@@ -136,8 +136,7 @@ ChargeFitSummary FitCharge(const Curve& curve, const ChargeFitOptions& options, 
   // A failed solve (non-finite residuals) must not reach the covariance:
   // ceres::Covariance dereferenced null on the non-finite Jacobian of
   // negative times (e^{-kt} overflowing) and crashed.
-  if (!solver_summary.IsSolutionUsable())
-    ThrowUserError(where, "", "the fit failed: " + solver_summary.message);
+  if (!solver_summary.IsSolutionUsable()) ThrowUserError(where, "", "the fit failed: " + solver_summary.message);
 
   ChargeFitSummary summary;
   log_k = params[0];
@@ -147,7 +146,8 @@ ChargeFitSummary FitCharge(const Curve& curve, const ChargeFitOptions& options, 
   // resolve mean the curve shows no saturating growth.
   const double edge = std::log(1.05);
   if (!std::isfinite(log_k) || log_k <= std::log(k_lo) + edge || log_k >= std::log(k_hi) - edge)
-    ThrowUserError(where, "", "the curve does not approach a level within its time span (no saturating growth or fall)");
+    ThrowUserError(where, "",
+                   "the curve does not approach a level within its time span (no saturating growth or fall)");
 
   const int n = static_cast<int>(params.size());
   std::vector<double> variance(n, 0.0);

@@ -86,9 +86,9 @@ class ChannelDecayCost final : public ceres::CostFunction {
 };
 
 struct Fit {
-  std::vector<double> theta;                  // log rates
-  std::vector<std::vector<double>> A;         // [c][i], fit units
-  std::vector<double> B;                      // [c], fit units
+  std::vector<double> theta;           // log rates
+  std::vector<std::vector<double>> A;  // [c][i], fit units
+  std::vector<double> B;               // [c], fit units
   double wrss = std::numeric_limits<double>::infinity();
   int iterations = 0;
   bool valid = false;
@@ -237,8 +237,8 @@ class VarProCost final : public ceres::CostFunction {
         const double norm = v.norm();
         if (norm > 1e-12 * norm0) Q.col(rank++) = v / norm;  // drop a column the others already span
       }
-      Eigen::Map<Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>> J(jacobians[0] + c * m * nc_, m,
-                                                                                            nc_);
+      Eigen::Map<Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>> J(jacobians[0] + c * m * nc_,
+                                                                                           m, nc_);
       for (int i = 0; i < nc_; ++i) {
         // d r / d log k_i with the amplitudes held, w t k_i e^{-k_i t} A_i,
         // projected onto the complement of the columns in use.
@@ -450,8 +450,7 @@ DecayFitSummary FitDecay(const Curve& curve, const DecayFitOptions& options, con
   if (options.components > 0) {
     chosen = static_cast<int>(fits.size()) - 1;
     summary.choice = "fixed at " + std::to_string(options.components) + " by the caller";
-    if (chosen + 1 < options.components)
-      summary.choice += "; only " + std::to_string(chosen + 1) + " could be placed";
+    if (chosen + 1 < options.components) summary.choice += "; only " + std::to_string(chosen + 1) + " could be placed";
     if (!fits[chosen].valid) summary.choice += " (warning: " + fits[chosen].why_invalid + ")";
   } else {
     // The fewest components whose BIC is within 2 of the lowest (a smaller

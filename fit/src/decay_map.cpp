@@ -80,7 +80,8 @@ DecayMap FitDecayMap(const DecayMapInput& in, const DecayMapOptions& options, co
   for (int j = 0; j < m; ++j) {
     if (in.frames[j].size() != pixels * in.channels)
       ThrowUserError(where, "frame " + std::to_string(j + 1), "has another size than the first");
-    if (j > 0 && !(in.t_s[j] > in.t_s[j - 1])) ThrowUserError(where, "frame " + std::to_string(j + 1), "times must increase");
+    if (j > 0 && !(in.t_s[j] > in.t_s[j - 1]))
+      ThrowUserError(where, "frame " + std::to_string(j + 1), "times must increase");
     if (!(in.exposure_s[j] > 0)) ThrowUserError(where, "frame " + std::to_string(j + 1), "exposure must be > 0");
   }
   // The rate grid, as FitDecay scans it: from a twentieth of one per span
@@ -130,13 +131,16 @@ DecayMap FitDecayMap(const DecayMapInput& in, const DecayMapOptions& options, co
           // floor so a dark sample does not get an infinite weight.
           const double floor = std::max(1e-3 * peak, 1e-12);
           for (int j = 0; j < m; ++j)
-            wc[j] = options.weighting == Weighting::kPoisson ? in.exposure_s[j] / std::max<double>(std::fabs(yc[j]), floor) : 1.0;
+            wc[j] = options.weighting == Weighting::kPoisson
+                        ? in.exposure_s[j] / std::max<double>(std::fabs(yc[j]), floor)
+                        : 1.0;
         }
         // Scan the grid, then Newton on log k with central differences.
         int best = 0;
         PixelSolution best_solution;
         for (int g = 0; g < G; ++g) {
-          PixelSolution s = Project(&basis[static_cast<std::size_t>(g) * m], y.data(), w2.data(), in.channels, m, options.background);
+          PixelSolution s =
+              Project(&basis[static_cast<std::size_t>(g) * m], y.data(), w2.data(), in.channels, m, options.background);
           if (s.cost < best_solution.cost) best_solution = s, best = g;
         }
         double u = log_k[best];
@@ -167,8 +171,10 @@ DecayMap FitDecayMap(const DecayMapInput& in, const DecayMapOptions& options, co
           for (int j = 0; j < m; ++j) peak = std::max(peak, std::fabs(y[c][j]));
           decays = decays || best_solution.amplitude[c] * (b[0] - b[m - 1]) > 1e-6 * peak;
         }
-        if (decays) map.kr[p] = static_cast<float>(std::exp(u));
-        else ++no_decay;
+        if (decays)
+          map.kr[p] = static_cast<float>(std::exp(u));
+        else
+          ++no_decay;
         map.rms[p] = static_cast<float>(std::sqrt(std::max(0.0, best_solution.cost) / (in.channels * m)));
       }
       if (progress) progress(++rows_done);

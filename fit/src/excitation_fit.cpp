@@ -92,7 +92,9 @@ ExcitationFitSummary FitExcitation(const std::vector<ExcitationSample>& samples,
   if (!(options.kr > 0) || !std::isfinite(options.kr))
     ThrowUserError(where, "kr", "expected the decay rate from a decay fit (> 0), got " + FormatDouble(options.kr));
   if (samples.size() < 3)
-    ThrowUserError(where, "", "has " + std::to_string(samples.size()) + " experiments; an excitation fit needs at least 3 charge times");
+    ThrowUserError(
+        where, "",
+        "has " + std::to_string(samples.size()) + " experiments; an excitation fit needs at least 3 charge times");
   double longest = 0, shortest = std::numeric_limits<double>::infinity(), peak = 0;
   for (std::size_t j = 0; j < samples.size(); ++j) {
     const ExcitationSample& s = samples[j];
@@ -105,7 +107,8 @@ ExcitationFitSummary FitExcitation(const std::vector<ExcitationSample>& samples,
     peak = std::max(peak, s.value);
   }
   if (!(peak > 0)) ThrowUserError(where, "", "no experiment shows any glow: nothing to fit");
-  if (!(longest > shortest)) ThrowUserError(where, "", "every experiment has the same charge time: the charging speed is unknown");
+  if (!(longest > shortest))
+    ThrowUserError(where, "", "every experiment has the same charge time: the charging speed is unknown");
 
   // Start: a from a rate scan with S solved linearly (the signal is linear in S).
   double best_cost = std::numeric_limits<double>::infinity(), log_a0 = 0, S0 = 0;
@@ -181,7 +184,8 @@ struct KeResidual {
 }  // namespace
 
 std::vector<std::optional<double>> KeFromExcitationRates(const std::vector<std::vector<double>>& E_per_light,
-                                          const std::vector<double>& a_per_light, const std::string& where) {
+                                                         const std::vector<double>& a_per_light,
+                                                         const std::string& where) {
   if (E_per_light.empty() || E_per_light.size() != a_per_light.size())
     ThrowUserError(where, "", "needs one excitation rate per light");
   const std::size_t bands = E_per_light[0].size();
@@ -230,8 +234,9 @@ std::vector<std::optional<double>> KeFromExcitationRates(const std::vector<std::
   return result;
 }
 
-KeEstimate KeWithUncertainty(const std::vector<std::vector<double>>& E_per_light, const std::vector<double>& a_per_light,
-                             const std::vector<double>& a_stderr_per_light, const std::string& where) {
+KeEstimate KeWithUncertainty(const std::vector<std::vector<double>>& E_per_light,
+                             const std::vector<double>& a_per_light, const std::vector<double>& a_stderr_per_light,
+                             const std::string& where) {
   KeEstimate estimate;
   estimate.ke = KeFromExcitationRates(E_per_light, a_per_light, where);
   const std::size_t bands = estimate.ke.size();
@@ -240,11 +245,12 @@ KeEstimate KeWithUncertainty(const std::vector<std::vector<double>>& E_per_light
   const double strongest = *std::max_element(a_per_light.begin(), a_per_light.end());
   std::vector<int> free_bands;
   for (std::size_t b = 0; b < bands; ++b)
-    if (estimate.ke[b] && *estimate.ke[b] > 1e-9 * std::max(strongest, 1e-300)) free_bands.push_back(static_cast<int>(b));
+    if (estimate.ke[b] && *estimate.ke[b] > 1e-9 * std::max(strongest, 1e-300))
+      free_bands.push_back(static_cast<int>(b));
   if (free_bands.empty()) return estimate;
   if (free_bands.size() > 64) return estimate;
-  BoundedMatrix normal = BoundedMatrix::Zero(static_cast<Eigen::Index>(free_bands.size()),
-                                             static_cast<Eigen::Index>(free_bands.size()));
+  BoundedMatrix normal =
+      BoundedMatrix::Zero(static_cast<Eigen::Index>(free_bands.size()), static_cast<Eigen::Index>(free_bands.size()));
   for (std::size_t l = 0; l < E_per_light.size(); ++l) {
     const double sigma = a_stderr_per_light[l];
     if (!(sigma > 0)) return estimate;  // an exact rate: no uncertainty to carry
@@ -257,7 +263,8 @@ KeEstimate KeWithUncertainty(const std::vector<std::vector<double>>& E_per_light
   if (!lu.isInvertible()) return estimate;
   const BoundedMatrix covariance = lu.inverse();
   for (std::size_t i = 0; i < free_bands.size(); ++i)
-    estimate.ke_stderr[free_bands[i]] = std::sqrt(std::max(0.0, covariance(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(i))));
+    estimate.ke_stderr[free_bands[i]] =
+        std::sqrt(std::max(0.0, covariance(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(i))));
   return estimate;
 }
 

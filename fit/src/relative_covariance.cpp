@@ -12,7 +12,8 @@ namespace phos {
 RelativeCovariance ComputeRelativeCovariance(ceres::Problem& problem, const std::vector<CovarianceBlock>& blocks,
                                              double chi2) {
   RelativeCovariance result;
-  for (const CovarianceBlock& block : blocks) result.stderr_per_block.emplace_back(static_cast<std::size_t>(block.size), 0.0);
+  for (const CovarianceBlock& block : blocks)
+    result.stderr_per_block.emplace_back(static_cast<std::size_t>(block.size), 0.0);
   ceres::Problem::EvaluateOptions evaluate;
   std::vector<double> scale;
   std::vector<std::pair<int, int>> where;  // column -> (block, index)
@@ -49,10 +50,12 @@ RelativeCovariance ComputeRelativeCovariance(ceres::Problem& problem, const std:
   const Eigen::SelfAdjointEigenSolver<BoundedMatrix> eigen(normal);
   const auto& lambda = eigen.eigenvalues();  // ascending
   if (!(lambda(n - 1) > 0)) return result;
-  result.condition_number = lambda(0) > 0 ? std::sqrt(lambda(n - 1) / lambda(0)) : std::numeric_limits<double>::infinity();
+  result.condition_number =
+      lambda(0) > 0 ? std::sqrt(lambda(n - 1) / lambda(0)) : std::numeric_limits<double>::infinity();
   // A direction 1e-14 below the largest is numerically null: no inverse.
   if (!(lambda(0) > 1e-14 * lambda(n - 1))) return result;
-  const BoundedMatrix inverse = eigen.eigenvectors() * lambda.cwiseInverse().asDiagonal() * eigen.eigenvectors().transpose();
+  const BoundedMatrix inverse =
+      eigen.eigenvectors() * lambda.cwiseInverse().asDiagonal() * eigen.eigenvectors().transpose();
   for (Eigen::Index k = 0; k < n; ++k) {
     const auto [b, i] = where[kept[k]];
     result.stderr_per_block[b][i] = std::fabs(scale[kept[k]]) * std::sqrt(std::max(0.0, inverse(k, k) * chi2));

@@ -28,7 +28,7 @@ struct CovarianceBlock {
 struct RelativeCovariance {
   bool ok = false;
   std::vector<std::vector<double>> stderr_per_block;  // same shape as the blocks; 0 where left out
-  double condition_number = 0;  // of the weighted Jacobian, relative parameters
+  double condition_number = 0;                        // of the weighted Jacobian, relative parameters
 };
 
 // `blocks` must list every free parameter block of `problem`. `chi2`: the

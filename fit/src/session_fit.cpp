@@ -47,7 +47,8 @@ void PeakMoments(const std::vector<double>& p, double* centroid, double* sigma) 
   const int peak = static_cast<int>(std::max_element(p.begin(), p.end()) - p.begin());
   double c = peak, s = 2;
   for (int iteration = 0; iteration < 5; ++iteration) {
-    const int lo = std::max(0, static_cast<int>(std::floor(c - 3 * s))), hi = std::min(n - 1, static_cast<int>(std::ceil(c + 3 * s)));
+    const int lo = std::max(0, static_cast<int>(std::floor(c - 3 * s))),
+              hi = std::min(n - 1, static_cast<int>(std::ceil(c + 3 * s)));
     double w = 0, wx = 0, wxx = 0;
     for (int x = lo; x <= hi; ++x) {
       const double v = std::max(0.0, p[x]);
@@ -67,7 +68,8 @@ void PeakMoments(const std::vector<double>& p, double* centroid, double* sigma) 
 // differences), as a bounded Ceres problem: the non-negative, regularized
 // reconstruction of a spectrum from blurred samples.
 struct LinearRow {
-  LinearRow(std::vector<double> row, double target, double weight) : row_(std::move(row)), target_(target), weight_(weight) {}
+  LinearRow(std::vector<double> row, double target, double weight)
+      : row_(std::move(row)), target_(target), weight_(weight) {}
   template <typename T>
   bool operator()(T const* const* x, T* residual) const {
     T sum = T(-target_);
@@ -135,7 +137,6 @@ std::vector<nlohmann::json> SessionFrames(const fs::path& part, std::vector<std:
   return lines;
 }
 
-
 }  // namespace
 
 LvfCalibrationFit FitLvfCalibration(const fs::path& dir) {
@@ -175,8 +176,8 @@ LvfCalibrationFit FitLvfCalibration(const fs::path& dir) {
     }
   }
   if (fit.lines.size() < 2)
-    ThrowUserError(dir.string(), "lvf-calibration", "needs well-exposed frames of at least 2 lines, has " +
-                                                         std::to_string(fit.lines.size()));
+    ThrowUserError(dir.string(), "lvf-calibration",
+                   "needs well-exposed frames of at least 2 lines, has " + std::to_string(fit.lines.size()));
   if (fit.flat_dn_per_s.empty()) ThrowUserError(dir.string(), "lvf-calibration", "has no unclipped flat-field frame");
   // centre(x) = c0 + c1 x by least squares over the lines.
   double sx = 0, sy = 0, sxx = 0, sxy = 0;
@@ -343,11 +344,13 @@ Curve ReadDecayCurve(const fs::path& part, std::vector<std::string>* notes) {
     const double exposure = line.at("exposure_s").get<double>();
     if (curve.channels.empty()) {
       curve.channels.resize(means.size());
-      for (std::size_t c = 0; c < means.size(); ++c) curve.names.push_back(means.size() == 3 ? std::string(1, "RGB"[c]) : "Y");
+      for (std::size_t c = 0; c < means.size(); ++c)
+        curve.names.push_back(means.size() == 3 ? std::string(1, "RGB"[c]) : "Y");
     }
     curve.t_s.push_back(line.value("delay_after_light_off_s", 0.0) + exposure / 2);
     curve.exposure_s.push_back(exposure);
-    for (std::size_t c = 0; c < means.size() && c < curve.channels.size(); ++c) curve.channels[c].push_back(means[c] / exposure);
+    for (std::size_t c = 0; c < means.size() && c < curve.channels.size(); ++c)
+      curve.channels[c].push_back(means[c] / exposure);
   }
   if (clipped > 0) notes->push_back("decay: " + std::to_string(clipped) + " clipped frame(s) left out");
   if (curve.size() == 0) notes->push_back("decay: no unclipped frame to fit");
@@ -445,7 +448,8 @@ std::vector<ExcitationMeasurement> ReadExcitationMeasurements(const fs::path& pa
     clipped += group.clipped > 0;
     if (!group.measurement.frames.empty()) measurements.push_back(std::move(group.measurement));
   }
-  if (cut > 0) notes->push_back("excitation: " + std::to_string(cut) + " measurement(s) cut off in their tail left out");
+  if (cut > 0)
+    notes->push_back("excitation: " + std::to_string(cut) + " measurement(s) cut off in their tail left out");
   if (clipped > 0) notes->push_back("excitation: " + std::to_string(clipped) + " measurement(s) with a clipped frame");
   return measurements;
 }
@@ -474,7 +478,8 @@ std::vector<KeEstimate> KePerState(const std::vector<SessionFit::ExcitationLight
       sigma_per_light.push_back(a_stderr.count(light.light) ? a_stderr.at(light.light)[i] : 0.0);
     }
     if (E_per_light.empty()) return {};
-    ke.push_back(KeWithUncertainty(E_per_light, a_per_light, sigma_per_light, where + " (state " + std::to_string(i + 1) + ")"));
+    ke.push_back(
+        KeWithUncertainty(E_per_light, a_per_light, sigma_per_light, where + " (state " + std::to_string(i + 1) + ")"));
   }
   return ke;
 }
@@ -577,7 +582,8 @@ std::vector<double> LightBandIrradiance(const fs::path& part, const nlohmann::js
 // Each state's share w_i of the emission, proportional to A_i / (kr_i r_i)
 // with r_i the state at the decay's light-off. Unknown ke: r_i = 1, said.
 std::vector<double> EmissionShares(const fs::path& decay_part, const nlohmann::json& devices,
-                                   const DecayFitSummary& decay, const std::vector<std::vector<std::optional<double>>>& ke,
+                                   const DecayFitSummary& decay,
+                                   const std::vector<std::vector<std::optional<double>>>& ke,
                                    std::vector<std::string>* notes) {
   const nlohmann::json settings = SessionStart(decay_part).value("settings", nlohmann::json::object());
   const std::string charge_light = settings.value("charge_light", "");
@@ -595,14 +601,17 @@ std::vector<double> EmissionShares(const fs::path& decay_part, const nlohmann::j
     const double kr = decay.components[i].rate;
     std::optional<double> a = i < ke.size() && !E.empty() ? RateUnder(E, ke[i]) : std::nullopt;
     double r = 1;
-    if (a && *a > 0 && !switches.empty()) r = StateAt(switches, *a, kr, light_off);
-    else assumed = true;
+    if (a && *a > 0 && !switches.empty())
+      r = StateAt(switches, *a, kr, light_off);
+    else
+      assumed = true;
     w.push_back(amplitude / (kr * std::max(r, 1e-12)));
     total += w.back();
   }
   if (assumed && decay.components.size() > 1)
-    notes->push_back("spectrum: a state's charge at the decay's light-off is not known (no ke for the decay's light): "
-                     "taken as saturated");
+    notes->push_back(
+        "spectrum: a state's charge at the decay's light-off is not known (no ke for the decay's light): "
+        "taken as saturated");
   for (double& v : w) v = total > 0 ? v / total : 1.0 / static_cast<double>(w.size());
   return w;
 }
@@ -611,10 +620,10 @@ std::vector<double> EmissionShares(const fs::path& decay_part, const nlohmann::j
 // L_b / sum_i w_i kr_i rbar_i, rbar_i the state averaged over the frame's
 // exposure in the dark. nullopt when the state during the spectrum is not
 // known (the charge light reaches a band without ke).
-std::optional<std::vector<std::vector<double>>> LambdaPerState(const fs::path& spectrum_part, const nlohmann::json& devices,
-                                                               const SpectrumFit& spectrum, const std::vector<double>& kr,
-                                                               const std::vector<std::vector<std::optional<double>>>& ke,
-                                                               const std::vector<double>& shares) {
+std::optional<std::vector<std::vector<double>>> LambdaPerState(
+    const fs::path& spectrum_part, const nlohmann::json& devices, const SpectrumFit& spectrum,
+    const std::vector<double>& kr, const std::vector<std::vector<std::optional<double>>>& ke,
+    const std::vector<double>& shares) {
   const std::vector<double> E = LightBandIrradiance(spectrum_part, devices, spectrum.charge_light);
   if (E.empty() || ke.size() != kr.size()) return std::nullopt;
   std::vector<double> a;
@@ -633,7 +642,8 @@ std::optional<std::vector<std::vector<double>>> LambdaPerState(const fs::path& s
       const double r = StateAt(switches, a[i], kr[i], frame.t_start_s);
       emitting += shares[i] * kr[i] * r * -std::expm1(-kr[i] * e) / (kr[i] * e);
     }
-    for (std::size_t b = 0; b < nb; ++b) X[b] += frame.band_radiance[b] / emitting / static_cast<double>(spectrum.frames.size());
+    for (std::size_t b = 0; b < nb; ++b)
+      X[b] += frame.band_radiance[b] / emitting / static_cast<double>(spectrum.frames.size());
   }
   std::vector<std::vector<double>> Lambda;
   for (double share : shares) {
@@ -732,9 +742,9 @@ JointFit JointRefine(const Curve& decay_curve, const DecayFitSummary& decay,
       excitation.fitted_measurements.size() == measurements.size() ? excitation.fitted_measurements : measurements;
   for (const auto& m : carried)
     for (const ExcitationFrame& f : m.frames) {
-      auto* cost = new ceres::DynamicAutoDiffCostFunction<JointExcitationResidual, 8>(
-          new JointExcitationResidual{m.charge_s, f.delay_s, f.exposure_s, f.value,
-                                      PhotonCountingWeight(f.value, std::max(f.exposure_s, 1e-6), 1e-3 * peak), nc, m.start_state});
+      auto* cost = new ceres::DynamicAutoDiffCostFunction<JointExcitationResidual, 8>(new JointExcitationResidual{
+          m.charge_s, f.delay_s, f.exposure_s, f.value,
+          PhotonCountingWeight(f.value, std::max(f.exposure_s, 1e-6), 1e-3 * peak), nc, m.start_state});
       cost->AddParameterBlock(nc);
       cost->AddParameterBlock(nc);
       cost->AddParameterBlock(nc);
@@ -787,8 +797,10 @@ JointFit JointRefine(const Curve& decay_curve, const DecayFitSummary& decay,
     const double chi2 = (joint.decay_joint + joint.excitation_joint) / (n_residuals - n_parameters);
     const RelativeCovariance covariance = ComputeRelativeCovariance(problem, blocks, chi2);
     if (covariance.ok) {
-      for (int i = 0; i < nc; ++i) joint.kr_stderr[i] = joint.kr[i] * covariance.stderr_per_block[0][i];  // d kr = kr d log kr
-      for (std::size_t l = 0; l < lights.size(); ++l) joint.a_stderr[lights[l]] = covariance.stderr_per_block[3 + ab.size() + l];
+      for (int i = 0; i < nc; ++i)
+        joint.kr_stderr[i] = joint.kr[i] * covariance.stderr_per_block[0][i];  // d kr = kr d log kr
+      for (std::size_t l = 0; l < lights.size(); ++l)
+        joint.a_stderr[lights[l]] = covariance.stderr_per_block[3 + ab.size() + l];
     }
   }
   return joint;
@@ -815,8 +827,9 @@ SessionFit FitSessionStages(const fs::path& dir, const SessionFitOptions& option
   const auto started = std::chrono::steady_clock::now();
   const nlohmann::json top = SessionStart(dir);
   if (top.value("protocol", "") != "all")
-    ThrowUserError(dir.string(), "", "is a '" + top.value("protocol", "?") +
-                                         "' session; fit session takes the folder of 'phos capture all'");
+    ThrowUserError(
+        dir.string(), "",
+        "is a '" + top.value("protocol", "?") + "' session; fit session takes the folder of 'phos capture all'");
   SessionFit result;
   const std::string top_how = StopHow(dir);
   if (top_how != "complete")
@@ -872,8 +885,9 @@ SessionFit FitSessionStages(const fs::path& dir, const SessionFitOptions& option
     std::string why;
     for (const std::string& note : result.notes)
       if (note.find("decay") != std::string::npos) why.append(why.empty() ? "" : "; ").append(note);
-    ThrowUserError(dir.string(), "", "no decay could be fitted, so no kr: nothing to write" +
-                                         (why.empty() ? std::string() : " (" + why + ")"));
+    ThrowUserError(
+        dir.string(), "",
+        "no decay could be fitted, so no kr: nothing to write" + (why.empty() ? std::string() : " (" + why + ")"));
   }
   const DecayFitSummary& decay = *result.decay;
   const int nc = decay.n_components;
@@ -882,31 +896,37 @@ SessionFit FitSessionStages(const fs::path& dir, const SessionFitOptions& option
 
   // 4. Excitation per state and ke per band.
   if (part_ok("excitation")) {
-    ExcitationStage stage = FitExcitationStage(dir / "excitation", decay, devices, nb, options.weighting, &result.notes);
+    ExcitationStage stage =
+        FitExcitationStage(dir / "excitation", decay, devices, nb, options.weighting, &result.notes);
     result.excitation = std::move(stage.lights);
     result.excitation_measurements = std::move(stage.measurements);
     result.state_excitation = std::move(stage.fit);
     result.ke = std::move(stage.ke);
   }
   std::vector<std::vector<std::optional<double>>> ke = KeValues(result.ke);
-  if (ke.empty()) ke.assign(static_cast<std::size_t>(nc), std::vector<std::optional<double>>(static_cast<std::size_t>(nb)));
+  if (ke.empty())
+    ke.assign(static_cast<std::size_t>(nc), std::vector<std::optional<double>>(static_cast<std::size_t>(nb)));
 
   // 5. Lambda per state.
   Material& material = result.material;
   const nlohmann::json sample = top.value("sample", nlohmann::json::object());
-  material.name = (sample.contains("material") ? sample["material"].value("name", std::string("sample")) : std::string("sample")) + " (fitted)";
+  material.name =
+      (sample.contains("material") ? sample["material"].value("name", std::string("sample")) : std::string("sample")) +
+      " (fitted)";
   material.bands = bands;
   std::optional<std::vector<std::vector<double>>> Lambda;
   if (result.spectrum) {
     const std::vector<double> shares = EmissionShares(dir / "decay", devices, decay, ke, &result.notes);
     Lambda = LambdaPerState(dir / "spectrum", devices, *result.spectrum, kr, ke, shares);
     if (!Lambda)
-      result.notes.push_back("spectrum: the charge light's excitation is not known in every band it reaches, so the "
-                             "state during the spectrum is not, nor Lambda's scale");
+      result.notes.push_back(
+          "spectrum: the charge light's excitation is not known in every band it reaches, so the "
+          "state during the spectrum is not, nor Lambda's scale");
   }
   if (!Lambda)
-    ThrowUserError(dir.string(), "", "no emission spectrum with a known excitation: Lambda cannot be fitted" +
-                                         std::string(result.notes.empty() ? "" : " (" + result.notes.back() + ")"));
+    ThrowUserError(dir.string(), "",
+                   "no emission spectrum with a known excitation: Lambda cannot be fitted" +
+                       std::string(result.notes.empty() ? "" : " (" + result.notes.back() + ")"));
   for (int i = 0; i < nc; ++i) {
     ExcitedState state;
     state.kr = kr[i];
@@ -982,8 +1002,10 @@ MaterialComparison CompareMaterials(const Material& fitted, const Material& trut
     std::vector<std::optional<double>> errors;
     for (std::size_t band = 0; band < t.ke.size(); ++band) {
       const auto& f = band < fitted.states[i].ke.size() ? fitted.states[i].ke[band] : std::nullopt;
-      if (t.ke[band] && f) errors.push_back(std::fabs(*f - *t.ke[band]) / std::max(*t.ke[band], 0.05 * largest));
-      else errors.push_back(std::nullopt);
+      if (t.ke[band] && f)
+        errors.push_back(std::fabs(*f - *t.ke[band]) / std::max(*t.ke[band], 0.05 * largest));
+      else
+        errors.push_back(std::nullopt);
     }
     c.ke_relative_error_per_state.push_back(errors);
   }

@@ -13,10 +13,14 @@ namespace {
 std::string Escape(const std::string& text) {
   std::string out;
   for (char ch : text) {
-    if (ch == '<') out += "&lt;";
-    else if (ch == '>') out += "&gt;";
-    else if (ch == '&') out += "&amp;";
-    else out += ch;
+    if (ch == '<')
+      out += "&lt;";
+    else if (ch == '>')
+      out += "&gt;";
+    else if (ch == '&')
+      out += "&amp;";
+    else
+      out += ch;
   }
   return out;
 }
@@ -26,13 +30,19 @@ std::string Escape(const std::string& text) {
 std::string SessionReportHtml(const SessionFit& fit, const std::string& title,
                               const std::optional<MaterialComparison>& comparison) {
   std::string html;
-  html.append("<!doctype html>\n<html><head><meta charset=\"utf-8\"><title>").append(Escape(title)).append(
-      "</title>\n<style>body{font-family:sans-serif;max-width:900px;margin:2em auto;color:#222}"
-      "table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}"
-      "th{background:#f4f4f4}.note{color:#a33}</style></head><body>\n");
+  html.append("<!doctype html>\n<html><head><meta charset=\"utf-8\"><title>")
+      .append(Escape(title))
+      .append(
+          "</title>\n<style>body{font-family:sans-serif;max-width:900px;margin:2em auto;color:#222}"
+          "table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}"
+          "th{background:#f4f4f4}.note{color:#a33}</style></head><body>\n");
   html.append("<h1>").append(Escape(title)).append("</h1>\n");
   const Material& m = fit.material;
-  html.append("<p>Fitted in ").append(FormatShort(fit.seconds)).append(" s. ").append(Escape(m.source)).append("</p>\n");
+  html.append("<p>Fitted in ")
+      .append(FormatShort(fit.seconds))
+      .append(" s. ")
+      .append(Escape(m.source))
+      .append("</p>\n");
   for (const std::string& note : fit.notes) html.append("<p class=\"note\">").append(Escape(note)).append("</p>\n");
 
   // The material, with units and 1-sigma uncertainties.
@@ -41,11 +51,15 @@ std::string SessionReportHtml(const SessionFit& fit, const std::string& title,
   };
   html.append("<h2>Material</h2>\n<table><tr><th>state</th><th>kr (1/s) &plusmn; 1&sigma;</th></tr>\n");
   for (std::size_t i = 0; i < m.states.size(); ++i)
-    html.append("<tr><td>").append(std::to_string(i + 1)).append("</td><td>")
-        .append(with_stderr(m.states[i].kr, m.states[i].kr_stderr)).append("</td></tr>\n");
-  html.append("</table>\n<p>ke: 1/s per unit band-integrated irradiance (the lab's irradiance unit); &Lambda;: "
-              "emitted radiance per unit kr&middot;r (the camera's radiance unit). 1&sigma; uncertainties; "
-              "\"not measured\": no light reached the band, so ke stays unknown.</p>\n<table><tr><th>band (nm)</th>");
+    html.append("<tr><td>")
+        .append(std::to_string(i + 1))
+        .append("</td><td>")
+        .append(with_stderr(m.states[i].kr, m.states[i].kr_stderr))
+        .append("</td></tr>\n");
+  html.append(
+      "</table>\n<p>ke: 1/s per unit band-integrated irradiance (the lab's irradiance unit); &Lambda;: "
+      "emitted radiance per unit kr&middot;r (the camera's radiance unit). 1&sigma; uncertainties; "
+      "\"not measured\": no light reached the band, so ke stays unknown.</p>\n<table><tr><th>band (nm)</th>");
   for (std::size_t i = 0; i < m.states.size(); ++i)
     html.append("<th>ke, state ").append(std::to_string(i + 1)).append("</th>");
   for (std::size_t i = 0; i < m.states.size(); ++i)
@@ -55,7 +69,8 @@ std::string SessionReportHtml(const SessionFit& fit, const std::string& title,
     html.append("<tr><td>").append(m.bands.BandName(b)).append("</td>");
     for (const ExcitedState& state : m.states) {
       const auto& ke = state.ke[b];
-      const std::optional<double> ke_stderr = b < static_cast<int>(state.ke_stderr.size()) ? state.ke_stderr[b] : std::nullopt;
+      const std::optional<double> ke_stderr =
+          b < static_cast<int>(state.ke_stderr.size()) ? state.ke_stderr[b] : std::nullopt;
       html.append("<td>").append(ke ? with_stderr(*ke, ke_stderr) : "not measured").append("</td>");
     }
     for (const ExcitedState& state : m.states) html.append("<td>").append(FormatShort(state.Lambda[b])).append("</td>");
@@ -67,7 +82,9 @@ std::string SessionReportHtml(const SessionFit& fit, const std::string& title,
     html.append("<h2>Against the known material</h2>\n<p>kr off by ");
     for (std::size_t i = 0; i < c.kr_relative_error.size(); ++i)
       html.append(i ? ", " : "").append(FormatShort(100 * c.kr_relative_error[i])).append("%");
-    html.append("; normalized emission spectrum L1 ").append(FormatShort(c.spectrum_l1)).append(".</p>\n<table><tr><th>state</th>");
+    html.append("; normalized emission spectrum L1 ")
+        .append(FormatShort(c.spectrum_l1))
+        .append(".</p>\n<table><tr><th>state</th>");
     for (int b = 0; b < m.band_count(); ++b) html.append("<th>ke error, ").append(m.bands.BandName(b)).append("</th>");
     html.append("</tr>\n");
     for (std::size_t i = 0; i < c.ke_relative_error_per_state.size(); ++i) {
@@ -82,10 +99,16 @@ std::string SessionReportHtml(const SessionFit& fit, const std::string& title,
   // Decay: data against fit, and residuals.
   if (fit.decay) {
     const DecayFitSummary& d = *fit.decay;
-    html.append("<h2>Decay</h2>\n<p>nc = ").append(std::to_string(d.n_components)).append(": ").append(Escape(d.choice))
+    html.append("<h2>Decay</h2>\n<p>nc = ")
+        .append(std::to_string(d.n_components))
+        .append(": ")
+        .append(Escape(d.choice))
         .append(". BIC per nc: ");
     for (std::size_t i = 0; i < d.bic.size(); ++i)
-      html.append(i ? ", " : "").append(std::to_string(i + 1)).append(": ").append(std::isfinite(d.bic[i]) ? FormatShort(d.bic[i]) : "invalid");
+      html.append(i ? ", " : "")
+          .append(std::to_string(i + 1))
+          .append(": ")
+          .append(std::isfinite(d.bic[i]) ? FormatShort(d.bic[i]) : "invalid");
     html.append(". rss ").append(FormatShort(d.rss)).append(" (DN/s)&sup2;.</p>\n");
     std::vector<PlotSeries> data_fit, residuals;
     for (int c = 0; c < fit.decay_curve.channel_count(); ++c) {
@@ -127,11 +150,17 @@ std::string SessionReportHtml(const SessionFit& fit, const std::string& title,
     const StateExcitationFit& e = *fit.state_excitation;
     std::vector<double> kr;
     for (const ExcitedState& state : m.states) kr.push_back(state.kr);
-    html.append("<h2>Excitation</h2>\n<p>Each charge's first frame and its decay tail, split into the states by "
-                "their kr; ").append(std::to_string(e.frames)).append(" frames, ").append(std::to_string(e.iterations))
-        .append(" Ceres iterations, ").append(e.converged ? "converged" : "<b>not converged</b>: " + Escape(e.termination))
+    html.append(
+            "<h2>Excitation</h2>\n<p>Each charge's first frame and its decay tail, split into the states by "
+            "their kr; ")
+        .append(std::to_string(e.frames))
+        .append(" frames, ")
+        .append(std::to_string(e.iterations))
+        .append(" Ceres iterations, ")
+        .append(e.converged ? "converged" : "<b>not converged</b>: " + Escape(e.termination))
         .append("; condition number of the weighted Jacobian (relative parameters) ")
-        .append(FormatShort(e.condition_number)).append(".</p>\n<table><tr><th>light</th>");
+        .append(FormatShort(e.condition_number))
+        .append(".</p>\n<table><tr><th>light</th>");
     for (std::size_t i = 0; i < kr.size(); ++i)
       html.append("<th>a, state ").append(std::to_string(i + 1)).append(" (1/s) &plusmn; 1&sigma;</th>");
     html.append("<th>charges</th></tr>\n");
@@ -142,8 +171,9 @@ std::string SessionReportHtml(const SessionFit& fit, const std::string& title,
       const auto a = e.a.find(light.light);
       const auto a_stderr = e.a_stderr.find(light.light);
       for (std::size_t i = 0; i < kr.size(); ++i)
-        html.append("<td>").append(a == e.a.end() ? "-" : FormatShort(a->second[i]) + " &plusmn; " +
-                                                             FormatShort(a_stderr->second[i])).append("</td>");
+        html.append("<td>")
+            .append(a == e.a.end() ? "-" : FormatShort(a->second[i]) + " &plusmn; " + FormatShort(a_stderr->second[i]))
+            .append("</td>");
       html.append("<td>").append(std::to_string(light.samples.size())).append("</td></tr>\n");
       if (a == e.a.end()) continue;
       PlotSeries data(light.light + " measured"), model(light.light + " fit");
@@ -172,31 +202,52 @@ std::string SessionReportHtml(const SessionFit& fit, const std::string& title,
   // The joint refinement beside the sequential fit.
   if (fit.joint) {
     const JointFit& j = *fit.joint;
-    html.append("<h2>Joint refinement</h2>\n<p>Every kr, the decay amplitudes and backgrounds, every state's a "
-                "under every light and S fitted at once to the decay and all excitation frames (one "
-                "photon-counting chi-square), beside the sequential fit of the paper (kr from the decay alone, "
-                "then the excitation). ")
-        .append(std::to_string(j.iterations)).append(" Ceres iterations")
+    html.append(
+            "<h2>Joint refinement</h2>\n<p>Every kr, the decay amplitudes and backgrounds, every state's a "
+            "under every light and S fitted at once to the decay and all excitation frames (one "
+            "photon-counting chi-square), beside the sequential fit of the paper (kr from the decay alone, "
+            "then the excitation). ")
+        .append(std::to_string(j.iterations))
+        .append(" Ceres iterations")
         .append(j.converged ? "." : ", <b>not converged</b>: " + Escape(j.termination))
         .append("</p>\n<table><tr><th></th><th>sequential</th><th>joint</th></tr>\n");
     for (std::size_t i = 0; i < j.kr.size() && fit.decay && i < fit.decay->components.size(); ++i)
-      html.append("<tr><td>kr, state ").append(std::to_string(i + 1)).append(" (1/s)</td><td>")
-          .append(FormatShort(fit.decay->components[i].rate)).append("</td><td>").append(FormatShort(j.kr[i]))
-          .append(" &plusmn; ").append(FormatShort(j.kr_stderr[i])).append("</td></tr>\n");
+      html.append("<tr><td>kr, state ")
+          .append(std::to_string(i + 1))
+          .append(" (1/s)</td><td>")
+          .append(FormatShort(fit.decay->components[i].rate))
+          .append("</td><td>")
+          .append(FormatShort(j.kr[i]))
+          .append(" &plusmn; ")
+          .append(FormatShort(j.kr_stderr[i]))
+          .append("</td></tr>\n");
     if (fit.state_excitation)
       for (const auto& [light, values] : j.a) {
         const auto sequential = fit.state_excitation->a.find(light);
         for (std::size_t i = 0; i < values.size(); ++i)
-          html.append("<tr><td>a under ").append(Escape(light)).append(", state ").append(std::to_string(i + 1))
-              .append(" (1/s)</td><td>").append(sequential == fit.state_excitation->a.end() ? "-" : FormatShort(sequential->second[i]))
-              .append("</td><td>").append(FormatShort(values[i])).append("</td></tr>\n");
+          html.append("<tr><td>a under ")
+              .append(Escape(light))
+              .append(", state ")
+              .append(std::to_string(i + 1))
+              .append(" (1/s)</td><td>")
+              .append(sequential == fit.state_excitation->a.end() ? "-" : FormatShort(sequential->second[i]))
+              .append("</td><td>")
+              .append(FormatShort(values[i]))
+              .append("</td></tr>\n");
       }
-    html.append("<tr><td>weighted SS, decay</td><td>").append(FormatShort(j.decay_sequential)).append("</td><td>")
-        .append(FormatShort(j.decay_joint)).append("</td></tr>\n<tr><td>weighted SS, excitation</td><td>")
-        .append(FormatShort(j.excitation_sequential)).append("</td><td>").append(FormatShort(j.excitation_joint))
+    html.append("<tr><td>weighted SS, decay</td><td>")
+        .append(FormatShort(j.decay_sequential))
+        .append("</td><td>")
+        .append(FormatShort(j.decay_joint))
+        .append("</td></tr>\n<tr><td>weighted SS, excitation</td><td>")
+        .append(FormatShort(j.excitation_sequential))
+        .append("</td><td>")
+        .append(FormatShort(j.excitation_joint))
         .append("</td></tr>\n<tr><th>weighted SS, total</th><th>")
-        .append(FormatShort(j.decay_sequential + j.excitation_sequential)).append("</th><th>")
-        .append(FormatShort(j.decay_joint + j.excitation_joint)).append("</th></tr>\n</table>\n<p>")
+        .append(FormatShort(j.decay_sequential + j.excitation_sequential))
+        .append("</th><th>")
+        .append(FormatShort(j.decay_joint + j.excitation_joint))
+        .append("</th></tr>\n</table>\n<p>")
         .append(j.decay_joint + j.excitation_joint < j.decay_sequential + j.excitation_sequential
                     ? "The joint fit fits the data better (lower total)."
                     : "The sequential fit is already at the joint optimum.")
@@ -206,9 +257,15 @@ std::string SessionReportHtml(const SessionFit& fit, const std::string& title,
   // LVF calibration and spectrum.
   if (fit.calibration) {
     const LvfCalibrationFit& c = *fit.calibration;
-    html.append("<h2>LVF calibration</h2>\n<p>centre(x) = ").append(FormatShort(c.center0_nm)).append(" nm + ")
-        .append(FormatShort(c.nm_per_column)).append(" nm &times; column; pass band ").append(FormatShort(c.fwhm_nm))
-        .append(" nm FWHM; line residual rms ").append(FormatShort(c.rms_residual_nm)).append(" nm.</p>\n");
+    html.append("<h2>LVF calibration</h2>\n<p>centre(x) = ")
+        .append(FormatShort(c.center0_nm))
+        .append(" nm + ")
+        .append(FormatShort(c.nm_per_column))
+        .append(" nm &times; column; pass band ")
+        .append(FormatShort(c.fwhm_nm))
+        .append(" nm FWHM; line residual rms ")
+        .append(FormatShort(c.rms_residual_nm))
+        .append(" nm.</p>\n");
     PlotSeries lines("lines"), model("fitted line");
     lines.markers = true;
     lines.line = false;

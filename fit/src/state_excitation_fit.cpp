@@ -119,8 +119,8 @@ Start StartingPoint(const std::vector<ExcitationMeasurement>& measurements, cons
     ExcitationFitOptions single;
     single.kr = options.kr[i];
     try {
-      const ExcitationFitSummary fit = FitExcitation(series[best][i], single, where + " (" + best + ", state " +
-                                                                                 std::to_string(i + 1) + ")");
+      const ExcitationFitSummary fit =
+          FitExcitation(series[best][i], single, where + " (" + best + ", state " + std::to_string(i + 1) + ")");
       start.S[i] = fit.scale;
       start.a[best][i] = fit.a;
     } catch (const UserError&) {
@@ -276,8 +276,9 @@ void CarryOverStartStates(std::vector<ExcitationMeasurement>& measurements,
     m.start_state.clear();
     if (std::isfinite(m.light_off_s)) order.push_back(&m);
   }
-  std::sort(order.begin(), order.end(),
-            [](const ExcitationMeasurement* x, const ExcitationMeasurement* y) { return x->light_off_s < y->light_off_s; });
+  std::sort(order.begin(), order.end(), [](const ExcitationMeasurement* x, const ExcitationMeasurement* y) {
+    return x->light_off_s < y->light_off_s;
+  });
   for (std::size_t k = 1; k < order.size(); ++k) {
     const ExcitationMeasurement& before = *order[k - 1];
     ExcitationMeasurement& m = *order[k];
@@ -307,7 +308,8 @@ StateExcitationFit FitStateExcitation(const std::vector<ExcitationMeasurement>& 
     for (const auto& f : m.frames)
       if (!std::isfinite(f.value) || !(f.delay_s >= 0) || !(f.exposure_s >= 0) || !std::isfinite(f.exposure_s) ||
           !std::isfinite(f.delay_s))
-        ThrowUserError(where, "excitation", "frame values, delays and exposures must be finite (delays, exposures >= 0)");
+        ThrowUserError(where, "excitation",
+                       "frame values, delays and exposures must be finite (delays, exposures >= 0)");
   }
   if (!(PeakValue(measurements) > 0)) ThrowUserError(where, "excitation", "no frame shows any signal");
   StateExcitationFit fit;
@@ -338,7 +340,8 @@ StateExcitationFit FitStateExcitation(const std::vector<ExcitationMeasurement>& 
   for (const auto& m : carried)
     for (const ExcitationFrame& f : m.frames) {
       const double r =
-          ExcitationFrameSignal(fit.S, fit.a[m.light], options.kr, m.charge_s, f, fit.background, m.start_state) - f.value;
+          ExcitationFrameSignal(fit.S, fit.a[m.light], options.kr, m.charge_s, f, fit.background, m.start_state) -
+          f.value;
       fit.rss += r * r;
       ++fit.frames;
     }
@@ -348,7 +351,8 @@ StateExcitationFit FitStateExcitation(const std::vector<ExcitationMeasurement>& 
   std::vector<CovarianceBlock> blocks;
   for (double* block : built->blocks) blocks.push_back({block, nc, nc});
   if (options.background) blocks.push_back({&fit.background, 1, 0});
-  const double chi2 = fit.frames > parameters ? fit.weighted_rss / (fit.frames - parameters) : 1.0;  // reduced chi-square
+  const double chi2 =
+      fit.frames > parameters ? fit.weighted_rss / (fit.frames - parameters) : 1.0;  // reduced chi-square
   const RelativeCovariance covariance = ComputeRelativeCovariance(built->problem, blocks, chi2);
   fit.condition_number = covariance.condition_number;
   if (options.compute_uncertainties && fit.frames > parameters) {
@@ -357,15 +361,17 @@ StateExcitationFit FitStateExcitation(const std::vector<ExcitationMeasurement>& 
       std::size_t k = 1;
       for (auto& [light, values] : fit.a) fit.a_stderr[light] = covariance.stderr_per_block[k++];
     } else {
-      fit.notes.push_back("the excitation's covariance could not be computed (a direction the data do not pin): no "
-                          "uncertainties");
+      fit.notes.push_back(
+          "the excitation's covariance could not be computed (a direction the data do not pin): no "
+          "uncertainties");
     }
   }
   fit.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
   return fit;
 }
 
-DesignInformation ExcitationDesignInformation(const std::vector<ExcitationMeasurement>& design, const std::vector<double>& S,
+DesignInformation ExcitationDesignInformation(const std::vector<ExcitationMeasurement>& design,
+                                              const std::vector<double>& S,
                                               const std::map<std::string, std::vector<double>>& a,
                                               const std::vector<double>& kr) {
   std::vector<double> s = S;

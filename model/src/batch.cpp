@@ -41,20 +41,9 @@ template <typename Real>
 EIGEN_STRONG_INLINE Packet<Real> OneMinusExpSeries(const Packet<Real>& x) {
   using P = Packet<Real>;
   // 1/(n+1)!, n = 0..13; float uses the first 8.
-  static constexpr double kInverseFactorial[] = {1.0,
-                                                 1.0 / 2,
-                                                 1.0 / 6,
-                                                 1.0 / 24,
-                                                 1.0 / 120,
-                                                 1.0 / 720,
-                                                 1.0 / 5040,
-                                                 1.0 / 40320,
-                                                 1.0 / 362880,
-                                                 1.0 / 3628800,
-                                                 1.0 / 39916800,
-                                                 1.0 / 479001600,
-                                                 1.0 / 6227020800,
-                                                 1.0 / 87178291200};
+  static constexpr double kInverseFactorial[] = {
+      1.0,         1.0 / 2,      1.0 / 6,       1.0 / 24,       1.0 / 120,       1.0 / 720,        1.0 / 5040,
+      1.0 / 40320, 1.0 / 362880, 1.0 / 3628800, 1.0 / 39916800, 1.0 / 479001600, 1.0 / 6227020800, 1.0 / 87178291200};
   constexpr int kDegree = sizeof(Real) == 4 ? 7 : 13;
   P series = ei::pset1<P>(static_cast<Real>(kInverseFactorial[kDegree]));
   for (int n = kDegree - 1; n >= 0; --n)
@@ -125,9 +114,12 @@ EIGEN_STRONG_INLINE Packet<Real> StepPacket(Packet<Real>& r, const Packet<Real>&
 
 template <typename Real, Integrator kIntegrator>
 Real StepScalar(Real r, Real a, Real kr, Real h) {
-  if constexpr (kIntegrator == Integrator::kExact) return ExactStep(r, a, kr, h);
-  else if constexpr (kIntegrator == Integrator::kEuler) return EulerStep(r, a, kr, h);
-  else return Rk4Step(r, a, kr, h);
+  if constexpr (kIntegrator == Integrator::kExact)
+    return ExactStep(r, a, kr, h);
+  else if constexpr (kIntegrator == Integrator::kEuler)
+    return EulerStep(r, a, kr, h);
+  else
+    return Rk4Step(r, a, kr, h);
 }
 
 // Points [j0, j1) of a batch with kStates states. Returns max k (1/s).
@@ -248,25 +240,22 @@ Real AdvanceAll(const BatchCoefficients<Real>& c, const Real* E, std::size_t E_s
 }
 
 template <typename Real>
-BatchStepInfo AdvanceBatch(Integrator integrator, const BatchCoefficients<Real>& c, const Real* E,
-                           std::size_t E_stride, Real h_s, StateBatch<Real>& s, Real* Lp, std::size_t Lp_stride) {
+BatchStepInfo AdvanceBatch(Integrator integrator, const BatchCoefficients<Real>& c, const Real* E, std::size_t E_stride,
+                           Real h_s, StateBatch<Real>& s, Real* Lp, std::size_t Lp_stride) {
   PHOS_CHECK(s.nc == c.nc);
   // An empty batch (a phosphorescent medium with no voxel of density > 0)
   // has nothing to advance, and its empty E may well be null.
   PHOS_CHECK(c.n_exc == 0 || s.n == 0 || E != nullptr);
   BatchStepInfo info;
   switch (integrator) {
-    case Integrator::kExact:
-      AdvanceAll<Real, Integrator::kExact>(c, E, E_stride, h_s, s, Lp, Lp_stride);
-      break;
+    case Integrator::kExact: AdvanceAll<Real, Integrator::kExact>(c, E, E_stride, h_s, s, Lp, Lp_stride); break;
     case Integrator::kEuler:
       info.max_hk = h_s * AdvanceAll<Real, Integrator::kEuler>(c, E, E_stride, h_s, s, Lp, Lp_stride);
       break;
     case Integrator::kRk4:
       info.max_hk = h_s * AdvanceAll<Real, Integrator::kRk4>(c, E, E_stride, h_s, s, Lp, Lp_stride);
       break;
-    case Integrator::kReference:
-      PHOS_CHECK(!"the reference integrator is scalar: use Simulate()");
+    case Integrator::kReference: PHOS_CHECK(!"the reference integrator is scalar: use Simulate()");
   }
   return info;
 }
@@ -320,11 +309,11 @@ void EmitBatch(const BatchCoefficients<Real>& c, const StateBatch<Real>& s, Real
   });
 }
 
-#define PHOS_INSTANTIATE_BATCH(Real)                                                                       \
-  template struct BatchCoefficients<Real>;                                                                 \
-  template BatchStepInfo AdvanceBatch<Real>(Integrator, const BatchCoefficients<Real>&, const Real*,       \
-                                            std::size_t, Real, StateBatch<Real>&, Real*, std::size_t);     \
-  template void DecayBatch<Real>(const BatchCoefficients<Real>&, Real, StateBatch<Real>&, Real*, std::size_t);                 \
+#define PHOS_INSTANTIATE_BATCH(Real)                                                                              \
+  template struct BatchCoefficients<Real>;                                                                        \
+  template BatchStepInfo AdvanceBatch<Real>(Integrator, const BatchCoefficients<Real>&, const Real*, std::size_t, \
+                                            Real, StateBatch<Real>&, Real*, std::size_t);                         \
+  template void DecayBatch<Real>(const BatchCoefficients<Real>&, Real, StateBatch<Real>&, Real*, std::size_t);    \
   template void EmitBatch<Real>(const BatchCoefficients<Real>&, const StateBatch<Real>&, Real*, std::size_t);
 PHOS_INSTANTIATE_BATCH(float)
 PHOS_INSTANTIATE_BATCH(double)

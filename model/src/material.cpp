@@ -21,7 +21,8 @@ namespace {
 // A number >= 0 and at most `limit` (the finite ranges of material.h).
 double NonNegativeUpTo(const JsonField& field, double limit) {
   const double v = field.NumberAtLeast(0.0);
-  if (v > limit) field.Fail("expected at most " + FormatDouble(limit) + " (the limit phos accepts), got " + FormatDouble(v));
+  if (v > limit)
+    field.Fail("expected at most " + FormatDouble(limit) + " (the limit phos accepts), got " + FormatDouble(v));
   return v;
 }
 
@@ -48,8 +49,8 @@ Material MaterialFromJson(const nlohmann::json& json, const std::string& source)
                        FormatDouble(m.bands.edges_nm[i]));
   for (size_t i = 1; i < m.bands.edges_nm.size(); ++i)
     if (!(m.bands.edges_nm[i] > m.bands.edges_nm[i - 1]))
-      bands.At(i).Fail("band edges must increase strictly (" + FormatDouble(m.bands.edges_nm[i]) +
-                       " follows " + FormatDouble(m.bands.edges_nm[i - 1]) + ")");
+      bands.At(i).Fail("band edges must increase strictly (" + FormatDouble(m.bands.edges_nm[i]) + " follows " +
+                       FormatDouble(m.bands.edges_nm[i - 1]) + ")");
   const size_t n = static_cast<size_t>(m.bands.band_count());
 
   if (auto albedo = root.Optional("albedo"); albedo && !albedo->IsNull()) {
@@ -128,9 +129,7 @@ nlohmann::json MaterialToJson(const Material& m) {
   return j;
 }
 
-Material LoadMaterial(const std::filesystem::path& path) {
-  return MaterialFromJson(ReadJsonFile(path), path.string());
-}
+Material LoadMaterial(const std::filesystem::path& path) { return MaterialFromJson(ReadJsonFile(path), path.string()); }
 
 void ValidateMaterial(const Material& material, const std::string& source) {
   // JSON has no NaN (nlohmann writes it as null, which would read back as an

@@ -18,19 +18,18 @@ long double ReferenceAdvance(long double r, double a_in, double kr_in, double h_
   // stability-limited steps would exceed the budget.
   const long double min_steps = k * static_cast<long double>(h_s) / 3.3L;
   if (min_steps > static_cast<long double>(options.max_steps))
-    ThrowUserError("", "--integrator reference",
-                   "this interval is too stiff for the explicit reference (k*h = " +
-                       FormatShort(static_cast<double>(k * h_s)) + ", over " +
-                       std::to_string(options.max_steps) + " steps); use --integrator exact");
+    ThrowUserError(
+        "", "--integrator reference",
+        "this interval is too stiff for the explicit reference (k*h = " + FormatShort(static_cast<double>(k * h_s)) +
+            ", over " + std::to_string(options.max_steps) + " steps); use --integrator exact");
 
   auto f = [&](long double x) { return a * (1.0L - x) - kr * x; };  // Eq. 8.1
   // Butcher tableau of Dormand and Prince (1980).
-  constexpr long double a21 = 1.0L / 5, a31 = 3.0L / 40, a32 = 9.0L / 40, a41 = 44.0L / 45,
-                        a42 = -56.0L / 15, a43 = 32.0L / 9, a51 = 19372.0L / 6561, a52 = -25360.0L / 2187,
-                        a53 = 64448.0L / 6561, a54 = -212.0L / 729, a61 = 9017.0L / 3168, a62 = -355.0L / 33,
-                        a63 = 46732.0L / 5247, a64 = 49.0L / 176, a65 = -5103.0L / 18656;
-  constexpr long double b1 = 35.0L / 384, b3 = 500.0L / 1113, b4 = 125.0L / 192, b5 = -2187.0L / 6784,
-                        b6 = 11.0L / 84;
+  constexpr long double a21 = 1.0L / 5, a31 = 3.0L / 40, a32 = 9.0L / 40, a41 = 44.0L / 45, a42 = -56.0L / 15,
+                        a43 = 32.0L / 9, a51 = 19372.0L / 6561, a52 = -25360.0L / 2187, a53 = 64448.0L / 6561,
+                        a54 = -212.0L / 729, a61 = 9017.0L / 3168, a62 = -355.0L / 33, a63 = 46732.0L / 5247,
+                        a64 = 49.0L / 176, a65 = -5103.0L / 18656;
+  constexpr long double b1 = 35.0L / 384, b3 = 500.0L / 1113, b4 = 125.0L / 192, b5 = -2187.0L / 6784, b6 = 11.0L / 84;
   // Difference between the 5th- and 4th-order weights: the error estimate.
   constexpr long double e1 = b1 - 5179.0L / 57600, e3 = b3 - 7571.0L / 16695, e4 = b4 - 393.0L / 640,
                         e5 = b5 + 92097.0L / 339200, e6 = b6 - 187.0L / 2100, e7 = -1.0L / 40;
@@ -42,8 +41,9 @@ long double ReferenceAdvance(long double r, double a_in, double kr_in, double h_
   ReferenceStats local;
   while (t < H) {
     if (++steps > options.max_steps)
-      ThrowUserError("", "--integrator reference",
-                     "more than " + std::to_string(options.max_steps) + " steps for one interval; use --integrator exact");
+      ThrowUserError(
+          "", "--integrator reference",
+          "more than " + std::to_string(options.max_steps) + " steps for one interval; use --integrator exact");
     step = std::min(step, H - t);
     long double k2 = f(r + step * (a21 * k1));
     long double k3 = f(r + step * (a31 * k1 + a32 * k2));
@@ -54,8 +54,8 @@ long double ReferenceAdvance(long double r, double a_in, double kr_in, double h_
     long double k7 = f(next);  // first-same-as-last: k1 of the next step
     local.evaluations += 6;
     long double error = step * (e1 * k1 + e3 * k3 + e4 * k4 + e5 * k5 + e6 * k6 + e7 * k7);
-    long double scale = options.absolute_tolerance +
-                        options.relative_tolerance * std::max(std::fabs(r), std::fabs(next));
+    long double scale =
+        options.absolute_tolerance + options.relative_tolerance * std::max(std::fabs(r), std::fabs(next));
     long double ratio = std::fabs(error) / scale;
     if (ratio <= 1.0L) {
       t += step;

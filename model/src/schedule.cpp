@@ -11,8 +11,7 @@ bool IrradiancePhase::dark() const {
   return true;
 }
 
-IrradianceSchedule IrradianceSchedule::ChargeThenDecay(const std::vector<double>& E, double charge_s,
-                                                       double decay_s) {
+IrradianceSchedule IrradianceSchedule::ChargeThenDecay(const std::vector<double>& E, double charge_s, double decay_s) {
   IrradianceSchedule schedule;
   if (charge_s > 0) schedule.Add(charge_s, E, "charge");
   if (decay_s > 0) schedule.Add(decay_s, std::vector<double>(E.size(), 0.0), "dark");
@@ -30,8 +29,7 @@ double IrradianceSchedule::total_s() const {
   return total;
 }
 
-std::vector<double> ExcitationRates(const Material& material, const std::vector<double>& E,
-                                    const std::string& where) {
+std::vector<double> ExcitationRates(const Material& material, const std::vector<double>& E, const std::string& where) {
   PHOS_CHECK(static_cast<int>(E.size()) == material.band_count());
   std::vector<double> a(material.states.size(), 0.0);
   for (size_t i = 0; i < material.states.size(); ++i) {
@@ -40,9 +38,9 @@ std::vector<double> ExcitationRates(const Material& material, const std::vector<
       if (E[b] == 0.0) continue;
       if (!s.ke_known(b))
         ThrowUserError(where, "states[" + std::to_string(i) + "].ke[" + std::to_string(b) + "]",
-                       "unknown (not measured) for band " + material.bands.BandName(b) +
-                           ": material '" + material.name + "' cannot be charged by irradiance " +
-                           FormatDouble(E[b]) + " there; give 0 irradiance in that band");
+                       "unknown (not measured) for band " + material.bands.BandName(b) + ": material '" +
+                           material.name + "' cannot be charged by irradiance " + FormatDouble(E[b]) +
+                           " there; give 0 irradiance in that band");
       a[i] += *s.ke[b] * E[b];
     }
   }

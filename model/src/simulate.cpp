@@ -39,8 +39,8 @@ void CheckStability(const Material& material, const IrradianceSchedule& schedule
                                phase.label + "' (k = " + FormatShort(k) + "/s)";
       const std::string fix = "use --integrator exact, or --dt <= " + FormatDouble(RoundDownSignificant(monotone / k));
       if (hk > stable) {
-        std::string message = what + " exceeds the stability limit " + FormatShort(stable) +
-                              ": the result diverges; " + fix;
+        std::string message =
+            what + " exceeds the stability limit " + FormatShort(stable) + ": the result diverges; " + fix;
         if (!options.allow_unstable) ThrowUserError("", "--dt", message);
         warnings->push_back("unstable: " + message);
       } else {

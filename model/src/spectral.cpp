@@ -13,8 +13,7 @@ SpectralGrid SpectralGrid::Uniform(double lower_nm, double upper_nm, int band_co
   PHOS_CHECK(band_count > 0 && upper_nm > lower_nm);
   SpectralGrid grid;
   grid.edges_nm.resize(static_cast<size_t>(band_count) + 1);
-  for (int i = 0; i <= band_count; ++i)
-    grid.edges_nm[i] = lower_nm + (upper_nm - lower_nm) * i / band_count;
+  for (int i = 0; i <= band_count; ++i) grid.edges_nm[i] = lower_nm + (upper_nm - lower_nm) * i / band_count;
   grid.edges_nm.back() = upper_nm;
   return grid;
 }
@@ -90,7 +89,9 @@ SampledSpectrum GaussianSpectrum(double center_nm, double fwhm_nm, double weight
   return s;
 }
 
-SampledSpectrum LedSpectrum(double center_nm, double fwhm_nm) { return Normalized(GaussianSpectrum(center_nm, fwhm_nm)); }
+SampledSpectrum LedSpectrum(double center_nm, double fwhm_nm) {
+  return Normalized(GaussianSpectrum(center_nm, fwhm_nm));
+}
 
 SampledSpectrum WhiteLedSpectrum() {
   SampledSpectrum s;

@@ -28,7 +28,8 @@ std::vector<Surfel> Surfelize(const SceneGeometry& geometry, const Vec3f& eye, f
       const float target_area = kPiF * r_star * r_star;
       if (area < target_area) {
         // Two-pass: one fine surfel, kept with probability area / target.
-        if (Hash01(options.seed, static_cast<std::uint64_t>(o), static_cast<std::uint64_t>(t)) >= area / target_area) continue;
+        if (Hash01(options.seed, static_cast<std::uint64_t>(o), static_cast<std::uint64_t>(t)) >= area / target_area)
+          continue;
         surfels.push_back({(a + b + c) / 3.0f, n, target_area, o, t, 1.0f / 3, 1.0f / 3});
         continue;
       }
@@ -74,15 +75,16 @@ namespace {
 
 // Accumulates one surfel into one receiver pixel, weighted.
 inline void Accumulate(const GBuffer& g, std::size_t p, const Surfel& s, const float* B, int channels, float weight,
-                       float* occlusion, float* occlusion_y, float* irradiance, const std::vector<Dipole>* dipoles = nullptr,
-                       const std::vector<float>* near_m = nullptr) {
+                       float* occlusion, float* occlusion_y, float* irradiance,
+                       const std::vector<Dipole>* dipoles = nullptr, const std::vector<float>* near_m = nullptr) {
   if (dipoles) {
     // Subsurface: light that entered at the surfel leaves at the receiver.
     if (g.object[p] != s.object) return;
     const float r = (s.position - g.position[p]).norm();
     const Dipole* d = &(*dipoles)[static_cast<std::size_t>(s.object) * channels];
     const float near = near_m ? (*near_m)[p] : 0.0f;
-    for (int c = 0; c < channels; ++c) irradiance[p * channels + c] += weight * d[c].SurfelKernel(r, s.area, near) * B[c];
+    for (int c = 0; c < channels; ++c)
+      irradiance[p * channels + c] += weight * d[c].SurfelKernel(r, s.area, near) * B[c];
     return;
   }
   float cos_q = 0, w_y = 0;
@@ -144,9 +146,9 @@ namespace {
 // Per surfel: its world radius per level and the screen rectangle each
 // level's shell can reach.
 struct Reach {
-  float rho[8];     // shell outer radius per level (world)
-  int rect[8][4];   // x0, y0, x1, y1 per level (inclusive)
-  int offset[8][2]; // interleave offset per level
+  float rho[8];      // shell outer radius per level (world)
+  int rect[8][4];    // x0, y0, x1, y1 per level (inclusive)
+  int offset[8][2];  // interleave offset per level
   float r_max;
   bool any;
 };
@@ -159,54 +161,56 @@ std::vector<Reach> ComputeReach(const GBuffer& g, const CameraRays& camera, cons
   const int W = g.width, H = g.height, L = std::max(1, options.levels), C = std::max(0, options.channels);
   const float pixel_scale = H / (2 * camera.tan_half_y());  // pixels per unit of lateral size at depth 1
   std::vector<Reach> reach(surfels.size());
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, surfels.size()), [&](const tbb::blocked_range<std::size_t>& range) {
-    for (std::size_t i = range.begin(); i != range.end(); ++i) {
-      const Surfel& s = surfels[i];
-      Reach& R = reach[i];
-      // getMaxDist: F <= A / (pi r^2) < epsilon beyond this distance; for
-      // the dipole, where Rd(r) A falls below epsilon (per unit of E).
-      R.r_max = std::sqrt(s.area / (kPiF * options.epsilon));
-      if (options.dipoles) {
-        R.r_max = 0;
-        for (int c = 0; c < C; ++c) {
-          const float E = radiosity[i * C + c];
-          if (E > 0)
-            R.r_max = std::max(R.r_max, (*options.dipoles)[static_cast<std::size_t>(s.object) * C + c].MaxDistance(s.area * E, options.epsilon));
+  tbb::parallel_for(
+      tbb::blocked_range<std::size_t>(0, surfels.size()), [&](const tbb::blocked_range<std::size_t>& range) {
+        for (std::size_t i = range.begin(); i != range.end(); ++i) {
+          const Surfel& s = surfels[i];
+          Reach& R = reach[i];
+          // getMaxDist: F <= A / (pi r^2) < epsilon beyond this distance; for
+          // the dipole, where Rd(r) A falls below epsilon (per unit of E).
+          R.r_max = std::sqrt(s.area / (kPiF * options.epsilon));
+          if (options.dipoles) {
+            R.r_max = 0;
+            for (int c = 0; c < C; ++c) {
+              const float E = radiosity[i * C + c];
+              if (E > 0)
+                R.r_max = std::max(R.r_max, (*options.dipoles)[static_cast<std::size_t>(s.object) * C + c].MaxDistance(
+                                                s.area * E, options.epsilon));
+            }
+          }
+          float x = 0, y = 0, depth = 0;
+          const bool in_front = camera.Project(s.position, &x, &y, &depth);
+          // R_0 pixels at the surfel's depth, in world units.
+          const float rho0 = options.base_radius_px * std::max(depth, 1e-6f) / pixel_scale;
+          R.any = false;
+          for (int l = 0; l < L && l < 8; ++l) {
+            R.rho[l] = l == L - 1 ? R.r_max : std::min(R.r_max, rho0 * static_cast<float>(1 << l));
+            const float inner = l == 0 ? 0.0f : std::min(R.r_max, rho0 * static_cast<float>(1 << (l - 1)));
+            const int block = 1 << l;
+            R.offset[l][0] = static_cast<int>(Hash01(i, static_cast<std::uint64_t>(l), 1) * block);
+            R.offset[l][1] = static_cast<int>(Hash01(i, static_cast<std::uint64_t>(l), 2) * block);
+            if (inner >= R.r_max) {
+              R.rect[l][0] = 1;
+              R.rect[l][2] = 0;  // empty
+              continue;
+            }
+            const float rho = R.rho[l];
+            if (!in_front || depth - rho <= 1e-4f) {
+              R.rect[l][0] = 0;
+              R.rect[l][1] = 0;
+              R.rect[l][2] = W - 1;
+              R.rect[l][3] = H - 1;
+            } else {
+              const float half = rho * pixel_scale / (depth - rho) + 1;
+              R.rect[l][0] = std::max(0, static_cast<int>(std::floor(x - half)));
+              R.rect[l][1] = std::max(0, static_cast<int>(std::floor(y - half)));
+              R.rect[l][2] = std::min(W - 1, static_cast<int>(std::ceil(x + half)));
+              R.rect[l][3] = std::min(H - 1, static_cast<int>(std::ceil(y + half)));
+            }
+            R.any = R.any || (R.rect[l][0] <= R.rect[l][2] && R.rect[l][1] <= R.rect[l][3]);
+          }
         }
-      }
-      float x = 0, y = 0, depth = 0;
-      const bool in_front = camera.Project(s.position, &x, &y, &depth);
-      // R_0 pixels at the surfel's depth, in world units.
-      const float rho0 = options.base_radius_px * std::max(depth, 1e-6f) / pixel_scale;
-      R.any = false;
-      for (int l = 0; l < L && l < 8; ++l) {
-        R.rho[l] = l == L - 1 ? R.r_max : std::min(R.r_max, rho0 * static_cast<float>(1 << l));
-        const float inner = l == 0 ? 0.0f : std::min(R.r_max, rho0 * static_cast<float>(1 << (l - 1)));
-        const int block = 1 << l;
-        R.offset[l][0] = static_cast<int>(Hash01(i, static_cast<std::uint64_t>(l), 1) * block);
-        R.offset[l][1] = static_cast<int>(Hash01(i, static_cast<std::uint64_t>(l), 2) * block);
-        if (inner >= R.r_max) {
-          R.rect[l][0] = 1;
-          R.rect[l][2] = 0;  // empty
-          continue;
-        }
-        const float rho = R.rho[l];
-        if (!in_front || depth - rho <= 1e-4f) {
-          R.rect[l][0] = 0;
-          R.rect[l][1] = 0;
-          R.rect[l][2] = W - 1;
-          R.rect[l][3] = H - 1;
-        } else {
-          const float half = rho * pixel_scale / (depth - rho) + 1;
-          R.rect[l][0] = std::max(0, static_cast<int>(std::floor(x - half)));
-          R.rect[l][1] = std::max(0, static_cast<int>(std::floor(y - half)));
-          R.rect[l][2] = std::min(W - 1, static_cast<int>(std::ceil(x + half)));
-          R.rect[l][3] = std::min(H - 1, static_cast<int>(std::ceil(y + half)));
-        }
-        R.any = R.any || (R.rect[l][0] <= R.rect[l][2] && R.rect[l][1] <= R.rect[l][3]);
-      }
-    }
-  });
+      });
 
   return reach;
 }
@@ -274,10 +278,11 @@ DssResult SplatDeepScreenSpace(const GBuffer& g, const CameraRays& camera, const
 
   const std::vector<Reach> reach = ComputeReach(g, camera, surfels, radiosity, options);
 
-  const std::uint64_t splats = GatherShells(g, surfels, reach, L, options.tile_px, [&](std::size_t p, std::size_t i, int l, float weight) {
-    Accumulate(g, p, surfels[i], C > 0 ? &radiosity[i * C] : nullptr, C, weight, occlusion[l].data(),
-               occlusion_y[l].data(), irradiance[l].data(), options.dipoles, options.near_m);
-  });
+  const std::uint64_t splats =
+      GatherShells(g, surfels, reach, L, options.tile_px, [&](std::size_t p, std::size_t i, int l, float weight) {
+        Accumulate(g, p, surfels[i], C > 0 ? &radiosity[i * C] : nullptr, C, weight, occlusion[l].data(),
+                   occlusion_y[l].data(), irradiance[l].data(), options.dipoles, options.near_m);
+      });
 
   // Unshuffle and blur: level l's pixels each saw a quarter^l of the shells;
   // averaging over the 2^l x 2^l block around a pixel (every sub-buffer
@@ -299,7 +304,8 @@ DssResult SplatDeepScreenSpace(const GBuffer& g, const CameraRays& camera, const
             continue;
           }
           // The block of 2^l x 2^l pixels around (x, y), clamped inside the image.
-          const int bx = std::clamp(x - block / 2, 0, std::max(0, W - block)), by = std::clamp(y - block / 2, 0, std::max(0, H - block));
+          const int bx = std::clamp(x - block / 2, 0, std::max(0, W - block)),
+                    by = std::clamp(y - block / 2, 0, std::max(0, H - block));
           float wsum = 0, osum = 0, oysum = 0;
           float isum[16] = {};
           for (int v = by; v < std::min(H, by + block); ++v)
@@ -308,7 +314,8 @@ DssResult SplatDeepScreenSpace(const GBuffer& g, const CameraRays& camera, const
               if (g.object[q] < 0) continue;
               const float depth_ratio = std::fabs(g.depth[q] - g.depth[p]) / std::max(g.depth[p], 1e-6f);
               // Points in a medium (no normal) are weighted by depth only.
-              const float normal_w = g.normal[p].squaredNorm() == 0 ? 1.0f : std::max(0.0f, g.normal[q].dot(g.normal[p]));
+              const float normal_w =
+                  g.normal[p].squaredNorm() == 0 ? 1.0f : std::max(0.0f, g.normal[q].dot(g.normal[p]));
               const bool same = !options.dipoles || g.object[q] == g.object[p];  // translucency stays in its object
               const float w = normal_w * (depth_ratio < 0.05f && same ? 1.0f : 0.0f);
               if (w <= 0) continue;
@@ -388,8 +395,9 @@ inline void Cover(ZCell& cell, float distance, float cover, std::int32_t surfel,
 }
 
 // Splats one surfel into one receiver's map.
-inline void SplatIntoMap(const GBuffer& g, std::size_t p, const Vec3f& t, const Vec3f& b, const std::vector<Surfel>& surfels,
-                         std::int32_t index, float weight, const CellCentres& centres, ZCell* map) {
+inline void SplatIntoMap(const GBuffer& g, std::size_t p, const Vec3f& t, const Vec3f& b,
+                         const std::vector<Surfel>& surfels, std::int32_t index, float weight,
+                         const CellCentres& centres, ZCell* map) {
   const Surfel& s = surfels[index];
   const Vec3f d = s.position - g.position[p];
   const float r2 = d.squaredNorm();
@@ -434,9 +442,11 @@ DssResult SplatBouncedZBuffer(const GBuffer& g, const CameraRays& camera, const 
   }
   // A pixel of level l sees a quarter^l of the surfels: their partial
   // covers count 4^l (as the blending's weights do).
-  const std::uint64_t splats = GatherShells(g, surfels, reach, L, options.tile_px, [&](std::size_t p, std::size_t i, int l, float weight) {
-    SplatIntoMap(g, p, tangent[p], bitangent[p], surfels, static_cast<std::int32_t>(i), weight, centres, &maps[l][p * kCells]);
-  });
+  const std::uint64_t splats =
+      GatherShells(g, surfels, reach, L, options.tile_px, [&](std::size_t p, std::size_t i, int l, float weight) {
+        SplatIntoMap(g, p, tangent[p], bitangent[p], surfels, static_cast<std::int32_t>(i), weight, centres,
+                     &maps[l][p * kCells]);
+      });
 
   // Merge: level l's pixel saw a quarter^l of the shells; the nearest per
   // cell over its 2^l x 2^l block (neighbours of like depth and normal)
@@ -451,12 +461,14 @@ DssResult SplatBouncedZBuffer(const GBuffer& g, const CameraRays& camera, const 
         for (ZCell& c : merged) c = ZCell{};
         for (int l = 0; l < L; ++l) {
           const int block = 1 << l;
-          const int bx = std::clamp(x - block / 2, 0, std::max(0, W - block)), by = std::clamp(y - block / 2, 0, std::max(0, H - block));
+          const int bx = std::clamp(x - block / 2, 0, std::max(0, W - block)),
+                    by = std::clamp(y - block / 2, 0, std::max(0, H - block));
           for (int v = by; v < std::min(H, by + block); ++v)
             for (int u = bx; u < std::min(W, bx + block); ++u) {
               const std::size_t q = static_cast<std::size_t>(v) * W + u;
               if (g.object[q] < 0) continue;
-              if (q != p && (std::fabs(g.depth[q] - g.depth[p]) > 0.05f * g.depth[p] || g.normal[q].dot(g.normal[p]) < 0.9f))
+              if (q != p &&
+                  (std::fabs(g.depth[q] - g.depth[p]) > 0.05f * g.depth[p] || g.normal[q].dot(g.normal[p]) < 0.9f))
                 continue;
               const ZCell* map = &maps[l][q * kCells];
               for (int c = 0; c < kCells; ++c)
@@ -512,7 +524,8 @@ std::vector<float> RayTracedOcclusion(const SceneGeometry& geometry, const GBuff
       int hits = 0;
       for (int k = 0; k < rays; ++k) {
         // Cosine-distributed (Malley): a uniform disk point lifted to the hemisphere.
-        const float u1 = Hash01(seed, p, 2 * static_cast<std::uint64_t>(k)), u2 = Hash01(seed, p, 2 * static_cast<std::uint64_t>(k) + 1);
+        const float u1 = Hash01(seed, p, 2 * static_cast<std::uint64_t>(k)),
+                    u2 = Hash01(seed, p, 2 * static_cast<std::uint64_t>(k) + 1);
         const float r = std::sqrt(u1), phi = 2 * kPiF * u2;
         const Vec3f d = r * std::cos(phi) * t + r * std::sin(phi) * b + std::sqrt(std::max(0.0f, 1 - u1)) * nrm;
         hits += geometry.Occluded(origin, d, 1e30f);

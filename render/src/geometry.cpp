@@ -47,7 +47,7 @@ SceneGeometry::SceneGeometry(const Scene& scene) : scene_(scene), embree_(std::m
     rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 4 * sizeof(float),
                             mesh.positions.size());
     auto* index = static_cast<unsigned*>(rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
-                                                                  3 * sizeof(unsigned), mesh.triangles.size()));
+                                                                 3 * sizeof(unsigned), mesh.triangles.size()));
     for (std::size_t t = 0; t < mesh.triangles.size(); ++t)
       for (int c = 0; c < 3; ++c) index[3 * t + c] = static_cast<unsigned>(mesh.triangles[t][c]);
     // Moving objects are refit rather than rebuilt.
@@ -147,7 +147,8 @@ bool SceneGeometry::Occluded(const Vec3f& origin, const Vec3f& direction, float 
 }
 
 Vec3f SceneGeometry::Point(int object, int triangle, float b1, float b2) const {
-  return (1 - b1 - b2) * Vertex(object, triangle, 0) + b1 * Vertex(object, triangle, 1) + b2 * Vertex(object, triangle, 2);
+  return (1 - b1 - b2) * Vertex(object, triangle, 0) + b1 * Vertex(object, triangle, 1) +
+         b2 * Vertex(object, triangle, 2);
 }
 
 Vec3f SceneGeometry::FrontNormal(int object, int triangle) const {
@@ -198,8 +199,8 @@ float UnitIrradiance(const SceneGeometry& geometry, const LightPose& light, cons
   return geometry.Occluded(origin, to_light, 1e30f) ? 0.0f : cosine;
 }
 
-float UnitSkyIrradiance(const SceneGeometry& geometry, const Environment& environment, const Vec3f& p,
-                        const Vec3f& n, int rays, std::uint64_t seed, std::uint64_t* count) {
+float UnitSkyIrradiance(const SceneGeometry& geometry, const Environment& environment, const Vec3f& p, const Vec3f& n,
+                        int rays, std::uint64_t seed, std::uint64_t* count) {
   const int side = std::max(1, static_cast<int>(std::lround(std::sqrt(static_cast<double>(rays)))));
   const Vec3f t = n.unitOrthogonal(), b = n.cross(t);
   const Vec3f origin = p + geometry.ray_epsilon() * n;
@@ -267,7 +268,8 @@ TexelAtlas::TexelAtlas(const Scene& scene, const SceneGeometry& geometry) : slot
         float longest = 0;
         for (int c = 0; c < 3; ++c)
           longest = std::max(longest, (geometry.Vertex(static_cast<int>(o), t, (c + 1) % 3) -
-                                       geometry.Vertex(static_cast<int>(o), t, c)).norm());
+                                       geometry.Vertex(static_cast<int>(o), t, c))
+                                          .norm());
         const int m = std::clamp(static_cast<int>(std::ceil(longest / size)), 1, 4096);
         texels.first.push_back(static_cast<std::uint32_t>(texels.count));
         texels.m.push_back(static_cast<std::uint16_t>(m));
@@ -282,7 +284,8 @@ TexelAtlas::TexelAtlas(const Scene& scene, const SceneGeometry& geometry) : slot
   }
 }
 
-void TexelAtlas::BuildUv(ObjectTexels& texels, const Object& object, const SceneGeometry& geometry, double texel_size_m) {
+void TexelAtlas::BuildUv(ObjectTexels& texels, const Object& object, const SceneGeometry& geometry,
+                         double texel_size_m) {
   const Mesh& mesh = *object.mesh;
   const int o = texels.object, triangles = static_cast<int>(mesh.triangles.size());
   // Resolution: texels of about texel_size_m, from world area over UV area.
@@ -294,7 +297,9 @@ void TexelAtlas::BuildUv(ObjectTexels& texels, const Object& object, const Scene
     uv_area += 0.5 * std::abs((b - a).x() * (c - a).y() - (b - a).y() * (c - a).x());
   }
   int R = object.uv_resolution;
-  if (R <= 0) R = std::clamp(static_cast<int>(std::ceil(std::sqrt(world_area / std::max(uv_area, 1e-12)) / texel_size_m)), 1, 8192);
+  if (R <= 0)
+    R = std::clamp(static_cast<int>(std::ceil(std::sqrt(world_area / std::max(uv_area, 1e-12)) / texel_size_m)), 1,
+                   8192);
   texels.uv_resolution = R;
   texels.m.assign(triangles, 8);
   texels.uv_corners.resize(3 * static_cast<std::size_t>(triangles));
@@ -305,12 +310,15 @@ void TexelAtlas::BuildUv(ObjectTexels& texels, const Object& object, const Scene
   std::vector<TexelAnchor> anchor(std::size_t(R) * R);
   for (int t = 0; t < triangles; ++t) {
     Eigen::Vector2f p[3];
-    for (int c = 0; c < 3; ++c) p[c] = texels.uv_corners[3 * t + c] = mesh.uvs[mesh.uv_triangles[t][c]] * static_cast<float>(R);
+    for (int c = 0; c < 3; ++c)
+      p[c] = texels.uv_corners[3 * t + c] = mesh.uvs[mesh.uv_triangles[t][c]] * static_cast<float>(R);
     const float area2 = (p[1] - p[0]).x() * (p[2] - p[0]).y() - (p[1] - p[0]).y() * (p[2] - p[0]).x();
     if (std::abs(area2) < 1e-12f) continue;  // degenerate in UV: nothing to store on it
     const Eigen::Vector2f lo = p[0].cwiseMin(p[1]).cwiseMin(p[2]), hi = p[0].cwiseMax(p[1]).cwiseMax(p[2]);
-    const int x0 = std::clamp(static_cast<int>(std::floor(lo.x())) - 1, 0, R - 1), x1 = std::clamp(static_cast<int>(std::ceil(hi.x())), 0, R - 1);
-    const int y0 = std::clamp(static_cast<int>(std::floor(lo.y())) - 1, 0, R - 1), y1 = std::clamp(static_cast<int>(std::ceil(hi.y())), 0, R - 1);
+    const int x0 = std::clamp(static_cast<int>(std::floor(lo.x())) - 1, 0, R - 1),
+              x1 = std::clamp(static_cast<int>(std::ceil(hi.x())), 0, R - 1);
+    const int y0 = std::clamp(static_cast<int>(std::floor(lo.y())) - 1, 0, R - 1),
+              y1 = std::clamp(static_cast<int>(std::ceil(hi.y())), 0, R - 1);
     // Per edge (opposite corner c): its length, and half the extent of a texel
     // square along the edge's normal, (|n_x| + |n_y|) / 2.
     float edge_length[3], half_extent[3];
@@ -366,7 +374,8 @@ std::size_t TexelAtlas::UvTexelOf(const ObjectTexels& o, int triangle, float b1,
   for (int dy = -1; dy <= 1; ++dy)
     for (int dx = -1; dx <= 1; ++dx) {
       const int xx = std::clamp(x + dx, 0, R - 1), yy = std::clamp(y + dy, 0, R - 1);
-      if (o.uv_index[std::size_t(yy) * R + xx] >= 0) return static_cast<std::size_t>(o.uv_index[std::size_t(yy) * R + xx]);
+      if (o.uv_index[std::size_t(yy) * R + xx] >= 0)
+        return static_cast<std::size_t>(o.uv_index[std::size_t(yy) * R + xx]);
     }
   return 0;
 }

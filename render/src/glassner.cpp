@@ -14,12 +14,13 @@
 namespace phos::render {
 namespace {
 
-
 void RequireStatic(const Scene& scene) {
   for (const Object& o : scene.objects)
-    if (o.motion.Moves()) ThrowUserError(scene.source, "objects", "the comparison needs static objects ('" + o.name + "' moves)");
+    if (o.motion.Moves())
+      ThrowUserError(scene.source, "objects", "the comparison needs static objects ('" + o.name + "' moves)");
   for (const Light& l : scene.lights)
-    if (l.motion.Moves()) ThrowUserError(scene.source, "lights", "the comparison needs static lights ('" + l.name + "' moves)");
+    if (l.motion.Moves())
+      ThrowUserError(scene.source, "lights", "the comparison needs static lights ('" + l.name + "' moves)");
 }
 
 // ke of state i in band b as the solver uses it (unknown: zero if the scene says so).
@@ -88,7 +89,8 @@ Image EmittedRadianceReference(const SceneGeometry& geometry, double t_s) {
           const double level = scene.lights[l].schedule.LevelAt(mid);
           if (level <= 0 || unit[l] == 0) continue;
           for (int b = 0; b < nb; ++b)
-            if (scene.lights[l].E_per_band[b] > 0) a += Ke(object, i, b) * level * scene.lights[l].E_per_band[b] * unit[l];
+            if (scene.lights[l].E_per_band[b] > 0)
+              a += Ke(object, i, b) * level * scene.lights[l].E_per_band[b] * unit[l];
         }
         r[i] = ExactStep(r[i], a, material.states[i].kr, t1 - t0);
       }
@@ -111,7 +113,8 @@ Image EmittedRadianceGlassner(const SceneGeometry& geometry, double t_s, int tim
   const double history = t_s - scene.start_s;
   for (const Object& o : scene.objects)
     if (o.phosphor && o.initial.kind != InitialState::Kind::kZero)
-      ThrowUserError(scene.source, "objects", "the Glassner baseline integrates from r = 0 ('" + o.name + "' starts otherwise)");
+      ThrowUserError(scene.source, "objects",
+                     "the Glassner baseline integrates from r = 0 ('" + o.name + "' starts otherwise)");
   Image image = ForEachPixel(geometry, [&](const Hit& hit, float* out, std::uint64_t pixel) {
     const Object& object = scene.objects[hit.object];
     const Material& material = *object.phosphor;

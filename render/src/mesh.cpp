@@ -48,11 +48,12 @@ std::string OneLine(std::string message) {
 // indices in range, and vertices finite and within kMaxCoordinate_m.
 void CheckCounts(std::size_t vertices, std::size_t triangles, const std::string& where, const std::string& file) {
   if (vertices > kMaxMeshVertices)
-    ThrowUserError(where, "", "mesh '" + file + "' has more than the limit of " + std::to_string(kMaxMeshVertices) +
-                                  " vertices");
+    ThrowUserError(where, "",
+                   "mesh '" + file + "' has more than the limit of " + std::to_string(kMaxMeshVertices) + " vertices");
   if (triangles > kMaxMeshTriangles)
-    ThrowUserError(where, "", "mesh '" + file + "' has more than the limit of " + std::to_string(kMaxMeshTriangles) +
-                                  " triangles");
+    ThrowUserError(
+        where, "",
+        "mesh '" + file + "' has more than the limit of " + std::to_string(kMaxMeshTriangles) + " triangles");
 }
 
 Mesh ParseObj(std::string_view text, const std::string& name, const std::string& group, const std::string& where) {
@@ -101,7 +102,8 @@ Mesh ParseObj(std::string_view text, const std::string& name, const std::string&
         ThrowUserError(where, "", "OBJ '" + name + "' has a face with a vertex index out of range");
       mesh.triangles.push_back(t);
       const Eigen::Vector3i uv(indices[i].texcoord_index, indices[i + 1].texcoord_index, indices[i + 2].texcoord_index);
-      every_corner_has_uv = every_corner_has_uv && uv.minCoeff() >= 0 && uv.maxCoeff() < static_cast<int>(mesh.uvs.size());
+      every_corner_has_uv =
+          every_corner_has_uv && uv.minCoeff() >= 0 && uv.maxCoeff() < static_cast<int>(mesh.uvs.size());
       mesh.uv_triangles.push_back(uv);
     }
   }
@@ -127,12 +129,12 @@ std::vector<Out> ReadAccessor(const tinygltf::Model& model, int index, int compo
     ThrowUserError(where, what, "accessor without a valid bufferView");
   const tinygltf::BufferView& view = model.bufferViews[accessor.bufferView];
   if (view.buffer < 0 || view.buffer >= static_cast<int>(model.buffers.size()))
-    ThrowUserError(where, what, "bufferView " + std::to_string(accessor.bufferView) + " names a buffer that does not exist");
+    ThrowUserError(where, what,
+                   "bufferView " + std::to_string(accessor.bufferView) + " names a buffer that does not exist");
   const tinygltf::Buffer& buffer = model.buffers[view.buffer];
   const int component_bytes = tinygltf::GetComponentSizeInBytes(accessor.componentType);
   const int element_components = tinygltf::GetNumComponentsInType(accessor.type);
-  if (component_bytes <= 0 || element_components != components)
-    ThrowUserError(where, what, "unexpected accessor type");
+  if (component_bytes <= 0 || element_components != components) ThrowUserError(where, what, "unexpected accessor type");
   const bool integer = accessor.componentType == TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT ||
                        accessor.componentType == TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT ||
                        accessor.componentType == TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE;
@@ -140,8 +142,9 @@ std::vector<Out> ReadAccessor(const tinygltf::Model& model, int index, int compo
     ThrowUserError(where, what, "unsupported component type " + std::to_string(accessor.componentType));
   if (std::is_integral_v<Out> && !integer) ThrowUserError(where, what, "indices must be unsigned integers");
   if (accessor.count > max_elements)
-    ThrowUserError(where, what, "accessor count " + std::to_string(accessor.count) + " is more than the limit of " +
-                                    std::to_string(max_elements));
+    ThrowUserError(where, what,
+                   "accessor count " + std::to_string(accessor.count) + " is more than the limit of " +
+                       std::to_string(max_elements));
   const std::size_t element_bytes = static_cast<std::size_t>(component_bytes) * static_cast<std::size_t>(components);
   const std::size_t stride = view.byteStride ? view.byteStride : element_bytes;
   const std::size_t size = buffer.data.size();
@@ -149,8 +152,8 @@ std::vector<Out> ReadAccessor(const tinygltf::Model& model, int index, int compo
   if (view.byteOffset > size || accessor.byteOffset > size - view.byteOffset)
     ThrowUserError(where, what, "accessor starts past the end of its buffer");
   const std::size_t begin = view.byteOffset + accessor.byteOffset;
-  if (accessor.count > 0 && (element_bytes > size - begin ||
-                             (accessor.count - 1) > (size - begin - element_bytes) / stride))
+  if (accessor.count > 0 &&
+      (element_bytes > size - begin || (accessor.count - 1) > (size - begin - element_bytes) / stride))
     ThrowUserError(where, what, "accessor reaches past the end of its buffer");
   std::vector<Out> out;
   out.reserve(accessor.count * static_cast<std::size_t>(components));
@@ -158,16 +161,28 @@ std::vector<Out> ReadAccessor(const tinygltf::Model& model, int index, int compo
     const unsigned char* p = buffer.data.data() + begin + e * stride;
     for (int c = 0; c < components; ++c, p += component_bytes) {
       switch (accessor.componentType) {
-        case TINYGLTF_COMPONENT_TYPE_FLOAT: { float f; std::memcpy(&f, p, 4); out.push_back(static_cast<Out>(f)); break; }
+        case TINYGLTF_COMPONENT_TYPE_FLOAT: {
+          float f;
+          std::memcpy(&f, p, 4);
+          out.push_back(static_cast<Out>(f));
+          break;
+        }
         case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: {
           std::uint32_t u;
           std::memcpy(&u, p, 4);
           // An index past INT_MAX is out of range anyway: -1 says so below.
-          if constexpr (std::is_integral_v<Out>) out.push_back(u > 0x7fffffffu ? Out(-1) : static_cast<Out>(u));
-          else out.push_back(static_cast<Out>(u));
+          if constexpr (std::is_integral_v<Out>)
+            out.push_back(u > 0x7fffffffu ? Out(-1) : static_cast<Out>(u));
+          else
+            out.push_back(static_cast<Out>(u));
           break;
         }
-        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: { std::uint16_t u; std::memcpy(&u, p, 2); out.push_back(static_cast<Out>(u)); break; }
+        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: {
+          std::uint16_t u;
+          std::memcpy(&u, p, 2);
+          out.push_back(static_cast<Out>(u));
+          break;
+        }
         default: out.push_back(static_cast<Out>(*p)); break;  // unsigned byte
       }
     }
@@ -181,7 +196,8 @@ Eigen::Affine3d NodeTransform(const tinygltf::Node& node) {
     transform.matrix() = Eigen::Map<const Eigen::Matrix4d>(node.matrix.data());  // column-major, as glTF
     return transform;
   }
-  if (node.translation.size() == 3) transform.translate(Vec3(node.translation[0], node.translation[1], node.translation[2]));
+  if (node.translation.size() == 3)
+    transform.translate(Vec3(node.translation[0], node.translation[1], node.translation[2]));
   if (node.rotation.size() == 4)  // glTF quaternions are x, y, z, w
     transform.rotate(Eigen::Quaterniond(node.rotation[3], node.rotation[0], node.rotation[1], node.rotation[2]));
   if (node.scale.size() == 3) transform.scale(Vec3(node.scale[0], node.scale[1], node.scale[2]));
@@ -211,24 +227,26 @@ bool GltfNoWrite(std::string* err, const std::string&, const std::vector<unsigne
 }
 // Images are not decoded: phos uses none, and a crafted image must not cost
 // memory or time.
-bool GltfSkipImage(tinygltf::Image*, const int, std::string*, std::string*, int, int, const unsigned char*, int, void*) {
+bool GltfSkipImage(tinygltf::Image*, const int, std::string*, std::string*, int, int, const unsigned char*, int,
+                   void*) {
   return true;
 }
 
 Mesh ParseGltf(std::string_view data, bool binary, const std::filesystem::path& base_dir, const std::string& name,
                const std::string& group, const std::string& where) {
   if (data.size() > kMaxInputFileBytes)
-    ThrowUserError(where, "", "glTF '" + name + "' is more than the limit of " + std::to_string(kMaxInputFileBytes) + " bytes");
+    ThrowUserError(where, "",
+                   "glTF '" + name + "' is more than the limit of " + std::to_string(kMaxInputFileBytes) + " bytes");
   tinygltf::TinyGLTF loader;
   loader.SetFsCallbacks({&GltfFileExists, &GltfExpandPath, &GltfReadFile, &GltfNoWrite, nullptr});
   loader.SetImageLoader(&GltfSkipImage, nullptr);
   tinygltf::Model model;
   std::string error, warning;
-  const bool ok =
-      binary ? loader.LoadBinaryFromMemory(&model, &error, &warning, reinterpret_cast<const unsigned char*>(data.data()),
-                                           static_cast<unsigned int>(data.size()), base_dir.string())
-             : loader.LoadASCIIFromString(&model, &error, &warning, data.data(), static_cast<unsigned int>(data.size()),
-                                          base_dir.string());
+  const bool ok = binary ? loader.LoadBinaryFromMemory(&model, &error, &warning,
+                                                       reinterpret_cast<const unsigned char*>(data.data()),
+                                                       static_cast<unsigned int>(data.size()), base_dir.string())
+                         : loader.LoadASCIIFromString(&model, &error, &warning, data.data(),
+                                                      static_cast<unsigned int>(data.size()), base_dir.string());
   if (!ok) ThrowUserError(where, "", "cannot read glTF '" + name + "': " + OneLine(error));
   Mesh mesh;
   mesh.source = name + (group.empty() ? "" : "#" + group);
@@ -237,24 +255,28 @@ Mesh ParseGltf(std::string_view data, bool binary, const std::filesystem::path& 
   const std::string file_where = where + " (" + name + ")";
   std::size_t instances = 0;
   // Walks the node tree of the default scene, applying each node's transform.
-  std::function<void(int, const Eigen::Affine3d&, int)> visit = [&](int index, const Eigen::Affine3d& parent, int depth) {
+  std::function<void(int, const Eigen::Affine3d&, int)> visit = [&](int index, const Eigen::Affine3d& parent,
+                                                                    int depth) {
     if (index < 0 || index >= static_cast<int>(model.nodes.size()) || depth > 64)
       ThrowUserError(file_where, "nodes", "node index out of range or a cycle");
     // A node graph that shares children multiplies its instances (2^40 ran out of memory).
     if (++instances > kMaxGltfInstances)
-      ThrowUserError(file_where, "nodes", "the node graph has more than the limit of " +
-                                              std::to_string(kMaxGltfInstances) + " node instances");
+      ThrowUserError(
+          file_where, "nodes",
+          "the node graph has more than the limit of " + std::to_string(kMaxGltfInstances) + " node instances");
     const tinygltf::Node& node = model.nodes[index];
     const Eigen::Affine3d transform = parent * NodeTransform(node);
     if (node.mesh >= 0 && node.mesh < static_cast<int>(model.meshes.size()) &&
         (group.empty() || model.meshes[node.mesh].name == group)) {
       found = true;
       for (const tinygltf::Primitive& primitive : model.meshes[node.mesh].primitives) {
-        if (primitive.mode != TINYGLTF_MODE_TRIANGLES && primitive.mode != -1) continue;  // points and lines carry no surface
+        if (primitive.mode != TINYGLTF_MODE_TRIANGLES && primitive.mode != -1)
+          continue;  // points and lines carry no surface
         const auto position = primitive.attributes.find("POSITION");
-        if (position == primitive.attributes.end()) ThrowUserError(file_where, "meshes", "a primitive without POSITION");
-        const std::vector<float> p =
-            ReadAccessor<float>(model, position->second, 3, kMaxMeshVertices - mesh.positions.size(), file_where, "POSITION");
+        if (position == primitive.attributes.end())
+          ThrowUserError(file_where, "meshes", "a primitive without POSITION");
+        const std::vector<float> p = ReadAccessor<float>(
+            model, position->second, 3, kMaxMeshVertices - mesh.positions.size(), file_where, "POSITION");
         const int base = static_cast<int>(mesh.positions.size());
         const int count = static_cast<int>(p.size() / 3);
         for (int i = 0; i < count; ++i)
@@ -263,8 +285,8 @@ Mesh ParseGltf(std::string_view data, bool binary, const std::filesystem::path& 
         const int uv_base = static_cast<int>(mesh.uvs.size());
         bool with_uv = texcoord != primitive.attributes.end();
         if (with_uv) {
-          const std::vector<float> uv =
-              ReadAccessor<float>(model, texcoord->second, 2, kMaxMeshVertices - mesh.uvs.size(), file_where, "TEXCOORD_0");
+          const std::vector<float> uv = ReadAccessor<float>(
+              model, texcoord->second, 2, kMaxMeshVertices - mesh.uvs.size(), file_where, "TEXCOORD_0");
           with_uv = static_cast<int>(uv.size() / 2) == count;
           for (int i = 0; with_uv && i < count; ++i) mesh.uvs.emplace_back(uv[2 * i], uv[2 * i + 1]);
         }
@@ -279,7 +301,8 @@ Mesh ParseGltf(std::string_view data, bool binary, const std::filesystem::path& 
         }
         for (std::size_t i = 0; i + 2 < indices.size(); i += 3) {
           Eigen::Vector3i t(indices[i], indices[i + 1], indices[i + 2]);
-          if (t.minCoeff() < 0 || t.maxCoeff() >= count) ThrowUserError(file_where, "indices", "vertex index out of range");
+          if (t.minCoeff() < 0 || t.maxCoeff() >= count)
+            ThrowUserError(file_where, "indices", "vertex index out of range");
           mesh.triangles.push_back(t.array() + base);
           if (with_uv) mesh.uv_triangles.push_back(t.array() + uv_base);
         }
@@ -299,7 +322,8 @@ Mesh ParseGltf(std::string_view data, bool binary, const std::filesystem::path& 
       ThrowUserError(file_where, "scene", "the default scene " + std::to_string(scene) + " does not exist");
     for (int node : model.scenes[scene].nodes) visit(node, Eigen::Affine3d::Identity(), 0);
   } else {
-    for (std::size_t node = 0; node < model.nodes.size(); ++node) visit(static_cast<int>(node), Eigen::Affine3d::Identity(), 0);
+    for (std::size_t node = 0; node < model.nodes.size(); ++node)
+      visit(static_cast<int>(node), Eigen::Affine3d::Identity(), 0);
   }
   if (!found) ThrowUserError(where, "", "glTF '" + name + "' has no mesh named '" + group + "'");
   if (!all_uv || mesh.uv_triangles.size() != mesh.triangles.size()) {  // a partial UV map is no map
@@ -341,13 +365,13 @@ Mesh MakeSphere(double radius, int subdivisions, bool inward) {
   mesh.source = "shape sphere";
   // An icosahedron, each face split in four `subdivisions` times, vertices on the sphere.
   const double t = (1 + std::sqrt(5.0)) / 2;
-  std::vector<Vec3> p = {{-1, t, 0}, {1, t, 0}, {-1, -t, 0}, {1, -t, 0}, {0, -1, t}, {0, 1, t},
-                         {0, -1, -t}, {0, 1, -t}, {t, 0, -1}, {t, 0, 1}, {-t, 0, -1}, {-t, 0, 1}};
+  std::vector<Vec3> p = {{-1, t, 0},  {1, t, 0},  {-1, -t, 0}, {1, -t, 0}, {0, -1, t},  {0, 1, t},
+                         {0, -1, -t}, {0, 1, -t}, {t, 0, -1},  {t, 0, 1},  {-t, 0, -1}, {-t, 0, 1}};
   for (Vec3& v : p) v.normalize();
   std::vector<Eigen::Vector3i> faces = {{0, 11, 5}, {0, 5, 1},  {0, 1, 7},   {0, 7, 10}, {0, 10, 11},
                                         {1, 5, 9},  {5, 11, 4}, {11, 10, 2}, {10, 7, 6}, {7, 1, 8},
                                         {3, 9, 4},  {3, 4, 2},  {3, 2, 6},   {3, 6, 8},  {3, 8, 9},
-                                        {4, 9, 5},  {2, 4, 11}, {6, 2, 10},  {8, 6, 7}, {9, 8, 1}};
+                                        {4, 9, 5},  {2, 4, 11}, {6, 2, 10},  {8, 6, 7},  {9, 8, 1}};
   for (int s = 0; s < subdivisions; ++s) {
     std::map<std::pair<int, int>, int> midpoints;
     auto midpoint = [&](int a, int b) {
@@ -373,14 +397,18 @@ Mesh MakeSphere(double radius, int subdivisions, bool inward) {
 Mesh ParseMesh(std::string_view data, const std::string& format, const std::filesystem::path& base_dir,
                const std::string& name, const std::string& group, const std::string& where) {
   Mesh mesh;
-  if (format == ".obj") mesh = ParseObj(data, name, group, where);
-  else if (format == ".gltf" || format == ".glb") mesh = ParseGltf(data, format == ".glb", base_dir, name, group, where);
-  else ThrowUserError(where, "", "unknown mesh format '" + format + "' (.obj, .gltf, .glb)");
+  if (format == ".obj")
+    mesh = ParseObj(data, name, group, where);
+  else if (format == ".gltf" || format == ".glb")
+    mesh = ParseGltf(data, format == ".glb", base_dir, name, group, where);
+  else
+    ThrowUserError(where, "", "unknown mesh format '" + format + "' (.obj, .gltf, .glb)");
   for (const Eigen::Vector3f& v : mesh.positions) {
     if (!v.allFinite()) ThrowUserError(where, "", "mesh '" + name + "' has a vertex that is not finite");
     if (v.cwiseAbs().maxCoeff() > kMaxCoordinate_m)
-      ThrowUserError(where, "", "mesh '" + name + "' has a vertex beyond the limit of " + FormatDouble(kMaxCoordinate_m) +
-                                    " m from the origin on an axis");
+      ThrowUserError(where, "",
+                     "mesh '" + name + "' has a vertex beyond the limit of " + FormatDouble(kMaxCoordinate_m) +
+                         " m from the origin on an axis");
   }
   for (const Eigen::Vector2f& uv : mesh.uvs)
     if (!uv.allFinite()) ThrowUserError(where, "", "mesh '" + name + "' has a texture coordinate that is not finite");
@@ -389,7 +417,8 @@ Mesh ParseMesh(std::string_view data, const std::string& format, const std::file
 
 Mesh LoadMesh(const std::filesystem::path& path, const std::string& group, const std::string& where) {
   std::string extension = path.extension().string();
-  std::transform(extension.begin(), extension.end(), extension.begin(), [](unsigned char c) { return std::tolower(c); });
+  std::transform(extension.begin(), extension.end(), extension.begin(),
+                 [](unsigned char c) { return std::tolower(c); });
   std::error_code ec;
   if (!std::filesystem::exists(path, ec)) ThrowUserError(where, "", "mesh file '" + path.string() + "' does not exist");
   if (extension != ".obj" && extension != ".gltf" && extension != ".glb")

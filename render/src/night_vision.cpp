@@ -25,7 +25,8 @@ Image NightVision(const Image& bands, const Image& rgb, const SpectralGrid& grid
   double total = 0;
   for (int b = 0; b < nb; ++b) {
     const int steps = std::max(8, static_cast<int>(grid.width_nm(b)));
-    for (int k = 0; k < steps; ++k) v_weight[b] += ScotopicLuminosity(grid.lower_nm(b) + (k + 0.5) * grid.width_nm(b) / steps) / steps;
+    for (int k = 0; k < steps; ++k)
+      v_weight[b] += ScotopicLuminosity(grid.lower_nm(b) + (k + 0.5) * grid.width_nm(b) / steps) / steps;
     total += v_weight[b];
   }
   for (double& w : v_weight) w /= total;
@@ -54,7 +55,8 @@ Image NightVision(const Image& bands, const Image& rgb, const SpectralGrid& grid
   if (sigma > 0.05) cv::GaussianBlur(V, blurred, cv::Size(0, 0), sigma, sigma, cv::BORDER_REFLECT);
   // Edges: base = G(blurred), detail d = blurred - base, put back as sign(d) |d|^(1/gamma).
   cv::Mat base;
-  cv::GaussianBlur(blurred, base, cv::Size(0, 0), std::max(1.0, 2 * sigma), std::max(1.0, 2 * sigma), cv::BORDER_REFLECT);
+  cv::GaussianBlur(blurred, base, cv::Size(0, 0), std::max(1.0, 2 * sigma), std::max(1.0, 2 * sigma),
+                   cv::BORDER_REFLECT);
   std::mt19937_64 random(options.seed);
   std::normal_distribution<float> noise(0.0f, static_cast<float>(options.noise_sigma));
   // The bluish grey of chromaticity (x, y) = (0.25, 0.25): XYZ = (1, 1, 2) in linear sRGB.
@@ -70,7 +72,8 @@ Image NightVision(const Image& bands, const Image& rgb, const SpectralGrid& grid
     if (s > 0 && options.noise_sigma > 0) rod += s * std::sqrt(std::max(0.0, rod)) * noise(random);
     rod = std::max(0.0, rod);
     for (int k = 0; k < 3; ++k)
-      out.pixels[3 * p + k] = static_cast<float>((1 - s) * options.exposure * rgb.pixels[3 * p + k] + s * rod * tint[k]);
+      out.pixels[3 * p + k] =
+          static_cast<float>((1 - s) * options.exposure * rgb.pixels[3 * p + k] + s * rod * tint[k]);
   }
   return out;
 }

@@ -50,8 +50,8 @@ struct EmitterDistribution {
     float area;
   };
   std::vector<Entry> entries;
-  std::vector<double> cdf;                 // cumulative power, normalized
-  std::vector<std::vector<float>> pdf;     // per object, per triangle: probability of choosing it
+  std::vector<double> cdf;              // cumulative power, normalized
+  std::vector<std::vector<float>> pdf;  // per object, per triangle: probability of choosing it
   bool empty() const { return entries.empty(); }
 
   EmitterDistribution(const SceneGeometry& geometry, const CoupledSolver* solver) {
@@ -104,9 +104,15 @@ struct EmitterDistribution {
 
 class Tracer {
  public:
-  Tracer(const SceneGeometry& geometry, const CoupledSolver* solver, const VolumeMedia* media, const FrameOptions& options)
-      : geometry_(geometry), scene_(geometry.scene()), solver_(solver), media_(media), options_(options),
-        nb_(scene_.bands.band_count()), emitters_(geometry, options.transport == Transport::kPath ? solver : nullptr) {
+  Tracer(const SceneGeometry& geometry, const CoupledSolver* solver, const VolumeMedia* media,
+         const FrameOptions& options)
+      : geometry_(geometry),
+        scene_(geometry.scene()),
+        solver_(solver),
+        media_(media),
+        options_(options),
+        nb_(scene_.bands.band_count()),
+        emitters_(geometry, options.transport == Transport::kPath ? solver : nullptr) {
     const double t = geometry.time_s();
     if (scene_.environment) {
       sky_level_ = static_cast<float>(scene_.environment->schedule.LevelAt(t));
@@ -159,7 +165,7 @@ class Tracer {
       // Media between the point and the light shadow it (a cloud on the floor).
       if (unit > 0 && media_)
         unit *= light.pose.kind == Light::Kind::kPoint ? media_->Transmittance(p, light.pose.at)
-                                                        : media_->TransmittanceToInfinity(p, -light.pose.at);
+                                                       : media_->TransmittanceToInfinity(p, -light.pose.at);
       if (unit > 0) E += light.E * unit;
     }
   }
@@ -222,8 +228,8 @@ class Tracer {
         } else {
           const float cos_light = -hit.normal.dot(direction);
           const float light_pdf =
-              emitters_.AreaPdf(hit.object, hit.triangle, geometry_.Area(hit.object, hit.triangle)) *
-              hit.distance * hit.distance / cos_light;
+              emitters_.AreaPdf(hit.object, hit.triangle, geometry_.Area(hit.object, hit.triangle)) * hit.distance *
+              hit.distance / cos_light;
           L += beta * Le * (bsdf_pdf * bsdf_pdf / (bsdf_pdf * bsdf_pdf + light_pdf * light_pdf));
         }
       }
@@ -340,14 +346,17 @@ Image RenderBands(const SceneGeometry& geometry, const CoupledSolver* solver, co
   tbb::parallel_for(0, height, [&](int y) {
     std::uint64_t rays = 0;
     for (int x = 0; x < width; ++x) {
-      SplitMix64 random((std::uint64_t(options.seed) << 40) ^ (std::uint64_t(y) * std::uint64_t(width) + x) * 0x2545F4914F6CDD1Dull);
+      SplitMix64 random((std::uint64_t(options.seed) << 40) ^
+                        (std::uint64_t(y) * std::uint64_t(width) + x) * 0x2545F4914F6CDD1Dull);
       Bands sum = Bands::Zero(nb);
       for (int s = 0; s < spp; ++s) {
         // One centred sample when there is one; jittered otherwise.
         const float jx = spp == 1 ? 0.5f : random.UniformFloat(), jy = spp == 1 ? 0.5f : random.UniformFloat();
         const Vec3f direction = camera.Direction(static_cast<float>(x) + jx, static_cast<float>(y) + jy);
-        sum += options.transport == Transport::kPath ? tracer.Path(camera.origin(), direction, random, rays)
-                                                     : tracer.Direct(camera.origin(), direction, spp == 1 ? PixelJitter(x, y) : random.UniformFloat(), rays);
+        sum +=
+            options.transport == Transport::kPath
+                ? tracer.Path(camera.origin(), direction, random, rays)
+                : tracer.Direct(camera.origin(), direction, spp == 1 ? PixelJitter(x, y) : random.UniformFloat(), rays);
       }
       sum /= static_cast<float>(spp);
       std::copy(sum.data(), sum.data() + nb, image.at(x, y));
@@ -372,21 +381,23 @@ Image RenderBands(const SceneGeometry& geometry, const CoupledSolver* solver, co
     std::vector<float> radiosity(surfels.size() * nb, 0.0f);
     // The irradiance on translucent objects' surfels, kept for the dipole.
     std::vector<float> surfel_E(translucent ? surfels.size() * nb : 0, 0.0f);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, surfels.size()), [&](const tbb::blocked_range<std::size_t>& range) {
-      std::uint64_t rays = 0;
-      Bands E;
-      for (std::size_t i = range.begin(); i != range.end(); ++i) {
-        const Surfel& s = surfels[i];
-        // The front side sends: what it reflects of the lights, and its glow.
-        tracer.DirectIrradiance(s.position, s.normal, E, rays);
-        Bands B = tracer.Albedo(s.object) * E;
-        Bands Le;
-        if (tracer.Emission(FrontHit(s), Le)) B += kPiF * Le;
-        std::copy(B.data(), B.data() + nb, &radiosity[i * nb]);
-        if (translucent && scene.objects[s.object].subsurface) std::copy(E.data(), E.data() + nb, &surfel_E[i * nb]);
-      }
-      total_rays += rays;
-    });
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, surfels.size()),
+                      [&](const tbb::blocked_range<std::size_t>& range) {
+                        std::uint64_t rays = 0;
+                        Bands E;
+                        for (std::size_t i = range.begin(); i != range.end(); ++i) {
+                          const Surfel& s = surfels[i];
+                          // The front side sends: what it reflects of the lights, and its glow.
+                          tracer.DirectIrradiance(s.position, s.normal, E, rays);
+                          Bands B = tracer.Albedo(s.object) * E;
+                          Bands Le;
+                          if (tracer.Emission(FrontHit(s), Le)) B += kPiF * Le;
+                          std::copy(B.data(), B.data() + nb, &radiosity[i * nb]);
+                          if (translucent && scene.objects[s.object].subsurface)
+                            std::copy(E.data(), E.data() + nb, &surfel_E[i * nb]);
+                        }
+                        total_rays += rays;
+                      });
     // Only surfels that send light matter to either receiver (the occlusion
     // is not used here): a dark scene's unlit floor costs nothing. The sky
     // needs every surfel (they occlude it).
@@ -424,8 +435,9 @@ Image RenderBands(const SceneGeometry& geometry, const CoupledSolver* solver, co
         if (sky && !scene.objects[g.object[p]].subsurface) {
           // Directional occlusion: the sky less what the surfels hide of it.
           const float gradient = static_cast<float>(scene.environment->gradient);
-          const float unit = std::max(0.0f, kPiF * (1 - indirect.occlusion[p]) +
-                                                gradient * (2 * kPiF / 3 * g.normal[p].y() - kPiF * indirect.occlusion_y[p]));
+          const float unit =
+              std::max(0.0f, kPiF * (1 - indirect.occlusion[p]) +
+                                 gradient * (2 * kPiF / 3 * g.normal[p].y() - kPiF * indirect.occlusion_y[p]));
           for (int b = 0; b < nb; ++b) out[b] += T * albedo[b] * tracer.sky_L()[b] * unit / kPiF;
         }
       }
@@ -462,7 +474,9 @@ Image RenderBands(const SceneGeometry& geometry, const CoupledSolver* solver, co
           const Dipole* d = &dipoles[static_cast<std::size_t>(g.object[p]) * nb];
           float* out = image.at(x, y);
           for (int b = 0; b < nb; ++b)
-            out[b] += T * (E[b] * static_cast<float>(d[b].AnnulusIntegral(0, near[p])) + exitance.irradiance[p * nb + b]) / kPiF;
+            out[b] += T *
+                      (E[b] * static_cast<float>(d[b].AnnulusIntegral(0, near[p])) + exitance.irradiance[p * nb + b]) /
+                      kPiF;
         }
         total_rays += rays;
       });
@@ -478,7 +492,8 @@ Image RenderBands(const SceneGeometry& geometry, const CoupledSolver* solver, co
           const std::vector<double>& albedo = scene.volumes[v].albedo;
           float* out = image.at(x, y);
           for (int b = 0; b < nb; ++b)
-            out[b] += intervals.delta_T[p] * static_cast<float>(albedo[b]) * in_medium.irradiance[p * nb + b] / (4 * kPiF);
+            out[b] +=
+                intervals.delta_T[p] * static_cast<float>(albedo[b]) * in_medium.irradiance[p * nb + b] / (4 * kPiF);
         }
       });
     }
@@ -488,7 +503,7 @@ Image RenderBands(const SceneGeometry& geometry, const CoupledSolver* solver, co
 }
 
 std::vector<TransportCandidate> MeasureTransportCandidates(const SceneGeometry& geometry, const CoupledSolver* solver,
-                                                          const FrameOptions& base) {
+                                                           const FrameOptions& base) {
   auto time_of = [&](const FrameOptions& options) {
     const auto start = std::chrono::steady_clock::now();
     RenderBands(geometry, solver, options);
@@ -506,7 +521,8 @@ std::vector<TransportCandidate> MeasureTransportCandidates(const SceneGeometry& 
   path.transport = Transport::kPath;
   path.spp = 1;
   const double path_1spp_s = time_of(path);
-  for (const auto& [spp, ssim] : std::vector<std::pair<int, double>>{{4, 0.59}, {16, 0.80}, {64, 0.93}, {256, 0.965}, {1024, 0.9825}}) {
+  for (const auto& [spp, ssim] :
+       std::vector<std::pair<int, double>>{{4, 0.59}, {16, 0.80}, {64, 0.93}, {256, 0.965}, {1024, 0.9825}}) {
     path.spp = spp;
     candidates.push_back({path, ssim, path_1spp_s * spp, "path " + std::to_string(spp) + " spp"});
   }

@@ -16,7 +16,6 @@
 namespace phos::render {
 namespace {
 
-
 // Every coordinate, size and direction of a scene lies in
 // [-kMaxCoordinate_m, kMaxCoordinate_m] (scene.h): Embree's float BVH
 // asserted on 1e308.
@@ -99,7 +98,8 @@ std::vector<double> ReadSpectrum(const JsonField& field, const SpectralGrid& ban
     std::vector<double> values = field["values"].NumberArray(static_cast<std::size_t>(bands.band_count()), 0.0);
     for (std::size_t b = 0; b < values.size(); ++b)
       if (values[b] > kMaxIrradiance)
-        field["values"].At(b).Fail("expected at most " + FormatDouble(kMaxIrradiance) + ", got " + FormatDouble(values[b]));
+        field["values"].At(b).Fail("expected at most " + FormatDouble(kMaxIrradiance) + ", got " +
+                                   FormatDouble(values[b]));
     return values;
   } else {
     field["type"].Fail("unknown spectrum type '" + type + "' (led, white_led, blackbody, sun, bands)");
@@ -188,9 +188,12 @@ void ReadPhosphorPolicy(const JsonField& o, bool is_phosphor, bool& unknown_ke_a
       initial = {InitialState::Kind::kUniform, f->NumberInRange(0, 1)};
     } else {
       const std::string kind = f->String();
-      if (kind == "zero") initial.kind = InitialState::Kind::kZero;
-      else if (kind == "equilibrium") initial.kind = InitialState::Kind::kEquilibrium;
-      else f->Fail("expected \"zero\", \"equilibrium\" or a number in [0, 1], got \"" + kind + "\"");
+      if (kind == "zero")
+        initial.kind = InitialState::Kind::kZero;
+      else if (kind == "equilibrium")
+        initial.kind = InitialState::Kind::kEquilibrium;
+      else
+        f->Fail("expected \"zero\", \"equilibrium\" or a number in [0, 1], got \"" + kind + "\"");
     }
     if (!is_phosphor) f->Fail("only a phosphorescent object or volume (with 'phosphor') has an initial state");
   }
@@ -212,7 +215,8 @@ std::vector<float> ReadDensity(const JsonField& f, const Volume& v) {
   f.RejectUnknownKeys({"value", "shape", "puffs", "radius_m", "seed", "below_y_m"});
   const double value = f.Has("value") ? f["value"].NumberInRange(0, kMaxDensity) : 1.0;
   const std::string shape = f.Has("shape") ? f["shape"].String() : "box";
-  if (shape != "box" && shape != "ellipsoid") f["shape"].Fail("expected \"box\" or \"ellipsoid\", got \"" + shape + "\"");
+  if (shape != "box" && shape != "ellipsoid")
+    f["shape"].Fail("expected \"box\" or \"ellipsoid\", got \"" + shape + "\"");
   const int puffs = f.Has("puffs") ? f["puffs"].Integer(1, 100000) : 0;
   const double radius = f.Has("radius_m") ? ReadLength(f["radius_m"], 1e-9) : 0.0;
   if (puffs > 0 && !f.Has("radius_m")) f.Fail("'puffs' needs 'radius_m'");
@@ -265,8 +269,8 @@ Eigen::Affine3d RigidMotion::At(double t_s) const {
   if (t_s >= keys.back().t_s) {
     a = b = &keys.back();
   } else if (t_s > keys.front().t_s) {
-    const auto next = std::upper_bound(keys.begin(), keys.end(), t_s,
-                                       [](double t, const RigidKey& key) { return t < key.t_s; });
+    const auto next =
+        std::upper_bound(keys.begin(), keys.end(), t_s, [](double t, const RigidKey& key) { return t < key.t_s; });
     b = &*next;
     a = &*(next - 1);
     w = (t_s - a->t_s) / (b->t_s - a->t_s);
@@ -308,8 +312,8 @@ std::vector<double> LightSchedule::ChangesBetween(double t0_s, double t1_s) cons
 CameraKey Camera::At(double t_s) const {
   if (keys.size() == 1 || t_s <= keys.front().t_s) return keys.front();
   if (t_s >= keys.back().t_s) return keys.back();
-  const auto next = std::upper_bound(keys.begin(), keys.end(), t_s,
-                                     [](double t, const CameraKey& key) { return t < key.t_s; });
+  const auto next =
+      std::upper_bound(keys.begin(), keys.end(), t_s, [](double t, const CameraKey& key) { return t < key.t_s; });
   const CameraKey& a = *(next - 1);
   const CameraKey& b = *next;
   const double w = (t_s - a.t_s) / (b.t_s - a.t_s);
@@ -434,7 +438,8 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
     ReadPhosphor(o, base_dir, scene.bands, materials, object.phosphor, object.phosphor_path);
     if (auto f = o.Optional("subsurface")) {
       f->RejectUnknownKeys({"sigma_a_per_m", "sigma_s_prime_per_m", "eta"});
-      if (o.Has("albedo")) o["albedo"].Fail("a translucent object's albedo follows from 'subsurface'; give one of them");
+      if (o.Has("albedo"))
+        o["albedo"].Fail("a translucent object's albedo follows from 'subsurface'; give one of them");
       auto per_band = [&](const JsonField& field, double lower) {
         if (field.value().is_number()) return std::vector<double>(nb, field.NumberInRange(lower, 1e9));
         std::vector<double> values = field.NumberArray(static_cast<std::size_t>(nb), lower);
@@ -447,7 +452,8 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
       sss.sigma_s_prime_per_m = per_band((*f)["sigma_s_prime_per_m"], 1e-9);
       if (f->Has("eta")) sss.eta = (*f)["eta"].NumberInRange(1.0, 3.0);
       for (int b = 0; b < nb; ++b)
-        object.albedo.push_back(Dipole::From(sss.sigma_a_per_m[b], sss.sigma_s_prime_per_m[b], sss.eta).TotalReflectance());
+        object.albedo.push_back(
+            Dipole::From(sss.sigma_a_per_m[b], sss.sigma_s_prime_per_m[b], sss.eta).TotalReflectance());
       object.subsurface = sss;
     } else if (o.Has("albedo")) {
       object.albedo = ReadAlbedo(o["albedo"], nb);
@@ -473,8 +479,8 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
   const JsonField lights = root["lights"];
   for (std::size_t i = 0; i < lights.ArraySize(); ++i) {
     const JsonField l = lights.At(i);
-    l.RejectUnknownKeys({"name", "type", "position", "direction", "intensity", "spectrum", "schedule", "path",
-                         "normal", "thickness_m"});
+    l.RejectUnknownKeys({"name", "type", "position", "direction", "intensity", "spectrum", "schedule", "path", "normal",
+                         "thickness_m"});
     Light light;
     light.name = l.Has("name") ? l["name"].NonEmptyString() : "light " + std::to_string(i);
     const std::string type = l["type"].String();
@@ -575,9 +581,12 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
       v.density = ReadDensity(f["density"], v);
       v.sigma_t_per_m = f["sigma_t_per_m"].NumberInRange(0, 1e9);
       ReadPhosphor(f, base_dir, scene.bands, materials, v.phosphor, v.phosphor_path);
-      if (f.Has("albedo")) v.albedo = ReadAlbedo(f["albedo"], nb);
-      else if (v.phosphor && v.phosphor->albedo) v.albedo = *v.phosphor->albedo;
-      else f.Fail("missing 'albedo' (the single-scattering albedo: a number or one value per band)");
+      if (f.Has("albedo"))
+        v.albedo = ReadAlbedo(f["albedo"], nb);
+      else if (v.phosphor && v.phosphor->albedo)
+        v.albedo = *v.phosphor->albedo;
+      else
+        f.Fail("missing 'albedo' (the single-scattering albedo: a number or one value per band)");
       if (auto g = f.Optional("g")) v.g = g->NumberInRange(-0.99, 0.99);
       ReadPhosphorPolicy(f, v.phosphor != nullptr, v.unknown_ke_as_zero, v.initial);
       scene.volumes.push_back(std::move(v));

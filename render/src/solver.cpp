@@ -24,8 +24,11 @@ bool EverOn(const Light& light) {
 }  // namespace
 
 CoupledSolver::CoupledSolver(const Scene& scene, SceneGeometry& geometry)
-    : scene_(scene), geometry_(geometry), atlas_(scene, geometry),
-      band_count_(scene.bands.band_count()), time_s_(scene.start_s) {
+    : scene_(scene),
+      geometry_(geometry),
+      atlas_(scene, geometry),
+      band_count_(scene.bands.band_count()),
+      time_s_(scene.start_s) {
   const int nb = band_count_;
   // Bands any light of the scene ever puts light into.
   std::vector<bool> lit(nb, false);
@@ -123,7 +126,8 @@ void CoupledSolver::BuildGlowPatches() {
       running += std::size_t(std::min<int>(texels.m[t], ms_cap)) * std::min<int>(texels.m[t], ms_cap);
     }
     atlas_.ForEachTexel(static_cast<int>(slot), [&](std::size_t k, int t, float b1, float b2) {
-      g.texel_patch[k] = static_cast<std::uint32_t>(triangle_base[t] + SubTriangleIndex(std::min<int>(texels.m[t], ms_cap), b1, b2));
+      g.texel_patch[k] =
+          static_cast<std::uint32_t>(triangle_base[t] + SubTriangleIndex(std::min<int>(texels.m[t], ms_cap), b1, b2));
     });
     for (int t = 0; t < geometry_.triangle_count(g.object); ++t) {
       const int m = texels.m[t], ms = std::min(m, ms_cap);
@@ -248,8 +252,7 @@ const std::vector<float>& CoupledSolver::UnitIrradiance(Group& g, int l) {
   const double t = geometry_.time_s();
   const LightPose pose = PoseAt(light, t);
   std::vector<float>& unit = g.unit_E[l];
-  if (!unit.empty() && pose == g.unit_E_light_at[l] && g.unit_E_version[l] == geometry_.version())
-    return unit;
+  if (!unit.empty() && pose == g.unit_E_light_at[l] && g.unit_E_version[l] == geometry_.version()) return unit;
   UpdateTexelFrames(g);
   const std::size_t n = g.states.n;
   unit.resize(n);
@@ -302,10 +305,11 @@ bool CoupledSolver::GatherIrradiance(Group& g, double t_s) {
       if (g.unit_sky.empty() || g.unit_sky_version != geometry_.version()) {
         UpdateTexelFrames(g);
         g.unit_sky.resize(n);
-        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 256), [&](const tbb::blocked_range<std::size_t>& range) {
-          for (std::size_t j = range.begin(); j != range.end(); ++j)
-            g.unit_sky[j] = UnitSkyIrradiance(geometry_, env, g.texel_position[j], g.texel_normal[j], kSkyRays, j);
-        });
+        tbb::parallel_for(
+            tbb::blocked_range<std::size_t>(0, n, 256), [&](const tbb::blocked_range<std::size_t>& range) {
+              for (std::size_t j = range.begin(); j != range.end(); ++j)
+                g.unit_sky[j] = UnitSkyIrradiance(geometry_, env, g.texel_position[j], g.texel_normal[j], kSkyRays, j);
+            });
         g.unit_sky_version = geometry_.version();
         ++stats_.irradiance_updates;
         stats_.shadow_rays += n * kSkyRays;
@@ -367,7 +371,8 @@ void CoupledSolver::Step(double t0_s, double t1_s, bool moving) {
       for (std::size_t bi = 0; bi < g.excitation_bands.size(); ++bi) {
         const auto it = std::find(glow_.emission_bands.begin(), glow_.emission_bands.end(), g.excitation_bands[bi]);
         if (it == glow_.emission_bands.end()) continue;
-        const float* glow_E = glow_.E.data() + static_cast<std::size_t>(it - glow_.emission_bands.begin()) * glow_.count;
+        const float* glow_E =
+            glow_.E.data() + static_cast<std::size_t>(it - glow_.emission_bands.begin()) * glow_.count;
         float* E = g.E.data() + bi * n;
         for (std::size_t j = 0; j < n; ++j) E[j] += glow_E[g.texel_patch[j]];
       }

@@ -68,10 +68,10 @@ struct VolumeMedia::Phosphor {
   std::vector<int> excitation_bands, emission_bands, emission_index;
   BatchCoefficients<float> coefficients;
   StateBatch<float> states;
-  std::vector<float> E;          // [n_exc * n]
-  std::vector<float> unit;       // [n]: one light's, scratch
-  std::vector<float> Lp;         // [n_em * n]
-  std::vector<float> Lp_grid;    // [n_em * voxels of the grid]: sampled by the marches
+  std::vector<float> E;                // [n_exc * n]
+  std::vector<float> unit;             // [n]: one light's, scratch
+  std::vector<float> Lp;               // [n_em * n]
+  std::vector<float> Lp_grid;          // [n_em * voxels of the grid]: sampled by the marches
   std::vector<std::int32_t> state_of;  // per grid voxel: index into voxels, or -1
 };
 
@@ -195,24 +195,25 @@ void VolumeMedia::UpdateLight(int vi, int l, const LightPose& pose) {
   const VolumeGrid& grid = grids_[vi];
   const std::vector<std::uint8_t>& needs = needs_light_[vi];
   cache.unit.assign(needs.size(), 0.0f);
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, needs.size(), 512), [&](const tbb::blocked_range<std::size_t>& r) {
-    for (std::size_t j = r.begin(); j != r.end(); ++j) {
-      if (!needs[j]) continue;
-      const Vec3f p = grid.VoxelCentre(j);
-      if (pose.kind == Light::Kind::kPoint) {
-        const Vec3f d = pose.at - p;
-        const float distance2 = d.squaredNorm(), distance = std::sqrt(distance2);
-        if (!(distance > 0)) continue;
-        const Vec3f w = d / distance;
-        if (geometry_.Occluded(p, w, distance * (1 - 1e-4f))) continue;
-        cache.unit[j] = std::exp(-MediaOpticalDepth(p, w, distance)) / distance2;
-      } else {
-        const Vec3f w = -pose.at;
-        if (geometry_.Occluded(p, w, 1e30f)) continue;
-        cache.unit[j] = std::exp(-MediaOpticalDepth(p, w, 1e30f));
-      }
-    }
-  });
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, needs.size(), 512),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      for (std::size_t j = r.begin(); j != r.end(); ++j) {
+                        if (!needs[j]) continue;
+                        const Vec3f p = grid.VoxelCentre(j);
+                        if (pose.kind == Light::Kind::kPoint) {
+                          const Vec3f d = pose.at - p;
+                          const float distance2 = d.squaredNorm(), distance = std::sqrt(distance2);
+                          if (!(distance > 0)) continue;
+                          const Vec3f w = d / distance;
+                          if (geometry_.Occluded(p, w, distance * (1 - 1e-4f))) continue;
+                          cache.unit[j] = std::exp(-MediaOpticalDepth(p, w, distance)) / distance2;
+                        } else {
+                          const Vec3f w = -pose.at;
+                          if (geometry_.Occluded(p, w, 1e30f)) continue;
+                          cache.unit[j] = std::exp(-MediaOpticalDepth(p, w, 1e30f));
+                        }
+                      }
+                    });
   cache.pose = key;
   cache.version = geometry_.version();
   cache.valid = true;
@@ -393,7 +394,8 @@ void VolumeMedia::StepVolume(int vi, double h) {
     lit = true;
   }
   if (lit) {
-    AdvanceBatch(Integrator::kExact, p->coefficients, p->E.data(), n, static_cast<float>(h), p->states, p->Lp.data(), n);
+    AdvanceBatch(Integrator::kExact, p->coefficients, p->E.data(), n, static_cast<float>(h), p->states, p->Lp.data(),
+                 n);
     ++stats_.steps;
   } else {
     DecayBatch(p->coefficients, static_cast<float>(h), p->states, p->Lp.data(), n);  // closed form, any length

@@ -164,8 +164,8 @@ TEST_F(AravisGvFake, AtOnePercentPacketLossEveryFrameReturnedIsWholeAndLostPacke
   LosePackets(0.01, 1);
   const LinkWork work = CaptureWholeFrames(camera, 16);
   const AravisCamera::StreamStatistics stream = camera.stream_statistics();
-  std::printf("1%% loss: %d frames, %d retakes, %llu resend requests, %llu packets resent\n", work.frames,
-              work.retakes, static_cast<unsigned long long>(stream.resend_requests),
+  std::printf("1%% loss: %d frames, %d retakes, %llu resend requests, %llu packets resent\n", work.frames, work.retakes,
+              static_cast<unsigned long long>(stream.resend_requests),
               static_cast<unsigned long long>(stream.resent_packets));
   EXPECT_GT(stream.resend_requests, 0u);  // packet resend is on
   EXPECT_GT(stream.failed_frames, 0u);    // and the fake's losses were seen
@@ -285,12 +285,10 @@ TEST_F(AravisFake, RefusedSettingsAndMissingCamerasAreClearErrors) {
     camera.Capture(1e7, 0);
     FAIL() << "an impossible exposure was accepted";
   } catch (const UserError& e) {
-    EXPECT_NE(std::string(e.what()).find("camera 'Fake_1': exposure: refuses 1e+07 s"), std::string::npos)
-        << e.what();
+    EXPECT_NE(std::string(e.what()).find("camera 'Fake_1': exposure: refuses 1e+07 s"), std::string::npos) << e.what();
   }
   EXPECT_THROW(AravisCamera("No_Such_Camera_42", clock), UserError);
 }
-
 
 TEST_F(AravisFake, PixelFormatsBinningAndTheSoftwareTrigger) {
   AravisCamera camera("Fake_1", clock, 2.0);

@@ -28,7 +28,7 @@ TEST(SimulatedLab, ChargingFollowsTheModel) {
     lab.lab.lights().Set("led405", true);
     return lab.lab.IrradianceNow();
   }();
-  EXPECT_GT(E[0], 0.5);                  // the 405 nm LED lands in 400-437.5 nm ...
+  EXPECT_GT(E[0], 0.5);                              // the 405 nm LED lands in 400-437.5 nm ...
   for (int b = 2; b < 8; ++b) EXPECT_EQ(E[b], 0.0);  // ... and nowhere near the red
   lab.clock.Advance(100);
   const double a = ExcitationRates(lab.material, E, "orange")[0];
@@ -81,7 +81,9 @@ TEST(DecayProtocol, RecordsTimingFramesAndTheSamplesDecayRate) {
   Curve curve{{}, {{}}, {"G"}};
   for (std::size_t m = 0; m < frames.size(); ++m) {
     const double delay = frames[m]["delay_after_light_off_s"];
-    const double expected = m == 0 ? 0.005 : m <= 6 ? 0.005 + 5.0 / std::ldexp(1.0, 7 - static_cast<int>(m)) : 0.005 + 5.0 * (m - 6.0);
+    const double expected = m == 0   ? 0.005
+                            : m <= 6 ? 0.005 + 5.0 / std::ldexp(1.0, 7 - static_cast<int>(m))
+                                     : 0.005 + 5.0 * (m - 6.0);
     EXPECT_NEAR(delays[m], expected, 1e-12);
     EXPECT_NEAR(delay, expected, 1e-9);
     // An exposure never runs into the next frame's slot.

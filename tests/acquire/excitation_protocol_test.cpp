@@ -53,7 +53,8 @@ TEST(ExcitationProtocol, DoublesToThePlateauAndTheFitRecoversTheExcitationRate) 
     const double charge = frame["charge_s"], exposure = frame["exposure_s"];
     if (std::fabs(std::log2(charge) - std::round(std::log2(charge))) < 1e-9) doubling.push_back(charge);
     // The green channel's signal per second of exposure.
-    samples.push_back({charge, frame["delay_after_light_off_s"], exposure, frame["mean_signal_dn"][1].get<double>() / exposure});
+    samples.push_back(
+        {charge, frame["delay_after_light_off_s"], exposure, frame["mean_signal_dn"][1].get<double>() / exposure});
   }
   // Doubled from 1 s until a doubling added less than 3%, then the midpoints.
   ASSERT_GE(doubling.size(), 5u);
@@ -67,8 +68,9 @@ TEST(ExcitationProtocol, DoublesToThePlateauAndTheFitRecoversTheExcitationRate) 
     for (std::size_t j = 1; j < frames.size(); ++j) {
       EXPECT_EQ(frames[j]["tail"], static_cast<int>(j));
       EXPECT_EQ(frames[j]["charge_s"], frames[0]["charge_s"]);
-      EXPECT_GT(frames[j]["delay_after_light_off_s"].get<double>(),
-                frames[j - 1]["delay_after_light_off_s"].get<double>() + frames[j - 1]["exposure_s"].get<double>() - 1e-9);
+      EXPECT_GT(
+          frames[j]["delay_after_light_off_s"].get<double>(),
+          frames[j - 1]["delay_after_light_off_s"].get<double>() + frames[j - 1]["exposure_s"].get<double>() - 1e-9);
       EXPECT_GE(frames[j]["exposure_s"].get<double>(), frames[j - 1]["exposure_s"].get<double>());
     }
   }

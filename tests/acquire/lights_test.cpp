@@ -52,8 +52,7 @@ TEST(LightsOffGuard, SwitchesOffAtScopeEndAndOnException) {
     LightsOffGuard guard(lights);
     lights.Set("a", true);
     throw std::runtime_error("camera disappeared");
-  } catch (const std::runtime_error&) {
-  }
+  } catch (const std::runtime_error&) {}
   EXPECT_FALSE(lights.IsOn("a"));
 }
 

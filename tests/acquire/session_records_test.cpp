@@ -108,8 +108,10 @@ TEST(SessionRecords, FrameRecordsRoundTripAndNameWhatIsWrong) {
   };
   for (const Case& c : cases) {
     nlohmann::json bad = good;
-    if (c.value.is_null()) bad.erase(c.key);
-    else bad[c.key] = c.value;
+    if (c.value.is_null())
+      bad.erase(c.key);
+    else
+      bad[c.key] = c.value;
     try {
       FrameRecord::FromJson(bad, "s/frames.jsonl:1");
       ADD_FAILURE() << c.key << " accepted";
@@ -181,10 +183,10 @@ TEST(SessionRecords, EveryCutOfEveryRecordFileResumesToAWholeSession) {
     const std::string bytes = Bytes(dir / "whole" / name);
     std::vector<std::size_t> cuts;
     for (std::size_t i = 0; i < bytes.size(); ++i)
-      if (bytes[i] == '\n') cuts.push_back(i + 1);                  // at a boundary
+      if (bytes[i] == '\n') cuts.push_back(i + 1);  // at a boundary
     const std::size_t last_start = bytes.rfind('\n', bytes.size() - 2) + 1;
     for (std::size_t inside : {last_start + 1, (last_start + bytes.size()) / 2, bytes.size() - 1})
-      cuts.push_back(inside);                                       // inside the last record
+      cuts.push_back(inside);  // inside the last record
     // Every boundary of frames.jsonl, every fourth of events.jsonl (it has
     // several lines per frame): the boundaries differ only in what is lost.
     const std::size_t stride = std::string(name) == "events.jsonl" ? 4 : 1;
@@ -224,8 +226,8 @@ TEST(SessionRecords, ABadFrameIsFoundSetAsideAndMeasuredAgain) {
       const fs::path frame = s / records.frames[i].file;
       const std::string bytes = Bytes(frame);
       if (damage == 0) WriteBytes(frame, bytes.substr(0, bytes.size() / 2));  // truncated
-      if (damage == 1) fs::remove(frame);                                    // missing
-      if (damage == 2) {                                                     // same size, one byte flipped
+      if (damage == 1) fs::remove(frame);                                     // missing
+      if (damage == 2) {                                                      // same size, one byte flipped
         std::string flipped = bytes;
         flipped[flipped.size() / 2] ^= 0x40;
         WriteBytes(frame, flipped);

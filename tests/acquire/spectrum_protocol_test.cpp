@@ -31,7 +31,8 @@ std::vector<double> ColumnProfile(const Frame& frame) {
     for (int x = 0; x < frame.width; ++x)
       for (int c = 0; c < frame.channels; ++c)
         profile[x] += (frame.pixels[(static_cast<std::size_t>(y) * frame.width + x) * frame.channels + c] -
-                       frame.black_level_dn) / frame.height;
+                       frame.black_level_dn) /
+                      frame.height;
   return profile;
 }
 
@@ -129,7 +130,9 @@ TEST(SpectrumProtocol, TheGlowThroughTheFilterFollowsTheEmissionSpectrum) {
   EXPECT_EQ(frame.black_level_dn, lines.back()["black_level_dn"].get<double>());
   const std::vector<double> profile = ColumnProfile(frame);
   const LinearVariableFilter& lvf = lab.lab.camera_model().lvf;
-  auto column = [&](double nm) { return static_cast<int>((nm - lvf.start_nm) / (lvf.end_nm - lvf.start_nm) * frame.width); };
+  auto column = [&](double nm) {
+    return static_cast<int>((nm - lvf.start_nm) / (lvf.end_nm - lvf.start_nm) * frame.width);
+  };
   EXPECT_GT(profile[column(606)], 20 * std::max(1.0, profile[column(419)]));
   const double peak_nm = lvf.CenterNm(std::max_element(profile.begin(), profile.end()) - profile.begin(), frame.width);
   EXPECT_GT(peak_nm, 575);
@@ -215,7 +218,8 @@ TEST(LvfCalibrationProtocol, ResumingSkipsTheSourcesAlreadyCalibrated) {
   {
     DisappearingCamera camera(lab.lab, 4);
     SessionWriter session(dir / "s", {{"protocol", "lvf-calibration"}});
-    EXPECT_THROW(RunLvfCalibrationProtocol(camera, lab.lab.lights(), lab.clock, session, lab.Rig(), options), UserError);
+    EXPECT_THROW(RunLvfCalibrationProtocol(camera, lab.lab.lights(), lab.clock, session, lab.Rig(), options),
+                 UserError);
   }
   const std::vector<std::string> done = ReadLvfCalibrationDone(dir / "s");
   ASSERT_FALSE(done.empty());

@@ -22,9 +22,9 @@ using testing::RunPhos;
 
 TEST(CaptureDecayCommand, WritesACompleteSession) {
   testing::TempDir dir;
-  auto result = RunPhos("capture decay --device sim --sim-material " +
-                        testing::Fixture("materials/orange.json").string() + " --out " + (dir / "s").string() +
-                        " --charge-s 600 --duration-s 30");
+  auto result =
+      RunPhos("capture decay --device sim --sim-material " + testing::Fixture("materials/orange.json").string() +
+              " --out " + (dir / "s").string() + " --charge-s 600 --duration-s 30");
   ASSERT_EQ(result.exit_code, 0) << result.err;
   EXPECT_NE(result.out.find("12 frames"), std::string::npos) << result.out;  // 6 slots, 6 early frames
   nlohmann::json start = ReadJsonFile(dir / "s" / "session.json");
@@ -70,12 +70,16 @@ TEST(CaptureDecayCommand, BadInputGivesOneLineAndExitCode2) {
       {"capture decay --device aravis" + orange + " --out " + (dir / "a").string(), "--device: expected 'sim'"},
       {"capture decay --out " + (dir / "b").string(), "--sim-material: is required"},
       {"capture decay --device lab --out " + (dir / "b").string(), "needs --lab"},
-      {"capture decay --sim-material " + (dir / "none.json").string() + " --out " + (dir / "c").string(), "cannot open"},
+      {"capture decay --sim-material " + (dir / "none.json").string() + " --out " + (dir / "c").string(),
+       "cannot open"},
       {"capture decay" + orange + " --out " + (dir / "full").string(), "already holds files"},
       {"capture decay" + orange + " --out " + (dir / "d").string() + " --light uv", "unknown channel 'uv'"},
-      {"capture decay" + orange + " --out " + (dir / "e").string() + " --interval-s 0", "interval and duration must be > 0"},
-      {"capture decay" + orange + " --out " + (dir / "e").string() + " --charge-s inf", "--charge-s: expected a finite number, got inf"},
-      {"capture excitation" + orange + " --out " + (dir / "e").string() + " --reset-s nan", "expected a finite number, got nan"},
+      {"capture decay" + orange + " --out " + (dir / "e").string() + " --interval-s 0",
+       "interval and duration must be > 0"},
+      {"capture decay" + orange + " --out " + (dir / "e").string() + " --charge-s inf",
+       "--charge-s: expected a finite number, got inf"},
+      {"capture excitation" + orange + " --out " + (dir / "e").string() + " --reset-s nan",
+       "expected a finite number, got nan"},
   };
   for (const Case& c : cases) {
     auto result = RunPhos(c.arguments);
@@ -102,7 +106,6 @@ TEST(CaptureDecayCommand, ALightTheSampleCannotTakeFailsTheSessionWithTheReason)
   EXPECT_NE(stop["why"].get<std::string>().find("unknown (not measured)"), std::string::npos) << stop.dump();
 }
 
-
 using testing::ReadJsonLines;
 
 // Cuts a session back to its first `keep` frames, as if killed (kill -9)
@@ -111,15 +114,16 @@ void KillAfter(const std::filesystem::path& session, int keep) {
   const std::vector<nlohmann::json> lines = ReadJsonLines(session / "frames.jsonl");
   std::ofstream out(session / "frames.jsonl", std::ios::trunc);
   for (int i = 0; i < keep; ++i) out << lines[i].dump() << "\n";
-  for (std::size_t i = keep; i < lines.size(); ++i) std::filesystem::remove(session / lines[i]["file"].get<std::string>());
+  for (std::size_t i = keep; i < lines.size(); ++i)
+    std::filesystem::remove(session / lines[i]["file"].get<std::string>());
   std::filesystem::remove(session / "stop.json");
 }
 
 TEST(CaptureAllCommand, RunsTheFourProtocolsInOrderAndResumesPartByPart) {
   testing::TempDir dir;
   const std::string out = (dir / "all").string();
-  auto result = RunPhos("capture all --sim-material " + testing::Fixture("materials/orange.json").string() +
-                        " --out " + out + " --charge-s 1800 --duration-s 60");
+  auto result = RunPhos("capture all --sim-material " + testing::Fixture("materials/orange.json").string() + " --out " +
+                        out + " --charge-s 1800 --duration-s 60");
   ASSERT_EQ(result.exit_code, 0) << result.err;
   EXPECT_EQ(ReadJsonFile(dir / "all" / "stop.json")["how"], "complete");
   double previous_start = -1;
@@ -133,7 +137,8 @@ TEST(CaptureAllCommand, RunsTheFourProtocolsInOrderAndResumesPartByPart) {
   }
   // Three lights measured for excitation; the previews are there.
   std::set<std::string> lights;
-  for (const nlohmann::json& line : ReadJsonLines(dir / "all" / "excitation" / "frames.jsonl")) lights.insert(line["light"]);
+  for (const nlohmann::json& line : ReadJsonLines(dir / "all" / "excitation" / "frames.jsonl"))
+    lights.insert(line["light"]);
   EXPECT_EQ(lights, (std::set<std::string>{"led420", "led456", "led494"}));
   for (const std::string preview : {"decay-frames.png", "spectrum-frames.png"})
     EXPECT_GT(std::filesystem::file_size(dir / "all" / preview), 1000u) << preview;
@@ -163,7 +168,8 @@ TEST(CaptureAllCommand, RunsTheFourProtocolsInOrderAndResumesPartByPart) {
   // (Each measurement is a frame and its tail of 6: one light-off time.)
   std::set<std::pair<std::string, double>> seen;
   int cut = 0;
-  for (const testing::ExcitationCharge& charge : testing::ExcitationCharges(dir / "all" / "excitation" / "frames.jsonl")) {
+  for (const testing::ExcitationCharge& charge :
+       testing::ExcitationCharges(dir / "all" / "excitation" / "frames.jsonl")) {
     if (charge.frames < 7) {
       ++cut;  // the one the kill cut off, taken again whole
       continue;
@@ -177,16 +183,18 @@ TEST(CaptureAllCommand, RunsTheFourProtocolsInOrderAndResumesPartByPart) {
 TEST(CaptureResumeCommand, SaysWhatCannotBeResumed) {
   testing::TempDir dir;
   const std::string orange = " --sim-material " + testing::Fixture("materials/orange.json").string();
-  ASSERT_EQ(RunPhos("capture decay" + orange + " --out " + (dir / "d").string() + " --charge-s 60 --duration-s 20").exit_code, 0);
+  ASSERT_EQ(
+      RunPhos("capture decay" + orange + " --out " + (dir / "d").string() + " --charge-s 60 --duration-s 20").exit_code,
+      0);
   auto done = RunPhos("capture resume " + (dir / "d").string());
   EXPECT_EQ(done.exit_code, 0);
   EXPECT_NE(done.out.find("completed already"), std::string::npos) << done.out;
   KillAfter(dir / "d", 2);
-  EXPECT_TRUE(testing::IsOneLineUserError(RunPhos("capture resume " + (dir / "d").string()),
-                                          "a decay cannot be continued"));
+  EXPECT_TRUE(
+      testing::IsOneLineUserError(RunPhos("capture resume " + (dir / "d").string()), "a decay cannot be continued"));
   EXPECT_EQ(ReadJsonLines(dir / "d" / "frames.jsonl").size(), 2u);  // kept
-  EXPECT_TRUE(testing::IsOneLineUserError(RunPhos("capture resume " + (dir / "nothing").string()),
-                                          "is not a capture session"));
+  EXPECT_TRUE(
+      testing::IsOneLineUserError(RunPhos("capture resume " + (dir / "nothing").string()), "is not a capture session"));
 }
 
 TEST(CaptureResumeCommand, ARecordThatDoesNotReadIsNotRepairedAndNothingChanges) {
@@ -195,7 +203,9 @@ TEST(CaptureResumeCommand, ARecordThatDoesNotReadIsNotRepairedAndNothingChanges)
   // names it and leaves the folder as it was.
   testing::TempDir dir;
   const std::string orange = " --sim-material " + testing::Fixture("materials/orange.json").string();
-  ASSERT_EQ(RunPhos("capture decay" + orange + " --out " + (dir / "d").string() + " --charge-s 60 --duration-s 20").exit_code, 0);
+  ASSERT_EQ(
+      RunPhos("capture decay" + orange + " --out " + (dir / "d").string() + " --charge-s 60 --duration-s 20").exit_code,
+      0);
   std::vector<nlohmann::json> lines = ReadJsonLines(dir / "d" / "frames.jsonl");
   ASSERT_GE(lines.size(), 3u);
   lines[1]["exposure_s"] = "long";
@@ -203,10 +213,10 @@ TEST(CaptureResumeCommand, ARecordThatDoesNotReadIsNotRepairedAndNothingChanges)
   for (const nlohmann::json& line : lines) text += line.dump() + "\n";
   testing::WriteText(dir / "d" / "frames.jsonl", text);
   const std::string stop = testing::ReadText(dir / "d" / "stop.json");
-  EXPECT_TRUE(testing::IsOneLineUserError(RunPhos("capture resume " + (dir / "d").string()),
-                                          "frames.jsonl:2: exposure_s"));
-  EXPECT_TRUE(testing::IsOneLineUserError(RunPhos("capture resume " + (dir / "d").string()),
-                                          "cannot be repaired by resume"));
+  EXPECT_TRUE(
+      testing::IsOneLineUserError(RunPhos("capture resume " + (dir / "d").string()), "frames.jsonl:2: exposure_s"));
+  EXPECT_TRUE(
+      testing::IsOneLineUserError(RunPhos("capture resume " + (dir / "d").string()), "cannot be repaired by resume"));
   EXPECT_EQ(testing::ReadText(dir / "d" / "frames.jsonl"), text);
   EXPECT_EQ(testing::ReadText(dir / "d" / "stop.json"), stop);
 }
@@ -227,11 +237,13 @@ TEST(CaptureSpectrumAndCalibrationCommands, WriteCompleteSessions) {
 // A lab config for Aravis's cameras and lights that only record (no GPIO here).
 std::string WriteLab(const testing::TempDir& dir, const std::string& camera, const std::string& extra = "") {
   const std::string text = R"({"schema": "phos.lab/1",
-    "camera": {"aravis": ")" + camera + R"(", "region": [0, 0, 128, 96], "trigger": "software", "timeout_s": 2},
+    "camera": {"aravis": ")" +
+                           camera + R"(", "region": [0, 0, 128, 96], "trigger": "software", "timeout_s": 2},
     "lights": {"backend": "none", "channels": {"led405": {"line": 17}, "lamp": {"line": 22, "active_low": true},
                "hg436": {"line": 23}, "hg546": {"line": 24}}},
     "calibration_lines": [{"light": "hg436", "wavelength_nm": 435.8}, {"light": "hg546", "wavelength_nm": 546.1}],
-    "rig": "fixed")" + extra + "}";
+    "rig": "fixed")" + extra +
+                           "}";
   testing::WriteText(dir / "lab.json", text);
   return (dir / "lab.json").string();
 }
@@ -247,9 +259,10 @@ TEST(CaptureWithALabConfig, DrivesTheFakeCameraInRealTime) {
                  R"("led405": {"line": 17, "irradiance_csv": "led405.csv"})");
     testing::WriteText(lab, text);
   }
-  auto result = RunPhos("capture decay --lab " + lab + " --out " + (dir / "s").string() +
-                        " --charge-s 0.2 --interval-s 0.25 --duration-s 1 --initial-exposure-s 0.01 --max-exposure-s 0.05"
-                        " --early-frames 0");
+  auto result =
+      RunPhos("capture decay --lab " + lab + " --out " + (dir / "s").string() +
+              " --charge-s 0.2 --interval-s 0.25 --duration-s 1 --initial-exposure-s 0.01 --max-exposure-s 0.05"
+              " --early-frames 0");
   ASSERT_EQ(result.exit_code, 0) << result.err;
   nlohmann::json start = ReadJsonFile(dir / "s" / "session.json");
   EXPECT_EQ(start["devices"]["device"], "lab");
@@ -301,8 +314,8 @@ TEST(CaptureWithALabConfig, BadConfigsAndMissingDevicesAreOneLine) {
     name.append(std::to_string(n++)).append(".json");
     const std::filesystem::path lab = dir / name;
     testing::WriteText(lab, c.config);
-    auto result = RunPhos("capture decay --lab " + lab.string() + " --out " + (dir / name).replace_extension(".session").string() +
-                          " --charge-s 0.1 --duration-s 0.5");
+    auto result = RunPhos("capture decay --lab " + lab.string() + " --out " +
+                          (dir / name).replace_extension(".session").string() + " --charge-s 0.1 --duration-s 0.5");
     EXPECT_TRUE(testing::IsOneLineUserError(result, c.expected)) << c.config;
   }
 }
@@ -314,31 +327,36 @@ TEST(CaptureWithALabConfig, ACameraThatDisappearsMidRunFailsTheSessionAndKeepsIt
   // do: it waits its turn on their lock file (ctest runs both side by side).
   testing::TempDir dir;
   const std::string lab = WriteLab(dir, "127.0.0.1");
-  const std::string script = "exec 9>>/tmp/phos-aravis-gv-fake.lock; flock 9; arv-fake-gv-camera-0.8 -i 127.0.0.1 >/dev/null 2>&1 & F=$!; sleep 0.7; "
-                             "(sleep 2; kill -9 $F) & " + std::string(PHOS_BINARY) + " capture decay --lab " + lab +
-                             " --out " + (dir / "s").string() +
-                             " --charge-s 0.1 --interval-s 0.2 --duration-s 30 --initial-exposure-s 0.01 "
-                             "--max-exposure-s 0.02 >" + (dir / "out").string() + " 2>" + (dir / "err").string() +
-                             "; echo $? >" + (dir / "rc").string() + "; kill -9 $F 2>/dev/null; wait";
+  const std::string script =
+      "exec 9>>/tmp/phos-aravis-gv-fake.lock; flock 9; arv-fake-gv-camera-0.8 -i 127.0.0.1 >/dev/null 2>&1 & F=$!; "
+      "sleep 0.7; "
+      "(sleep 2; kill -9 $F) & " +
+      std::string(PHOS_BINARY) + " capture decay --lab " + lab + " --out " + (dir / "s").string() +
+      " --charge-s 0.1 --interval-s 0.2 --duration-s 30 --initial-exposure-s 0.01 "
+      "--max-exposure-s 0.02 >" +
+      (dir / "out").string() + " 2>" + (dir / "err").string() + "; echo $? >" + (dir / "rc").string() +
+      "; kill -9 $F 2>/dev/null; wait";
   ASSERT_EQ(std::system(("bash -c '" + script + "'").c_str()), 0);
   EXPECT_EQ(testing::ReadText(dir / "rc"), "2\n") << testing::ReadText(dir / "err");
   EXPECT_EQ(testing::LineCount(testing::ReadText(dir / "err")), 1) << testing::ReadText(dir / "err");
-  EXPECT_NE(testing::ReadText(dir / "err").find("camera '127.0.0.1'"), std::string::npos) << testing::ReadText(dir / "err");
+  EXPECT_NE(testing::ReadText(dir / "err").find("camera '127.0.0.1'"), std::string::npos)
+      << testing::ReadText(dir / "err");
   nlohmann::json stop = ReadJsonFile(dir / "s" / "stop.json");
   EXPECT_EQ(stop["how"], "failed");
   EXPECT_NE(stop["why"].get<std::string>().find("camera '127.0.0.1'"), std::string::npos) << stop.dump();
   const std::vector<nlohmann::json> frames = ReadJsonLines(dir / "s" / "frames.jsonl");
   EXPECT_GE(frames.size(), 3u);  // what came before the camera went is kept
   EXPECT_EQ(stop["frames"].get<std::size_t>(), frames.size());
-  for (const nlohmann::json& frame : frames) EXPECT_TRUE(std::filesystem::exists(dir / "s" / frame["file"].get<std::string>()));
+  for (const nlohmann::json& frame : frames)
+    EXPECT_TRUE(std::filesystem::exists(dir / "s" / frame["file"].get<std::string>()));
 }
-
 
 TEST(CaptureDecayCommand, AMonoCameraFromItsSensitivityCsv) {
   testing::TempDir dir;
   const std::string orange = " --sim-material " + testing::Fixture("materials/orange.json").string();
-  auto result = RunPhos("capture decay" + orange + " --sim-camera " + testing::Fixture("cameras/mono-cmos.csv").string() +
-                        " --out " + (dir / "s").string() + " --charge-s 600 --duration-s 20");
+  auto result =
+      RunPhos("capture decay" + orange + " --sim-camera " + testing::Fixture("cameras/mono-cmos.csv").string() +
+              " --out " + (dir / "s").string() + " --charge-s 600 --duration-s 20");
   ASSERT_EQ(result.exit_code, 0) << result.err;
   const std::vector<nlohmann::json> frames = ReadJsonLines(dir / "s" / "frames.jsonl");
   ASSERT_FALSE(frames.empty());
@@ -346,9 +364,9 @@ TEST(CaptureDecayCommand, AMonoCameraFromItsSensitivityCsv) {
   EXPECT_EQ(ReadFrame(dir / "s", frames[0]).channel_names, std::vector<std::string>{"Y"});
   EXPECT_GT(frames[0]["mean_signal_dn"][0].get<double>(), 10.0);  // it sees the glow
   testing::WriteText(dir / "bad.csv", "wavelength_nm,Y\n500,1\n490,1\n");
-  EXPECT_TRUE(testing::IsOneLineUserError(
-      RunPhos("capture decay" + orange + " --sim-camera " + (dir / "bad.csv").string() + " --out " + (dir / "t").string()),
-      "wavelength_nm: must increase"));
+  EXPECT_TRUE(testing::IsOneLineUserError(RunPhos("capture decay" + orange + " --sim-camera " +
+                                                  (dir / "bad.csv").string() + " --out " + (dir / "t").string()),
+                                          "wavelength_nm: must increase"));
 }
 
 }  // namespace

@@ -40,9 +40,11 @@ TEST(EditCommand, KeIsUnknownWhereNoLightReaches) {
   std::string irradiance;
   for (int f = 0; f < 60; ++f) irradiance += std::string(f ? ", " : "") + (f < 20 ? "[1, 0, 0]" : "[0, 0, 0]");
   WriteText(dir / "c.json", R"({"schema": "phos.constraints/1", "bands_nm": [380, 490, 580, 720], "dt_s": 0.5,
-    "irradiance": [)" + irradiance + R"(], "albedo": [0.5, 0.5, 0.5], "states": 1,
+    "irradiance": [)" + irradiance +
+                                R"(], "albedo": [0.5, 0.5, 0.5], "states": 1,
     "constraints": [{"t_s": 11, "radiance": [0.02, 0.06, 0.01]}, {"t_s": 25, "radiance": [0.01, 0.03, 0.005]}]})");
-  const CommandResult text = RunPhos("edit solve " + (dir / "c.json").string() + " --no-baseline --out " + (dir / "m.json").string());
+  const CommandResult text =
+      RunPhos("edit solve " + (dir / "c.json").string() + " --no-baseline --out " + (dir / "m.json").string());
   ASSERT_EQ(text.exit_code, 0) << text.err;
   EXPECT_NE(text.out.find(", unknown, unknown]"), std::string::npos) << text.out;
   const Material m = LoadMaterial(dir / "m.json");

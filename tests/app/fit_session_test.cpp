@@ -65,7 +65,8 @@ void ExpectRecovered(const Recovery& r) {
   const nlohmann::json& joint = r.result["joint"];
   const double sequential = joint["weighted_ss_sequential"]["decay"].get<double>() +
                             joint["weighted_ss_sequential"]["excitation"].get<double>();
-  const double together = joint["weighted_ss_joint"]["decay"].get<double>() + joint["weighted_ss_joint"]["excitation"].get<double>();
+  const double together =
+      joint["weighted_ss_joint"]["decay"].get<double>() + joint["weighted_ss_joint"]["excitation"].get<double>();
   EXPECT_LE(together, sequential * (1 + 1e-9));
   EXPECT_TRUE(joint["converged"].get<bool>());
 }
@@ -77,7 +78,8 @@ std::pair<int, int> Covered(const Recovery& r) {
   for (std::size_t i = 0; i < states.size() && i < r.truth["states"].size(); ++i) {
     const nlohmann::json& t = r.truth["states"][i];
     if (!states[i]["kr_stderr"].is_null()) {
-      covered += std::fabs(states[i]["kr"].get<double>() - t["kr"].get<double>()) <= states[i]["kr_stderr"].get<double>();
+      covered +=
+          std::fabs(states[i]["kr"].get<double>() - t["kr"].get<double>()) <= states[i]["kr_stderr"].get<double>();
       ++total;
     }
     for (int b = 0; b < 8; ++b) {
@@ -108,9 +110,9 @@ TEST_P(FitSessionEndToEnd, RecoversTheMaterialTheSampleWasMadeOf) {
   }
   const std::string report = testing::ReadText(dir / "r.html");
   EXPECT_GE(std::count(report.begin(), report.end(), '<'), 100);
-  for (const std::string section : {"<h2>Decay</h2>", "<h2>Excitation</h2>", "<h2>LVF calibration</h2>",
-                                    "<h2>Emission spectrum</h2>", "<h2>Joint refinement</h2>",
-                                    "<h2>Against the known material</h2>", "1/s per unit band-integrated irradiance"})
+  for (const std::string section :
+       {"<h2>Decay</h2>", "<h2>Excitation</h2>", "<h2>LVF calibration</h2>", "<h2>Emission spectrum</h2>",
+        "<h2>Joint refinement</h2>", "<h2>Against the known material</h2>", "1/s per unit band-integrated irradiance"})
     EXPECT_NE(report.find(section), std::string::npos) << section;
   EXPECT_NE(report.find("BIC per nc"), std::string::npos);
 }
@@ -204,21 +206,23 @@ TEST(FitSessionCommand, PartialSessionsAndBadInput) {
   EXPECT_TRUE(testing::IsOneLineUserError(
       RunPhos("fit session " + (dir / "none").string() + " --out " + (dir / "x.json").string()),
       "is not a capture session"));
-  EXPECT_TRUE(testing::IsOneLineUserError(
-      RunPhos("fit session " + (dir / "c").string() + " --out " + (dir / "x.json").string() + " --compare " +
-              (dir / "nothing.json").string()),
-      "cannot open"));
+  EXPECT_TRUE(
+      testing::IsOneLineUserError(RunPhos("fit session " + (dir / "c").string() + " --out " +
+                                          (dir / "x.json").string() + " --compare " + (dir / "nothing.json").string()),
+                                  "cannot open"));
 }
-
 
 TEST(FitBatchCommand, FitsInParallelResumesAndSummarizes) {
   testing::TempDir dir;
   for (const std::string name : {"orange", "white", "yellow"})
     ASSERT_EQ(RunPhos("capture all --sim-material " + testing::Fixture("materials/" + name + ".json").string() +
-                      " --out " + (dir / "captures" / name).string()).exit_code, 0);
+                      " --out " + (dir / "captures" / name).string())
+                  .exit_code,
+              0);
   std::filesystem::create_directories(dir / "captures" / "broken");
   testing::WriteText(dir / "captures" / "broken" / "session.json", "{}");
-  const std::string command = "fit batch " + (dir / "captures").string() + " --out " + (dir / "out").string() + " --jobs 2";
+  const std::string command =
+      "fit batch " + (dir / "captures").string() + " --out " + (dir / "out").string() + " --jobs 2";
 
   auto first = RunPhos(command);
   EXPECT_EQ(first.exit_code, 2);  // one item failed; the others were fitted
@@ -228,7 +232,8 @@ TEST(FitBatchCommand, FitsInParallelResumesAndSummarizes) {
     EXPECT_TRUE(std::filesystem::exists(dir / "out" / (name + ".json"))) << name;
     EXPECT_TRUE(std::filesystem::exists(dir / "out" / (name + ".html"))) << name;
   }
-  EXPECT_NE(testing::ReadText(dir / "out" / "broken.failed.txt").find("schema: missing"), std::string::npos);  // the typed reader names the key
+  EXPECT_NE(testing::ReadText(dir / "out" / "broken.failed.txt").find("schema: missing"),
+            std::string::npos);  // the typed reader names the key
   const std::string summary = testing::ReadText(dir / "out" / "summary.csv");
   EXPECT_EQ(testing::LineCount(summary), 5);  // header + 4 items
 
@@ -252,13 +257,14 @@ TEST(FitBatchCommand, FitsInParallelResumesAndSummarizes) {
             std::string::npos);
 }
 
-
 TEST(FitMapCommand, MapsASpatiallyVaryingSample) {
   // Orange with a disk of blue in the middle: the map must show each its kr.
   testing::TempDir dir;
   ASSERT_EQ(RunPhos("capture decay --sim-material " + testing::Fixture("materials/orange.json").string() +
                     " --sim-inset " + testing::Fixture("materials/blue.json").string() + " --sim-size 80x60 --out " +
-                    (dir / "s").string() + " --charge-s 1800").exit_code, 0);
+                    (dir / "s").string() + " --charge-s 1800")
+                .exit_code,
+            0);
   auto result = RunPhos("fit map " + (dir / "s").string() + " --out " + (dir / "map").string());
   ASSERT_EQ(result.exit_code, 0) << result.err;
   auto in = OIIO::ImageInput::open((dir / "map" / "decay-map.exr").string());
@@ -270,7 +276,9 @@ TEST(FitMapCommand, MapsASpatiallyVaryingSample) {
   ASSERT_GE(kr_channel, 0);
   std::vector<float> pixels(static_cast<std::size_t>(spec.width) * spec.height * spec.nchannels);
   ASSERT_TRUE(in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, pixels.data()));
-  auto kr = [&](int x, int y) { return pixels[(static_cast<std::size_t>(y) * spec.width + x) * spec.nchannels + kr_channel]; };
+  auto kr = [&](int x, int y) {
+    return pixels[(static_cast<std::size_t>(y) * spec.width + x) * spec.nchannels + kr_channel];
+  };
   // Medians of a 10 x 10 patch in the centre (blue, 0.032/s) and in a corner (orange, 0.015/s).
   auto median = [&](int x0, int y0) {
     std::vector<float> v;
@@ -282,8 +290,9 @@ TEST(FitMapCommand, MapsASpatiallyVaryingSample) {
   EXPECT_NEAR(median(35, 25), 0.032, 0.03 * 0.032);
   EXPECT_NEAR(median(2, 2), 0.015, 0.03 * 0.015);
   EXPECT_TRUE(std::filesystem::exists(dir / "map" / "kr.png"));
-  EXPECT_TRUE(testing::IsOneLineUserError(RunPhos("fit map " + (dir / "nothing").string() + " --out " +
-                                                  (dir / "m2").string()), "is not a capture session"));
+  EXPECT_TRUE(
+      testing::IsOneLineUserError(RunPhos("fit map " + (dir / "nothing").string() + " --out " + (dir / "m2").string()),
+                                  "is not a capture session"));
 
   // Downstream readers check frames as resume does (docs/capture.md): a torn
   // last record is left out with a note; a truncated frame is refused in one
@@ -297,9 +306,9 @@ TEST(FitMapCommand, MapsASpatiallyVaryingSample) {
   EXPECT_NE(torn.out.find("torn last line left out"), std::string::npos) << torn.out;
   std::filesystem::copy(dir / "s", dir / "cut", std::filesystem::copy_options::recursive);
   std::filesystem::resize_file(dir / "cut" / "frames" / "000005.tif", 1000);
-  EXPECT_TRUE(testing::IsOneLineUserError(
-      RunPhos("fit map " + (dir / "cut").string() + " --out " + (dir / "m4").string()),
-      "frames/000005.tif: is 1000 bytes where its record says"));
+  EXPECT_TRUE(
+      testing::IsOneLineUserError(RunPhos("fit map " + (dir / "cut").string() + " --out " + (dir / "m4").string()),
+                                  "frames/000005.tif: is 1000 bytes where its record says"));
   EXPECT_FALSE(std::filesystem::exists(dir / "m4"));
   std::filesystem::copy(dir / "s", dir / "tiny", std::filesystem::copy_options::recursive);
   std::string tiny = frames;

@@ -38,7 +38,8 @@ double PlainRss(const std::string& csv_text, const nlohmann::json& fit) {
   while (std::getline(in, line)) {
     const double t = std::stod(line.substr(0, line.find(','))), y = std::stod(line.substr(line.find(',') + 1));
     double model = 0;
-    for (const auto& k : fit["components"]) model += k["amplitude"].get<double>() * std::exp(-k["rate"].get<double>() * t);
+    for (const auto& k : fit["components"])
+      model += k["amplitude"].get<double>() * std::exp(-k["rate"].get<double>() * t);
     rss += (y - model) * (y - model);
   }
   return rss;
@@ -121,7 +122,8 @@ TEST(FitCommands, BadInputGivesOneLineAndExitCode2) {
       {"fit decay-curve --csv " + (dir / "header.csv").string() + " --json", "header.csv: has 0 samples"},
       {"fit decay-curve --csv " + (dir / "one.csv").string() + " --json", "one.csv: has 1 sample"},
       {"fit decay-curve --csv " + (dir / "flat.csv").string() + " --components 1 --json", "every value is the same"},
-      {"fit decay-curve --csv " + (dir / "nan.csv").string() + " --json", "nan.csv: line 3, column value: expected a finite number"},
+      {"fit decay-curve --csv " + (dir / "nan.csv").string() + " --json",
+       "nan.csv: line 3, column value: expected a finite number"},
       {"fit decay-curve --csv " + (dir / "rising.csv").string() + " --components 1 --json", "no decaying component"},
       {"fit decay-curve --csv " + (dir / "onecol.csv").string() + " --json", "expected columns t,value"},
       {"fit decay-curve --csv " + (dir / "negative.csv").string() + " --components 1 --json", "no decaying component"},
@@ -130,9 +132,11 @@ TEST(FitCommands, BadInputGivesOneLineAndExitCode2) {
       {"fit decay-curve --csv " + good + " --weights gauss --json", "--weights: expected none or poisson"},
       {"fit charge-curve --csv " + (dir / "flat.csv").string() + " --json", "no growth to fit"},
       {"fit charge-curve --csv " + good + " --weights x --json", "--weights"},
-      {"fit charge-curve --csv " + (dir / "negative-t.csv").string() + " --json", "negative-t.csv: t: sample 1 is at a negative time"},
+      {"fit charge-curve --csv " + (dir / "negative-t.csv").string() + " --json",
+       "negative-t.csv: t: sample 1 is at a negative time"},
       {"fit decay-curve " + (dir / "negative-t.csv").string(), "negative-t.csv: t: sample 1 is at a negative time"},
-      {"fit decay-curve " + (dir / "few-times.csv").string() + " --components 1", "few-times.csv: t: has 8 samples at only 2 distinct times"},
+      {"fit decay-curve " + (dir / "few-times.csv").string() + " --components 1",
+       "few-times.csv: t: has 8 samples at only 2 distinct times"},
       {"fit decay-curve " + good + " --from 100", "good.csv: --from: no sample in the window"},
       {"fit decay-curve " + good + " --from 5 --to 1", "--from: 5 s is after --to 1 s"},
       {"fit decay-curve " + good + " " + good + " --plot p.svg", "--plot: draws one curve; got 2 files"},
@@ -208,7 +212,8 @@ TEST(FitCurveFiles, ShuffledReplicatesGiveTheSortedResult) {
   EXPECT_EQ(sorted["time_order"]["reordered"], false);
   EXPECT_EQ(sorted["time_order"]["repeated_times"], 40);
   auto text = RunPhos("fit decay-curve " + fixture);
-  EXPECT_NE(text.out.find("  sorted 120 samples by time; 40 repeated times (replicates)\n"), std::string::npos) << text.out;
+  EXPECT_NE(text.out.find("  sorted 120 samples by time; 40 repeated times (replicates)\n"), std::string::npos)
+      << text.out;
   text = RunPhos("fit decay-curve " + (dir / "sorted.csv").string());
   EXPECT_NE(text.out.find("  120 samples; 40 repeated times (replicates)\n"), std::string::npos) << text.out;
 }

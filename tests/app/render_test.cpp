@@ -16,8 +16,8 @@ const std::string kCornell = Fixture("scenes/cornell-phosphor.json").string();
 
 TEST(RenderCommand, JsonFramesFollowTheContract) {
   TempDir dir;
-  const CommandResult r = RunPhos("render " + kCornell + " --out " + dir.path().string() +
-                                  " --times 20,40 --width 40 --height 30 --json");
+  const CommandResult r =
+      RunPhos("render " + kCornell + " --out " + dir.path().string() + " --times 20,40 --width 40 --height 30 --json");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const nlohmann::json json = nlohmann::json::parse(r.out);
   ASSERT_EQ(json["frames"].size(), 2u);
@@ -110,7 +110,8 @@ TEST(RenderCommand, BadInputIsOneLineAndExitTwo) {
   TempDir dir;
   const std::string out = " --out " + dir.path().string();
   EXPECT_TRUE(IsOneLineUserError(RunPhos("render /nonexistent/scene.json" + out), "scene.json"));
-  EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + kCornell + out + " --transport magic"), "unknown transport 'magic'"));
+  EXPECT_TRUE(
+      IsOneLineUserError(RunPhos("render " + kCornell + out + " --transport magic"), "unknown transport 'magic'"));
   EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + kCornell + out + " --times 5,x"), "--times"));
   EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + kCornell + out + " --times -1"), "before the scene's start"));
   // Out of order is refused, not re-sorted (frames are numbered as given).

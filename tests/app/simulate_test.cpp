@@ -87,20 +87,26 @@ TEST(SimulateCommand, BadInputGivesOneLineAndExitCode2) {
   testing::WriteText(dir / "negative.json", text);
   const std::string common = " --charge-s 1 --decay-s 1 --dt 0.1";
   const BadInput cases[] = {
-      {"simulate --material " + (dir / "none.json").string() + common + " --irradiance 0", "none.json: cannot open the file"},
-      {"simulate --material " + (dir / "broken.json").string() + common + " --irradiance 0", "broken.json: not valid JSON"},
+      {"simulate --material " + (dir / "none.json").string() + common + " --irradiance 0",
+       "none.json: cannot open the file"},
+      {"simulate --material " + (dir / "broken.json").string() + common + " --irradiance 0",
+       "broken.json: not valid JSON"},
       {"simulate --material " + (dir / "negative.json").string() + common + " --irradiance 0",
        "negative.json: states[0].kr: expected a number >= 0, got -0.227"},
-      {"simulate --material " + Green() + common + " --irradiance 1", "green.json: states[0].ke[3]: unknown (not measured)"},
+      {"simulate --material " + Green() + common + " --irradiance 1",
+       "green.json: states[0].ke[3]: unknown (not measured)"},
       {"simulate --material " + testing::Fixture("materials/bottle.json").string() + common + " --irradiance 1",
        "cannot be charged"},
       {"simulate --material " + Green() + common + " --irradiance 1,2", "--irradiance: expected 1 value or 8"},
       {"simulate --material " + Green() + common + " --irradiance x", "--irradiance: expected a number"},
       {"simulate --material " + Green() + common + " --irradiance -1", "--irradiance: expected values in [0"},
-      {"simulate --material " + Green() + " --charge-s 1 --decay-s 1 --dt 0 --irradiance 0", "--dt: expected a step > 0"},
+      {"simulate --material " + Green() + " --charge-s 1 --decay-s 1 --dt 0 --irradiance 0",
+       "--dt: expected a step > 0"},
       {"simulate --material " + Green() + " --charge-s -1 --dt 1 --irradiance 0", "--charge-s: expected seconds >= 0"},
-      {"simulate --material " + Green() + common + " --irradiance 0 --integrator leapfrog", "--integrator: expected exact"},
-      {"simulate --material " + Green() + " --charge-s 100 --irradiance 100,100,100,0,0,0,0,0 --dt 1 --integrator euler",
+      {"simulate --material " + Green() + common + " --irradiance 0 --integrator leapfrog",
+       "--integrator: expected exact"},
+      {"simulate --material " + Green() +
+           " --charge-s 100 --irradiance 100,100,100,0,0,0,0,0 --dt 1 --integrator euler",
        "exceeds the stability limit 2"},
       {"simulate --material " + Green() + common + " --irradiance 0 --bogus", "bogus"},
       {"simulate" + common, "--material is required"},
@@ -137,7 +143,8 @@ TEST(SimulateCommand, SamplesTheEndWhenTheStepDoesNotDivideIt) {
   EXPECT_TRUE(testing::RelativelyNear(j["r"][7][0].get<double>(), end, 1e-12));
   EXPECT_TRUE(testing::RelativelyNear(j["L"][7][3].get<double>(), 0.64 * kr * static_cast<double>(end), 1e-12));
   // Ending inside the charge (no decay) too.
-  auto charge = RunPhos("simulate --material " + Green() + " --charge-s 10 --irradiance " + kBlueLight + " --dt 4 --json");
+  auto charge =
+      RunPhos("simulate --material " + Green() + " --charge-s 10 --irradiance " + kBlueLight + " --dt 4 --json");
   ASSERT_EQ(charge.exit_code, 0) << charge.err;
   nlohmann::json c = nlohmann::json::parse(charge.out);
   EXPECT_EQ(c["t"].get<std::vector<double>>(), (std::vector<double>{0, 4, 8, 10}));
@@ -171,7 +178,8 @@ TEST(PhosCommand, BarePhosPrintsItsUsageAndHelpListsEveryCommand) {
 }
 
 TEST(PhosCommand, CommandsRunTheSameWithoutTheDispatcher) {
-  const std::string args = " --material " + Green() + " --charge-s 2 --irradiance " + kBlueLight + " --decay-s 2 --json";
+  const std::string args =
+      " --material " + Green() + " --charge-s 2 --irradiance " + kBlueLight + " --decay-s 2 --json";
   auto through = RunPhos("simulate" + args);
   ASSERT_EQ(through.exit_code, 0) << through.err;
   testing::TempDir dir;
@@ -193,7 +201,8 @@ TEST(PhosCommand, QuickCommandsLinkNoImageRenderOrCameraLibrary) {
   const std::array<const char*, 4> heavy = {"libOpenImageIO", "libembree", "libaravis", "libopencv"};
   for (const char* executable : {"phos", "phos-simulate", "phos-plot", "phos-fit-curve", "phos-edit"}) {
     const std::string libraries = SharedLibraries(executable);
-    for (const char* library : heavy) EXPECT_EQ(libraries.find(library), std::string::npos) << executable << ": " << library;
+    for (const char* library : heavy)
+      EXPECT_EQ(libraries.find(library), std::string::npos) << executable << ": " << library;
   }
   // The check sees them where they are.
   EXPECT_NE(SharedLibraries("phos-render").find("libembree"), std::string::npos);
@@ -203,8 +212,9 @@ TEST(PlotCommand, DrawsOneLinePerCsv) {
   testing::TempDir dir;
   for (const char* name : {"green", "orange"}) {
     auto r = RunPhos("simulate --material " + testing::Fixture(std::string("materials/") + name + ".json").string() +
-                     " --charge-s 10 --irradiance 1,1,1,0,0,0,0,0 --decay-s 30 --out " + (dir / (std::string(name) + ".csv")).string() +
-                     " --plot " + (dir / (std::string(name) + ".svg")).string());
+                     " --charge-s 10 --irradiance 1,1,1,0,0,0,0,0 --decay-s 30 --out " +
+                     (dir / (std::string(name) + ".csv")).string() + " --plot " +
+                     (dir / (std::string(name) + ".svg")).string());
     ASSERT_EQ(r.exit_code, 0) << r.err;
     EXPECT_NE(testing::ReadText(dir / (std::string(name) + ".svg")).find("<svg"), std::string::npos);
   }
@@ -239,7 +249,8 @@ TEST(PlotCommand, LinesTakeTheColourOfTheirGlowAndTheLogAxisFollowsTheData) {
     for (int i = 0; i < 3; ++i) c[i] = std::strtol(hex.substr(1 + 2 * i, 2).c_str(), nullptr, 16);
     return c;
   };
-  const auto green = rgb(j["series"][0]["color"]), red = rgb(j["series"][1]["color"]), blue = rgb(j["series"][2]["color"]);
+  const auto green = rgb(j["series"][0]["color"]), red = rgb(j["series"][1]["color"]),
+             blue = rgb(j["series"][2]["color"]);
   EXPECT_TRUE(green[1] > green[0] && green[1] > green[2]) << j["series"][0]["color"];
   EXPECT_TRUE(red[0] > red[1] && red[0] > red[2]) << j["series"][1]["color"];
   EXPECT_TRUE(blue[2] > blue[0] && blue[2] > blue[1]) << j["series"][2]["color"];
@@ -250,7 +261,8 @@ TEST(PlotCommand, LinesTakeTheColourOfTheirGlowAndTheLogAxisFollowsTheData) {
   EXPECT_NE(svg.find("(unit of Lambda)"), std::string::npos);
   // Green decays at kr = 0.227/s for 300 s: 30 decades below its peak, all on the axis.
   double lowest = INFINITY;
-  for (std::size_t p = svg.find("text-anchor=\"end\">"); p != std::string::npos; p = svg.find("text-anchor=\"end\">", p + 1))
+  for (std::size_t p = svg.find("text-anchor=\"end\">"); p != std::string::npos;
+       p = svg.find("text-anchor=\"end\">", p + 1))
     lowest = std::min(lowest, std::atof(svg.c_str() + p + 18));
   EXPECT_LE(lowest, j["series"][0]["end_radiance"].get<double>());
 }

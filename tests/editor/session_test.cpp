@@ -58,19 +58,29 @@ TEST(EditSession, BadEditsChangeNothing) {
   Cornell c;
   c.session.AddConstraint(128, 64, 35);
   const std::string before = c.session.State().dump();
-  EXPECT_NE(ErrorOfType<UserError>([&] { c.session.AddConstraint(40, 230, 35); }).find("'floor', which is not phosphorescent"),
+  EXPECT_NE(ErrorOfType<UserError>([&] {
+              c.session.AddConstraint(40, 230, 35);
+            }).find("'floor', which is not phosphorescent"),
             std::string::npos);
   EXPECT_NE(ErrorOfType<UserError>([&] { c.session.AddConstraint(999, 0, 35); }).find("outside"), std::string::npos);
-  EXPECT_NE(ErrorOfType<UserError>([&] { c.session.UpdateConstraint(0, {{"rgb", {1, 2}}}); }).find("rgb"), std::string::npos);
-  EXPECT_NE(ErrorOfType<UserError>([&] { c.session.UpdateConstraint(0, {{"rgb", {1, 1, 1}}, {"kind", "maybe"}}); })
-                .find("kind"),
+  EXPECT_NE(ErrorOfType<UserError>([&] {
+              c.session.UpdateConstraint(0, {{"rgb", {1, 2}}});
+            }).find("rgb"),
             std::string::npos);
-  EXPECT_NE(ErrorOfType<UserError>([&] { c.session.UpdateConstraint(7, {}); }).find("no constraint 7"), std::string::npos);
-  EXPECT_NE(ErrorOfType<UserError>([&] { c.session.SetPreset("back wall", "plutonium"); }).find("no preset"), std::string::npos);
-  EXPECT_NE(ErrorOfType<UserError>([&] { c.session.ExportMaterial("back wall", "../x.json"); }).find("outside the project"),
+  EXPECT_NE(ErrorOfType<UserError>([&] {
+              c.session.UpdateConstraint(0, {{"rgb", {1, 1, 1}}, {"kind", "maybe"}});
+            }).find("kind"),
             std::string::npos);
-  EXPECT_NE(ErrorOfType<UserError>([&] { c.session.ExportMaterial("back wall", "/tmp/x.json"); }).find("outside the project"),
+  EXPECT_NE(ErrorOfType<UserError>([&] { c.session.UpdateConstraint(7, {}); }).find("no constraint 7"),
             std::string::npos);
+  EXPECT_NE(ErrorOfType<UserError>([&] { c.session.SetPreset("back wall", "plutonium"); }).find("no preset"),
+            std::string::npos);
+  EXPECT_NE(
+      ErrorOfType<UserError>([&] { c.session.ExportMaterial("back wall", "../x.json"); }).find("outside the project"),
+      std::string::npos);
+  EXPECT_NE(
+      ErrorOfType<UserError>([&] { c.session.ExportMaterial("back wall", "/tmp/x.json"); }).find("outside the project"),
+      std::string::npos);
   EXPECT_EQ(c.session.State().dump(), before);
   EXPECT_TRUE(std::filesystem::exists(c.session.ExportMaterial("back wall", "out/wall.json")));
 }
@@ -78,8 +88,9 @@ TEST(EditSession, BadEditsChangeNothing) {
 TEST(EditSession, ColoursBecomeSpectraOfExactlyThatColour) {
   Cornell c;
   c.session.AddConstraint(128, 64, 35);
-  for (const std::vector<double>& rgb : {std::vector<double>{0.004, 0.02, 0.012}, std::vector<double>{0.01, 0.002, 0.001},
-                                        std::vector<double>{0.0, 0.03, 0.0}}) {
+  for (const std::vector<double>& rgb :
+       {std::vector<double>{0.004, 0.02, 0.012}, std::vector<double>{0.01, 0.002, 0.001},
+        std::vector<double>{0.0, 0.03, 0.0}}) {
     c.session.UpdateConstraint(0, {{"rgb", rgb}});
     const nlohmann::json state = c.session.State();
     const nlohmann::json& constraint = state["constraints"][0];
@@ -114,20 +125,25 @@ TEST(EditSession, ATargetOfZeroIsRefused) {
   Cornell c;
   c.session.AddConstraint(128, 64, 35);
   const std::string before = c.session.State().dump();
-  EXPECT_NE(ErrorOfType<UserError>([&] { c.session.UpdateConstraint(0, {{"rgb", {0, 0, 0}}}); }).find("Lambda = 0"),
+  EXPECT_NE(ErrorOfType<UserError>([&] {
+              c.session.UpdateConstraint(0, {{"rgb", {0, 0, 0}}});
+            }).find("Lambda = 0"),
             std::string::npos);
   // A point that looks black when clicked (a preset with no known ke, after
   // lamp-off: nothing charged it) would start as a target of zero.
   c.session.SetPreset("left wall", "bottle");
-  EXPECT_NE(ErrorOfType<UserError>([&] { c.session.AddConstraint(20, 128, 60); }).find("Lambda = 0"), std::string::npos);
+  EXPECT_NE(ErrorOfType<UserError>([&] { c.session.AddConstraint(20, 128, 60); }).find("Lambda = 0"),
+            std::string::npos);
   // A point no light reaches (an edge pixel whose shadow rays hit the
   // neighbouring wall, or, along this row, the left wall in the tall block's
   // shadow) could only be met with Lambda = 0: refused, naming why.
   int refused = 0, placed = 0;
   for (int x = 30; x < 80 && refused == 0; ++x) {
     const std::string error = ErrorOfType<UserError>([&] { c.session.AddConstraint(x, 128, 35); });
-    if (error.find("no light reaches") != std::string::npos) ++refused;
-    else if (error == "(no error)") ++placed;
+    if (error.find("no light reaches") != std::string::npos)
+      ++refused;
+    else if (error == "(no error)")
+      ++placed;
   }
   EXPECT_EQ(refused, 1);
   for (int k = 0; k < placed; ++k) c.session.RemoveConstraint(1);
@@ -171,20 +187,24 @@ TEST(EditSession, ExportsAreNamedAfterTheObjectAndFollowNoLink) {
   EXPECT_EQ(LoadMaterial(written).name, "green");
   c.session.ExportMaterial("back wall", "linked.json");
   EXPECT_FALSE(std::filesystem::is_symlink(root / "linked.json"));  // replaced, not followed
-  EXPECT_NE(ErrorOfType<UserError>([&] { c.session.ExportMaterial("back wall", "elsewhere/x.json"); }).find("symbolic link"),
-            std::string::npos);
+  EXPECT_NE(
+      ErrorOfType<UserError>([&] { c.session.ExportMaterial("back wall", "elsewhere/x.json"); }).find("symbolic link"),
+      std::string::npos);
   EXPECT_EQ(ReadText(outside / "victim.json"), "keep");
   EXPECT_FALSE(std::filesystem::exists(outside / "x.json"));
   EXPECT_TRUE(std::filesystem::is_symlink(root / "edited" / ".back-wall.json.tmp"));  // never opened
   // NUL and over-long names are refused before any file is touched.
-  EXPECT_NE(ErrorOfType<UserError>([&] { c.session.ExportMaterial("back wall", std::string("a\0b.json", 8)); })
-                .find("control character"),
+  EXPECT_NE(ErrorOfType<UserError>([&] {
+              c.session.ExportMaterial("back wall", std::string("a\0b.json", 8));
+            }).find("control character"),
             std::string::npos);
-  EXPECT_NE(ErrorOfType<UserError>([&] { c.session.ExportMaterial("back wall", std::string(300, 'a') + ".json"); })
-                .find("longer than"),
+  EXPECT_NE(ErrorOfType<UserError>([&] {
+              c.session.ExportMaterial("back wall", std::string(300, 'a') + ".json");
+            }).find("longer than"),
             std::string::npos);
-  EXPECT_NE(ErrorOfType<UserError>([&] { c.session.ExportMaterial("back wall", std::string(2000, 'a') + ".json"); })
-                .find("more than 1024"),
+  EXPECT_NE(ErrorOfType<UserError>([&] {
+              c.session.ExportMaterial("back wall", std::string(2000, 'a') + ".json");
+            }).find("more than 1024"),
             std::string::npos);
 }
 
@@ -256,8 +276,8 @@ struct RunningServer {
     return Send("GET " + target + " HTTP/1.1\r\n" + Host() + headers + "\r\n");
   }
   Reply Post(const std::string& target, const std::string& body, const std::string& method = "POST") const {
-    return Send(method + " " + target + " HTTP/1.1\r\n" + Host() + "Content-Type: application/json\r\nContent-Length: " +
-                std::to_string(body.size()) + "\r\n\r\n" + body);
+    return Send(method + " " + target + " HTTP/1.1\r\n" + Host() +
+                "Content-Type: application/json\r\nContent-Length: " + std::to_string(body.size()) + "\r\n\r\n" + body);
   }
 
   Cornell cornell;
@@ -307,7 +327,8 @@ TEST(EditorServer, EveryBadValueIs400NamingTheField) {
   refused(server.Post("/api/settings", R"({"states": 2, "falloff": 1e9})"), "falloff");
   refused(server.Post("/api/settings", R"({"states": 2.5})"), "states");
   refused(server.Post("/api/export", R"({"object": "back wall", "path": "a\u0000b.json"})"), "path");
-  refused(server.Post("/api/export", R"({"object": "back wall", "path": ")" + std::string(5000, 'a') + R"(.json"})"), "path");
+  refused(server.Post("/api/export", R"({"object": "back wall", "path": ")" + std::string(5000, 'a') + R"(.json"})"),
+          "path");
   refused(server.Post("/api/export", R"({"object": ")" + std::string(5000, 'o') + R"(", "path": "x.json"})"), "object");
   refused(server.Post("/api/preset", R"({"object": "back wall", "preset": "green", "extra": true})"), "extra");
   refused(server.Post("/api/constraints/update", R"({"index": 0, "rgb": [1e400, 0, 0]})"), "rgb");

@@ -46,7 +46,9 @@ Problem FromTruth(const Material& truth, const std::vector<double>& E_lit, const
   point.albedo.assign(nb, 0.5);
   p.points.push_back(point);
   p.states = truth.state_count();
-  for (double t : times) p.constraints.push_back({Constraint::Kind::kTarget, 0, t, t, std::vector<double>(nb, 0.0), 1, "t" + std::to_string(t)});
+  for (double t : times)
+    p.constraints.push_back(
+        {Constraint::Kind::kTarget, 0, t, t, std::vector<double>(nb, 0.0), 1, "t" + std::to_string(t)});
   const auto L = PredictRadiance(p, truth, times);
   for (std::size_t c = 0; c < times.size(); ++c) p.constraints[c].radiance = L[c];
   return p;
@@ -97,10 +99,11 @@ TEST(EditorSolve, KeStaysUnknownInBandsNoLightReaches) {
   // ... but unknown where the constraints' light falls has no value to simulate with.
   Material unmeasured = truth;
   unmeasured.states[0].ke[0].reset();
-  EXPECT_NE(phos::testing::ErrorOfType<UserError>([&] { Cost(p, unmeasured); }).find("unknown (not measured) for band 380-490"),
+  EXPECT_NE(phos::testing::ErrorOfType<UserError>([&] {
+              Cost(p, unmeasured);
+            }).find("unknown (not measured) for band 380-490"),
             std::string::npos);
 }
-
 
 TEST(EditorSolve, OneTargetInTheDarkGivesTheLeastPhosphorThatMakesIt) {
   // One target tau after the light goes off is met exactly by every kr, with
@@ -157,7 +160,9 @@ TEST(EditorSolve, ReachesTheLookOfRandomTwoStateMaterials) {
   // refinement that stops on the cost's absolute scale, leaves some of these
   // at 1e-5 and misses of 5-70%.
   std::mt19937 rng(13);
-  auto log_uniform = [&](double lo, double hi) { return lo * std::pow(hi / lo, std::uniform_real_distribution<double>(0, 1)(rng)); };
+  auto log_uniform = [&](double lo, double hi) {
+    return lo * std::pow(hi / lo, std::uniform_real_distribution<double>(0, 1)(rng));
+  };
   auto uniform = [&](double lo, double hi) { return std::uniform_real_distribution<double>(lo, hi)(rng); };
   for (int edit = 0; edit < 24; ++edit) {
     const double kr_slow = log_uniform(0.01, 0.2), ratio = log_uniform(2, 50);
@@ -200,7 +205,8 @@ TEST(EditorSolve, ContradictionsAreNamed) {
   p.constraints[1].label = "late";
   const Solution s = Solve(p);
   bool named = false;
-  for (const std::string& note : s.feedback) named = named || (note.find("early and late contradict") != std::string::npos);
+  for (const std::string& note : s.feedback)
+    named = named || (note.find("early and late contradict") != std::string::npos);
   EXPECT_TRUE(named);
 }
 
@@ -233,12 +239,15 @@ TEST(EditorSolve, BadConstraintFilesNameTheField) {
     edit(copy);
     return phos::testing::ErrorOfType<UserError>([&] { ProblemFromJson(copy, "glow-sign.json"); });
   };
-  EXPECT_NE(error([](nlohmann::json& c) { c["constraints"][0]["t_s"] = 500; }).find("constraints[0].t_s"), std::string::npos);
+  EXPECT_NE(error([](nlohmann::json& c) { c["constraints"][0]["t_s"] = 500; }).find("constraints[0].t_s"),
+            std::string::npos);
   EXPECT_NE(error([](nlohmann::json& c) { c["irradiance"][3] = {1, 2}; }).find("irradiance[3]"), std::string::npos);
-  EXPECT_NE(error([](nlohmann::json& c) { c["constraints"][1].erase("radiance"); }).find("exactly one of"), std::string::npos);
+  EXPECT_NE(error([](nlohmann::json& c) { c["constraints"][1].erase("radiance"); }).find("exactly one of"),
+            std::string::npos);
   EXPECT_NE(error([](nlohmann::json& c) { c["states"] = 9; }).find("states"), std::string::npos);
   EXPECT_NE(error([](nlohmann::json& c) { c["albedo"][0] = 2; }).find("albedo[0]"), std::string::npos);
-  EXPECT_NE(error([](nlohmann::json& c) { c["constraints"][0]["until_s"] = 9; }).find("ranges are for"), std::string::npos);
+  EXPECT_NE(error([](nlohmann::json& c) { c["constraints"][0]["until_s"] = 9; }).find("ranges are for"),
+            std::string::npos);
 }
 
 }  // namespace

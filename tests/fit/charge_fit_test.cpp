@@ -75,7 +75,8 @@ TEST(ChargeFit, CurvesWithoutALevelAreClearErrors) {
     FitCharge(ramp, {}, "ramp.csv");
     FAIL() << "a straight ramp was fitted";
   } catch (const UserError& e) {
-    EXPECT_NE(std::string(e.what()).find("ramp.csv: the curve does not approach a level"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("ramp.csv: the curve does not approach a level"), std::string::npos)
+        << e.what();
   }
   Curve short_curve{{0, 1, 2}, {{0, 1, 1.5}}, {"v"}};
   EXPECT_THROW(FitCharge(short_curve, {}, "short"), UserError);

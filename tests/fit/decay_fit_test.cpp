@@ -33,7 +33,8 @@ Curve Synthesize(const Truth& truth, int points, double dt, double noise, unsign
     curve.t_s.push_back(t);
     for (std::size_t c = 0; c < truth.amplitudes.size(); ++c) {
       double mean = truth.background;
-      for (std::size_t i = 0; i < truth.rates.size(); ++i) mean += truth.amplitudes[c][i] * std::exp(-truth.rates[i] * t);
+      for (std::size_t i = 0; i < truth.rates.size(); ++i)
+        mean += truth.amplitudes[c][i] * std::exp(-truth.rates[i] * t);
       double value = mean + gauss(rng);
       if (poisson) value = static_cast<double>(std::poisson_distribution<long>(mean)(rng));
       curve.channels[c].push_back(value);
@@ -161,7 +162,8 @@ TEST(DecayFit, BadCurvesAreClearErrors) {
   Curve curve;
   curve.names = {"v"};
   curve.channels = {};
-  EXPECT_EQ(ErrorOf([&] { FitDecay(curve, options, "none.csv"); }), "none.csv: no value column (expected t,value[,value...])");
+  EXPECT_EQ(ErrorOf([&] { FitDecay(curve, options, "none.csv"); }),
+            "none.csv: no value column (expected t,value[,value...])");
   curve.channels = {{}};
   EXPECT_EQ(ErrorOf([&] { FitDecay(curve, options, "e.csv"); }), "e.csv: has 0 samples; this fit needs at least 7");
   curve.t_s = {0};
@@ -268,7 +270,8 @@ TEST(DecayFit, ShuffledSamplesSortedGiveTheSortedFit) {
   // Each time holds the same values (replicates may differ in order).
   const DecayFitSummary a = FitDecay(ordered, {}, "ordered"), b = FitDecay(shuffled, {}, "shuffled");
   ASSERT_EQ(a.n_components, b.n_components);
-  for (int i = 0; i < a.n_components; ++i) EXPECT_NEAR(a.components[i].rate, b.components[i].rate, 1e-9 * a.components[i].rate);
+  for (int i = 0; i < a.n_components; ++i)
+    EXPECT_NEAR(a.components[i].rate, b.components[i].rate, 1e-9 * a.components[i].rate);
   EXPECT_NEAR(a.rss, b.rss, 1e-9 * a.rss);
 }
 
@@ -295,7 +298,8 @@ TEST(PeakAfterRise, FindsTheChargeBeforeTheDecay) {
   for (int j = 0; j <= 150; ++j) {
     const double t = j, peak = 500 * (1 - std::exp(-0.05 * 60));
     both.t_s.push_back(t);
-    both.channels[0].push_back((t <= 60 ? 500 * (1 - std::exp(-0.05 * t)) : peak * std::exp(-0.05 * (t - 60))) + noise(rng));
+    both.channels[0].push_back((t <= 60 ? 500 * (1 - std::exp(-0.05 * t)) : peak * std::exp(-0.05 * (t - 60))) +
+                               noise(rng));
   }
   const std::optional<double> peak = PeakAfterRise(both);
   ASSERT_TRUE(peak.has_value());

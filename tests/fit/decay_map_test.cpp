@@ -48,7 +48,8 @@ DecayMapInput Stack(unsigned seed) {
 TEST(DecayMap, RecoversEveryPixelsRateAndAgreesWithTheCurveFit) {
   const DecayMapInput in = Stack(3);
   std::size_t rows = 0;
-  const DecayMap map = FitDecayMap(in, DecayMapOptions{}, "stack", [&](std::size_t done) { rows = std::max(rows, done); });
+  const DecayMap map =
+      FitDecayMap(in, DecayMapOptions{}, "stack", [&](std::size_t done) { rows = std::max(rows, done); });
   EXPECT_EQ(rows, 30u);
   EXPECT_EQ(map.no_decay, 0u);
   double worst = 0;

@@ -54,7 +54,8 @@ std::vector<ExcitationMeasurement> Measure(std::vector<ExcitationMeasurement> de
       f.value = ExcitationFrameSignal(truth.S, truth.a.at(m.light), truth.kr, m.charge_s, f, background);
       if (rng) {
         // Photon counting: a rate's variance is value / (exposure * gain).
-        std::normal_distribution<double> noise(0.0, std::sqrt(std::max(f.value, 0.0) / (f.exposure_s * electrons_per_dn)));
+        std::normal_distribution<double> noise(0.0,
+                                               std::sqrt(std::max(f.value, 0.0) / (f.exposure_s * electrons_per_dn)));
         f.value += noise(*rng);
       }
     }
@@ -110,9 +111,10 @@ TEST(StateExcitationFit, TheDecayTailMakesTheStatesIdentifiable) {
   const std::vector<std::string> lights = {"led420", "led456", "led494"};
   const DesignInformation tail = ExcitationDesignInformation(Design(lights, 6), truth.S, truth.a, truth.kr);
   const DesignInformation one = ExcitationDesignInformation(Design(lights, 0), truth.S, truth.a, truth.kr);
-  std::printf("worst relative 1-sigma of an a at one electron per unit: tail %.3g, one frame %.3g; "
-              "condition numbers %.3g, %.3g\n",
-              tail.worst_a_relative_stderr, one.worst_a_relative_stderr, tail.condition_number, one.condition_number);
+  std::printf(
+      "worst relative 1-sigma of an a at one electron per unit: tail %.3g, one frame %.3g; "
+      "condition numbers %.3g, %.3g\n",
+      tail.worst_a_relative_stderr, one.worst_a_relative_stderr, tail.condition_number, one.condition_number);
   EXPECT_LT(3 * tail.worst_a_relative_stderr, one.worst_a_relative_stderr);
   // Two states whose charging rates a + kr nearly coincide under a light:
   // that light's charging curve alone cannot split them (only S, known from
@@ -124,8 +126,10 @@ TEST(StateExcitationFit, TheDecayTailMakesTheStatesIdentifiable) {
   EXPECT_LT(5 * close_tail.a_relative_stderr.at("led456")[1], close_one.a_relative_stderr.at("led456")[1]);
   // With one state both designs pin the rate (the tail's extra frames help).
   const Truth single{{0.05}, {2e4}, {{"led420", {0.03}}}};
-  const double single_one = ExcitationDesignInformation(Design({"led420"}, 0), single.S, single.a, single.kr).worst_a_relative_stderr;
-  const double single_tail = ExcitationDesignInformation(Design({"led420"}, 6), single.S, single.a, single.kr).worst_a_relative_stderr;
+  const double single_one =
+      ExcitationDesignInformation(Design({"led420"}, 0), single.S, single.a, single.kr).worst_a_relative_stderr;
+  const double single_tail =
+      ExcitationDesignInformation(Design({"led420"}, 6), single.S, single.a, single.kr).worst_a_relative_stderr;
   EXPECT_LT(single_one, 0.1);
   EXPECT_LT(single_tail, single_one);
 }

@@ -44,8 +44,9 @@ TEST(FuzzRegressions, EveryInputThatEverCrashedIsRefusedInOneLine) {
 TEST(FuzzRegressions, ALabCameraRegionIsWholePixelsOfARealSensor) {
   testing::TempDir dir;
   auto error_of = [&](const std::string& region) {
-    testing::WriteText(dir / "lab.json", R"({"schema": "phos.lab/1", "camera": {"aravis": "Fake_1", "region": )" + region +
-                                             R"(}, "lights": {"backend": "none", "channels": {"led405": {"line": 1}}}})");
+    testing::WriteText(dir / "lab.json",
+                       R"({"schema": "phos.lab/1", "camera": {"aravis": "Fake_1", "region": )" + region +
+                           R"(}, "lights": {"backend": "none", "channels": {"led405": {"line": 1}}}})");
     return testing::ErrorOfType<UserError>([&] { LoadLabConfig(dir / "lab.json"); });
   };
   EXPECT_EQ(error_of("[0, 0, 128, 96]"), "(no error)");
@@ -53,9 +54,10 @@ TEST(FuzzRegressions, ALabCameraRegionIsWholePixelsOfARealSensor) {
             (dir / "lab.json").string() + ": camera.region[2]: expected a whole number from 1 to 65536, got 1e+09");
   EXPECT_EQ(error_of("[1e10, 0, 16, 16]"),
             (dir / "lab.json").string() + ": camera.region[0]: expected a whole number from 0 to 65536, got 1e+10");
-  EXPECT_EQ(error_of("[65530, 0, 16, 16]"), (dir / "lab.json").string() +
-                                                ": camera.region: the region reaches past 65536 pixels, the largest sensor "
-                                                "phos accepts");
+  EXPECT_EQ(error_of("[65530, 0, 16, 16]"),
+            (dir / "lab.json").string() +
+                ": camera.region: the region reaches past 65536 pixels, the largest sensor "
+                "phos accepts");
 }
 
 // The fuzz harness reads lab configs from memory (LabConfigFromJson); a file
@@ -69,8 +71,9 @@ TEST(FuzzRegressions, ALabConfigFromMemoryIsTheSameAsFromItsFile) {
   testing::WriteText(dir / "lab.json", good);
   EXPECT_EQ(LabConfigFromJson(good, dir / "lab.json").ToJson(), LoadLabConfig(dir / "lab.json").ToJson());
   EXPECT_EQ(LabConfigFromJson(good, dir / "lab.json").source, dir / "lab.json");
-  for (const std::string bad : {std::string("{"), std::string(R"({"schema": "phos.lab/2"})"),
-                                std::string(R"({"schema": "phos.lab/1", "camera": {"aravis": "Fake_1", "region": [0, 0, 1e9, 1]}})")}) {
+  for (const std::string bad :
+       {std::string("{"), std::string(R"({"schema": "phos.lab/2"})"),
+        std::string(R"({"schema": "phos.lab/1", "camera": {"aravis": "Fake_1", "region": [0, 0, 1e9, 1]}})")}) {
     testing::WriteText(dir / "lab.json", bad);
     const std::string from_file = testing::ErrorOfType<UserError>([&] { LoadLabConfig(dir / "lab.json"); });
     EXPECT_NE(from_file, "(no error)");

@@ -56,7 +56,7 @@ TEST(Batch, MatchesTheScalarStepsOfEveryIntegrator) {
       for (int i = 0; i < 2; ++i) {
         double r0 = before.state(i)[j], kr = m.states[i].kr;
         max_hk = std::max(max_hk, 0.1 * (a[i] + kr));
-        r[i] = integrator == Integrator::kExact ? ExactStep(r0, a[i], kr, 0.1)
+        r[i] = integrator == Integrator::kExact   ? ExactStep(r0, a[i], kr, 0.1)
                : integrator == Integrator::kEuler ? EulerStep(r0, a[i], kr, 0.1)
                                                   : Rk4Step(r0, a[i], kr, 0.1);
         EXPECT_TRUE(testing::RelativelyNear(scene.s.state(i)[j], r[i], 1e-14));
@@ -65,8 +65,10 @@ TEST(Batch, MatchesTheScalarStepsOfEveryIntegrator) {
       EXPECT_TRUE(testing::RelativelyNear(Lp[j], L[2], 1e-14));
       EXPECT_TRUE(testing::RelativelyNear(Lp[scene.n + j], L[3], 1e-14));
     }
-    if (integrator == Integrator::kExact) EXPECT_EQ(info.max_hk, 0.0);
-    else EXPECT_NEAR(info.max_hk, max_hk, 1e-12 * max_hk);
+    if (integrator == Integrator::kExact)
+      EXPECT_EQ(info.max_hk, 0.0);
+    else
+      EXPECT_NEAR(info.max_hk, max_hk, 1e-12 * max_hk);
   }
 }
 
@@ -93,9 +95,8 @@ TEST(Batch, DarkStepIsTheClosedFormJump) {
   DecayBatch<double>(c, 3600.0, scene.s);  // an hour after lights-out, in one step
   for (int i = 0; i < 2; ++i)
     for (std::size_t j = 0; j < scene.n; ++j)
-      EXPECT_TRUE(testing::RelativelyNear(scene.s.state(i)[j],
-                                          before.state(i)[j] * std::exp(-static_cast<long double>(m.states[i].kr) * 3600),
-                                          1e-13));
+      EXPECT_TRUE(testing::RelativelyNear(
+          scene.s.state(i)[j], before.state(i)[j] * std::exp(-static_cast<long double>(m.states[i].kr) * 3600), 1e-13));
 }
 
 TEST(Batch, OnlyTheBandsThatCarryLightAreComputed) {
@@ -111,7 +112,8 @@ TEST(Batch, OnlyTheBandsThatCarryLightAreComputed) {
   std::copy(scene.E.begin(), scene.E.end(), E_all.begin());
   AdvanceBatch<double>(Integrator::kExact, few, scene.E.data(), scene.n, 0.5, scene.s);
   AdvanceBatch<double>(Integrator::kExact, all, E_all.data(), scene.n, 0.5, s_all);
-  for (std::size_t k = 0; k < scene.s.r.size(); ++k) EXPECT_TRUE(testing::RelativelyNear(scene.s.r[k], s_all.r[k], 1e-15));
+  for (std::size_t k = 0; k < scene.s.r.size(); ++k)
+    EXPECT_TRUE(testing::RelativelyNear(scene.s.r[k], s_all.r[k], 1e-15));
 
   Material green = LoadMaterial(testing::Fixture("materials/green.json"));
   EXPECT_THROW(BatchCoefficients<float>::Compile(green, {0, 3}, {}, "green.json"), UserError);

@@ -127,10 +127,11 @@ TEST(Simulate, SamplesEveryDtAndSplitsStepsAtTheLightSwitch) {
   SimulationResult result = Simulate(m, IrradianceSchedule::ChargeThenDecay(E, 10.3, 20.0), options, "orange");
   ASSERT_EQ(result.sample_count(), 31u);  // t = 0..30
   EXPECT_EQ(result.t_s.back(), 30.0);
-  EXPECT_EQ(result.steps, 31);            // 30 steps, one of them split in two
+  EXPECT_EQ(result.steps, 31);  // 30 steps, one of them split in two
   for (std::size_t s = 0; s < result.sample_count(); ++s) {
     double t = result.t_s[s];
-    long double expected = t <= 10.3 ? ClosedForm(0, a, kr, t) : ClosedForm(ClosedForm(0, a, kr, 10.3), 0, kr, t - 10.3);
+    long double expected =
+        t <= 10.3 ? ClosedForm(0, a, kr, t) : ClosedForm(ClosedForm(0, a, kr, 10.3), 0, kr, t - 10.3);
     EXPECT_TRUE(RelativelyNear(result.state(s, 0), expected, 1e-12)) << t;
     for (int b = 0; b < 8; ++b)  // Eq. 8.2
       EXPECT_DOUBLE_EQ(result.radiance(s, b), m.states[0].Lambda[b] * kr * result.state(s, 0));

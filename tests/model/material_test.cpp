@@ -16,7 +16,7 @@ namespace {
 
 std::string ErrorOf(const std::function<void()>& f) { return testing::ErrorOfType<UserError>(f); }
 
-const char* kPresets[] = {"blue", "green", "orange", "pink", "purple", "red",
+const char* kPresets[] = {"blue",  "green",  "orange", "pink",   "purple",  "red",
                           "white", "yellow", "bottle", "gloves", "stickers"};
 
 TEST(Material, AllElevenTable8_1PresetsLoad) {
@@ -85,16 +85,22 @@ TEST(Material, ValidationNamesFileAndField) {
        "schema: unknown schema \"phos.material/2\" (expected \"phos.material/1\")"},
       {"missing kr", [](auto& j) { j["states"][0].erase("kr"); }, "states[0].kr: missing (required)"},
       {"negative kr", [](auto& j) { j["states"][0]["kr"] = -1; }, "states[0].kr: expected a number >= 0, got -1"},
-      {"negative ke", [](auto& j) { j["states"][0]["ke"][1] = -0.5; }, "states[0].ke[1]: expected a number >= 0, got -0.5"},
+      {"negative ke", [](auto& j) { j["states"][0]["ke"][1] = -0.5; },
+       "states[0].ke[1]: expected a number >= 0, got -0.5"},
       {"band count", [](auto& j) { j["states"][0]["Lambda"].erase(0); },
        "states[0].Lambda: expected 8 values (one per band), got 7"},
       {"ke count", [](auto& j) { j["states"][0]["ke"].push_back(0.1); },
        "states[0].ke: expected 8 values (one per band), got 9"},
       {"not a number", [](auto& j) { j["states"][0]["Lambda"][2] = "NaN"; },
        "states[0].Lambda[2]: expected a number, got \"NaN\""},
-      {"edges", [](auto& j) { j["bands_nm"][3] = 400; }, "bands_nm[3]: band edges must increase strictly (400 follows 475)"},
-      {"no states", [](auto& j) { j["states"] = nlohmann::json::array(); }, "states: expected 1 to 4 excited states, got 0"},
-      {"five states", [](auto& j) { for (int i = 0; i < 4; ++i) j["states"].push_back(j["states"][0]); },
+      {"edges", [](auto& j) { j["bands_nm"][3] = 400; },
+       "bands_nm[3]: band edges must increase strictly (400 follows 475)"},
+      {"no states", [](auto& j) { j["states"] = nlohmann::json::array(); },
+       "states: expected 1 to 4 excited states, got 0"},
+      {"five states",
+       [](auto& j) {
+         for (int i = 0; i < 4; ++i) j["states"].push_back(j["states"][0]);
+       },
        "states: expected 1 to 4 excited states, got 5"},
       {"typo", [](auto& j) { j["states"][0]["Lamda"] = 1; },
        "states[0].Lamda: unknown field (expected one of: kr, ke, Lambda, kr_stderr, ke_stderr)"},

@@ -161,8 +161,8 @@ TEST(BouncedZBuffer, HidesLightBehindANearerSurfelAndCountsNothingTwice) {
   dss_options.channels = 1;
   const render::DssResult blend = render::SplatDeepScreenSpace(g, camera, surfels, radiosity, dss_options);
   const render::DssResult z = render::SplatBouncedZBuffer(g, camera, surfels, radiosity, dss_options);
-  EXPECT_NEAR(blend.occlusion[centre], 2 * F, 0.1 * F);                 // over-occlusion
-  EXPECT_NEAR(blend.irradiance[centre], B * F, 0.1 * B * F);            // leaking
+  EXPECT_NEAR(blend.occlusion[centre], 2 * F, 0.1 * F);       // over-occlusion
+  EXPECT_NEAR(blend.irradiance[centre], B * F, 0.1 * B * F);  // leaking
   EXPECT_NEAR(z.occlusion[centre], F, 0.1 * F);
   EXPECT_LT(z.irradiance[centre], 0.05 * B * F);
   // Without the dark disk the glow arrives: B F within 10%.

@@ -50,8 +50,8 @@ TEST(NightVision, DarkScenesTurnBlueGreyAndKeepTheirMeanBrightness) {
     b += out.pixels[3 * q + 2];
     Y += 0.2126 * out.pixels[3 * q] + 0.7152 * out.pixels[3 * q + 1] + 0.0722 * out.pixels[3 * q + 2];
   }
-  EXPECT_GT(b, 1.5 * r);                    // blue shift
-  EXPECT_NEAR(Y / (32 * 32), 0.5, 0.02);    // a flat spectrum has V = Y
+  EXPECT_GT(b, 1.5 * r);                  // blue shift
+  EXPECT_NEAR(Y / (32 * 32), 0.5, 0.02);  // a flat spectrum has V = Y
 }
 
 TEST(NightVision, EdgeTermBoostsFaintEdgesAndNoiseIsSeeded) {

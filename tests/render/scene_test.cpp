@@ -93,8 +93,9 @@ TEST(Meshes, CornellWallsFaceIntoTheBox) {
     }
   }
   EXPECT_EQ(LoadMesh(Fixture("scenes/meshes/cornell.obj"), "tall_block", "test").triangles.size(), 10u);
-  EXPECT_NE(ErrorOfType<UserError>([] { LoadMesh(Fixture("scenes/meshes/cornell.obj"), "sofa", "scene.json"); })
-                .find("no group 'sofa'"),
+  EXPECT_NE(ErrorOfType<UserError>([] {
+              LoadMesh(Fixture("scenes/meshes/cornell.obj"), "sofa", "scene.json");
+            }).find("no group 'sofa'"),
             std::string::npos);
 }
 
@@ -129,8 +130,7 @@ TEST(Scenes, EveryFixtureLoads) {
 std::string ErrorAfterEdit(const std::function<void(nlohmann::json&)>& edit) {
   nlohmann::json json = ReadJsonFile(Fixture("scenes/cornell-phosphor.json"));
   edit(json);
-  return ErrorOfType<UserError>(
-      [&] { SceneFromJson(json, Fixture("scenes"), "cornell-phosphor.json"); });
+  return ErrorOfType<UserError>([&] { SceneFromJson(json, Fixture("scenes"), "cornell-phosphor.json"); });
 }
 
 // Loads the dust-sheets fixture (volumes, sheet lights) with one change.
@@ -155,23 +155,37 @@ TEST(Scenes, VolumesAndSheetsLoadAndBadOnesNameTheField) {
   EXPECT_TRUE(scene.HasPhosphors());
 
   EXPECT_EQ(MediaErrorAfterEdit([](nlohmann::json&) {}), "(no error)");
-  auto error_has = [](const std::string& error, const std::string& part) { return error.find(part) != std::string::npos; };
-  EXPECT_TRUE(error_has(MediaErrorAfterEdit([](nlohmann::json& j) { j["volumes"][0]["bounds"]["max"] = {-1, 1, 1}; }),
+  auto error_has = [](const std::string& error, const std::string& part) {
+    return error.find(part) != std::string::npos;
+  };
+  EXPECT_TRUE(error_has(MediaErrorAfterEdit([](nlohmann::json& j) {
+                          j["volumes"][0]["bounds"]["max"] = {-1, 1, 1};
+                        }),
                         "volumes[0].bounds.max"));
-  EXPECT_TRUE(error_has(MediaErrorAfterEdit([](nlohmann::json& j) { j["volumes"][0]["resolution"] = {4, 4}; }),
+  EXPECT_TRUE(error_has(MediaErrorAfterEdit([](nlohmann::json& j) {
+                          j["volumes"][0]["resolution"] = {4, 4};
+                        }),
                         "resolution"));
-  EXPECT_TRUE(error_has(MediaErrorAfterEdit([](nlohmann::json& j) { j["volumes"][0]["density"] = {1, 2, 3}; }),
+  EXPECT_TRUE(error_has(MediaErrorAfterEdit([](nlohmann::json& j) {
+                          j["volumes"][0]["density"] = {1, 2, 3};
+                        }),
                         "density"));
   EXPECT_TRUE(error_has(MediaErrorAfterEdit([](nlohmann::json& j) { j["volumes"][0]["density"]["shape"] = "torus"; }),
                         "torus"));
   EXPECT_TRUE(error_has(MediaErrorAfterEdit([](nlohmann::json& j) { j["volumes"][0]["g"] = 1.0; }), "volumes[0].g"));
   EXPECT_TRUE(error_has(MediaErrorAfterEdit([](nlohmann::json& j) { j["volumes"][0]["sigma_t_per_m"] = -1; }),
                         "sigma_t_per_m"));
-  EXPECT_TRUE(error_has(MediaErrorAfterEdit([](nlohmann::json& j) { j["volumes"][0].erase("albedo"); j["volumes"][0].erase("phosphor"); }),
+  EXPECT_TRUE(error_has(MediaErrorAfterEdit([](nlohmann::json& j) {
+                          j["volumes"][0].erase("albedo");
+                          j["volumes"][0].erase("phosphor");
+                        }),
                         "albedo"));
-  EXPECT_TRUE(error_has(MediaErrorAfterEdit([](nlohmann::json& j) { j["lights"][0]["thickness_m"] = 0; }),
-                        "thickness_m"));
-  EXPECT_TRUE(error_has(MediaErrorAfterEdit([](nlohmann::json& j) { j["lights"][0]["normal"] = {0, 0, 0}; }), "normal"));
+  EXPECT_TRUE(
+      error_has(MediaErrorAfterEdit([](nlohmann::json& j) { j["lights"][0]["thickness_m"] = 0; }), "thickness_m"));
+  EXPECT_TRUE(error_has(MediaErrorAfterEdit([](nlohmann::json& j) {
+                          j["lights"][0]["normal"] = {0, 0, 0};
+                        }),
+                        "normal"));
   EXPECT_TRUE(error_has(MediaErrorAfterEdit([](nlohmann::json& j) { j["lights"][0]["type"] = "point"; }),
                         "only a sheet light"));
 }
@@ -181,19 +195,22 @@ TEST(Scenes, TranslucentObjectsTakeTheDipolesReflectanceAsAlbedo) {
   const Object& wax = scene.objects[1];
   ASSERT_TRUE(wax.subsurface.has_value());
   for (int b = 0; b < 8; ++b)
-    EXPECT_DOUBLE_EQ(wax.albedo[b], Dipole::From(wax.subsurface->sigma_a_per_m[b], wax.subsurface->sigma_s_prime_per_m[b],
-                                                  wax.subsurface->eta).TotalReflectance());
+    EXPECT_DOUBLE_EQ(wax.albedo[b], Dipole::From(wax.subsurface->sigma_a_per_m[b],
+                                                 wax.subsurface->sigma_s_prime_per_m[b], wax.subsurface->eta)
+                                        .TotalReflectance());
   EXPECT_LT(wax.albedo[0], wax.albedo[7]);  // absorbs blue: a warm wax
   auto edit = [](const std::function<void(nlohmann::json&)>& change) {
     nlohmann::json json = ReadJsonFile(Fixture("scenes/translucent-shadow.json"));
     change(json);
     return ErrorOfType<UserError>([&] { SceneFromJson(json, Fixture("scenes"), "translucent-shadow.json"); });
   };
-  EXPECT_NE(edit([](nlohmann::json& j) { j["objects"][1]["albedo"] = 0.5; }).find("objects[1].albedo"), std::string::npos);
+  EXPECT_NE(edit([](nlohmann::json& j) { j["objects"][1]["albedo"] = 0.5; }).find("objects[1].albedo"),
+            std::string::npos);
   EXPECT_NE(edit([](nlohmann::json& j) { j["objects"][1]["subsurface"]["sigma_a_per_m"] = 0; }).find("sigma_a_per_m"),
             std::string::npos);
   EXPECT_NE(edit([](nlohmann::json& j) { j["objects"][1]["subsurface"]["eta"] = 0.5; }).find("eta"), std::string::npos);
-  EXPECT_NE(edit([](nlohmann::json& j) { j["objects"][1]["subsurface"]["g"] = 0.5; }).find("subsurface"), std::string::npos);
+  EXPECT_NE(edit([](nlohmann::json& j) { j["objects"][1]["subsurface"]["g"] = 0.5; }).find("subsurface"),
+            std::string::npos);
 }
 
 TEST(Scenes, TheSkyLoadsAndBadOnesNameTheField) {
@@ -207,8 +224,10 @@ TEST(Scenes, TheSkyLoadsAndBadOnesNameTheField) {
     return ErrorOfType<UserError>([&] { SceneFromJson(json, Fixture("scenes"), "dusk-sign.json"); });
   };
   EXPECT_EQ(edit([](nlohmann::json&) {}), "(no error)");
-  EXPECT_NE(edit([](nlohmann::json& j) { j["environment"]["gradient"] = 2; }).find("environment.gradient"), std::string::npos);
-  EXPECT_NE(edit([](nlohmann::json& j) { j["environment"]["radiance"] = -1; }).find("environment.radiance"), std::string::npos);
+  EXPECT_NE(edit([](nlohmann::json& j) { j["environment"]["gradient"] = 2; }).find("environment.gradient"),
+            std::string::npos);
+  EXPECT_NE(edit([](nlohmann::json& j) { j["environment"]["radiance"] = -1; }).find("environment.radiance"),
+            std::string::npos);
   EXPECT_NE(edit([](nlohmann::json& j) { j["environment"]["colour"] = 1; }).find("colour"), std::string::npos);
   EXPECT_NE(edit([](nlohmann::json& j) { j["environment"]["schedule"] = nlohmann::json::array(); }).find("schedule"),
             std::string::npos);
@@ -216,33 +235,39 @@ TEST(Scenes, TheSkyLoadsAndBadOnesNameTheField) {
 
 TEST(Scenes, BadInputNamesTheFileAndField) {
   EXPECT_EQ(ErrorAfterEdit([](nlohmann::json&) {}), "(no error)");
-  EXPECT_NE(ErrorAfterEdit([](nlohmann::json& j) { j["lights"][0]["colour"] = 1; }).find("lights[0]"), std::string::npos);
-  EXPECT_NE(ErrorAfterEdit([](nlohmann::json& j) { j["objects"][2]["mesh"] = "missing.obj"; })
-                .find("does not exist"),
+  EXPECT_NE(ErrorAfterEdit([](nlohmann::json& j) { j["lights"][0]["colour"] = 1; }).find("lights[0]"),
+            std::string::npos);
+  EXPECT_NE(ErrorAfterEdit([](nlohmann::json& j) { j["objects"][2]["mesh"] = "missing.obj"; }).find("does not exist"),
             std::string::npos);
   EXPECT_NE(ErrorAfterEdit([](nlohmann::json& j) { j["objects"][0]["albedo"] = 1.5; }).find("objects[0].albedo"),
             std::string::npos);
-  EXPECT_NE(ErrorAfterEdit([](nlohmann::json& j) { j["objects"][0]["albedo"] = {0.5, 0.5}; }).find("objects[0].albedo"),
+  EXPECT_NE(ErrorAfterEdit([](nlohmann::json& j) {
+              j["objects"][0]["albedo"] = {0.5, 0.5};
+            }).find("objects[0].albedo"),
             std::string::npos);
-  EXPECT_NE(ErrorAfterEdit([](nlohmann::json& j) { j["lights"][0]["spectrum"]["type"] = "laser"; })
-                .find("unknown spectrum type 'laser'"),
+  EXPECT_NE(ErrorAfterEdit([](nlohmann::json& j) {
+              j["lights"][0]["spectrum"]["type"] = "laser";
+            }).find("unknown spectrum type 'laser'"),
             std::string::npos);
   EXPECT_NE(ErrorAfterEdit([](nlohmann::json& j) {
               j["lights"][0]["schedule"] = {{{"t_s", 5}, {"level", 1}}, {{"t_s", 2}, {"level", 0}}};
             }).find("keyframe times must increase"),
             std::string::npos);
-  EXPECT_NE(ErrorAfterEdit([](nlohmann::json& j) { j["objects"][0]["initial"] = "equilibrium"; })
-                .find("only a phosphorescent object"),
+  EXPECT_NE(ErrorAfterEdit([](nlohmann::json& j) {
+              j["objects"][0]["initial"] = "equilibrium";
+            }).find("only a phosphorescent object"),
             std::string::npos);
   EXPECT_NE(ErrorAfterEdit([](nlohmann::json& j) { j["schema"] = "phos.scene/2"; }).find("schema"), std::string::npos);
-  EXPECT_NE(ErrorAfterEdit([](nlohmann::json& j) { j["camera"]["look_at"] = j["camera"]["position"]; })
-                .find("must differ"),
+  EXPECT_NE(
+      ErrorAfterEdit([](nlohmann::json& j) { j["camera"]["look_at"] = j["camera"]["position"]; }).find("must differ"),
+      std::string::npos);
+  EXPECT_NE(ErrorAfterEdit([](nlohmann::json& j) {
+              j["bands_nm"] = {400, 500, 600, 700};
+            }).find("bands_nm differ from the scene's"),
             std::string::npos);
-  EXPECT_NE(ErrorAfterEdit([](nlohmann::json& j) { j["bands_nm"] = {400, 500, 600, 700}; })
-                .find("bands_nm differ from the scene's"),
-            std::string::npos);
-  EXPECT_NE(ErrorAfterEdit([](nlohmann::json& j) { j["objects"][2]["phosphor"] = "../materials/none.json"; })
-                .find("none.json"),
+  EXPECT_NE(ErrorAfterEdit([](nlohmann::json& j) {
+              j["objects"][2]["phosphor"] = "../materials/none.json";
+            }).find("none.json"),
             std::string::npos);
 }
 
@@ -266,7 +291,8 @@ TEST(Atlas, OnlyPhosphorsCarryTexelsOfTheAskedSize) {
   Scene scene = phos::testing::EmptyScene();
   scene.objects.push_back(phos::testing::MakeObject("plain", MakeQuad(1, 1), 0.5));
   scene.objects.push_back(phos::testing::MakeObject(
-      "glowing", MakeQuad(1, 1), 0.5, phos::testing::UniformPhosphor(0.1, std::vector<double>(8, 0.1), std::vector<double>(8, 1))));
+      "glowing", MakeQuad(1, 1), 0.5,
+      phos::testing::UniformPhosphor(0.1, std::vector<double>(8, 0.1), std::vector<double>(8, 1))));
   scene.objects[1].texel_size_m = 0.1;
   SceneGeometry geometry(scene);
   TexelAtlas atlas(scene, geometry);
@@ -285,9 +311,9 @@ namespace {
 
 TEST(UvAtlas, TexelsFollowTheMeshsUvMapAndOnlyCoveredOnesCarryState) {
   Scene scene = phos::testing::EmptyScene();
-  Object tile = phos::testing::MakeObject("tile", LoadMesh(phos::testing::Fixture("scenes/meshes/tile.obj"), "", "test"),
-                                          0.5, phos::testing::UniformPhosphor(0.1, std::vector<double>(8, 0.1),
-                                                                              std::vector<double>(8, 1)));
+  Object tile = phos::testing::MakeObject(
+      "tile", LoadMesh(phos::testing::Fixture("scenes/meshes/tile.obj"), "", "test"), 0.5,
+      phos::testing::UniformPhosphor(0.1, std::vector<double>(8, 0.1), std::vector<double>(8, 1)));
   ASSERT_TRUE(tile.mesh->has_uvs());
   tile.texel_size_m = 0.05;
   scene.objects.push_back(tile);
@@ -319,9 +345,9 @@ TEST(UvAtlas, TexelsFollowTheMeshsUvMapAndOnlyCoveredOnesCarryState) {
 
 TEST(UvAtlas, SolverChargesUvTexelsLikeTheClosedForm) {
   Scene scene = phos::testing::EmptyScene();
-  Object tile = phos::testing::MakeObject("tile", LoadMesh(phos::testing::Fixture("scenes/meshes/tile.obj"), "", "test"),
-                                          0.5, phos::testing::UniformPhosphor(0.1, {1, 0, 0, 0, 0, 0, 0, 0},
-                                                                              {0, 0, 0, 1, 0, 0, 0, 0}));
+  Object tile = phos::testing::MakeObject(
+      "tile", LoadMesh(phos::testing::Fixture("scenes/meshes/tile.obj"), "", "test"), 0.5,
+      phos::testing::UniformPhosphor(0.1, {1, 0, 0, 0, 0, 0, 0, 0}, {0, 0, 0, 1, 0, 0, 0, 0}));
   tile.texel_size_m = 0.1;
   scene.objects.push_back(tile);
   scene.lights.push_back(phos::testing::PointLight(Vec3(0, 1, 0), {1, 0, 0, 0, 0, 0, 0, 0}));
@@ -347,24 +373,38 @@ TEST(Scenes, CoordinatesTimesAndCountsOutsideTheLimitsAreRefused) {
     return error.find(part) != std::string::npos;
   };
   // Embree's assertion in bvh_intersector1.cpp aborted on these.
-  EXPECT_TRUE(error_has(ErrorAfterEdit([](nlohmann::json& j) { j["camera"]["position"] = {0, 1e308, 0}; }),
+  EXPECT_TRUE(error_has(ErrorAfterEdit([](nlohmann::json& j) {
+                          j["camera"]["position"] = {0, 1e308, 0};
+                        }),
                         "cornell-phosphor.json: camera.position[1]: expected a number in [-1e+06, 1e+06], got 1e+308"));
-  EXPECT_TRUE(error_has(MediaErrorAfterEdit([](nlohmann::json& j) { j["volumes"][0]["bounds"]["max"] = {1e308, 1, 1}; }),
+  EXPECT_TRUE(error_has(MediaErrorAfterEdit([](nlohmann::json& j) {
+                          j["volumes"][0]["bounds"]["max"] = {1e308, 1, 1};
+                        }),
                         "volumes[0].bounds.max[0]: expected a number in [-1e+06, 1e+06]"));
-  EXPECT_TRUE(error_has(ErrorAfterEdit([](nlohmann::json& j) { j["objects"][0]["transform"] = {{"scale", 1e300}}; }),
+  EXPECT_TRUE(error_has(ErrorAfterEdit([](nlohmann::json& j) {
+                          j["objects"][0]["transform"] = {{"scale", 1e300}};
+                        }),
                         "objects[0].transform.scale: expected a number in [1e-06, 1e+06]"));
   EXPECT_TRUE(error_has(ErrorAfterEdit([](nlohmann::json& j) { j["time"]["end_s"] = 1e300; }), "time.end_s"));
   EXPECT_TRUE(error_has(ErrorAfterEdit([](nlohmann::json& j) { j["lights"][0]["intensity"] = 1e300; }),
                         "lights[0].intensity: expected a number in [0, 1e+09]"));
-  EXPECT_TRUE(error_has(ErrorAfterEdit([](nlohmann::json& j) { j["camera"]["width"] = 16384; j["camera"]["height"] = 16384; }),
+  EXPECT_TRUE(error_has(ErrorAfterEdit([](nlohmann::json& j) {
+                          j["camera"]["width"] = 16384;
+                          j["camera"]["height"] = 16384;
+                        }),
                         "camera: 16384 x 16384 pixels is more than the limit of 67108864 pixels per frame"));
   // A volume scaled 100x hung: voxels over all volumes, and voxels x puffs, are capped.
-  EXPECT_TRUE(error_has(MediaErrorAfterEdit([](nlohmann::json& j) { j["volumes"][0]["resolution"] = {4096, 4096, 2}; }),
-                        "volumes[0].resolution: the scene's volumes have 33554432 voxels, more than the limit of 16777216"));
+  EXPECT_TRUE(
+      error_has(MediaErrorAfterEdit([](nlohmann::json& j) {
+                  j["volumes"][0]["resolution"] = {4096, 4096, 2};
+                }),
+                "volumes[0].resolution: the scene's volumes have 33554432 voxels, more than the limit of 16777216"));
   EXPECT_TRUE(error_has(MediaErrorAfterEdit([](nlohmann::json& j) { j["volumes"][0]["density"]["puffs"] = 100000; }),
                         "volumes[0].density.puffs: 100000 puffs over 43008 voxels is more than the limit of 1e+08"));
   // Huge bounds with a phosphor: "check failed: c.n_exc == 0 || E != nullptr".
-  EXPECT_TRUE(error_has(MediaErrorAfterEdit([](nlohmann::json& j) { j["volumes"][0]["bounds"]["min"] = {-1e30, 0, 0}; }),
+  EXPECT_TRUE(error_has(MediaErrorAfterEdit([](nlohmann::json& j) {
+                          j["volumes"][0]["bounds"]["min"] = {-1e30, 0, 0};
+                        }),
                         "volumes[0].bounds.min[0]"));
 }
 
@@ -388,7 +428,8 @@ nlohmann::json Pedestal() { return ReadJsonFile(Fixture("scenes/meshes/pedestal.
 
 std::string GltfError(const nlohmann::json& gltf) {
   const std::string text = gltf.dump();
-  return ErrorOfType<UserError>([&] { ParseMesh(text, ".gltf", Fixture("scenes/meshes"), "crafted.gltf", "", "scene.json: objects[0].mesh"); });
+  return ErrorOfType<UserError>(
+      [&] { ParseMesh(text, ".gltf", Fixture("scenes/meshes"), "crafted.gltf", "", "scene.json: objects[0].mesh"); });
 }
 
 // Issue 16: crafted glTF files gave an ASan error (an accessor count that
@@ -413,7 +454,7 @@ TEST(Meshes, CraftedGltfFilesAreRefusedInOneLine) {
   EXPECT_TRUE(has(GltfError(j), "POSITION: accessor"));
   j = Pedestal();
   j["bufferViews"][0]["buffer"] = 3;
-  EXPECT_TRUE(has(GltfError(j), "cannot read glTF")||has(GltfError(j), "names a buffer that does not exist"));
+  EXPECT_TRUE(has(GltfError(j), "cannot read glTF") || has(GltfError(j), "names a buffer that does not exist"));
   j = Pedestal();
   j.erase("buffers");
   EXPECT_TRUE(has(GltfError(j), "crafted.gltf"));
@@ -441,12 +482,14 @@ TEST(Meshes, ObjRejectionsAreOneLine) {
   const std::string bad[] = {"v 0 0 0\nv 1 0 0\nf 1 2 7\n", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nv 1e39 0 0\n",
                              "f 1 2 3\nf 4 5 6\n", "v 1e7 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"};
   for (const std::string& obj : bad) {
-    const std::string error = ErrorOfType<UserError>([&] { ParseMesh(obj, ".obj", ".", "crafted.obj", "", "s.json: objects[0].mesh"); });
+    const std::string error =
+        ErrorOfType<UserError>([&] { ParseMesh(obj, ".obj", ".", "crafted.obj", "", "s.json: objects[0].mesh"); });
     EXPECT_EQ(error.rfind("s.json: objects[0].mesh: ", 0), 0u) << error;
     EXPECT_EQ(error.find('\n'), std::string::npos) << error;
   }
   // The mesh file itself: a regular file only.
-  EXPECT_NE(ErrorOfType<UserError>([&] { LoadMesh("/dev/zero.obj", "", "s.json"); }).find("does not exist"), std::string::npos);
+  EXPECT_NE(ErrorOfType<UserError>([&] { LoadMesh("/dev/zero.obj", "", "s.json"); }).find("does not exist"),
+            std::string::npos);
   testing::TempDir dir;
   ASSERT_EQ(::mkfifo((dir / "fifo.obj").c_str(), 0600), 0);
   EXPECT_NE(ErrorOfType<UserError>([&] { LoadMesh(dir / "fifo.obj", "", "s.json"); }).find("not a regular file"),

@@ -86,7 +86,8 @@ inline render::Scene DiskOverFloor(float R, float h) {
 // The disk's surfels alone (s = 0.03) in a DiskOverFloor scene: what reaches
 // points of the floor or of a medium on its axis (the floor's own surfels lie
 // in the floor's plane).
-inline std::vector<render::Surfel> DiskSurfels(const render::SceneGeometry& geometry, const render::CameraRays& camera) {
+inline std::vector<render::Surfel> DiskSurfels(const render::SceneGeometry& geometry,
+                                               const render::CameraRays& camera) {
   render::SurfelOptions options;
   options.s = 0.03f;
   std::vector<render::Surfel> surfels;

@@ -42,7 +42,8 @@ TEST(Sky, AnOpenFloorReceivesTheClosedForm) {
     options.sky_rays = 256;
     EXPECT_NEAR(RenderBands(geometry, nullptr, options).at(5, 5)[2] / expected, 1.0, 0.01) << gradient;
     options.transport = Transport::kDss;
-    EXPECT_NEAR(RenderBands(geometry, nullptr, options).at(5, 5)[2] / expected, 1.0, 1e-4) << gradient;  // nothing occludes
+    EXPECT_NEAR(RenderBands(geometry, nullptr, options).at(5, 5)[2] / expected, 1.0, 1e-4)
+        << gradient;  // nothing occludes
     options.transport = Transport::kPath;
     options.spp = 256;
     options.max_depth = 2;
@@ -70,7 +71,8 @@ TEST(Sky, DirectionalOcclusionUnderADiskIsTheClosedForm) {
   // The disk seen from below also hides its own floor's sky; the blocked part is what matters.
   const double blocked = kPi + 2 * kPi / 3 * g - truth;
   EXPECT_NEAR(kPi + 2 * kPi / 3 * g - sky_irradiance(GatherAllSurfels(gb, surfels, {}, 0)), blocked, 0.02 * blocked);
-  EXPECT_NEAR(kPi + 2 * kPi / 3 * g - sky_irradiance(SplatDeepScreenSpace(gb, camera, surfels, {}, {})), blocked, 0.05 * blocked);
+  EXPECT_NEAR(kPi + 2 * kPi / 3 * g - sky_irradiance(SplatDeepScreenSpace(gb, camera, surfels, {}, {})), blocked,
+              0.05 * blocked);
   // The gradient matters: ambient occlusion times the open sky's irradiance
   // (what a uniform treatment gives) misses the blocked part by far more.
   const double ao_estimate = sin2 * (kPi + 2 * kPi / 3 * g);

@@ -36,8 +36,8 @@ struct SphereCase {
   std::vector<double> Lambda = {0, 0, 1, 2, 1, 0, 0, 0};
   Scene scene = EmptyScene();
   SphereCase() {
-    scene.objects.push_back(MakeObject("sphere", MakeSphere(radius, 4, /*inward=*/true), 0.5,
-                                       UniformPhosphor(kr, ke, Lambda)));
+    scene.objects.push_back(
+        MakeObject("sphere", MakeSphere(radius, 4, /*inward=*/true), 0.5, UniformPhosphor(kr, ke, Lambda)));
     scene.texel_size_m = 0.05;
     // Light only in the two bands with ke, so the excitation rate is a = (0.2 + 0.1) E.
     scene.lights.push_back(PointLight(Vec3::Zero(), {intensity, intensity, 0, 0, 0, 0, 0, 0}, off_s));

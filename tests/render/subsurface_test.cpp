@@ -14,7 +14,8 @@ namespace phos::render {
 namespace {
 
 TEST(Dipole, ProfileIntegratesToTheTotalDiffuseReflectance) {
-  for (const auto& [sigma_a, sigma_s] : std::vector<std::pair<double, double>>{{10, 1000}, {100, 300}, {1, 5000}, {2000, 10}}) {
+  for (const auto& [sigma_a, sigma_s] :
+       std::vector<std::pair<double, double>>{{10, 1000}, {100, 300}, {1, 5000}, {2000, 10}}) {
     const Dipole d = Dipole::From(sigma_a, sigma_s, 1.3);
     // Numerically, on a logarithmic grid of r (the profile spans decades).
     double integral = 0;
@@ -44,7 +45,8 @@ TEST(Dipole, ProfileIntegratesToTheTotalDiffuseReflectance) {
           const double rr = std::sqrt(x * x + y * y);
           if (rr < 60 / d.sigma_tr) lattice += d.SurfelKernel(static_cast<float>(rr), static_cast<float>(cell), near);
         }
-      EXPECT_NEAR(lattice / d.TotalReflectance(), 1.0, 0.03) << sigma_a << " " << sigma_s << " offset " << ox << "," << oy;
+      EXPECT_NEAR(lattice / d.TotalReflectance(), 1.0, 0.03)
+          << sigma_a << " " << sigma_s << " offset " << ox << "," << oy;
     }
     EXPECT_GT(d.TotalReflectance(), 0);
     EXPECT_LT(d.TotalReflectance(), 1);

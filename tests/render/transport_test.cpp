@@ -138,16 +138,16 @@ void ExpectMatchesReference(const Image& image, const std::string& name, double 
     }
   }
   const double mean_block = total_ref / ((image.width / block) * (image.height / block));
-  const bool ok = worst <= block_tolerance * mean_block && std::abs(total - total_ref) <= 0.25 * block_tolerance * total_ref;
+  const bool ok =
+      worst <= block_tolerance * mean_block && std::abs(total - total_ref) <= 0.25 * block_tolerance * total_ref;
   if (!ok) {
     const std::filesystem::path out = std::filesystem::current_path() / ("render-regression-" + name + "-diff.exr");
     Image rgb(difference.width, difference.height, 3);
     for (std::size_t p = 0; p < difference.pixels.size(); ++p)
       for (int c = 0; c < 3; ++c) rgb.pixels[3 * p + c] = difference.pixels[p];
     WriteExr(out, rgb, difference, SpectralGrid::Uniform(400, 700, 1));
-    ADD_FAILURE() << name << ": worst 8x8 block differs by " << worst / mean_block
-                  << " of a mean block (tolerance " << block_tolerance << "), totals " << total << " vs "
-                  << total_ref << "; difference image: " << out;
+    ADD_FAILURE() << name << ": worst 8x8 block differs by " << worst / mean_block << " of a mean block (tolerance "
+                  << block_tolerance << "), totals " << total << " vs " << total_ref << "; difference image: " << out;
   }
 }
 

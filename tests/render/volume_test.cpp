@@ -88,8 +88,8 @@ TEST(Media, SingleScatteringOfACollimatedBeamMatchesTheClosedForm) {
       const double y0 = 0.3;
       float L[8] = {};
       const float T = media.March(Vec3f(0.1f, static_cast<float>(y0), 3), Vec3f(0, 0, -1), 1e30f, 0.5f, L);
-      const double expected = 0.6 * HenyeyGreenstein(0.0f, static_cast<float>(g)) * 2.0 *
-                              std::exp(-sigma * (1 - y0)) * (1 - std::exp(-2 * sigma));
+      const double expected = 0.6 * HenyeyGreenstein(0.0f, static_cast<float>(g)) * 2.0 * std::exp(-sigma * (1 - y0)) *
+                              (1 - std::exp(-2 * sigma));
       EXPECT_NEAR(T, std::exp(-2 * sigma), 1e-5);
       for (float l : L) EXPECT_NEAR(l / expected, 1.0, 0.01) << "sigma " << sigma << " g " << g;
     }
@@ -212,8 +212,10 @@ TEST(Media, ASheetChargesOnlyItsSlab) {
     const double a = 1.0 * coverage, k = a + 0.1;
     const double r = a / k * (1 - std::exp(-k * 2.0));
     const float state = solver.media()->State(0, 0, static_cast<std::size_t>((7 * 20 + 9) * 20 + x));
-    if (coverage > 0) EXPECT_NEAR(state, r, 1e-5) << cx;
-    else EXPECT_EQ(state, 0.0f) << cx;
+    if (coverage > 0)
+      EXPECT_NEAR(state, r, 1e-5) << cx;
+    else
+      EXPECT_EQ(state, 0.0f) << cx;
   }
   EXPECT_GT(solver.media()->State(0, 0, (7 * 20 + 9) * 20 + 14), 0.5f);  // x = 0.45: fully inside
 }
@@ -283,8 +285,9 @@ TEST(IntervalMap, AGlowingWallLightsTheMediumInFrontOfIt) {
   Scene scene = testing::EmptyScene(33, 33);
   scene.camera.keys = {{0.0, Vec3(0, 0, 3), Vec3(0, 0, 0)}};
   scene.camera.fov_deg = 20;
-  Object wall = testing::MakeObject("wall", MakeQuad(2 * a, 2 * a), 0.0,
-                                    testing::UniformPhosphor(kr, {0, 1, 0, 0, 0, 0, 0, 0}, {0, 0, 0, 0, Lambda, 0, 0, 0}));
+  Object wall =
+      testing::MakeObject("wall", MakeQuad(2 * a, 2 * a), 0.0,
+                          testing::UniformPhosphor(kr, {0, 1, 0, 0, 0, 0, 0, 0}, {0, 0, 0, 0, Lambda, 0, 0, 0}));
   RigidKey upright;
   upright.rotate = Eigen::Quaterniond(Eigen::AngleAxisd(kPi / 2, Vec3::UnitX()));  // normal +y -> +z
   wall.motion.keys = {upright};
@@ -305,7 +308,8 @@ TEST(IntervalMap, AGlowingWallLightsTheMediumInFrontOfIt) {
   const int n = 4000;
   for (int i = 0; i < n; ++i) {
     const double z = 0.2 + 0.2 * (i + 0.5) / n;
-    in_medium += albedo / (4 * kPi) * Lp * 4 * std::asin(a * a / (a * a + z * z)) * sigma * std::exp(-sigma * (0.4 - z)) * 0.2 / n;
+    in_medium += albedo / (4 * kPi) * Lp * 4 * std::asin(a * a / (a * a + z * z)) * sigma *
+                 std::exp(-sigma * (0.4 - z)) * 0.2 / n;
   }
   const double T = std::exp(-0.2 * sigma);
   const float centre = image.at(16, 16)[4];

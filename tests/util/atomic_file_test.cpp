@@ -47,7 +47,7 @@ TEST(WriteAtomically, AWriterThatFailsLeavesTheOldFileAndNoTemporary) {
 TEST(WriteAtomically, TheTemporaryKeepsTheExtensionAndIsMadeAfreshNeverThroughALink) {
   testing::TempDir dir;
   const std::filesystem::path temporary = AtomicTemporaryPath(dir / "out.exr");
-  EXPECT_EQ(temporary.extension(), ".exr");  // OpenImageIO chooses the format by it
+  EXPECT_EQ(temporary.extension(), ".exr");                                   // OpenImageIO chooses the format by it
   EXPECT_NE(temporary.filename().string().find(".tmp."), std::string::npos);  // how a resume finds leftovers
   // A link planted at the temporary's name is removed, and what it points at is untouched.
   testing::WriteText(dir / "victim", "keep me");

@@ -74,13 +74,15 @@ TEST(ReadCsv, AFirstLineOfNumbersIsData) {
 TEST(ReadCsv, ADecimalCommaIsNamed) {
   testing::TempDir dir;
   testing::WriteText(dir / "a.csv", "t;value\n0;1\n0,5;2\n");
-  EXPECT_NE(testing::ErrorOfType<UserError>([&] { ReadCsv(dir / "a.csv"); })
-                .find("a.csv: line 3, column t: expected a finite number, got \"0,5\" (decimal commas"),
+  EXPECT_NE(testing::ErrorOfType<UserError>([&] {
+              ReadCsv(dir / "a.csv");
+            }).find("a.csv: line 3, column t: expected a finite number, got \"0,5\" (decimal commas"),
             std::string::npos);
   // A line of another width names its line.
   testing::WriteText(dir / "b.txt", "t value\n0 1\n1 2 3\n");
-  EXPECT_NE(testing::ErrorOfType<UserError>([&] { ReadCsv(dir / "b.txt"); }).find("b.txt: line 3: expected 2 columns, got 3"),
-            std::string::npos);
+  EXPECT_NE(
+      testing::ErrorOfType<UserError>([&] { ReadCsv(dir / "b.txt"); }).find("b.txt: line 3: expected 2 columns, got 3"),
+      std::string::npos);
 }
 
 // Limits before allocation (issue 16 item 2): columns and rows are counted

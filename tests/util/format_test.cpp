@@ -34,7 +34,8 @@ TEST(ParseDouble, RejectsWhatIsNotOneFiniteNumber) {
   double v = 0;
   EXPECT_TRUE(ParseDouble("+2.5", &v));
   EXPECT_EQ(v, 2.5);
-  for (const char* bad : {"", "abc", "1.0x", "nan", "inf", "1e999", " 1", "1,2"}) EXPECT_FALSE(ParseDouble(bad, &v)) << bad;
+  for (const char* bad : {"", "abc", "1.0x", "nan", "inf", "1e999", " 1", "1,2"})
+    EXPECT_FALSE(ParseDouble(bad, &v)) << bad;
 }
 
 TEST(ParseDoubleList, SplitsOnCommasAndNamesTheBadItem) {

@@ -39,8 +39,9 @@ TEST(ReadFileText, ReadsOnlyRegularFilesWithinTheLimit) {
   EXPECT_EQ(ReadFileText(dir / "a.json"), "{\"a\": 1}");
   EXPECT_EQ(ReadJsonFile(dir / "a.json")["a"], 1);
   ASSERT_EQ(::mkfifo((dir / "fifo.json").c_str(), 0600), 0);
-  EXPECT_EQ(ErrorOf([&] { ReadJsonFile(dir / "fifo.json"); }),
-            (dir / "fifo.json").string() + ": not a regular file (a FIFO, socket or device); phos reads only regular files");
+  EXPECT_EQ(
+      ErrorOf([&] { ReadJsonFile(dir / "fifo.json"); }),
+      (dir / "fifo.json").string() + ": not a regular file (a FIFO, socket or device); phos reads only regular files");
   EXPECT_NE(ErrorOf([&] { ReadJsonFile("/dev/zero"); }).find("/dev/zero: not a regular file"), std::string::npos);
   EXPECT_EQ(ErrorOf([&] { ReadJsonFile(dir.path()); }), dir.path().string() + ": is a folder, not a file");
   EXPECT_EQ(ErrorOf([&] { ReadFileText(dir / "a.json", 4); }),

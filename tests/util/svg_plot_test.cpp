@@ -46,7 +46,6 @@ TEST(PlotSvg, LogAxisLeavesGapsAtNonPositiveValues) {
   EXPECT_NE(svg.find(">0.001<"), std::string::npos);
 }
 
-
 // The red, green and blue parts of "#RRGGBB".
 std::array<int, 3> Rgb(const std::string& hex) {
   EXPECT_EQ(hex.size(), 7u) << hex;
@@ -109,7 +108,8 @@ TEST(PlotColors, AMaterialsColourIsTheLightItEmits) {
   EXPECT_GT(blue[2], blue[0]);
   EXPECT_GT(blue[2], blue[1]);
   // The scale does not matter; nothing visible is grey.
-  EXPECT_EQ(SpectrumColor({0, 0, 0.7, 6.4, 0.5, 0, 0, 0}, paper), SpectrumColor({0, 0, 0.07, 0.64, 0.05, 0, 0, 0}, paper));
+  EXPECT_EQ(SpectrumColor({0, 0, 0.7, 6.4, 0.5, 0, 0, 0}, paper),
+            SpectrumColor({0, 0, 0.07, 0.64, 0.05, 0, 0, 0}, paper));
   EXPECT_EQ(SpectrumColor(std::vector<double>(8, 0.0), paper), "#888888");
   EXPECT_EQ(SpectrumColor({1, 1}, {300, 320, 340}), "#888888");  // ultraviolet only
   // Light enough to read on white: no channel mix as pale as yellow at full brightness.
@@ -162,7 +162,8 @@ TEST(PlotSvg, TheLogAxisSpansTheData) {
   const std::string svg = PlotSvg({s}, options);
   // The lowest tick is at or below the data's smallest value, whatever the decades.
   double lowest = INFINITY;
-  for (std::size_t p = svg.find("text-anchor=\"end\">"); p != std::string::npos; p = svg.find("text-anchor=\"end\">", p + 1))
+  for (std::size_t p = svg.find("text-anchor=\"end\">"); p != std::string::npos;
+       p = svg.find("text-anchor=\"end\">", p + 1))
     lowest = std::min(lowest, std::atof(svg.c_str() + p + 18));
   EXPECT_LE(lowest, std::exp(-0.227 * 300));
   EXPECT_GT(lowest, std::exp(-0.227 * 300) * 1e-9);  // and not far below it

@@ -38,7 +38,8 @@ void WriteAtomically(const std::filesystem::path& path,
   const std::filesystem::path temporary = AtomicTemporaryPath(path);
   ::unlink(temporary.c_str());  // a stale temporary, or a symlink planted there: removed, not followed
   const int fd = ::open(temporary.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC, 0644);
-  if (fd < 0) ThrowUserError(path.string(), "", std::string("cannot open the file for writing: ") + std::strerror(errno));
+  if (fd < 0)
+    ThrowUserError(path.string(), "", std::string("cannot open the file for writing: ") + std::strerror(errno));
   ::close(fd);
   const auto remove_temporary = [&] {
     std::error_code ignored;
@@ -65,7 +66,8 @@ void WriteFileAtomically(const std::filesystem::path& path, std::string_view tex
       path,
       [&](const std::filesystem::path& temporary) {
         const int fd = ::open(temporary.c_str(), O_WRONLY | O_TRUNC | O_NOFOLLOW | O_CLOEXEC);
-        if (fd < 0) ThrowUserError(path.string(), "", std::string("cannot open the file for writing: ") + std::strerror(errno));
+        if (fd < 0)
+          ThrowUserError(path.string(), "", std::string("cannot open the file for writing: ") + std::strerror(errno));
         std::size_t written = 0;
         while (written < text.size()) {
           const ssize_t n = ::write(fd, text.data() + written, text.size() - written);

@@ -19,9 +19,10 @@ double Lobe(double nm, double mu, double sigma_low, double sigma_high) {
 }  // namespace
 
 Tristimulus Cie1931Cmf(double nm) {
-  return {1.056 * Lobe(nm, 599.8, 37.9, 31.0) + 0.362 * Lobe(nm, 442.0, 16.0, 26.7) - 0.065 * Lobe(nm, 501.1, 20.4, 26.2),
-          0.821 * Lobe(nm, 568.8, 46.9, 40.5) + 0.286 * Lobe(nm, 530.9, 16.3, 31.1),
-          1.217 * Lobe(nm, 437.0, 11.8, 36.0) + 0.681 * Lobe(nm, 459.0, 26.0, 13.8)};
+  return {
+      1.056 * Lobe(nm, 599.8, 37.9, 31.0) + 0.362 * Lobe(nm, 442.0, 16.0, 26.7) - 0.065 * Lobe(nm, 501.1, 20.4, 26.2),
+      0.821 * Lobe(nm, 568.8, 46.9, 40.5) + 0.286 * Lobe(nm, 530.9, 16.3, 31.1),
+      1.217 * Lobe(nm, 437.0, 11.8, 36.0) + 0.681 * Lobe(nm, 459.0, 26.0, 13.8)};
 }
 
 Tristimulus Cie1931CmfBandMean(double lower_nm, double upper_nm) {
@@ -111,8 +112,10 @@ double Ciede2000(const Lab& lab1, const Lab& lab2) {
   double dhp = 0;
   if (Cp1 * Cp2 != 0) {
     dhp = hp2 - hp1;
-    if (dhp > 180) dhp -= 360;
-    else if (dhp < -180) dhp += 360;
+    if (dhp > 180)
+      dhp -= 360;
+    else if (dhp < -180)
+      dhp += 360;
   }
   const double dHp = 2 * std::sqrt(Cp1 * Cp2) * std::sin(0.5 * dhp * kDeg);
   // Eqs. 13-22: means and the weighting functions.
@@ -120,9 +123,12 @@ double Ciede2000(const Lab& lab1, const Lab& lab2) {
   const double Cp_mean = 0.5 * (Cp1 + Cp2);
   double hp_mean = hp1 + hp2;  // Eq. 14: the mean hue, again the shorter way round
   if (Cp1 * Cp2 != 0) {
-    if (std::fabs(hp1 - hp2) <= 180) hp_mean *= 0.5;
-    else if (hp1 + hp2 < 360) hp_mean = 0.5 * (hp1 + hp2 + 360);
-    else hp_mean = 0.5 * (hp1 + hp2 - 360);
+    if (std::fabs(hp1 - hp2) <= 180)
+      hp_mean *= 0.5;
+    else if (hp1 + hp2 < 360)
+      hp_mean = 0.5 * (hp1 + hp2 + 360);
+    else
+      hp_mean = 0.5 * (hp1 + hp2 - 360);
   }
   const double T = 1 - 0.17 * std::cos((hp_mean - 30) * kDeg) + 0.24 * std::cos(2 * hp_mean * kDeg) +
                    0.32 * std::cos((3 * hp_mean + 6) * kDeg) - 0.20 * std::cos((4 * hp_mean - 63) * kDeg);

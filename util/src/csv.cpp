@@ -93,8 +93,9 @@ CsvTable ParseCsv(const std::string& text, const std::string& source) {
       ThrowUserError(table.source, "line " + std::to_string(line_number),
                      "more than the limit of " + std::to_string(kMaxCsvRows) + " rows");
     if (fields.size() != table.header.size())
-      ThrowUserError(table.source, "line " + std::to_string(line_number),
-                     "expected " + std::to_string(table.header.size()) + " columns, got " + std::to_string(fields.size()));
+      ThrowUserError(
+          table.source, "line " + std::to_string(line_number),
+          "expected " + std::to_string(table.header.size()) + " columns, got " + std::to_string(fields.size()));
     for (std::size_t c = 0; c < fields.size(); ++c) {
       double v = 0;
       if (!ParseDouble(fields[c], &v)) {

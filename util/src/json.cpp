@@ -27,13 +27,15 @@ std::string ReadFileText(const std::filesystem::path& path, std::uintmax_t max_b
     ~FdCloser() { ::close(fd); }
   } closer{fd};
   struct stat info {};
-  if (::fstat(fd, &info) != 0) ThrowUserError(where, "", std::string("cannot read the file (") + std::strerror(errno) + ")");
+  if (::fstat(fd, &info) != 0)
+    ThrowUserError(where, "", std::string("cannot read the file (") + std::strerror(errno) + ")");
   if (S_ISDIR(info.st_mode)) ThrowUserError(where, "", "is a folder, not a file");
   if (!S_ISREG(info.st_mode))
     ThrowUserError(where, "", "not a regular file (a FIFO, socket or device); phos reads only regular files");
   const auto too_large = [&](std::uintmax_t bytes) {
-    ThrowUserError(where, "", "the file has " + std::to_string(bytes) + " bytes, more than the limit of " +
-                                  std::to_string(max_bytes) + " bytes");
+    ThrowUserError(where, "",
+                   "the file has " + std::to_string(bytes) + " bytes, more than the limit of " +
+                       std::to_string(max_bytes) + " bytes");
   };
   if (static_cast<std::uintmax_t>(info.st_size) > max_bytes) too_large(static_cast<std::uintmax_t>(info.st_size));
   std::string text(static_cast<std::size_t>(info.st_size), '\0');
@@ -48,7 +50,8 @@ std::string ReadFileText(const std::filesystem::path& path, std::uintmax_t max_b
         if (errno == EINTR) continue;
         ThrowUserError(where, "", std::string("reading failed (") + std::strerror(errno) + ")");
       }
-      text.resize(static_cast<std::size_t>(std::min<std::uintmax_t>(max_bytes, std::max<std::uintmax_t>(4096, 2 * text.size()))));
+      text.resize(static_cast<std::size_t>(
+          std::min<std::uintmax_t>(max_bytes, std::max<std::uintmax_t>(4096, 2 * text.size()))));
     }
     const ssize_t n = ::read(fd, text.data() + have, text.size() - have);
     if (n == 0) break;
@@ -162,18 +165,18 @@ double JsonField::NumberAtLeast(double lower) const {
 double JsonField::NumberInRange(double lower, double upper) const {
   double v = Number();
   if (v < lower || v > upper)
-    Fail("expected a number in [" + FormatDouble(lower) + ", " + FormatDouble(upper) + "], got " +
-         FormatDouble(v));
+    Fail("expected a number in [" + FormatDouble(lower) + ", " + FormatDouble(upper) + "], got " + FormatDouble(v));
   return v;
 }
 
 int JsonField::Integer(int lower, int upper) const {
-  if (!value_->is_number_integer() && !(value_->is_number() && std::floor(value_->get<double>()) == value_->get<double>()))
+  if (!value_->is_number_integer() &&
+      !(value_->is_number() && std::floor(value_->get<double>()) == value_->get<double>()))
     Fail("expected a whole number, got " + DescribeJson(*value_));
   double v = value_->get<double>();
   if (v < lower || v > upper)
-    Fail("expected a whole number from " + std::to_string(lower) + " to " + std::to_string(upper) +
-         ", got " + FormatDouble(v));
+    Fail("expected a whole number from " + std::to_string(lower) + " to " + std::to_string(upper) + ", got " +
+         FormatDouble(v));
   return static_cast<int>(v);
 }
 

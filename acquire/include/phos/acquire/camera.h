@@ -17,7 +17,7 @@ struct Frame {
   int adc_bits = 16;
   double black_level_dn = 0;
   double exposure_s = 0, gain = 1;
-  double t_start_s = 0;  // start of the exposure on the protocol's (host's) clock
+  double t_start_s = 0;                   // start of the exposure on the protocol's (host's) clock
   std::uint64_t camera_timestamp_ns = 0;  // the camera's own clock, where it has one
   double sensor_temperature_c = 0;
   // What the link took to deliver the frame whole: packets the camera sent

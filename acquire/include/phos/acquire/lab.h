@@ -22,8 +22,8 @@
 namespace phos {
 
 struct LabChannel {
-  std::string name;     // "led365", "shutter", "camera_trigger", ...
-  unsigned line = 0;    // offset on the GPIO chip
+  std::string name;         // "led365", "shutter", "camera_trigger", ...
+  unsigned line = 0;        // offset on the GPIO chip
   bool active_low = false;  // true for the usual relay boards: low = on
   // What the light puts on the sample, per band of LabConfig::bands, from a
   // spectroradiometer reading (irradiance_csv: wavelength_nm, irradiance per
@@ -40,8 +40,8 @@ struct LabConfig {
   int binning_x = 1, binning_y = 1;
   std::optional<std::array<int, 4>> region;  // x, y, width, height
   AravisCamera::Trigger trigger = AravisCamera::Trigger::kSoftware;
-  std::string trigger_source = "Line1";      // hardware trigger input
-  std::string trigger_channel;               // GPIO channel wired to it
+  std::string trigger_source = "Line1";  // hardware trigger input
+  std::string trigger_channel;           // GPIO channel wired to it
   double timeout_s = 5;
   // Lights: "gpiod" (GPIO lines on `chip`) or "none" (a dry run: switches
   // are recorded, nothing is driven; for trying a camera alone).

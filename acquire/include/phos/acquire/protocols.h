@@ -42,11 +42,11 @@ struct AutoExposure {
 // signal well above the noise; every frame records its exposure and its
 // delay after light-off, so fits can normalize.
 struct DecayProtocolOptions {
-  std::string charge_light;       // the channel to saturate with
-  double charge_s = 5400;         // 90 minutes
-  double interval_s = 5;          // one frame every
-  double duration_s = 180;        // of decay
-  double first_delay_s = 0.005;   // light-off to the first exposure
+  std::string charge_light;      // the channel to saturate with
+  double charge_s = 5400;        // 90 minutes
+  double interval_s = 5;         // one frame every
+  double duration_s = 180;       // of decay
+  double first_delay_s = 0.005;  // light-off to the first exposure
   // Frames between the first and the second slot, at delays halving from
   // interval_s / 2 down: a state that decays in well under interval_s (the
   // fast state of a two-state material, kr up to a few 1/s) is seen by
@@ -99,13 +99,13 @@ struct ExcitationProtocolOptions {
   double reset_s = 900;             // darkness before each charge (several 1/kr)
   double first_charge_s = 1;
   double max_charge_s = 4096;
-  double plateau_growth = 1.03;     // stop doubling when a doubling adds < 3%
-  double delay_s = 0.05;            // light-off to exposure
+  double plateau_growth = 1.03;  // stop doubling when a doubling adds < 3%
+  double delay_s = 0.05;         // light-off to exposure
   double exposure_s = 1;
   double gain = 1;
-  int tail_frames = 6;              // 0: one frame per charge (the paper's design)
-  double tail_growth = 2;           // each tail frame's exposure over the one before
-  double high_fraction = 0.7;       // a tail frame above this share of the range stops the growth
+  int tail_frames = 6;         // 0: one frame per charge (the paper's design)
+  double tail_growth = 2;      // each tail frame's exposure over the one before
+  double high_fraction = 0.7;  // a tail frame above this share of the range stops the growth
 
   bool IsValid(std::string* error) const;
 };

@@ -81,8 +81,8 @@ inline constexpr double kMinExposureS = 1e-6;
 inline constexpr double kMaxExposureS = 86400;
 
 struct FrameRecord {
-  std::string file;  // frames/NNNNNN.tif, relative to the session folder
-  int seq = 0;       // 1, 2, ...: the NNNNNN of file
+  std::string file;      // frames/NNNNNN.tif, relative to the session folder
+  int seq = 0;           // 1, 2, ...: the NNNNNN of file
   double t_start_s = 0;  // exposure start on the protocol's clock
   double exposure_s = 0;
   double gain = 1;
@@ -111,7 +111,7 @@ struct FrameRecord {
 
 struct FrameRecords {
   std::vector<FrameRecord> frames;
-  std::vector<int> lines;  // each frame's line number in frames.jsonl
+  std::vector<int> lines;           // each frame's line number in frames.jsonl
   std::optional<std::string> torn;  // a torn last line, skipped
 };
 
@@ -150,7 +150,7 @@ SessionRecord ReadSessionRecord(const std::filesystem::path& session_dir);
 struct StopRecord {
   std::string how;  // complete, aborted, failed
   std::string why;
-  int frames = 0;   // the frame records frames.jsonl held when it stopped
+  int frames = 0;  // the frame records frames.jsonl held when it stopped
   std::string stopped_utc;
 
   nlohmann::json ToJson() const;

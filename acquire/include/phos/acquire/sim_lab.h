@@ -131,9 +131,9 @@ class SimulatedLab final : public Camera {
   // per band, and the reflection of each light off the sample and off the
   // white reference, integrated over wavelength (so narrow lines stay narrow).
   struct Optics {
-    std::vector<std::vector<std::vector<double>>> emission;         // [column][channel][band]
-    std::vector<std::vector<std::vector<double>>> sample_reflect;   // [source][column][channel]
-    std::vector<std::vector<std::vector<double>>> white_reflect;    // [source][column][channel]
+    std::vector<std::vector<std::vector<double>>> emission;        // [column][channel][band]
+    std::vector<std::vector<std::vector<double>>> sample_reflect;  // [source][column][channel]
+    std::vector<std::vector<std::vector<double>>> white_reflect;   // [source][column][channel]
   };
   Optics MakeOptics(bool through_lvf) const;
   Optics plain_, lvf_;

@@ -96,12 +96,12 @@ class EditSession {
   int states_ = 1;
   double falloff_ = 0;
   std::vector<PlacedConstraint> constraints_;
-  std::vector<std::shared_ptr<const Material>> base_;     // per object: before edits (scene or preset)
-  std::vector<bool> base_unknown_ke_as_zero_;             // per object: the scene file's "unknown_ke" policy
-  std::vector<std::shared_ptr<const Material>> solved_;   // per object: solved, or null
-  std::map<int, Solution> solutions_;                     // per edited object
-  std::vector<double> xyz_to_rgb_weights_;                // 3 x nb: band radiance -> linear sRGB
-  std::vector<int> wide_band_;                            // per band: 0 blue, 1 green, 2 red
+  std::vector<std::shared_ptr<const Material>> base_;    // per object: before edits (scene or preset)
+  std::vector<bool> base_unknown_ke_as_zero_;            // per object: the scene file's "unknown_ke" policy
+  std::vector<std::shared_ptr<const Material>> solved_;  // per object: solved, or null
+  std::map<int, Solution> solutions_;                    // per edited object
+  std::vector<double> xyz_to_rgb_weights_;               // 3 x nb: band radiance -> linear sRGB
+  std::vector<int> wide_band_;                           // per band: 0 blue, 1 green, 2 red
   double last_solve_seconds_ = 0;
 };
 

@@ -38,12 +38,12 @@ namespace phos::editor {
 
 struct Constraint {
   enum class Kind { kTarget, kAtLeast, kAtMost } kind = Kind::kTarget;
-  int point = 0;                 // index into Problem::points
+  int point = 0;  // index into Problem::points
   double t_s = 0;
   double until_s = 0;            // bounds: the range's end (>= t_s); targets: = t_s
   std::vector<double> radiance;  // per band
   double weight = 1;
-  std::string label;             // "constraints[2]"
+  std::string label;  // "constraints[2]"
 };
 
 // A surface point the material is seen at: its irradiance over time (from
@@ -71,8 +71,8 @@ Problem ProblemFromJson(const nlohmann::json& json, const std::string& source);
 
 struct ConstraintResult {
   std::string label;
-  double residual = 0;             // targets: |L - T| over bands; bounds: the largest violation
-  std::vector<double> predicted;   // L per band at t_s
+  double residual = 0;            // targets: |L - T| over bands; bounds: the largest violation
+  std::vector<double> predicted;  // L per band at t_s
 };
 
 struct Solution {

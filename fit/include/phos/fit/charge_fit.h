@@ -32,7 +32,7 @@ struct ChargeFitSummary {
   double L0 = 0, Linf = 0, rate = 0;
   double L0_stderr = 0, Linf_stderr = 0, rate_stderr = 0;
   std::vector<ChargeLevels> levels;  // per channel; levels[0] is L0, Linf above
-  double rss = 0;       // plain sum of squared residuals, every channel
+  double rss = 0;                    // plain sum of squared residuals, every channel
   int iterations = 0;
   double seconds = 0;
 };

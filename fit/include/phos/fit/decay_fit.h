@@ -51,7 +51,7 @@ struct DecayFitOptions {
 };
 
 struct DecayComponent {
-  double rate = 0, rate_stderr = 0;           // 1/s
+  double rate = 0, rate_stderr = 0;                 // 1/s
   std::vector<double> amplitude, amplitude_stderr;  // per channel, at t = 0 (stderr 0 unless requested)
 };
 
@@ -61,10 +61,10 @@ struct DecayFitSummary {
   double rss = 0;                          // plain sum of squared residuals, data units
   double weighted_rss = 0;                 // what the fit minimized
   int n_components = 0;
-  std::vector<double> bic;                 // per nc tried (index nc - 1); NaN where invalid
-  std::string choice;                      // how n_components was chosen, in words
-  int iterations = 0;                      // Ceres iterations, all stages
-  double seconds = 0;                      // wall time of the fit
+  std::vector<double> bic;  // per nc tried (index nc - 1); NaN where invalid
+  std::string choice;       // how n_components was chosen, in words
+  int iterations = 0;       // Ceres iterations, all stages
+  double seconds = 0;       // wall time of the fit
 };
 
 // Fits the curve; bad data (too few samples, constant, not decaying) is a

@@ -35,8 +35,8 @@ struct ExcitationSample {
 };
 
 struct ExcitationFitOptions {
-  double kr = 0;                            // 1/s, from the decay fit
-  std::optional<double> saturated_signal;   // S, when measured independently
+  double kr = 0;                           // 1/s, from the decay fit
+  std::optional<double> saturated_signal;  // S, when measured independently
   Weighting weighting = Weighting::kNone;
   int max_iterations = 100;
 };
@@ -65,7 +65,8 @@ ExcitationFitSummary FitExcitation(const std::vector<ExcitationSample>& samples,
 // that no light reaches stays unknown (nullopt): the data say nothing of it,
 // and unknown is not zero (docs/model.md).
 std::vector<std::optional<double>> KeFromExcitationRates(const std::vector<std::vector<double>>& E_per_light,
-                                          const std::vector<double>& a_per_light, const std::string& where);
+                                                         const std::vector<double>& a_per_light,
+                                                         const std::string& where);
 
 // The same with the rates' 1-sigma uncertainties: ke as above, and for every
 // band whose ke is above its bound 0 the linearized 1-sigma of the weighted
@@ -74,7 +75,8 @@ std::vector<std::optional<double>> KeFromExcitationRates(const std::vector<std::
 struct KeEstimate {
   std::vector<std::optional<double>> ke, ke_stderr;
 };
-KeEstimate KeWithUncertainty(const std::vector<std::vector<double>>& E_per_light, const std::vector<double>& a_per_light,
-                             const std::vector<double>& a_stderr_per_light, const std::string& where);
+KeEstimate KeWithUncertainty(const std::vector<std::vector<double>>& E_per_light,
+                             const std::vector<double>& a_per_light, const std::vector<double>& a_stderr_per_light,
+                             const std::string& where);
 
 }  // namespace phos

@@ -45,11 +45,11 @@
 namespace phos {
 
 struct LvfCalibrationFit {
-  int width = 0;                      // columns
-  double center0_nm = 0;              // centre of column 0
+  int width = 0;          // columns
+  double center0_nm = 0;  // centre of column 0
   double nm_per_column = 0;
-  double fwhm_nm = 0;                 // the filter's pass band, from the lines' spread
-  double rms_residual_nm = 0;         // of the line fit
+  double fwhm_nm = 0;          // the filter's pass band, from the lines' spread
+  double rms_residual_nm = 0;  // of the line fit
   struct Line {
     std::string light;
     double wavelength_nm = 0, column = 0;
@@ -87,7 +87,7 @@ SpectrumFit FitEmissionSpectrum(const std::filesystem::path& session_dir, const 
                                 const SpectralGrid& bands, double dark_dn_per_s);
 
 struct SessionFitOptions {
-  int components = 0;      // 0: BIC chooses up to max_components
+  int components = 0;  // 0: BIC chooses up to max_components
   int max_components = 3;
   Weighting weighting = Weighting::kPoisson;
   // Write the joint refinement's kr, ke, Lambda and their uncertainties (when
@@ -138,7 +138,7 @@ struct SessionFit {
   std::vector<ExcitationLight> excitation;
   std::vector<ExcitationMeasurement> excitation_measurements;
   std::optional<StateExcitationFit> state_excitation;
-  std::vector<KeEstimate> ke;  // per state
+  std::vector<KeEstimate> ke;      // per state
   std::optional<JointFit> joint;   // with excitation data
   bool joint_written = false;      // the material is the joint refinement's
   std::vector<std::string> notes;  // what was left out or could not be fitted, and why
@@ -164,7 +164,7 @@ JointFit JointRefine(const Curve& decay_curve, const DecayFitSummary& decay,
 struct MaterialComparison {
   std::vector<double> kr_relative_error;  // per state, matched fastest to fastest
   double spectrum_l1 = 0;
-  std::vector<std::optional<double>> ke_relative_error;  // per band of the first state
+  std::vector<std::optional<double>> ke_relative_error;                         // per band of the first state
   std::vector<std::vector<std::optional<double>>> ke_relative_error_per_state;  // [state][band]
 };
 MaterialComparison CompareMaterials(const Material& fitted, const Material& truth);

@@ -104,14 +104,15 @@ StateExcitationFit FitStateExcitation(const std::vector<ExcitationMeasurement>& 
 // the Fisher information for photon-counting noise of one photo-electron
 // per unit of value and second of exposure, J' W J in relative parameters.
 struct DesignInformation {
-  double condition_number = 0;        // of the weighted Jacobian
+  double condition_number = 0;  // of the weighted Jacobian
   // The Cramer-Rao bound of each a_il relative to itself, per light and
   // state (scale it by 1/sqrt(electrons per unit) for a real camera), and
   // the largest of them: the rate the design pins worst.
   std::map<std::string, std::vector<double>> a_relative_stderr;
   double worst_a_relative_stderr = 0;
 };
-DesignInformation ExcitationDesignInformation(const std::vector<ExcitationMeasurement>& design, const std::vector<double>& S,
+DesignInformation ExcitationDesignInformation(const std::vector<ExcitationMeasurement>& design,
+                                              const std::vector<double>& S,
                                               const std::map<std::string, std::vector<double>>& a,
                                               const std::vector<double>& kr);
 

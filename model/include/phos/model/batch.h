@@ -20,9 +20,9 @@ namespace phos {
 
 template <typename Real>
 struct BatchCoefficients {
-  int nc = 0;        // excited states
-  int n_exc = 0;     // bands that carry irradiance
-  int n_em = 0;      // bands that are emitted
+  int nc = 0;                  // excited states
+  int n_exc = 0;               // bands that carry irradiance
+  int n_em = 0;                // bands that are emitted
   std::vector<Real> kr;        // [nc]
   std::vector<Real> ke;        // [nc * n_exc], state-major
   std::vector<Real> emission;  // [n_em * nc]: Lambda_i[b] * kr_i (Eq. 8.2)
@@ -67,8 +67,8 @@ BatchStepInfo AdvanceBatch(Integrator integrator, const BatchCoefficients<Real>&
 // across dark intervals). Needs no irradiance. If Lp is not null, also writes
 // the emitted radiance after the step, in the same pass (as AdvanceBatch).
 template <typename Real>
-void DecayBatch(const BatchCoefficients<Real>& coefficients, Real h_s, StateBatch<Real>& states,
-                Real* Lp = nullptr, std::size_t Lp_stride = 0);
+void DecayBatch(const BatchCoefficients<Real>& coefficients, Real h_s, StateBatch<Real>& states, Real* Lp = nullptr,
+                std::size_t Lp_stride = 0);
 
 // Emitted radiance of every point (Eq. 8.2).
 template <typename Real>

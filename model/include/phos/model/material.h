@@ -45,9 +45,9 @@ inline constexpr double kMaxIrradiance = 1e9;
 inline constexpr const char* kMaterialSchema = "phos.material/1";
 
 struct ExcitedState {
-  double kr = 0.0;                         // 1/s
-  std::vector<std::optional<double>> ke;   // per band, 1/s per unit irradiance; nullopt = unknown
-  std::vector<double> Lambda;              // per band, radiance per unit kr*r
+  double kr = 0.0;                        // 1/s
+  std::vector<std::optional<double>> ke;  // per band, 1/s per unit irradiance; nullopt = unknown
+  std::vector<double> Lambda;             // per band, radiance per unit kr*r
   // Optional 1-sigma uncertainties of a fit (same units); nullopt: not given.
   std::optional<double> kr_stderr;
   std::vector<std::optional<double>> ke_stderr;  // empty, or one per band (nullopt where ke is unknown)

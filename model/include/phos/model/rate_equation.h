@@ -55,7 +55,7 @@ inline Real ExactStep(Real r, Real a, Real kr, Real h) {
   Real k = a + kr;
   Real x = -k * h;
   Real decay = std::exp(x);
-  Real rise = -std::expm1(x);  // 1 - e^{-kh}, accurate for small kh
+  Real rise = -std::expm1(x);                                      // 1 - e^{-kh}, accurate for small kh
   Real r_inf = a / std::max(k, std::numeric_limits<Real>::min());  // k = 0 means a = 0: r_inf = 0
   Real next = r * decay + r_inf * rise;
   // The exact value lies between r and r_inf, inside [0, 1]; the clamp only

@@ -11,9 +11,9 @@
 namespace phos {
 
 struct ReferenceOptions {
-  long double relative_tolerance = 1e-16L;  // per step, on |r|
+  long double relative_tolerance = 1e-16L;   // per step, on |r|
   long double absolute_tolerance = 1e-300L;  // only to avoid 0/0 at r = 0: the control is relative
-  std::int64_t max_steps = 50'000'000;      // per call
+  std::int64_t max_steps = 50'000'000;       // per call
 };
 
 struct ReferenceStats {

@@ -33,7 +33,6 @@ class IrradianceSchedule {
 // The excitation rate a_i = sum_b ke_i[b] E[b] of every state (Eq. 8.1), in 1/s.
 // Irradiance in a band where some ke is unknown is a UserError naming the
 // state, the band and `where`: such a material may decay but not be charged there.
-std::vector<double> ExcitationRates(const Material& material, const std::vector<double>& E,
-                                    const std::string& where);
+std::vector<double> ExcitationRates(const Material& material, const std::vector<double>& E, const std::string& where);
 
 }  // namespace phos

@@ -36,7 +36,7 @@ struct SimulationResult {
   std::vector<double> r;    // [samples * nc]
   std::vector<double> L;    // [samples * nb]: emitted radiance Lp per band (Eq. 8.2)
   std::vector<std::string> warnings;
-  std::int64_t steps = 0;   // integrator steps taken (reference: accepted steps)
+  std::int64_t steps = 0;  // integrator steps taken (reference: accepted steps)
 
   std::size_t sample_count() const { return t_s.size(); }
   double state(std::size_t sample, int i) const { return r[sample * nc + i]; }

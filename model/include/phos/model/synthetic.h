@@ -31,12 +31,12 @@
 namespace phos {
 
 struct TwoStateSpec {
-  double slow_kr = 0.02;    // 1/s
-  double rate_ratio = 10;   // kr_fast / kr_slow, > 1
+  double slow_kr = 0.02;   // 1/s
+  double rate_ratio = 10;  // kr_fast / kr_slow, > 1
   // The fast state's share of the glow at light-off after charging to
   // equilibrium under unit irradiance in band 1 (what a decay fit's
   // amplitudes show after the decay protocol's long charge with led405).
-  double fast_share = 0.5;  // (0, 1)
+  double fast_share = 0.5;            // (0, 1)
   double fast_rho = 1, slow_rho = 1;  // see above
   // Total glow at that equilibrium, sum over bands and states of kr Lambda r.
   double glow = 0.2;

@@ -74,9 +74,9 @@ struct SurfelOptions {
   // docs/dss-budget.csv): the lowest error over the fixture views within
   // 0.1 s at 128 px.
   float s = 0.04f;
-  float d_near_m = 0.0f; // added to the distance (keeps near surfels from becoming tiny)
-  unsigned seed = 1;     // for the two-pass random discard
-  int max_split = 256;   // at most m x m surfels per triangle
+  float d_near_m = 0.0f;  // added to the distance (keeps near surfels from becoming tiny)
+  unsigned seed = 1;      // for the two-pass random discard
+  int max_split = 256;    // at most m x m surfels per triangle
 };
 
 // Surfels of every object at the geometry's current time, seen from `eye`
@@ -102,7 +102,7 @@ struct DssOptions {
   // disk of 60 000 surfels 1 m away lights its axis with 4e-6 each; 1e-5
   // lost it all).
   float epsilon = 1e-6f;
-  bool blur = true;          // geometry-aware blur of the interleaved levels
+  bool blur = true;  // geometry-aware blur of the interleaved levels
   int tile_px = 32;
   // Radiosity per surfel and channel (B, e.g. pi Lp per band), or empty for
   // occlusion only.
@@ -119,7 +119,7 @@ struct DssOptions {
 
 struct DssResult {
   int width = 0, height = 0, channels = 0;
-  std::vector<float> occlusion;   // per pixel, in [0, 1]
+  std::vector<float> occlusion;  // per pixel, in [0, 1]
   // Directional occlusion: per pixel, sum of F w_y (w the unit direction to
   // each surfel), scaled like `occlusion` where that sum exceeded 1. The sky
   // L(w) = L (1 + g w_y) then gives E = L [pi (1 - occlusion) + g (2 pi / 3 n_y

@@ -136,8 +136,8 @@ float UnitIrradiance(const SceneGeometry& geometry, const LightPose& light, cons
 // `rays` cosine-distributed shadow rays, stratified on a sqrt(rays) grid
 // (E = pi mean of Shape(w) over the unblocked rays); `seed` decorrelates
 // neighbouring points.
-float UnitSkyIrradiance(const SceneGeometry& geometry, const Environment& environment, const Vec3f& p,
-                        const Vec3f& n, int rays, std::uint64_t seed, std::uint64_t* count = nullptr);
+float UnitSkyIrradiance(const SceneGeometry& geometry, const Environment& environment, const Vec3f& p, const Vec3f& n,
+                        int rays, std::uint64_t seed, std::uint64_t* count = nullptr);
 
 // The pinhole camera at one moment: ray directions through image points in
 // pixels ((x + 0.5, y + 0.5) is the centre of pixel x, y).
@@ -167,15 +167,15 @@ class TexelAtlas {
 
   struct ObjectTexels {
     int object = -1;
-    std::size_t count = 0;             // texels of the object
+    std::size_t count = 0;  // texels of the object
     // Auto atlas: per triangle, the index of its first texel and its subdivisions.
     // UV atlas: first is unused and m is 8 (the glow patches' granularity).
     std::vector<std::uint32_t> first;
     std::vector<std::uint16_t> m;
     // UV atlas.
-    int uv_resolution = 0;             // 0: auto atlas
-    std::vector<std::int32_t> uv_index;  // [y * resolution + x]: texel, or -1 where no triangle lies
-    std::vector<TexelAnchor> anchors;    // per texel
+    int uv_resolution = 0;                    // 0: auto atlas
+    std::vector<std::int32_t> uv_index;       // [y * resolution + x]: texel, or -1 where no triangle lies
+    std::vector<TexelAnchor> anchors;         // per texel
     std::vector<Eigen::Vector2f> uv_corners;  // [3 * triangle + corner], in texels
     const Mesh* mesh = nullptr;
     bool uv() const { return uv_resolution > 0; }
@@ -203,7 +203,8 @@ class TexelAtlas {
     const ObjectTexels& o = objects_[slot];
     if (o.uv()) {
       const std::size_t end = std::min(o.anchors.size(), (chunk + 1) * kUvChunk);
-      for (std::size_t k = chunk * kUvChunk; k < end; ++k) f(k, static_cast<int>(o.anchors[k].triangle), o.anchors[k].b1, o.anchors[k].b2);
+      for (std::size_t k = chunk * kUvChunk; k < end; ++k)
+        f(k, static_cast<int>(o.anchors[k].triangle), o.anchors[k].b1, o.anchors[k].b2);
       return;
     }
     // Texel k in SubTriangleIndex's order: row i, then upright and inverted alternately.
@@ -213,7 +214,8 @@ class TexelAtlas {
       for (int j = 0; j < m - i; ++j)
         for (int inverted = 0; inverted < (i + j < m - 1 ? 2 : 1); ++inverted) {
           const float third = inverted ? 2.0f / 3.0f : 1.0f / 3.0f;
-          f(k++, t, (static_cast<float>(i) + third) / static_cast<float>(m), (static_cast<float>(j) + third) / static_cast<float>(m));
+          f(k++, t, (static_cast<float>(i) + third) / static_cast<float>(m),
+            (static_cast<float>(j) + third) / static_cast<float>(m));
         }
   }
   template <typename F>

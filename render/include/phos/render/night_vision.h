@@ -26,8 +26,8 @@
 namespace phos::render {
 
 struct NightVisionOptions {
-  double cd_per_unit = 0.01;   // photopic luminance (cd/m^2) of radiance Y = 1 in the scene's units
-  double exposure = 1.0;       // display scale, as for the PNG
+  double cd_per_unit = 0.01;  // photopic luminance (cd/m^2) of radiance Y = 1 in the scene's units
+  double exposure = 1.0;      // display scale, as for the PNG
   double acuity_sigma_px = 2.0;
   double gamma = 1.6;
   double noise_sigma = 0.05;

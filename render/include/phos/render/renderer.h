@@ -54,8 +54,8 @@ struct FrameOptions {
   int direct_spp = 1;  // direct: jittered samples per pixel
   int max_depth = 8;   // path: bounces
   unsigned seed = 1;
-  int interval_layers = 4;  // dss with media: points per pixel of the transmittance interval map
-  int sky_rays = 16;        // direct (and what dss surfels receive): shadow rays per point for the sky
+  int interval_layers = 4;           // dss with media: points per pixel of the transmittance interval map
+  int sky_rays = 16;                 // direct (and what dss surfels receive): shadow rays per point for the sky
   bool indirect_visibility = false;  // dss: the bounced z-buffer (no leaking, no over-occlusion) instead of blending
 };
 FrameOptions DefaultFrameOptions(const Scene& scene, Transport transport);
@@ -80,7 +80,7 @@ struct TransportChoice {
   bool fits = true;  // false: nothing met the budget or the quality; the nearest was chosen
 };
 std::vector<TransportCandidate> MeasureTransportCandidates(const SceneGeometry& geometry, const CoupledSolver* solver,
-                                                          const FrameOptions& base);
+                                                           const FrameOptions& base);
 // Best expected quality within budget_s seconds per frame (budget_s > 0), or
 // the cheapest candidate of at least min_ssim (min_ssim > 0).
 TransportChoice ChooseTransport(std::vector<TransportCandidate> candidates, double budget_s, double min_ssim);

@@ -32,13 +32,13 @@ using Vec3 = Eigen::Vector3d;
 // into Embree's float BVH, whose assertions abort on values like 1e308; the
 // counts bound memory and time. A message that refuses a value names its limit.
 inline constexpr double kMaxCoordinate_m = 1e6;  // |x| of every position, size, bound, vertex (after transforms)
-inline constexpr double kMinScale = 1e-6, kMaxScale = 1e6;  // a transform's scale
-inline constexpr double kMaxTime_s = 1e9;        // |t| of every time in a scene
-inline constexpr double kMaxLevel = 1e6;         // a light's or the sky's schedule level
-inline constexpr double kMaxDensity = 1e6;       // a volume's density
-inline constexpr std::size_t kMaxVoxels = std::size_t{1} << 24;       // over all volumes of a scene (16.8 million)
-inline constexpr double kMaxPuffEvaluations = 1e8;                   // voxels x puffs of a procedural density
-inline constexpr std::size_t kMaxPixels = std::size_t{1} << 26;       // width x height (67 million, 8192 x 8192)
+inline constexpr double kMinScale = 1e-6, kMaxScale = 1e6;              // a transform's scale
+inline constexpr double kMaxTime_s = 1e9;                               // |t| of every time in a scene
+inline constexpr double kMaxLevel = 1e6;                                // a light's or the sky's schedule level
+inline constexpr double kMaxDensity = 1e6;                              // a volume's density
+inline constexpr std::size_t kMaxVoxels = std::size_t{1} << 24;         // over all volumes of a scene (16.8 million)
+inline constexpr double kMaxPuffEvaluations = 1e8;                      // voxels x puffs of a procedural density
+inline constexpr std::size_t kMaxPixels = std::size_t{1} << 26;         // width x height (67 million, 8192 x 8192)
 inline constexpr std::size_t kMaxMeshVertices = std::size_t{1} << 24;   // per mesh file (16.8 million)
 inline constexpr std::size_t kMaxMeshTriangles = std::size_t{1} << 24;  // per mesh file
 inline constexpr std::size_t kMaxGltfInstances = std::size_t{1} << 16;  // node visits of a glTF scene graph (65536)
@@ -88,12 +88,12 @@ struct Object {
   std::string name;
   std::shared_ptr<const Mesh> mesh;
   RigidMotion motion;
-  std::vector<double> albedo;                 // per band, diffuse reflectance in [0, 1]
-  std::shared_ptr<const Material> phosphor;   // null: not phosphorescent (carries no state)
+  std::vector<double> albedo;                // per band, diffuse reflectance in [0, 1]
+  std::shared_ptr<const Material> phosphor;  // null: not phosphorescent (carries no state)
   std::string phosphor_path;
-  bool unknown_ke_as_zero = false;            // the scene's explicit assumption, never phos's guess
+  bool unknown_ke_as_zero = false;  // the scene's explicit assumption, never phos's guess
   InitialState initial;
-  double texel_size_m = 0.0;                  // edge of the automatic atlas's texels (0: scene default)
+  double texel_size_m = 0.0;  // edge of the automatic atlas's texels (0: scene default)
   // Texels: "auto" (per-triangle atlas), "uv" (the mesh's UV map) or "" (the
   // UV map when the mesh has one, else auto). uv_resolution: texels per UV
   // unit along each axis (0: from the texel size and the surface area).
@@ -125,8 +125,8 @@ struct Light {
   std::vector<double> E_per_band;  // spectrum * intensity integrated over the scene's bands
   double intensity = 1.0;
   LightSchedule schedule;
-  RigidMotion motion;    // a point light moves with the translation of its keys
-  Vec3 position = Vec3::Zero();  // point: object space of `motion`
+  RigidMotion motion;               // a point light moves with the translation of its keys
+  Vec3 position = Vec3::Zero();     // point: object space of `motion`
   Vec3 direction = Vec3(0, -1, 0);  // directional, sheet: the direction light travels
   Vec3 sheet_normal = Vec3(1, 0, 0);
   double sheet_thickness_m = 0;
@@ -178,16 +178,16 @@ struct CameraKey {
 struct Camera {
   std::vector<CameraKey> keys;  // at least one
   Vec3 up = Vec3(0, 1, 0);
-  double fov_deg = 45.0;        // vertical
+  double fov_deg = 45.0;  // vertical
   int width = 320, height = 240;
-  double exposure = 1.0;        // scale applied before tone mapping (PNG only)
+  double exposure = 1.0;  // scale applied before tone mapping (PNG only)
   CameraKey At(double t_s) const;
 };
 
 struct RenderSettings {
-  int spp = 16;          // path tracer samples per pixel
-  int max_depth = 8;     // path tracer bounces
-  int direct_spp = 1;    // direct transport: jittered samples per pixel
+  int spp = 16;        // path tracer samples per pixel
+  int max_depth = 8;   // path tracer bounces
+  int direct_spp = 1;  // direct transport: jittered samples per pixel
   unsigned seed = 1;
   double max_step_s = 0.0;  // coupled solver's longest step while something moves (0: 1/fps)
   // The phosphors' own glow charges the other phosphors (DESIGN.md: "optionally
@@ -220,8 +220,8 @@ Scene LoadScene(const std::filesystem::path& path);
 Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& base_dir, const std::string& source);
 
 // Built-in shapes (also usable from scene files as {"shape": ...}).
-Mesh MakeQuad(double size_x, double size_z);            // in the y = 0 plane, normal +y
-Mesh MakeBox(const Vec3& size, bool inward);            // centred at the origin
+Mesh MakeQuad(double size_x, double size_z);                    // in the y = 0 plane, normal +y
+Mesh MakeBox(const Vec3& size, bool inward);                    // centred at the origin
 Mesh MakeSphere(double radius, int subdivisions, bool inward);  // icosphere
 // Loads OBJ (tinyobjloader) or glTF 2.0 (.gltf/.glb, tinygltf), triangulated,
 // with node transforms applied (glTF). A non-empty `group` keeps only the OBJ

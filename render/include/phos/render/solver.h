@@ -29,11 +29,11 @@ namespace phos::render {
 
 struct SolverStats {
   std::size_t texels = 0;
-  std::size_t steps = 0;             // lit steps (AdvanceBatch)
-  std::size_t dark_jumps = 0;        // closed-form dark steps (DecayBatch)
+  std::size_t steps = 0;               // lit steps (AdvanceBatch)
+  std::size_t dark_jumps = 0;          // closed-form dark steps (DecayBatch)
   std::size_t irradiance_updates = 0;  // per-light geometry recomputations (each: one shadow ray per texel)
   std::size_t shadow_rays = 0;
-  std::size_t glow_patches = 0;      // phosphor_irradiance: source/receiver patches
+  std::size_t glow_patches = 0;  // phosphor_irradiance: source/receiver patches
 };
 
 class VolumeMedia;
@@ -86,11 +86,11 @@ class CoupledSolver {
     // only: cos / d^2 and visibility), and where it was computed.
     std::vector<std::vector<float>> unit_E;
     std::vector<LightPose> unit_E_light_at;
-    std::vector<std::uint64_t> unit_E_version;  // the geometry's version() it was computed at
+    std::vector<std::uint64_t> unit_E_version;                  // the geometry's version() it was computed at
     std::vector<Eigen::Vector3f> texel_position, texel_normal;  // at texel_version
     std::uint64_t texel_version = ~std::uint64_t{0};
     std::vector<std::uint32_t> texel_patch;  // phosphor_irradiance: the glow patch of each texel
-    std::vector<float> unit_sky;  // the sky's irradiance per unit of its radiance, per texel
+    std::vector<float> unit_sky;             // the sky's irradiance per unit of its radiance, per texel
     std::uint64_t unit_sky_version = ~std::uint64_t{0};
   };
 
@@ -103,7 +103,7 @@ class CoupledSolver {
   struct GlowPatches {
     std::vector<Eigen::Vector3f> centre, normal;
     std::vector<float> area;
-    std::vector<float> transfer;  // [receiver * count + source]
+    std::vector<float> transfer;      // [receiver * count + source]
     std::vector<int> emission_bands;  // bands any phosphor emits
     std::vector<float> Lp, E;         // per patch per band (scratch)
     std::size_t count = 0;

@@ -21,10 +21,10 @@
 namespace phos::render {
 
 struct Dipole {
-  float sigma_tr = 0;     // effective transport coefficient sqrt(3 sigma_a sigma_t'), 1/m
-  float z_r = 0, z_v = 0; // depths of the real and the virtual source, m
-  float alpha_prime = 0;  // reduced albedo sigma_s' / sigma_t'
-  float A = 1;            // internal reflection (1 + F_dr) / (1 - F_dr)
+  float sigma_tr = 0;      // effective transport coefficient sqrt(3 sigma_a sigma_t'), 1/m
+  float z_r = 0, z_v = 0;  // depths of the real and the virtual source, m
+  float alpha_prime = 0;   // reduced albedo sigma_s' / sigma_t'
+  float A = 1;             // internal reflection (1 + F_dr) / (1 - F_dr)
 
   // sigma_a and reduced scattering sigma_s' per metre, relative index of refraction eta.
   static Dipole From(double sigma_a_per_m, double sigma_s_prime_per_m, double eta) {

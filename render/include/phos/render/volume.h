@@ -70,10 +70,10 @@ struct MarchOptions {
 };
 
 struct VolumeStats {
-  std::size_t voxels = 0;          // all voxels
-  std::size_t phosphor_voxels = 0; // voxels with a state (density > 0)
-  std::size_t lit_voxels = 0;      // voxels whose light is computed (next to density > 0)
-  std::size_t light_updates = 0;   // per-light recomputations of the voxels' light
+  std::size_t voxels = 0;           // all voxels
+  std::size_t phosphor_voxels = 0;  // voxels with a state (density > 0)
+  std::size_t lit_voxels = 0;       // voxels whose light is computed (next to density > 0)
+  std::size_t light_updates = 0;    // per-light recomputations of the voxels' light
   std::size_t steps = 0, dark_jumps = 0;
 };
 
@@ -152,11 +152,11 @@ class VolumeMedia {
   MarchOptions options_;
   int nb_;
   std::vector<VolumeGrid> grids_;
-  std::vector<std::vector<LightCache>> caches_;  // [volume][light]
+  std::vector<std::vector<LightCache>> caches_;         // [volume][light]
   std::vector<std::vector<std::uint8_t>> needs_light_;  // per volume per voxel
-  std::vector<LightPose> poses_;  // lights' poses at the last PrepareLighting
-  std::vector<float> levels_;     // lights' levels at the last PrepareLighting
-  std::vector<std::unique_ptr<Phosphor>> phosphors_;  // per volume, null if not phosphorescent
+  std::vector<LightPose> poses_;                        // lights' poses at the last PrepareLighting
+  std::vector<float> levels_;                           // lights' levels at the last PrepareLighting
+  std::vector<std::unique_ptr<Phosphor>> phosphors_;    // per volume, null if not phosphorescent
   VolumeStats stats_;
 };
 

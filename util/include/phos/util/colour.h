@@ -10,7 +10,7 @@
 
 namespace phos {
 
-using Tristimulus = std::array<double, 3>;                   // XYZ, or linear RGB
+using Tristimulus = std::array<double, 3>;                  // XYZ, or linear RGB
 using ColourMatrix = std::array<std::array<double, 3>, 3>;  // row-major: out[i] = sum_j m[i][j] in[j]
 
 // CIE 1931 2-degree colour matching functions (xbar, ybar, zbar) at a

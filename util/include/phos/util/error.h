@@ -21,15 +21,14 @@ class UserError : public std::runtime_error {
 };
 
 // Throws UserError("<where>: <field>: <message>"); an empty where or field is left out.
-[[noreturn]] void ThrowUserError(std::string_view where, std::string_view field,
-                                 std::string_view message);
+[[noreturn]] void ThrowUserError(std::string_view where, std::string_view field, std::string_view message);
 
 [[noreturn]] void CheckFailed(const char* file, int line, const char* condition);
 
 }  // namespace phos
 
 // For invariants (programming errors), not for user input.
-#define PHOS_CHECK(condition)                                                      \
-  do {                                                                             \
-    if (!(condition)) ::phos::CheckFailed(__FILE__, __LINE__, #condition);         \
+#define PHOS_CHECK(condition)                                              \
+  do {                                                                     \
+    if (!(condition)) ::phos::CheckFailed(__FILE__, __LINE__, #condition); \
   } while (false)

@@ -41,7 +41,6 @@ nlohmann::json ReadJsonFile(const std::filesystem::path& path);
 // recorded. A missing file has no records.
 std::vector<nlohmann::json> ReadJsonLines(const std::filesystem::path& path);
 
-
 class JsonField {
  public:
   JsonField(const nlohmann::json& value, std::string source, std::string path = "");
@@ -64,8 +63,7 @@ class JsonField {
   std::string String() const;
   std::string NonEmptyString() const;
   // An array of finite numbers >= lower with exactly `size` elements (any size if 0).
-  std::vector<double> NumberArray(std::size_t size = 0,
-                                  double lower = -std::numeric_limits<double>::infinity()) const;
+  std::vector<double> NumberArray(std::size_t size = 0, double lower = -std::numeric_limits<double>::infinity()) const;
 
   // Fails on a member whose name is not in `known` (a typo must not pass silently).
   void RejectUnknownKeys(std::initializer_list<std::string_view> known) const;

@@ -32,7 +32,8 @@ class SplitMix64 {
 // A reproducible uniform number in [0, 1) from three integers, without a
 // stream: SplitMix64's finaliser on a mix of them.
 inline float Hash01(std::uint64_t a, std::uint64_t b, std::uint64_t c) {
-  std::uint64_t x = a * 0x9E3779B97F4A7C15ull ^ (b + 0x632BE59BD9B4E019ull) * 0xBF58476D1CE4E5B9ull ^ c * 0x94D049BB133111EBull;
+  std::uint64_t x =
+      a * 0x9E3779B97F4A7C15ull ^ (b + 0x632BE59BD9B4E019ull) * 0xBF58476D1CE4E5B9ull ^ c * 0x94D049BB133111EBull;
   x ^= x >> 30;
   x *= 0xBF58476D1CE4E5B9ull;
   x ^= x >> 27;
@@ -45,7 +46,8 @@ inline float Hash01(std::uint64_t a, std::uint64_t b, std::uint64_t c) {
 // offset whose neighbours differ, so one sample per pixel shows fine noise,
 // not banding.
 inline float InterleavedGradientNoise(int x, int y) {
-  const float v = 52.9829189f * std::fmod(0.06711056f * static_cast<float>(x) + 0.00583715f * static_cast<float>(y), 1.0f);
+  const float v =
+      52.9829189f * std::fmod(0.06711056f * static_cast<float>(x) + 0.00583715f * static_cast<float>(y), 1.0f);
   return v - std::floor(v);
 }
 

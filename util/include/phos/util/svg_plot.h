@@ -13,10 +13,10 @@ namespace phos {
 struct PlotSeries {
   explicit PlotSeries(std::string label_text = "") : label(std::move(label_text)) {}
   std::string label;
-  std::vector<double> x, y;   // points with a non-finite (or, on a log axis, non-positive) value are gaps
-  std::string color;          // CSS colour; empty: ChannelColor of the label if it names one, else the palette
-  bool markers = false;       // draw a dot at each point
-  bool line = true;           // join the points
+  std::vector<double> x, y;  // points with a non-finite (or, on a log axis, non-positive) value are gaps
+  std::string color;         // CSS colour; empty: ChannelColor of the label if it names one, else the palette
+  bool markers = false;      // draw a dot at each point
+  bool line = true;          // join the points
   bool dashed = false;
 };
 
