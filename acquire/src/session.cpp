@@ -119,8 +119,8 @@ void DisarmAbortRecord(int slot) {
   if (slot >= 0) g_abort_records[slot].armed.store(false);
 }
 
-// Temporaries a crash leaves: frames/NNNNNN.tif.tmp.tif, stop.json.tmp.*,
-// and the temporaries of WriteFileAtomically (<name>.tmp.<pid>).
+// Temporaries a crash leaves: frames/NNNNNN.tif.tmp.<pid>.tif, stop.json.tmp.*,
+// and the temporaries of util/atomic_file.h (<name>.tmp.<pid><ext>).
 bool IsTemporary(const std::string& name) { return name.find(".tmp.") != std::string::npos; }
 
 std::vector<std::filesystem::path> StaleTemporaries(const std::filesystem::path& dir) {
@@ -243,9 +243,7 @@ void SessionWriter::SetAsideBadFrames(const std::vector<SessionCheck::BadFrame>&
     if (seq.is_number_integer() && bad_seq.count(seq.get<int>())) continue;
     text += line.value.dump() + "\n";
   }
-  WriteFileAtomically(dir_ / "frames.jsonl", text);
-  SyncFile(dir_ / "frames.jsonl");
-  SyncDirectory(dir_);
+  WriteFileAtomically(dir_ / "frames.jsonl", text, {.sync = true});
 }
 
 SessionWriter::~SessionWriter() {
@@ -315,9 +313,7 @@ void SessionWriter::Stop(const std::string& how, const std::string& why) {
   stop.stopped_utc = UtcNow();
   // Counted from the records written, never from a counter.
   stop.frames = static_cast<int>(ReadFrameRecords(dir_).frames.size());
-  WriteFileAtomically(dir_ / "stop.json", stop.ToJson().dump(2) + "\n");
-  SyncFile(dir_ / "stop.json");
-  SyncDirectory(dir_);
+  WriteFileAtomically(dir_ / "stop.json", stop.ToJson().dump(2) + "\n", {.sync = true});
 }
 
 void SessionWriter::StopQuietly(const std::string& how, const std::string& why) noexcept {
