@@ -666,15 +666,19 @@ std::vector<int> DistinctShapes(const std::vector<LibraryCurve>& row) {
   return keep;
 }
 
-// The cost within which two solutions make the same look: a millionth of
-// the cost (rounding), plus 1e-12 of the targets' energy (a relative error of
-// 1e-6 at every target).
-double SameLookTolerance(const Problem& p, double cost) {
+// The constraints' energy, sum w |T|^2: the cost of emitting nothing at the
+// targets, the scale of every tolerance on the cost.
+double TargetEnergy(const Problem& p) {
   double energy = 0;
   for (const Constraint& c : p.constraints)
     for (double v : c.radiance) energy += c.weight * v * v;
-  return cost * 1e-6 + 1e-12 * energy;
+  return energy;
 }
+
+// The cost within which two solutions make the same look: a millionth of
+// the cost (rounding), plus 1e-12 of the targets' energy (a relative error of
+// 1e-6 at every target).
+double SameLookTolerance(const Problem& p, double cost) { return cost * 1e-6 + 1e-12 * TargetEnergy(p); }
 
 double SumOfLambda(const std::vector<std::vector<double>>& Lambda) {
   double sum = 0;
@@ -836,9 +840,7 @@ void BoundLogRates(const std::vector<double>& ke_upper, ceres::Problem& problem,
 // Ceres' tolerances are absolute, and a faint glow's cost and gradient are
 // tiny, so unscaled the refinement would stop far from the targets.
 ceres::LossFunction* ScaleToTargets(const Problem& p) {
-  double energy = 0;
-  for (const Constraint& c : p.constraints)
-    for (double v : c.radiance) energy += c.weight * v * v;
+  const double energy = TargetEnergy(p);
   return new ceres::ScaledLoss(nullptr, energy > 0 ? 1 / energy : 1.0, ceres::TAKE_OWNERSHIP);
 }
 
@@ -920,10 +922,8 @@ Parameters Refine(const Problem& p, const Samples& s, const TargetSystem& t, con
 // There the knee is kept.
 Parameters WeakestExcitation(const Problem& p, const Samples& s, const TargetSystem& t, const std::vector<int>& lit,
                              Parameters x) {
-  double energy = 0;
-  for (const Constraint& c : p.constraints)
-    for (double v : c.radiance) energy += c.weight * v * v;
-  const double allowed = CostOf(p, s, EmittedAtSamples(p, s, lit, x)) * (1 + 1e-6) + 1e-12 * energy;
+  const double cost = CostOf(p, s, EmittedAtSamples(p, s, lit, x));
+  const double allowed = cost + SameLookTolerance(p, cost);
   for (std::size_t i = 0; i < x.kr.size(); ++i)
     for (int halving = 0; halving < 60; ++halving) {
       Parameters weaker = x;
