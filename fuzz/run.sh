@@ -71,7 +71,7 @@ for t in "${TARGETS[@]}"; do
   if [ $rc -ne 0 ]; then
     status=1
     echo "fuzz: $t found a problem; the input is in $findings/, the log in $log:" >&2
-    grep -m5 -E "ERROR|SUMMARY|runtime error|internal error|terminate|logic_error" "$log" >&2
+    grep -m6 -E "ERROR|SUMMARY|runtime error|internal error|terminate|logic_error|what\(\)" "$log" >&2
   fi
 done
 exit $status

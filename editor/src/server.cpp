@@ -127,7 +127,10 @@ class DeadlineStream : public httplib::Stream {
   ssize_t read(char* ptr, size_t size) override {
     if (begin_ == end_) {
       if (left_to_read_ == 0 || !Wait(POLLIN, read_deadline_)) return -1;
-      const ssize_t n = ::recv(fd_, buffer_, std::min(sizeof buffer_, left_to_read_), 0);
+      ssize_t n;
+      do {  // a signal (the fuzz harness's SIGALRM, a debugger's) is not the end of the request
+        n = ::recv(fd_, buffer_, std::min(sizeof buffer_, left_to_read_), 0);
+      } while (n < 0 && errno == EINTR);
       if (n <= 0) return n;
       left_to_read_ -= static_cast<std::size_t>(n);
       begin_ = 0;
@@ -141,7 +144,10 @@ class DeadlineStream : public httplib::Stream {
 
   ssize_t write(const char* ptr, size_t size) override {
     if (!Wait(POLLOUT, WriteDeadline())) return -1;
-    return ::send(fd_, ptr, size, MSG_NOSIGNAL);
+    ssize_t n;
+    do n = ::send(fd_, ptr, size, MSG_NOSIGNAL);
+    while (n < 0 && errno == EINTR);
+    return n;
   }
 
   void get_remote_ip_and_port(std::string& ip, int& port) const override { Address(::getpeername, ip, port); }
