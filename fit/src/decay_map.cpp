@@ -3,6 +3,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include <Eigen/Core>
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -21,6 +22,351 @@ void Basis(double k, const std::vector<double>& t, const std::vector<double>& e,
     out[j] = std::exp(-k * t[j]) * (x > 1e-8 ? std::sinh(x) / x : 1.0);
   }
 }
+
+void Validate(const DecayMapInput& in, const std::string& where) {
+  const int m = static_cast<int>(in.frames.size());
+  if (m < 3) ThrowUserError(where, "", "needs at least 3 frames for a decay map, has " + std::to_string(m));
+  if (in.channels < 1 || in.channels > 8) ThrowUserError(where, "", "1 to 8 channels per pixel");
+  if (static_cast<int>(in.t_s.size()) != m || static_cast<int>(in.exposure_s.size()) != m)
+    ThrowUserError(where, "", "one time and one exposure per frame");
+  const std::size_t pixels = static_cast<std::size_t>(in.width) * in.height;
+  for (int j = 0; j < m; ++j) {
+    if (in.frames[j].size() != pixels * in.channels)
+      ThrowUserError(where, "frame " + std::to_string(j + 1), "has another size than the first");
+    if (j > 0 && !(in.t_s[j] > in.t_s[j - 1]))
+      ThrowUserError(where, "frame " + std::to_string(j + 1), "times must increase");
+    if (!(in.exposure_s[j] > 0)) ThrowUserError(where, "frame " + std::to_string(j + 1), "exposure must be > 0");
+  }
+}
+
+// The rate grid, as FitDecay scans it: from a twentieth of one per span to
+// three per smallest spacing, log-spaced; basis is G rows of m samples.
+struct RateGrid {
+  int G = 0;
+  std::vector<double> log_k, basis;
+};
+
+RateGrid MakeRateGrid(const DecayMapInput& in, const DecayMapOptions& options) {
+  const int m = static_cast<int>(in.frames.size());
+  const double span = in.t_s.back() - in.t_s.front();
+  double spacing = span;
+  for (int j = 1; j < m; ++j) spacing = std::min(spacing, in.t_s[j] - in.t_s[j - 1]);
+  const double k_lo = 0.02 / span, k_hi = 3 / spacing;
+  RateGrid grid;
+  grid.G = std::max(8, options.rate_grid_size);
+  grid.log_k.resize(grid.G);
+  grid.basis.resize(static_cast<std::size_t>(grid.G) * m);
+  for (int g = 0; g < grid.G; ++g) {
+    grid.log_k[g] = std::log(k_lo) + (std::log(k_hi) - std::log(k_lo)) * g / (grid.G - 1);
+    Basis(std::exp(grid.log_k[g]), in.t_s, in.exposure_s, &grid.basis[static_cast<std::size_t>(g) * m]);
+  }
+  return grid;
+}
+
+DecayMap EmptyMap(const DecayMapInput& in) {
+  const std::size_t pixels = static_cast<std::size_t>(in.width) * in.height;
+  DecayMap map;
+  map.width = in.width;
+  map.height = in.height;
+  map.channels = in.channels;
+  map.kr.assign(pixels, std::nanf(""));
+  map.amplitude.assign(pixels * in.channels, 0.0f);
+  map.background.assign(pixels * in.channels, 0.0f);
+  map.rms.assign(pixels, std::nanf(""));
+  return map;
+}
+
+// Photon counting: a rate's variance is value / exposure, with a floor (a
+// thousandth of the channel's peak) so a dark sample does not get an
+// infinite weight.
+double SampleWeight(double y, double exposure, double floor, Weighting weighting) {
+  return weighting == Weighting::kPoisson ? exposure / std::max(std::fabs(y), floor) : 1.0;
+}
+double WeightFloor(double peak) { return std::max(1e-3 * peak, 1e-12); }
+
+// One channel's amplitude and background for one rate, from the weighted
+// sums of basis b, constant 1 and values y: a 2x2 linear least-squares
+// problem with A >= 0 (or A alone without a background); the cost is the
+// weighted RSS from the same sums. Branch-free so that a loop over channels
+// and pixels vectorises; `constant` is S1y / S11, the fit when A = 0.
+struct ChannelFit {
+  double amplitude, background, cost;
+};
+inline ChannelFit ProjectChannel(double Sbb, double Sb1, double Sby, double S11, double S1y, double Syy,
+                                 double constant, bool background) {
+  double A, B;
+  if (background) {
+    // Both sides of each choice are computed, so that it is a select.
+    const double det = Sbb * S11 - Sb1 * Sb1, reciprocal = 1 / det;
+    const double inverse = det > 1e-300 * Sbb * S11 ? reciprocal : 0.0;
+    const double a = (Sby * S11 - Sb1 * S1y) * inverse, b = (Sbb * S1y - Sb1 * Sby) * inverse;
+    const bool decays = a > 0;  // else the bound is active: a constant alone
+    A = decays ? a : 0.0;
+    B = decays ? b : constant;
+  } else {
+    const double a = Sby / Sbb;
+    A = Sbb > 0 && a > 0 ? a : 0.0;
+    B = 0;
+  }
+  return {A, B, Syy - 2 * A * Sby - 2 * B * S1y + A * A * Sbb + 2 * A * B * Sb1 + B * B * S11};
+}
+
+// ProjectChannel's cost for n pixel-channels at one rate (a loop the
+// compiler vectorises: restrict pointers, no branches).
+void ProjectedCosts(int n, const double* Sbb, const double* Sb1, const double* Sby, const double* S11,
+                    const double* S1y, const double* Syy, const double* constant, bool background,
+                    double* __restrict__ cost) {
+  if (background)
+    for (int i = 0; i < n; ++i)
+      cost[i] = ProjectChannel(Sbb[i], Sb1[i], Sby[i], S11[i], S1y[i], Syy[i], constant[i], true).cost;
+  else
+    for (int i = 0; i < n; ++i)
+      cost[i] = ProjectChannel(Sbb[i], Sb1[i], Sby[i], S11[i], S1y[i], Syy[i], constant[i], false).cost;
+}
+
+// Weights and weighted values of n pixel-channels at one frame, and their
+// contribution to the rate-independent sums.
+void WeighFrame(int n, double exposure, Weighting weighting, const double* peak, double* __restrict__ w,
+                double* __restrict__ wy, double* __restrict__ S11, double* __restrict__ S1y,
+                double* __restrict__ Syy) {
+  for (int i = 0; i < n; ++i) {
+    const double y = wy[i];  // the values, until the weights are known
+    const double weight = weighting == Weighting::kPoisson ? exposure / std::max(std::fabs(y), WeightFloor(peak[i])) : 1.0;
+    w[i] = weight;
+    wy[i] = weight * y;
+    S11[i] += weight;
+    S1y[i] += weight * y;
+    Syy[i] += weight * y * y;
+  }
+}
+
+// ---------------------------------------------------------------------------
+// The fast map. Pixels go in blocks of up to kBlockPixels along a row: the
+// rate-independent sums (S11, S1y, Syy) once per pixel and channel, the
+// rate-dependent ones (Sbb, Sb1, Sby) for every grid rate at once as two
+// matrix products of the block's weights with the basis and its square;
+// then per pixel a parabola through the best grid rate and its neighbours
+// and exact Newton steps on u = log k of the variable-projection cost.
+
+constexpr int kBlockPixels = 128;
+
+using Matrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic>;  // column-major
+using Array = Eigen::ArrayXd;
+
+// Frame times split into what the basis derivatives need: start s and
+// exposure e of every frame, as arrays.
+struct FrameTimes {
+  Array s, e, s_plus_e, s2, two_s_plus_e;
+};
+
+FrameTimes MakeFrameTimes(const DecayMapInput& in) {
+  const int m = static_cast<int>(in.frames.size());
+  FrameTimes f;
+  f.e = Eigen::Map<const Array>(in.exposure_s.data(), m);
+  f.s = Eigen::Map<const Array>(in.t_s.data(), m) - f.e / 2;
+  f.s_plus_e = f.s + f.e;
+  f.s2 = f.s * f.s;
+  f.two_s_plus_e = 2 * f.s + f.e;
+  return f;
+}
+
+// The basis b = (exp(-k s) - exp(-k (s + e))) / (k e) (the same exposure
+// average as Basis) and its first two derivatives in u = log k:
+//   b_u  = -k s b + Q - b,
+//   b_uu = k^2 s^2 b - k (2 s + e) Q - b_u,   with Q = exp(-k (s + e)).
+// Eigen's exp is vectorised; the difference of exponentials loses at most
+// 1e-16 / (k e) relatively, 2e-11 at the grid's slowest rate.
+struct BasisWithDerivatives {
+  Array b, b_u, b_uu;
+};
+
+void EvaluateBasis(double u, const FrameTimes& f, BasisWithDerivatives& out) {
+  const double k = std::exp(u);
+  const Array P = (-k * f.s).exp();
+  const Array Q = (-k * f.s_plus_e).exp();
+  out.b = (P - Q) / (k * f.e);
+  out.b_u = -k * f.s * out.b + Q - out.b;
+  out.b_uu = k * k * f.s2 * out.b - k * f.two_s_plus_e * Q - out.b_u;
+}
+
+// One pixel's samples, contiguous per channel: weights w and weighted values
+// w y, and the rate-independent sums.
+struct PixelData {
+  int channels = 0, m = 0;
+  Matrix w, wy;  // m x channels
+  double S11[8], S1y[8], Syy[8], constant[8], peak[8];
+};
+
+// The variable-projection cost at one rate, with its first two derivatives
+// in u, and the amplitudes and backgrounds that attain it.
+struct RateFit {
+  double u = 0, cost = std::numeric_limits<double>::infinity(), d1 = 0, d2 = 0;
+  double decay_span = 0;  // b at the first frame minus b at the last
+  double amplitude[8] = {}, background[8] = {};
+};
+
+// Per channel, with theta = (A, B), M = [[Sbb, Sb1], [Sb1, S11]] and
+// r = (Sby, S1y), the cost is Syy - r^T M^-1 r. Its derivatives (' = d/du):
+//   C'  = -2 A Sby' + A^2 Sbb' + 2 A B Sb1',
+//   C'' = -2 A Sby'' + A^2 Sbb'' + 2 A B Sb1'' - 2 g^T M^-1 g,
+// where g = r' - M' theta is what moves theta (theta' = M^-1 g). A channel
+// held at A = 0 is a constant: no derivative.
+RateFit EvaluateRate(double u, const PixelData& px, const FrameTimes& f, bool background,
+                     BasisWithDerivatives& basis) {
+  EvaluateBasis(u, f, basis);
+  const Array b2 = basis.b.square();
+  const Array bb_u = basis.b * basis.b_u;
+  const Array bb_uu = basis.b_u.square() + basis.b * basis.b_uu;
+  RateFit fit;
+  fit.u = u;
+  fit.cost = 0;
+  fit.decay_span = basis.b(0) - basis.b(px.m - 1);
+  for (int c = 0; c < px.channels; ++c) {
+    const auto w = px.w.col(c).array(), wy = px.wy.col(c).array();
+    const double Sbb = (w * b2).sum(), Sb1 = (w * basis.b).sum(), Sby = (wy * basis.b).sum();
+    const ChannelFit cf =
+        ProjectChannel(Sbb, Sb1, Sby, px.S11[c], px.S1y[c], px.Syy[c], px.constant[c], background);
+    fit.amplitude[c] = cf.amplitude;
+    fit.background[c] = cf.background;
+    fit.cost += cf.cost;
+    if (!(cf.amplitude > 0)) continue;
+    const double A = cf.amplitude, B = cf.background;
+    const double dSbb = 2 * (w * bb_u).sum(), dSb1 = (w * basis.b_u).sum(), dSby = (wy * basis.b_u).sum();
+    const double ddSbb = 2 * (w * bb_uu).sum(), ddSb1 = (w * basis.b_uu).sum(), ddSby = (wy * basis.b_uu).sum();
+    fit.d1 += -2 * A * dSby + A * A * dSbb + 2 * A * B * dSb1;
+    double move;  // g^T M^-1 g
+    if (background) {
+      const double g1 = dSby - dSbb * A - dSb1 * B, g2 = -dSb1 * A;
+      const double det = Sbb * px.S11[c] - Sb1 * Sb1;
+      move = (px.S11[c] * g1 * g1 - 2 * Sb1 * g1 * g2 + Sbb * g2 * g2) / det;
+    } else {
+      const double g1 = dSby - dSbb * A;
+      move = g1 * g1 / Sbb;
+    }
+    fit.d2 += -2 * A * ddSby + A * A * ddSbb + 2 * A * B * ddSb1 - 2 * move;
+  }
+  return fit;
+}
+
+// Newton on u from the best grid rate. The start is the vertex of the
+// parabola through that rate's cost and its neighbours' (at most half a grid
+// step away); from there exact steps converge quadratically, so they stop
+// once a step is below 1e-4 in log k (what remains is of order 1e-8) or
+// when a step does not lower the cost.
+RateFit RefinePixel(const PixelData& px, const FrameTimes& f, const RateGrid& grid, const double* grid_cost,
+                    const DecayMapOptions& options, BasisWithDerivatives& basis) {
+  int best = 0;
+  for (int g = 1; g < grid.G; ++g)
+    if (grid_cost[g] < grid_cost[best]) best = g;
+  const double h = grid.log_k[1] - grid.log_k[0];
+  double u0 = grid.log_k[best];
+  if (best > 0 && best < grid.G - 1) {
+    const double lo = grid_cost[best - 1], mid = grid_cost[best], hi = grid_cost[best + 1];
+    const double curvature = lo - 2 * mid + hi;
+    if (curvature > 0) u0 += h * (lo - hi) / (2 * curvature);
+  }
+  RateFit fit = EvaluateRate(u0, px, f, options.background, basis);
+  if (!(fit.cost <= grid_cost[best]) && u0 != grid.log_k[best])
+    fit = EvaluateRate(grid.log_k[best], px, f, options.background, basis);
+  for (int step = 0; step < options.newton_steps; ++step) {
+    if (!(fit.d2 > 0)) break;
+    const double next = std::clamp(fit.u - fit.d1 / fit.d2, grid.log_k.front(), grid.log_k.back());
+    if (next == fit.u) break;
+    const RateFit trial = EvaluateRate(next, px, f, options.background, basis);
+    if (!(trial.cost < fit.cost)) break;
+    const bool converged = std::fabs(next - fit.u) < 1e-4;
+    fit = trial;
+    if (converged) break;
+  }
+  return fit;
+}
+
+// Per-thread work space for one block of pixels: n = pixel * channels +
+// channel indexes the block's pixel-channels.
+struct BlockWork {
+  Matrix w, wy;         // n x m
+  Matrix rate_sums;     // n x 2G: Sb1 for every grid rate, then Sbb
+  Matrix value_sums;    // n x G: Sby
+  Array S11, S1y, Syy, constant, peak;  // per n
+  Matrix pixel_cost;    // G x pixels
+  Array channel_cost;   // per n
+  PixelData pixel;
+  BasisWithDerivatives basis;
+};
+
+void FitBlock(const DecayMapInput& in, const DecayMapOptions& options, const RateGrid& grid, const Matrix& grid_basis,
+              const FrameTimes& times, std::size_t first_pixel, int count, BlockWork& work, DecayMap& map,
+              std::atomic<std::size_t>& no_decay) {
+  const int C = in.channels, m = static_cast<int>(in.frames.size()), G = grid.G;
+  const int n = count * C;
+  work.w.resize(n, m);
+  work.wy.resize(n, m);
+  work.peak.setZero(n);
+  for (int j = 0; j < m; ++j) {
+    const float* frame = &in.frames[j][first_pixel * C];
+    for (int i = 0; i < n; ++i) {
+      work.wy(i, j) = frame[i];  // the values, until the weights are known
+      work.peak(i) = std::max(work.peak(i), std::fabs(work.wy(i, j)));
+    }
+  }
+  work.S11.setZero(n);
+  work.S1y.setZero(n);
+  work.Syy.setZero(n);
+  for (int j = 0; j < m; ++j)
+    WeighFrame(n, in.exposure_s[j], options.weighting, work.peak.data(), &work.w(0, j), &work.wy(0, j),
+               work.S11.data(), work.S1y.data(), work.Syy.data());
+  work.constant = (work.S11 > 0).select(work.S1y / work.S11, 0.0);
+
+  work.rate_sums.noalias() = work.w * grid_basis;
+  work.value_sums.noalias() = work.wy * grid_basis.leftCols(G);
+
+  work.pixel_cost.resize(G, count);
+  work.channel_cost.resize(n);
+  for (int g = 0; g < G; ++g) {
+    ProjectedCosts(n, &work.rate_sums(0, G + g), &work.rate_sums(0, g), &work.value_sums(0, g), work.S11.data(),
+                   work.S1y.data(), work.Syy.data(), work.constant.data(), options.background,
+                   work.channel_cost.data());
+    for (int p = 0; p < count; ++p) work.pixel_cost(g, p) = work.channel_cost.segment(p * C, C).sum();
+  }
+
+  PixelData& px = work.pixel;
+  px.channels = C;
+  px.m = m;
+  px.w.resize(m, C);
+  px.wy.resize(m, C);
+  for (int p = 0; p < count; ++p) {
+    for (int c = 0; c < C; ++c) {
+      const int i = p * C + c;
+      px.w.col(c) = work.w.row(i).transpose();
+      px.wy.col(c) = work.wy.row(i).transpose();
+      px.S11[c] = work.S11(i);
+      px.S1y[c] = work.S1y(i);
+      px.Syy[c] = work.Syy(i);
+      px.constant[c] = work.constant(i);
+      px.peak[c] = work.peak(i);
+    }
+    const RateFit fit = RefinePixel(px, times, grid, &work.pixel_cost(0, p), options, work.basis);
+    // It decays if some channel's fitted decay is more than rounding (a
+    // millionth of the pixel's largest value) over the recorded span.
+    const std::size_t pixel = first_pixel + p;
+    bool decays = false;
+    for (int c = 0; c < C; ++c) {
+      map.amplitude[pixel * C + c] = static_cast<float>(fit.amplitude[c]);
+      map.background[pixel * C + c] = static_cast<float>(fit.background[c]);
+      decays = decays || fit.amplitude[c] * fit.decay_span > 1e-6 * px.peak[c];
+    }
+    if (decays)
+      map.kr[pixel] = static_cast<float>(std::exp(fit.u));
+    else
+      ++no_decay;
+    map.rms[pixel] = static_cast<float>(std::sqrt(std::max(0.0, fit.cost) / (C * m)));
+  }
+}
+
+// ---------------------------------------------------------------------------
+// The reference: the first algorithm, pixel by pixel, kept as it was (every
+// grid rate's sums from the samples, then Newton with central differences
+// of the cost), for the tests and the bench to compare the fast map with.
 
 struct PixelSolution {
   double cost = std::numeric_limits<double>::infinity();
@@ -58,7 +404,6 @@ PixelSolution Project(const double* basis, const float* const* y, const double* 
     } else {
       A = Sbb > 0 ? std::max(0.0, Sby / Sbb) : 0;
     }
-    // Weighted RSS from the sums, without a second pass over the samples.
     s.cost += Syy - 2 * A * Sby - 2 * B * S1y + A * A * Sbb + 2 * A * B * Sb1 + B * B * S11;
     s.amplitude[c] = A;
     s.background[c] = B;
@@ -66,119 +411,114 @@ PixelSolution Project(const double* basis, const float* const* y, const double* 
   return s;
 }
 
+void FitRowsReference(const DecayMapInput& in, const DecayMapOptions& options, const RateGrid& grid, int row_begin,
+                      int row_end, DecayMap& map, std::atomic<std::size_t>& no_decay) {
+  const int m = static_cast<int>(in.frames.size()), G = grid.G;
+  const std::vector<double>& log_k = grid.log_k;
+  std::vector<float> y_store(static_cast<std::size_t>(in.channels) * m);
+  std::vector<double> w2_store(static_cast<std::size_t>(in.channels) * m), b(m);
+  std::vector<const float*> y(in.channels);
+  std::vector<const double*> w2(in.channels);
+  for (int c = 0; c < in.channels; ++c) {
+    y[c] = &y_store[static_cast<std::size_t>(c) * m];
+    w2[c] = &w2_store[static_cast<std::size_t>(c) * m];
+  }
+  for (int row = row_begin; row != row_end; ++row) {
+    for (int x = 0; x < in.width; ++x) {
+      const std::size_t p = static_cast<std::size_t>(row) * in.width + x;
+      for (int c = 0; c < in.channels; ++c) {
+        float* yc = &y_store[static_cast<std::size_t>(c) * m];
+        double* wc = &w2_store[static_cast<std::size_t>(c) * m];
+        float peak = 0;
+        for (int j = 0; j < m; ++j) {
+          yc[j] = in.frames[j][p * in.channels + c];
+          peak = std::max(peak, std::fabs(yc[j]));
+        }
+        for (int j = 0; j < m; ++j) wc[j] = SampleWeight(yc[j], in.exposure_s[j], WeightFloor(peak), options.weighting);
+      }
+      int best = 0;
+      PixelSolution best_solution;
+      for (int g = 0; g < G; ++g) {
+        PixelSolution s = Project(&grid.basis[static_cast<std::size_t>(g) * m], y.data(), w2.data(), in.channels, m,
+                                  options.background);
+        if (s.cost < best_solution.cost) best_solution = s, best = g;
+      }
+      double u = log_k[best];
+      const double h0 = (log_k[1] - log_k[0]) / 4;
+      auto cost_at = [&](double log_rate) {
+        Basis(std::exp(log_rate), in.t_s, in.exposure_s, b.data());
+        return Project(b.data(), y.data(), w2.data(), in.channels, m, options.background);
+      };
+      for (int step = 0; step < options.newton_steps; ++step) {
+        const double h = h0 / (1 << step);
+        const double c0 = cost_at(u).cost, cm = cost_at(u - h).cost, cp = cost_at(u + h).cost;
+        const double d1 = (cp - cm) / (2 * h), d2 = (cp - 2 * c0 + cm) / (h * h);
+        if (!(d2 > 0)) break;
+        const double next = std::clamp(u - d1 / d2, log_k.front(), log_k.back());
+        const PixelSolution s = cost_at(next);
+        if (!(s.cost < best_solution.cost)) break;
+        best_solution = s;
+        u = next;
+      }
+      bool decays = false;
+      Basis(std::exp(u), in.t_s, in.exposure_s, b.data());
+      for (int c = 0; c < in.channels; ++c) {
+        map.amplitude[p * in.channels + c] = static_cast<float>(best_solution.amplitude[c]);
+        map.background[p * in.channels + c] = static_cast<float>(best_solution.background[c]);
+        float peak = 0;
+        for (int j = 0; j < m; ++j) peak = std::max(peak, std::fabs(y[c][j]));
+        decays = decays || best_solution.amplitude[c] * (b[0] - b[m - 1]) > 1e-6 * peak;
+      }
+      if (decays)
+        map.kr[p] = static_cast<float>(std::exp(u));
+      else
+        ++no_decay;
+      map.rms[p] = static_cast<float>(std::sqrt(std::max(0.0, best_solution.cost) / (in.channels * m)));
+    }
+  }
+}
+
 }  // namespace
 
 DecayMap FitDecayMap(const DecayMapInput& in, const DecayMapOptions& options, const std::string& where,
                      const std::function<void(std::size_t)>& progress) {
   const auto started = std::chrono::steady_clock::now();
+  Validate(in, where);
+  const RateGrid grid = MakeRateGrid(in, options);
   const int m = static_cast<int>(in.frames.size());
-  if (m < 3) ThrowUserError(where, "", "needs at least 3 frames for a decay map, has " + std::to_string(m));
-  if (in.channels < 1 || in.channels > 8) ThrowUserError(where, "", "1 to 8 channels per pixel");
-  if (static_cast<int>(in.t_s.size()) != m || static_cast<int>(in.exposure_s.size()) != m)
-    ThrowUserError(where, "", "one time and one exposure per frame");
-  const std::size_t pixels = static_cast<std::size_t>(in.width) * in.height;
-  for (int j = 0; j < m; ++j) {
-    if (in.frames[j].size() != pixels * in.channels)
-      ThrowUserError(where, "frame " + std::to_string(j + 1), "has another size than the first");
-    if (j > 0 && !(in.t_s[j] > in.t_s[j - 1]))
-      ThrowUserError(where, "frame " + std::to_string(j + 1), "times must increase");
-    if (!(in.exposure_s[j] > 0)) ThrowUserError(where, "frame " + std::to_string(j + 1), "exposure must be > 0");
-  }
-  // The rate grid, as FitDecay scans it: from a twentieth of one per span
-  // to three per smallest spacing.
-  const double span = in.t_s.back() - in.t_s.front();
-  double spacing = span;
-  for (int j = 1; j < m; ++j) spacing = std::min(spacing, in.t_s[j] - in.t_s[j - 1]);
-  const double k_lo = 0.02 / span, k_hi = 3 / spacing;
-  const int G = std::max(8, options.rate_grid_size);
-  std::vector<double> log_k(G), basis(static_cast<std::size_t>(G) * m);
-  for (int g = 0; g < G; ++g) {
-    log_k[g] = std::log(k_lo) + (std::log(k_hi) - std::log(k_lo)) * g / (G - 1);
-    Basis(std::exp(log_k[g]), in.t_s, in.exposure_s, &basis[static_cast<std::size_t>(g) * m]);
-  }
+  // The basis as an m x 2G matrix: every grid rate's samples, then their
+  // squares, so that one product gives Sb1 and Sbb for a block.
+  Matrix grid_basis(m, 2 * grid.G);
+  grid_basis.leftCols(grid.G) = Eigen::Map<const Matrix>(grid.basis.data(), m, grid.G);
+  grid_basis.rightCols(grid.G) = grid_basis.leftCols(grid.G).array().square().matrix();
+  const FrameTimes times = MakeFrameTimes(in);
 
-  DecayMap map;
-  map.width = in.width;
-  map.height = in.height;
-  map.channels = in.channels;
-  map.kr.assign(pixels, std::nanf(""));
-  map.amplitude.assign(pixels * in.channels, 0.0f);
-  map.background.assign(pixels * in.channels, 0.0f);
-  map.rms.assign(pixels, std::nanf(""));
+  DecayMap map = EmptyMap(in);
   std::atomic<std::size_t> no_decay{0}, rows_done{0};
-
   tbb::parallel_for(tbb::blocked_range<int>(0, in.height), [&](const tbb::blocked_range<int>& rows) {
-    std::vector<float> y_store(static_cast<std::size_t>(in.channels) * m);
-    std::vector<double> w2_store(static_cast<std::size_t>(in.channels) * m), b(m);
-    std::vector<const float*> y(in.channels);
-    std::vector<const double*> w2(in.channels);
-    for (int c = 0; c < in.channels; ++c) {
-      y[c] = &y_store[static_cast<std::size_t>(c) * m];
-      w2[c] = &w2_store[static_cast<std::size_t>(c) * m];
-    }
+    BlockWork work;
     for (int row = rows.begin(); row != rows.end(); ++row) {
-      for (int x = 0; x < in.width; ++x) {
-        const std::size_t p = static_cast<std::size_t>(row) * in.width + x;
-        for (int c = 0; c < in.channels; ++c) {
-          float* yc = &y_store[static_cast<std::size_t>(c) * m];
-          double* wc = &w2_store[static_cast<std::size_t>(c) * m];
-          float peak = 0;
-          for (int j = 0; j < m; ++j) {
-            yc[j] = in.frames[j][p * in.channels + c];
-            peak = std::max(peak, std::fabs(yc[j]));
-          }
-          // Photon counting: a rate's variance is value / exposure, with a
-          // floor so a dark sample does not get an infinite weight.
-          const double floor = std::max(1e-3 * peak, 1e-12);
-          for (int j = 0; j < m; ++j)
-            wc[j] = options.weighting == Weighting::kPoisson
-                        ? in.exposure_s[j] / std::max<double>(std::fabs(yc[j]), floor)
-                        : 1.0;
-        }
-        // Scan the grid, then Newton on log k with central differences.
-        int best = 0;
-        PixelSolution best_solution;
-        for (int g = 0; g < G; ++g) {
-          PixelSolution s =
-              Project(&basis[static_cast<std::size_t>(g) * m], y.data(), w2.data(), in.channels, m, options.background);
-          if (s.cost < best_solution.cost) best_solution = s, best = g;
-        }
-        double u = log_k[best];
-        const double h0 = (log_k[1] - log_k[0]) / 4;
-        auto cost_at = [&](double log_rate) {
-          Basis(std::exp(log_rate), in.t_s, in.exposure_s, b.data());
-          return Project(b.data(), y.data(), w2.data(), in.channels, m, options.background);
-        };
-        for (int step = 0; step < options.newton_steps; ++step) {
-          const double h = h0 / (1 << step);
-          const double c0 = cost_at(u).cost, cm = cost_at(u - h).cost, cp = cost_at(u + h).cost;
-          const double d1 = (cp - cm) / (2 * h), d2 = (cp - 2 * c0 + cm) / (h * h);
-          if (!(d2 > 0)) break;
-          const double next = std::clamp(u - d1 / d2, log_k.front(), log_k.back());
-          const PixelSolution s = cost_at(next);
-          if (!(s.cost < best_solution.cost)) break;
-          best_solution = s;
-          u = next;
-        }
-        // It decays if some channel's fitted decay is more than rounding
-        // (a millionth of the pixel's largest value) over the recorded span.
-        bool decays = false;
-        Basis(std::exp(u), in.t_s, in.exposure_s, b.data());
-        for (int c = 0; c < in.channels; ++c) {
-          map.amplitude[p * in.channels + c] = static_cast<float>(best_solution.amplitude[c]);
-          map.background[p * in.channels + c] = static_cast<float>(best_solution.background[c]);
-          float peak = 0;
-          for (int j = 0; j < m; ++j) peak = std::max(peak, std::fabs(y[c][j]));
-          decays = decays || best_solution.amplitude[c] * (b[0] - b[m - 1]) > 1e-6 * peak;
-        }
-        if (decays)
-          map.kr[p] = static_cast<float>(std::exp(u));
-        else
-          ++no_decay;
-        map.rms[p] = static_cast<float>(std::sqrt(std::max(0.0, best_solution.cost) / (in.channels * m)));
+      for (int x = 0; x < in.width; x += kBlockPixels) {
+        const int count = std::min(kBlockPixels, in.width - x);
+        FitBlock(in, options, grid, grid_basis, times, static_cast<std::size_t>(row) * in.width + x, count, work, map,
+                 no_decay);
       }
       if (progress) progress(++rows_done);
     }
+  });
+  map.no_decay = no_decay;
+  map.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+  return map;
+}
+
+DecayMap FitDecayMapReference(const DecayMapInput& in, const DecayMapOptions& options, const std::string& where) {
+  const auto started = std::chrono::steady_clock::now();
+  Validate(in, where);
+  const RateGrid grid = MakeRateGrid(in, options);
+  DecayMap map = EmptyMap(in);
+  std::atomic<std::size_t> no_decay{0};
+  tbb::parallel_for(tbb::blocked_range<int>(0, in.height), [&](const tbb::blocked_range<int>& rows) {
+    FitRowsReference(in, options, grid, rows.begin(), rows.end(), map, no_decay);
   });
   map.no_decay = no_decay;
   map.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();

@@ -5,14 +5,18 @@
 //
 //   y_c(t) = A_c exp(-k t) + B_c   (per second of exposure),
 //
-// into parameter images. A million pixels must take seconds, so the method
-// is variable projection on a rate grid shared by all pixels: for each
-// candidate k the amplitudes and backgrounds are a 2x2 weighted linear
+// into parameter images. A million pixels must take a second or two, so the
+// method is variable projection on a rate grid shared by all pixels: for
+// each candidate k the amplitudes and backgrounds are a 2x2 weighted linear
 // least-squares problem per channel (A_c clamped at 0), solved in closed
-// form; the best grid rate is then refined by Newton steps on log k with
-// finite differences. A frame integrates the glow over its exposure e, so
-// the basis is exp(-k t) sinh(k e / 2) / (k e / 2) at the exposure's middle,
-// exact for any exposure. Pixels run in parallel (TBB), rows at a time.
+// form from weighted sums. The sums that depend on k are, for a block of
+// pixels, products of the block's weights with the grid's basis (one matrix
+// product for every grid rate); the best grid rate is refined by the vertex
+// of a parabola through it and its neighbours, then exact Newton steps on
+// log k (analytic derivatives of the basis and of the projected cost). A
+// frame integrates the glow over its exposure e, so the basis is
+// exp(-k t) sinh(k e / 2) / (k e / 2) at the exposure's middle, exact for
+// any exposure. Rows run in parallel (TBB).
 
 #include <cstddef>
 #include <functional>
@@ -35,7 +39,7 @@ struct DecayMapOptions {
   int rate_grid_size = 48;  // log-spaced from 0.02 / span to 3 / smallest spacing
   bool background = true;
   Weighting weighting = Weighting::kPoisson;  // photon counting, scaled by sqrt(exposure)
-  int newton_steps = 4;
+  int newton_steps = 4;  // at most; they stop when a step is below 1e-4 in log k
 };
 
 struct DecayMap {
@@ -53,5 +57,11 @@ struct DecayMap {
 // increasing) is a UserError naming `where`.
 DecayMap FitDecayMap(const DecayMapInput& input, const DecayMapOptions& options, const std::string& where,
                      const std::function<void(std::size_t)>& progress = {});
+
+// The first algorithm, for comparison only (tests, bench): pixel by pixel,
+// every grid rate's sums from the samples, then `newton_steps` Newton steps
+// with central differences of the cost. The same model, options and outputs
+// as FitDecayMap, several times slower.
+DecayMap FitDecayMapReference(const DecayMapInput& input, const DecayMapOptions& options, const std::string& where);
 
 }  // namespace phos
