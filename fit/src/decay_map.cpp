@@ -131,7 +131,7 @@ void WeighFrame(int n, double exposure, Weighting weighting, const double* peak,
                 double* __restrict__ Syy) {
   for (int i = 0; i < n; ++i) {
     const double y = wy[i];  // the values, until the weights are known
-    const double weight = weighting == Weighting::kPoisson ? exposure / std::max(std::fabs(y), WeightFloor(peak[i])) : 1.0;
+    const double weight = SampleWeight(y, exposure, WeightFloor(peak[i]), weighting);
     w[i] = weight;
     wy[i] = weight * y;
     S11[i] += weight;
