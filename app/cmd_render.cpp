@@ -2,6 +2,11 @@
 //   phos render SCENE.json --out DIR [--times t1,t2,...] [--transport direct|path|dss]
 //       [--no-phosphorescence] [--json]
 //   JSON: {"frames":[{"t":..,"exr":path,"png":path,"seconds":..}], ...}
+// On a cluster (docs/scale.md) the states, which are sequential in time, are
+// solved once (--solve-only --checkpoints DIR --tasks N: a state file at the
+// start of each of N frame ranges), then the ranges render independently
+// (--task i/N or --frames A:B, from the latest state at or before A), each
+// writing a done record last (util/task_record.h).
 
 #include <algorithm>
 #include <chrono>
@@ -9,6 +14,7 @@
 #include <filesystem>
 #include <iostream>
 #include <memory>
+#include <regex>
 #include <string>
 
 #include <nlohmann/json.hpp>
@@ -24,6 +30,7 @@
 #include "phos/util/error.h"
 #include "phos/util/format.h"
 #include "phos/util/progress.h"
+#include "phos/util/task_record.h"
 
 namespace phos::app {
 namespace {
@@ -38,10 +45,160 @@ struct RenderArgs {
   bool transport_given = false, indirect_visibility = false;
   std::string contact_sheet;
   std::vector<std::string> materials;
+  // Shards (docs/scale.md): a range of frames, or the solver pass.
+  std::string frames, task, checkpoints;
+  bool solve_only = false;
+  int solve_tasks = 1;
 };
+
+// The frames [first, last) of the run's frame list this process renders.
+struct FrameRange {
+  std::size_t first = 0, last = 0;
+  bool whole = true;      // every frame (no --frames, no --task)
+  std::string done_name;  // the done record's file name under <out>/done/ (ranges only)
+};
+
+FrameRange SelectFrames(const RenderArgs& args, std::size_t frame_count) {
+  FrameRange range{0, frame_count, true, ""};
+  if (!args.frames.empty()) {
+    static const std::regex form(R"((\d{1,9}):(\d{1,9}))");
+    std::smatch m;
+    if (!std::regex_match(args.frames, m, form))
+      ThrowUserError("", "--frames", "expected FIRST:END (frame indices, END excluded), got \"" + args.frames + "\"");
+    range.first = std::stoul(m[1]);
+    range.last = std::stoul(m[2]);
+    if (range.first >= range.last || range.last > frame_count)
+      ThrowUserError("", "--frames",
+                     "expected 0 <= FIRST < END <= " + std::to_string(frame_count) + " (the run has " +
+                         std::to_string(frame_count) + " frames), got " + args.frames);
+    range.whole = false;
+    range.done_name = "frames-" + std::to_string(range.first) + "-" + std::to_string(range.last) + ".json";
+  } else if (!args.task.empty()) {
+    int index = 0, count = 0;
+    if (!ParseTaskIndex(args.task, &index, &count))
+      ThrowUserError("", "--task", "expected i/N with 0 <= i < N, got \"" + args.task + "\"");
+    const auto [first, last] = TaskShare(frame_count, index, count);
+    range = {first, last, false, "task-" + std::to_string(index) + "-of-" + std::to_string(count) + ".json"};
+  }
+  return range;
+}
+
+// What a range's frames are made from: a done record for other inputs is not this range's.
+std::string RangeInputs(const RenderArgs& a, const FrameRange& range) {
+  std::string materials;
+  for (const std::string& m : a.materials) materials += m + ";";
+  return "scene=" + a.scene + " times=" + a.times + " transport=" + a.transport + " spp=" + std::to_string(a.spp) +
+         " size=" + std::to_string(a.width) + "x" + std::to_string(a.height) + " exposure=" + FormatDouble(a.exposure) +
+         " night=" + FormatDouble(a.night_vision_cd) + " no_phosphorescence=" + std::to_string(a.no_phosphorescence) +
+         " indirect_visibility=" + std::to_string(a.indirect_visibility) + " materials=" + materials +
+         " frames=" + std::to_string(range.first) + ":" + std::to_string(range.last);
+}
+
+// Where the solver pass writes the state at frame f.
+std::filesystem::path CheckpointPath(const std::string& dir, std::size_t frame) {
+  char name[32];
+  std::snprintf(name, sizeof name, "state-%06zu.bin", frame);
+  return std::filesystem::path(dir) / name;
+}
+
+// The latest state at or before `frame` in the folder (SIZE_MAX: none).
+std::size_t LatestCheckpoint(const std::string& dir, std::size_t frame) {
+  std::size_t best = SIZE_MAX;
+  std::error_code ec;
+  static const std::regex form(R"(state-(\d{6,9})\.bin)");
+  for (const auto& entry : std::filesystem::directory_iterator(dir, ec)) {
+    std::smatch m;
+    const std::string name = entry.path().filename().string();
+    if (!std::regex_match(name, m, form)) continue;
+    const std::size_t f = std::stoul(m[1]);
+    if (f <= frame && (best == SIZE_MAX || f > best)) best = f;
+  }
+  if (ec) ThrowUserError(dir, "--checkpoints", "cannot read the folder: " + ec.message());
+  return best;
+}
 
 double Seconds(std::chrono::steady_clock::time_point since) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
+}
+
+// The solver pass: every state from the start through the last frame,
+// advanced frame by frame exactly as one sequential run does (the same steps
+// at the same break points: the floats come out the same), writing the state
+// at the first frame of each of `tasks` ranges. Idempotent: its done record
+// (<dir>/done.json) makes a rerun do nothing.
+void SolveOnly(const RenderArgs& args, const render::Scene& scene, render::CoupledSolver* solver,
+               const std::vector<double>& times) {
+  using namespace phos::render;
+  const auto start = std::chrono::steady_clock::now();
+  const std::filesystem::path dir = args.checkpoints, done = dir / "done.json";
+  const std::string inputs = RangeInputs(args, {0, times.size(), true, ""}) + " tasks=" + std::to_string(args.solve_tasks);
+  nlohmann::json result = {{"scene", args.scene}, {"frames", times.size()}, {"tasks", args.solve_tasks}};
+  if (TaskIsDone(done, inputs)) {
+    result["done_before"] = true;
+    if (args.json)
+      std::cout << result.dump() << "\n";
+    else
+      std::printf("%s: solver states already written (%s): nothing to do\n", scene.name.c_str(), done.c_str());
+    return;
+  }
+  std::error_code ec;
+  std::filesystem::create_directories(dir, ec);
+  if (ec) ThrowUserError("", "--checkpoints", "cannot create '" + dir.string() + "': " + ec.message());
+  std::vector<std::size_t> starts;
+  for (int i = 0; i < args.solve_tasks; ++i) {
+    const std::size_t first = TaskShare(times.size(), i, args.solve_tasks).first;
+    if (starts.empty() || starts.back() != first) starts.push_back(first);
+  }
+  TaskDoneRecord record{"render solve " + std::to_string(args.solve_tasks) + " ranges", inputs, {}, 0, HostName()};
+  nlohmann::json written = nlohmann::json::array();
+  if (solver) {
+    std::size_t next = 0;
+    for (std::size_t f = 0; f < times.size() && next < starts.size(); ++f) {
+      solver->AdvanceTo(times[f]);
+      if (f != starts[next]) continue;
+      const std::filesystem::path path = CheckpointPath(dir.string(), f);
+      WriteSolverCheckpoint(path, solver->Checkpoint(static_cast<int>(f)));
+      record.outputs.push_back(path.string());
+      written.push_back({{"frame", f}, {"t", times[f]}, {"file", path.string()}});
+      ++next;
+    }
+  }
+  record.seconds = Seconds(start);
+  WriteTaskDone(done, record);
+  result["checkpoints"] = written;
+  result["seconds"] = record.seconds;
+  if (args.json) {
+    std::cout << result.dump() << "\n";
+    return;
+  }
+  if (!solver)
+    std::printf("%s: no phosphorescence, no states: ranges render without checkpoints\n", scene.name.c_str());
+  else
+    std::printf("%s: solved %zu frame(s) in %.3f s; state at the start of %zu range(s) -> %s\n", scene.name.c_str(),
+                times.size(), record.seconds, written.size(), dir.c_str());
+}
+
+// Brings the solver to the frame before `first`, so that the range's first
+// AdvanceTo takes the very steps of one sequential run: from the latest
+// checkpoint at or before it (if any), then frame by frame.
+void PositionSolver(render::CoupledSolver* solver, const std::string& checkpoints, const std::vector<double>& times,
+                    std::size_t first) {
+  if (!solver || first == 0) return;
+  std::size_t from = 0;
+  if (!checkpoints.empty()) {
+    const std::size_t k = LatestCheckpoint(checkpoints, first);
+    if (k != SIZE_MAX) {
+      const std::filesystem::path path = CheckpointPath(checkpoints, k);
+      const render::SolverCheckpoint c = render::ReadSolverCheckpoint(path);
+      if (c.frame != static_cast<int>(k) || c.time_s != times[k])
+        ThrowUserError(path.string(), "time_s",
+                       "is the state at " + FormatDouble(c.time_s) + " s, but frame " + std::to_string(k) +
+                           " of this run is at " + FormatDouble(times[k]) + " s (solved with other --times?)");
+      solver->Restore(c, path.string());
+      from = k;
+    }
+  }
+  for (std::size_t f = from; f < first; ++f) solver->AdvanceTo(times[f]);
 }
 
 void Run(const RenderArgs& args) {
@@ -96,13 +253,42 @@ void Run(const RenderArgs& args) {
                    "phos render: warning: --times: %s s is past the scene's end (%s s); rendered all the same\n",
                    FormatDouble(times.back()).c_str(), FormatDouble(scene.end_s).c_str());
   }
+  const FrameRange range = SelectFrames(args, times.size());
+  if (!range.whole && choose)
+    ThrowUserError("", args.budget_s > 0 ? "--budget-s" : "--quality",
+                   "is timed on each machine, so ranges could choose differently: give --transport");
+  if (!range.whole && !args.contact_sheet.empty())
+    ThrowUserError("", "--contact-sheet", "needs every frame: not with --frames or --task");
+  if (args.solve_only && args.checkpoints.empty())
+    ThrowUserError("", "--solve-only", "writes the states to --checkpoints DIR: give it");
+  if (!args.solve_only && args.out.empty()) ThrowUserError("", "--out", "is required (except with --solve-only)");
+  const std::filesystem::path done =
+      range.whole ? std::filesystem::path() : std::filesystem::path(args.out) / "done" / range.done_name;
+  const std::string inputs = range.whole ? "" : RangeInputs(args, range);
+  if (!range.whole && !args.solve_only && TaskIsDone(done, inputs)) {
+    // A rerun of a finished range (Slurm's requeue, a resubmitted array) does nothing.
+    if (args.json)
+      std::cout << nlohmann::json({{"scene", args.scene}, {"done_before", true}, {"done", done.string()}}).dump() << "\n";
+    else
+      std::printf("%s: frames %zu:%zu already rendered (%s): nothing to do\n", scene.name.c_str(), range.first,
+                  range.last, done.c_str());
+    return;
+  }
+  const auto task_start = std::chrono::steady_clock::now();
   std::error_code ec;
-  std::filesystem::create_directories(args.out, ec);
-  if (ec) ThrowUserError("", "--out", "cannot create '" + args.out + "': " + ec.message());
+  if (!args.solve_only) {
+    std::filesystem::create_directories(args.out, ec);
+    if (ec) ThrowUserError("", "--out", "cannot create '" + args.out + "': " + ec.message());
+  }
 
   SceneGeometry geometry(scene);
   std::unique_ptr<CoupledSolver> solver;
   if (!args.no_phosphorescence && scene.HasPhosphors()) solver = std::make_unique<CoupledSolver>(scene, geometry);
+  if (args.solve_only) {
+    SolveOnly(args, scene, solver.get(), times);
+    return;
+  }
+  PositionSolver(solver.get(), args.checkpoints, times, range.first);
   FrameOptions options = DefaultFrameOptions(scene, transport);
   if (args.spp > 0) options.spp = options.direct_spp = args.spp;
   if (args.indirect_visibility && transport != Transport::kDss)
@@ -151,8 +337,9 @@ void Run(const RenderArgs& args) {
   std::vector<Image> sheet_frames;
   std::vector<std::string> sheet_labels;
   ProgressBar progress("render " + scene.name, times.size());
-  for (std::size_t f = 0; f < times.size(); ++f) {
+  for (std::size_t f = range.first; f < range.last; ++f) {
     const double t = times[f];
+    options.frame = f;  // the path tracer's seed: pixel, frame and sample
     const auto start = std::chrono::steady_clock::now();
     if (solver)
       solver->AdvanceTo(t);
@@ -197,6 +384,13 @@ void Run(const RenderArgs& args) {
   }
   progress.Finish();
   if (!args.contact_sheet.empty()) WriteContactSheet(args.contact_sheet, sheet_frames, sheet_labels, 4);
+  if (!range.whole) {
+    // Last, after every frame is whole on disk: the range is done.
+    TaskDoneRecord record{"render frames " + std::to_string(range.first) + ":" + std::to_string(range.last), inputs,
+                          {}, Seconds(task_start), HostName()};
+    for (const auto& frame : frames) record.outputs.push_back(frame["exr"].get<std::string>());
+    WriteTaskDone(done, record);
+  }
 
   nlohmann::json result = {
       {"scene", args.scene},         {"transport", TransportName(transport)}, {"phosphorescence", solver != nullptr},
@@ -225,7 +419,7 @@ void Run(const RenderArgs& args) {
     states = std::to_string(solver->stats().texels) + " phosphor texels";
     if (solver->media()) states += ", " + std::to_string(solver->media()->stats().phosphor_voxels) + " phosphor voxels";
   }
-  std::printf("%s: %zu frame(s), %dx%d, transport %s, %s\n", scene.name.c_str(), times.size(), scene.camera.width,
+  std::printf("%s: %zu frame(s), %dx%d, transport %s, %s\n", scene.name.c_str(), frames.size(), scene.camera.width,
               scene.camera.height, TransportName(transport), states.c_str());
   if (choose) std::printf("  transport for the %s\n", choice_line.c_str());
   for (const auto& frame : frames)
@@ -239,7 +433,7 @@ void RegisterRender(CLI::App& app) {
   auto args = std::make_shared<RenderArgs>();
   CLI::App* cmd = app.add_subcommand("render", Summary("render"));
   cmd->add_option("scene", args->scene, "Scene file (phos.scene/1)")->required();
-  cmd->add_option("--out", args->out, "Folder for frame-NNNN.exr and frame-NNNN.png")->required();
+  cmd->add_option("--out", args->out, "Folder for frame-NNNN.exr and frame-NNNN.png (required unless --solve-only)");
   cmd->add_option("--times", args->times,
                   "Comma-separated frame times in seconds, in increasing order (default: the scene's time range\n"
                   "at its fps); times past the scene's end are rendered with a warning");
@@ -280,6 +474,25 @@ void RegisterRender(CLI::App& app) {
                   "OBJECT=FILE: give the object of that name this phosphor material (repeatable),\n"
                   "e.g. one just fitted by 'phos fit', without editing the scene");
   cmd->add_flag("--json", args->json, "Print one JSON object: frames with t, exr, png and seconds");
+  cmd->add_option("--frames", args->frames,
+                  "FIRST:END: render only frames FIRST to END-1 of the run (0-based, numbered as in the whole\n"
+                  "run); equal bit for bit to the same frames of one run. The states start from the latest\n"
+                  "--checkpoints state at or before FIRST (or from the scene's start). Writes a done record\n"
+                  "<out>/done/frames-FIRST-END.json last; a rerun with one does nothing (docs/scale.md)");
+  cmd->add_option("--task", args->task,
+                  "i/N: render the i-th (0-based) of N near-equal consecutive ranges of frames, as --frames\n"
+                  "(a Slurm array task: --task $SLURM_ARRAY_TASK_ID/N); done record <out>/done/task-i-of-N.json")
+      ->excludes("--frames");
+  cmd->add_flag("--solve-only", args->solve_only,
+                "Render nothing: advance the states frame by frame (as a full run does: lights, dark jumps in\n"
+                "closed form, the glow patches with phosphor_irradiance) and write the state at the first\n"
+                "frame of each of --tasks ranges into --checkpoints, then <checkpoints>/done.json");
+  cmd->add_option("--checkpoints", args->checkpoints,
+                  "Folder of solver states (state-NNNNNN.bin, phos.solver-state/1, docs/formats.md): written by\n"
+                  "--solve-only, read by --frames and --task");
+  cmd->add_option("--tasks", args->solve_tasks, "With --solve-only: the number of frame ranges (default 1)")
+      ->check(CLI::Range(1, 1000000))
+      ->needs("--solve-only");
   cmd->callback([args] { Run(*args); });
 }
 

@@ -346,7 +346,7 @@ Image RenderBands(const SceneGeometry& geometry, const CoupledSolver* solver, co
   tbb::parallel_for(0, height, [&](int y) {
     std::uint64_t rays = 0;
     for (int x = 0; x < width; ++x) {
-      SplitMix64 random((std::uint64_t(options.seed) << 40) ^
+      SplitMix64 random((std::uint64_t(options.seed) << 40) ^ options.frame * 0x9E3779B97F4A7C15ull ^
                         (std::uint64_t(y) * std::uint64_t(width) + x) * 0x2545F4914F6CDD1Dull);
       Bands sum = Bands::Zero(nb);
       for (int s = 0; s < spp; ++s) {

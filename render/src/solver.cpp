@@ -3,13 +3,20 @@
 #include <algorithm>
 #include <cmath>
 #include <array>
+#include <bit>
+#include <cstring>
+#include <fstream>
 #include <set>
+
+#include <nlohmann/json.hpp>
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
 #include "phos/render/volume.h"
+#include "phos/util/atomic_file.h"
 #include "phos/util/error.h"
+#include "phos/util/json.h"
 
 namespace phos::render {
 namespace {
@@ -417,6 +424,85 @@ void CoupledSolver::AdvanceTo(double t_s) {
   }
   time_s_ = t_s;
   geometry_.SetTime(t_s);
+}
+
+nlohmann::json SolverCheckpoint::HeaderJson() const {
+  nlohmann::json sizes = nlohmann::json::array();
+  for (const std::vector<float>& a : arrays) sizes.push_back(a.size());
+  return {{"format", kFormat}, {"time_s", time_s}, {"frame", frame}, {"scene", scene}, {"array_sizes", sizes}};
+}
+
+void WriteSolverCheckpoint(const std::filesystem::path& path, const SolverCheckpoint& checkpoint) {
+  static_assert(std::endian::native == std::endian::little, "the state file's floats are little-endian");
+  std::string bytes = checkpoint.HeaderJson().dump() + "\n";
+  for (const std::vector<float>& a : checkpoint.arrays)
+    bytes.append(reinterpret_cast<const char*>(a.data()), a.size() * sizeof(float));
+  WriteFileAtomically(path, bytes);
+}
+
+SolverCheckpoint ReadSolverCheckpoint(const std::filesystem::path& path) {
+  // The largest state phos reads is the input limit: 64 M floats.
+  const std::string bytes = ReadFileText(path);
+  const std::size_t newline = bytes.find('\n');
+  if (newline == std::string::npos) ThrowUserError(path.string(), "", "is not a solver state (no header line)");
+  const nlohmann::json header = ParseJsonText(std::string_view(bytes).substr(0, newline), path.string());
+  const JsonField h(header, path.string());
+  if (h["format"].String() != SolverCheckpoint::kFormat)
+    h["format"].Fail(std::string("expected \"") + SolverCheckpoint::kFormat + "\"");
+  SolverCheckpoint c;
+  c.time_s = h["time_s"].Number();
+  c.frame = h["frame"].Integer(0, 1 << 30);
+  c.scene = h["scene"].String();
+  const JsonField sizes = h["array_sizes"];
+  std::size_t offset = newline + 1;
+  for (std::size_t i = 0; i < sizes.ArraySize(); ++i) {
+    const double count = sizes.At(i).NumberInRange(0, double(kMaxInputFileBytes / sizeof(float)));
+    const std::size_t n = static_cast<std::size_t>(count);
+    if (double(n) != count) sizes.At(i).Fail("expected a whole number of floats");
+    if (bytes.size() - offset < n * sizeof(float))
+      ThrowUserError(path.string(), "", "is shorter than its header says (a torn copy?)");
+    std::vector<float> a(n);
+    std::memcpy(a.data(), bytes.data() + offset, n * sizeof(float));
+    offset += n * sizeof(float);
+    c.arrays.push_back(std::move(a));
+  }
+  if (offset != bytes.size()) ThrowUserError(path.string(), "", "is longer than its header says");
+  return c;
+}
+
+SolverCheckpoint CoupledSolver::Checkpoint(int frame) const {
+  SolverCheckpoint c;
+  c.time_s = time_s_;
+  c.frame = frame;
+  c.scene = scene_.name;
+  for (const Group& g : groups_) {
+    c.arrays.push_back(g.states.r);
+    c.arrays.push_back(g.Lp);
+  }
+  if (media_) media_->SaveStates(&c.arrays);
+  return c;
+}
+
+void CoupledSolver::Restore(const SolverCheckpoint& c, const std::string& source) {
+  if (c.scene != scene_.name)
+    ThrowUserError(source, "scene", "is '" + c.scene + "', the scene rendered is '" + scene_.name + "'");
+  if (c.arrays.size() < 2 * groups_.size())
+    ThrowUserError(source, "arrays", "fewer than the scene's phosphorescent objects need (a state of another scene?)");
+  for (std::size_t s = 0; s < groups_.size(); ++s) {
+    Group& g = groups_[s];
+    if (c.arrays[2 * s].size() != g.states.r.size() || c.arrays[2 * s + 1].size() != g.Lp.size())
+      ThrowUserError(source, "arrays",
+                     "do not match the texels of object '" + scene_.objects[g.object].name +
+                         "' (a state of another version of the scene?)");
+    g.states.r = c.arrays[2 * s];
+    g.Lp = c.arrays[2 * s + 1];
+  }
+  if (media_)
+    media_->RestoreStates(c.arrays, 2 * groups_.size(), source);
+  else if (c.arrays.size() != 2 * groups_.size())
+    ThrowUserError(source, "arrays", "more than the scene's phosphors hold (a state of another scene?)");
+  time_s_ = c.time_s;
+  geometry_.SetTime(c.time_s);
 }
 
 }  // namespace phos::render

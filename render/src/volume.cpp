@@ -443,4 +443,29 @@ float VolumeMedia::State(int volume, int i, std::size_t voxel) const {
   return p->states.state(i)[p->state_of[voxel]];
 }
 
+void VolumeMedia::SaveStates(std::vector<std::vector<float>>* arrays) const {
+  for (const auto& p : phosphors_) {
+    if (!p) continue;
+    arrays->push_back(p->states.r);
+    arrays->push_back(p->Lp);
+  }
+}
+
+void VolumeMedia::RestoreStates(const std::vector<std::vector<float>>& arrays, std::size_t first,
+                                const std::string& source) {
+  std::size_t a = first;
+  for (std::size_t vi = 0; vi < phosphors_.size(); ++vi) {
+    Phosphor* p = phosphors_[vi].get();
+    if (!p) continue;
+    if (a + 2 > arrays.size() || arrays[a].size() != p->states.r.size() || arrays[a + 1].size() != p->Lp.size())
+      ThrowUserError(source, "arrays", "do not match the scene's phosphorescent voxels (a state of another scene?)");
+    p->states.r = arrays[a];
+    p->Lp = arrays[a + 1];
+    ScatterLp(static_cast<int>(vi));
+    a += 2;
+  }
+  if (a != arrays.size())
+    ThrowUserError(source, "arrays", "more than the scene's phosphors hold (a state of another scene?)");
+}
+
 }  // namespace phos::render

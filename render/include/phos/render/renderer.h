@@ -54,6 +54,10 @@ struct FrameOptions {
   int direct_spp = 1;  // direct: jittered samples per pixel
   int max_depth = 8;   // path: bounces
   unsigned seed = 1;
+  // The frame's index in its run: the path tracer's and the jitter's random
+  // numbers are seeded by pixel, frame and sample (never by thread), so a
+  // range of frames rendered on its own equals the same frames of one run.
+  std::uint64_t frame = 0;
   int interval_layers = 4;           // dss with media: points per pixel of the transmittance interval map
   int sky_rays = 16;                 // direct (and what dss surfels receive): shadow rays per point for the sky
   bool indirect_visibility = false;  // dss: the bounced z-buffer (no leaking, no over-occlusion) instead of blending

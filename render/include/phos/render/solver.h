@@ -17,6 +17,7 @@
 //    costs what the first did.
 
 #include <cstddef>
+#include <filesystem>
 #include <memory>
 #include <string>
 #include <vector>
@@ -37,6 +38,32 @@ struct SolverStats {
 };
 
 class VolumeMedia;
+
+// The coupled solver's state at one frame: all that a frame needs from it
+// (the states r and the emission Lp of every phosphorescent texel and voxel),
+// so that frames from `frame` on render without the solver's past. Written by
+// `phos render --solve-only` at the start of each frame range and read by the
+// range's task. The floats are kept bit for bit, so a range rendered from a
+// checkpoint equals the same frames of one sequential run.
+//
+// File (docs/formats.md, "Solver state"): one line of JSON, the header below
+// (ToJson), then the arrays as little-endian float32, back to back, in the
+// header's order and sizes.
+struct SolverCheckpoint {
+  static constexpr const char* kFormat = "phos.solver-state/1";
+  double time_s = 0;
+  int frame = 0;      // index of the frame at time_s in the run's frame list
+  std::string scene;  // the scene's name, to refuse a state of another scene
+  // Per texel group (object) in atlas order: r (nc * n), then Lp (n_em * n);
+  // then per phosphorescent volume the same two.
+  std::vector<std::vector<float>> arrays;
+
+  nlohmann::json HeaderJson() const;  // everything but the arrays' values
+};
+// Atomic (util/atomic_file.h): a killed solver pass leaves no half a state.
+void WriteSolverCheckpoint(const std::filesystem::path& path, const SolverCheckpoint& checkpoint);
+// UserError naming the file when it is not a whole checkpoint.
+SolverCheckpoint ReadSolverCheckpoint(const std::filesystem::path& path);
 
 class CoupledSolver {
  public:
@@ -66,6 +93,12 @@ class CoupledSolver {
   // The scene's media (volume.h), with the phosphorescent voxels' states;
   // null without volumes. Non-const: it caches the voxels' light per frame.
   VolumeMedia* media() const { return media_.get(); }
+
+  // The state now, for a checkpoint (frame: the caller's frame index).
+  SolverCheckpoint Checkpoint(int frame) const;
+  // Takes the state of a checkpoint of this scene (time and arrays); a
+  // checkpoint that does not fit the scene's texels is a UserError naming `source`.
+  void Restore(const SolverCheckpoint& checkpoint, const std::string& source);
 
   // The irradiance (per scene band) that the lights put on texel j of slot s now.
   std::vector<double> TexelIrradiance(int slot, std::size_t texel);

@@ -126,6 +126,11 @@ class VolumeMedia {
   // State i of voxel j (by grid index) of volume v; 0 where the density is 0.
   float State(int volume, int i, std::size_t voxel) const;
   const VolumeStats& stats() const { return stats_; }
+  // The phosphorescent voxels' states and Lp, two arrays per phosphorescent
+  // volume (the solver's checkpoints); RestoreStates takes them back in the
+  // same order and sizes, else a UserError naming `source`.
+  void SaveStates(std::vector<std::vector<float>>* arrays) const;
+  void RestoreStates(const std::vector<std::vector<float>>& arrays, std::size_t first, const std::string& source);
 
  private:
   struct LightCache {
