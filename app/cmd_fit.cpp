@@ -7,6 +7,8 @@
 #include <memory>
 #include <algorithm>
 #include <atomic>
+#include <chrono>
+#include <regex>
 #include <optional>
 #include <set>
 #include <thread>
@@ -28,6 +30,7 @@
 #include "phos/util/format.h"
 #include "phos/util/json.h"
 #include "phos/util/progress.h"
+#include "phos/util/task_record.h"
 
 namespace phos::app {
 namespace {
@@ -198,14 +201,30 @@ void RunFitSession(const SessionArgs& args) {
 // ---- phos fit map ------------------------------------------------------------
 
 struct MapArgs {
-  std::string session, out, weights = "poisson";
-  bool no_background = false, json = false;
+  std::string session, out, weights = "poisson", tile;
+  bool no_background = false, json = false, merge = false;
 };
 
-void RunFitMap(const MapArgs& args) {
+// What the map's pixels are made from: a tile's done record for other inputs is not this map's.
+std::string MapInputs(const MapArgs& args, int tiles) {
+  return "session=" + args.session + " weights=" + args.weights +
+         " background=" + std::to_string(!args.no_background) + " tiles=" + std::to_string(tiles);
+}
+
+// The session's frames as a map's input, only the rows of tile `index` of
+// `count` (rows [H index / count, H (index + 1) / count)): a tile holds only
+// its rows in memory. The whole map is tile 0 of 1.
+struct MapFrames {
+  DecayMapInput input;
+  std::vector<std::string> channel_names;
+  int clipped = 0;
+  int full_height = 0;
+  std::size_t first_row = 0;
+};
+
+MapFrames ReadMapFrames(const MapArgs& args, int index, int count) {
   namespace fs = std::filesystem;
   const fs::path dir = args.session;
-  std::error_code ec;
   const std::string protocol = ReadSessionRecord(dir).protocol;
   if (protocol != "decay")
     ThrowUserError(dir.string(), "", "is a '" + protocol + "' session; a decay map needs a decay session");
@@ -216,60 +235,65 @@ void RunFitMap(const MapArgs& args) {
   if (records.torn)
     std::printf("phos fit map: %s: torn last line left out ('phos capture resume' repairs it)\n",
                 (dir / "frames.jsonl").string().c_str());
-  const std::vector<FrameRecord>& lines = records.frames;
-  DecayMapInput input;
-  int clipped = 0;
-  std::vector<std::string> channel_names;
-  {
-    ProgressBar reading("reading frames", lines.size());
-    for (const FrameRecord& line : lines) {
-      reading.Advance();
-      if (line.protocol.value("saturated_fraction", 0.0) > 0) {
-        ++clipped;
-        continue;
-      }
-      const Frame frame = ReadFrame(dir, line);
-      if (input.frames.empty()) {
-        input.width = frame.width;
-        input.height = frame.height;
-        input.channels = frame.channels;
-        channel_names = frame.channel_names;
-      } else if (frame.width != input.width || frame.height != input.height || frame.channels != input.channels) {
-        ThrowUserError((dir / line.file).string(), "", "differs in size from the first frame");
-      }
-      std::vector<float> rate(frame.pixels.size());
-      for (std::size_t i = 0; i < rate.size(); ++i)
-        rate[i] = static_cast<float>((frame.pixels[i] - frame.black_level_dn) / frame.exposure_s);
-      input.frames.push_back(std::move(rate));
-      input.exposure_s.push_back(frame.exposure_s);
-      input.t_s.push_back(line.protocol.value("delay_after_light_off_s", 0.0) + frame.exposure_s / 2);
+  MapFrames out;
+  DecayMapInput& input = out.input;
+  ProgressBar reading("reading frames", records.frames.size());
+  for (const FrameRecord& line : records.frames) {
+    reading.Advance();
+    if (line.protocol.value("saturated_fraction", 0.0) > 0) {
+      ++out.clipped;
+      continue;
     }
+    const Frame frame = ReadFrame(dir, line);
+    if (input.frames.empty()) {
+      out.full_height = frame.height;
+      const auto [first, last] = TaskShare(static_cast<std::size_t>(frame.height), index, count);
+      if (first >= last)
+        ThrowUserError(dir.string(), "--tile",
+                       "has no rows: more tiles than the frames' " + std::to_string(frame.height) + " rows");
+      out.first_row = first;
+      input.width = frame.width;
+      input.height = static_cast<int>(last - first);
+      input.channels = frame.channels;
+      out.channel_names = frame.channel_names;
+    } else if (frame.width != input.width || frame.height != out.full_height || frame.channels != input.channels) {
+      ThrowUserError((dir / line.file).string(), "", "differs in size from the first frame");
+    }
+    const std::size_t row_values = static_cast<std::size_t>(frame.width) * frame.channels;
+    std::vector<float> rate(static_cast<std::size_t>(input.height) * row_values);
+    const std::size_t offset = out.first_row * row_values;
+    for (std::size_t i = 0; i < rate.size(); ++i)
+      rate[i] = static_cast<float>((frame.pixels[offset + i] - frame.black_level_dn) / frame.exposure_s);
+    input.frames.push_back(std::move(rate));
+    input.exposure_s.push_back(frame.exposure_s);
+    input.t_s.push_back(line.protocol.value("delay_after_light_off_s", 0.0) + frame.exposure_s / 2);
   }
-  if (clipped > 0 && !args.json) std::printf("phos fit map: %d clipped frame(s) left out\n", clipped);
-  DecayMapOptions options;
-  options.background = !args.no_background;
-  options.weighting = ParseWeightsOption(args.weights);
-  ProgressBar fitting("fitting pixels", static_cast<std::size_t>(input.height));
-  const DecayMap map = FitDecayMap(input, options, dir.string(), [&](std::size_t) { fitting.Advance(); });
-  fitting.Finish();
+  return out;
+}
 
-  // A map with no finite rate anywhere is no result (a frame record's
-  // exposure out of range, a session of dark frames): an error, not exit 0.
-  if (std::none_of(map.kr.begin(), map.kr.end(), [](float k) { return std::isfinite(k); }))
-    ThrowUserError(dir.string(), "",
-                   "no pixel has a finite decay rate: nothing written (are the frames dark or clipped?)");
-  fs::create_directories(args.out, ec);
-  if (ec) ThrowUserError(args.out, "", "cannot create the output folder: " + ec.message());
-  // One float EXR: kr, then amplitude and background per camera channel, then rms.
+// A map's parameter image: kr, then amplitude and background per camera
+// channel, then rms, interleaved per pixel (the channels of decay-map.exr).
+struct MapImage {
+  int width = 0, height = 0;
+  std::vector<std::string> names;
+  std::vector<float> pixels;
+  std::size_t no_decay = 0;
+  std::size_t frames = 0;
+  int clipped = 0;
+  double seconds = 0;
+};
+
+MapImage MapImageOf(const DecayMap& map, const MapFrames& frames) {
+  MapImage image{map.width, map.height, {"kr"}, {}, map.no_decay, frames.input.frames.size(), frames.clipped,
+                 map.seconds};
   const int C = map.channels, nch = 2 + 2 * C;
+  for (int c = 0; c < C; ++c) image.names.push_back("amplitude." + frames.channel_names[c]);
+  for (int c = 0; c < C; ++c) image.names.push_back("background." + frames.channel_names[c]);
+  image.names.push_back("rms");
   const std::size_t pixels = static_cast<std::size_t>(map.width) * map.height;
-  std::vector<float> image(pixels * nch);
-  std::vector<std::string> names = {"kr"};
-  for (int c = 0; c < C; ++c) names.push_back("amplitude." + channel_names[c]);
-  for (int c = 0; c < C; ++c) names.push_back("background." + channel_names[c]);
-  names.push_back("rms");
+  image.pixels.resize(pixels * nch);
   for (std::size_t p = 0; p < pixels; ++p) {
-    float* out = &image[p * nch];
+    float* out = &image.pixels[p * nch];
     out[0] = map.kr[p];
     for (int c = 0; c < C; ++c) {
       out[1 + c] = map.amplitude[p * C + c];
@@ -277,11 +301,27 @@ void RunFitMap(const MapArgs& args) {
     }
     out[1 + 2 * C] = map.rms[p];
   }
+  return image;
+}
+
+// decay-map.exr and kr.png of a whole map, and what the command says of it.
+void WriteMapOutputs(const MapArgs& args, const MapImage& map, const std::string& where) {
+  namespace fs = std::filesystem;
+  const std::size_t pixels = static_cast<std::size_t>(map.width) * map.height, nch = map.names.size();
+  std::vector<float> kr(pixels);
+  for (std::size_t p = 0; p < pixels; ++p) kr[p] = map.pixels[p * nch];
+  // A map with no finite rate anywhere is no result (a frame record's
+  // exposure out of range, a session of dark frames): an error, not exit 0.
+  if (std::none_of(kr.begin(), kr.end(), [](float k) { return std::isfinite(k); }))
+    ThrowUserError(where, "", "no pixel has a finite decay rate: nothing written (are the frames dark or clipped?)");
+  std::error_code ec;
+  fs::create_directories(args.out, ec);
+  if (ec) ThrowUserError(args.out, "", "cannot create the output folder: " + ec.message());
   const fs::path exr = fs::path(args.out) / "decay-map.exr";
-  WriteFloatImage(exr, map.width, map.height, names, image);
+  WriteFloatImage(exr, map.width, map.height, map.names, map.pixels);
   // A look at kr: grey from the 1st to the 99th percentile.
   std::vector<float> finite;
-  for (float k : map.kr)
+  for (float k : kr)
     if (std::isfinite(k)) finite.push_back(k);
   std::sort(finite.begin(), finite.end());
   const float lo = finite.empty() ? 0 : finite[finite.size() / 100],
@@ -289,16 +329,16 @@ void RunFitMap(const MapArgs& args) {
   const float median = finite.empty() ? std::nanf("") : finite[finite.size() / 2];
   std::vector<float> grey(pixels);
   for (std::size_t p = 0; p < pixels; ++p)
-    grey[p] = std::isfinite(map.kr[p]) ? std::clamp((map.kr[p] - lo) / std::max(hi - lo, 1e-12f), 0.0f, 1.0f) : 0.0f;
+    grey[p] = std::isfinite(kr[p]) ? std::clamp((kr[p] - lo) / std::max(hi - lo, 1e-12f), 0.0f, 1.0f) : 0.0f;
   WriteFloatImage(fs::path(args.out) / "kr.png", map.width, map.height, {"Y"}, grey);
   if (args.json) {
     std::printf("%s\n", nlohmann::json({{"width", map.width},
                                         {"height", map.height},
-                                        {"frames", input.frames.size()},
-                                        {"clipped_frames", clipped},
+                                        {"frames", map.frames},
+                                        {"clipped_frames", map.clipped},
                                         {"seconds", map.seconds},
                                         {"exr", exr.string()},
-                                        {"channels", names},
+                                        {"channels", map.names},
                                         {"kr_median_per_s", median},
                                         {"kr_p01_per_s", lo},
                                         {"kr_p99_per_s", hi},
@@ -309,18 +349,143 @@ void RunFitMap(const MapArgs& args) {
   }
   std::printf(
       "phos fit map: %dx%d pixels, %zu frames, fitted in %s s -> %s (kr, amplitude.*, background.*, rms), kr.png\n",
-      map.width, map.height, input.frames.size(), FormatShort(map.seconds).c_str(), exr.string().c_str());
+      map.width, map.height, map.frames, FormatShort(map.seconds).c_str(), exr.string().c_str());
   std::printf("  kr: median %s /s, 1%%-99%% %s to %s /s; %zu pixel(s) without a decay\n", FormatShort(median).c_str(),
               FormatShort(lo).c_str(), FormatShort(hi).c_str(), map.no_decay);
+}
+
+DecayMap FitMapFrames(const MapArgs& args, const MapFrames& frames) {
+  DecayMapOptions options;
+  options.background = !args.no_background;
+  options.weighting = ParseWeightsOption(args.weights);
+  ProgressBar fitting("fitting pixels", static_cast<std::size_t>(frames.input.height));
+  DecayMap map = FitDecayMap(frames.input, options, args.session, [&](std::size_t) { fitting.Advance(); });
+  fitting.Finish();
+  return map;
+}
+
+// Tiles (docs/scale.md): tile i of N is rows [H i / N, H (i + 1) / N) of
+// the map, fitted exactly as the whole map fits them (the rows' blocks of
+// pixels are the same), in <out>/tiles/tile-i-of-N.exr with what the merge
+// needs in its header, then its done record tile-i-of-N.json.
+std::filesystem::path TilePath(const std::string& out, int index, int count, const char* extension) {
+  return std::filesystem::path(out) / "tiles" /
+         ("tile-" + std::to_string(index) + "-of-" + std::to_string(count) + extension);
+}
+
+void RunFitMapTile(const MapArgs& args) {
+  int index = 0, count = 0;
+  if (!ParseTaskIndex(args.tile, &index, &count))
+    ThrowUserError("", "--tile", "expected i/N with 0 <= i < N, got \"" + args.tile + "\"");
+  const auto start = std::chrono::steady_clock::now();
+  const std::filesystem::path done = TilePath(args.out, index, count, ".json");
+  const std::string inputs = MapInputs(args, count);
+  if (TaskIsDone(done, inputs)) {
+    std::printf("phos fit map: tile %d/%d already fitted (%s): nothing to do\n", index, count, done.c_str());
+    return;
+  }
+  const MapFrames frames = ReadMapFrames(args, index, count);
+  const std::size_t first_row = frames.first_row, last_row = first_row + frames.input.height;
+  const MapImage tile = MapImageOf(FitMapFrames(args, frames), frames);
+  std::error_code ec;
+  std::filesystem::create_directories(done.parent_path(), ec);
+  if (ec) ThrowUserError(done.parent_path().string(), "", "cannot create the folder: " + ec.message());
+  const std::filesystem::path exr = TilePath(args.out, index, count, ".exr");
+  WriteAtomically(exr, [&](const std::filesystem::path& temporary) {
+    auto out = OIIO::ImageOutput::create(temporary.string());
+    if (!out) ThrowUserError(exr.string(), "", "no writer: " + OIIO::geterror());
+    OIIO::ImageSpec spec(tile.width, tile.height, static_cast<int>(tile.names.size()), OIIO::TypeDesc::FLOAT);
+    spec.channelnames = tile.names;
+    spec.attribute("compression", "zip");
+    spec.attribute("phos:first_row", static_cast<int>(first_row));
+    spec.attribute("phos:map_height", frames.full_height);
+    spec.attribute("phos:pixels_without_decay", static_cast<int>(tile.no_decay));
+    spec.attribute("phos:frames", static_cast<int>(tile.frames));
+    spec.attribute("phos:clipped_frames", tile.clipped);
+    spec.attribute("phos:seconds", static_cast<float>(tile.seconds));
+    if (!out->open(temporary.string(), spec) || !out->write_image(OIIO::TypeDesc::FLOAT, tile.pixels.data()) ||
+        !out->close())
+      ThrowUserError(exr.string(), "", "could not write (disk full?): " + out->geterror());
+  });
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  WriteTaskDone(done, {"fit map tile " + args.tile, inputs, {exr.string()}, seconds, HostName()});
+  std::printf("phos fit map: tile %d/%d, rows %zu-%zu of %d, %zu frames, fitted in %s s -> %s\n", index, count,
+              first_row, last_row - 1, frames.full_height, tile.frames, FormatShort(tile.seconds).c_str(),
+              exr.c_str());
+}
+
+// The tiles of <out>/tiles into one map: every tile of the one count found
+// must be there with its done record for these inputs.
+void RunFitMapMerge(const MapArgs& args) {
+  namespace fs = std::filesystem;
+  const fs::path tiles = fs::path(args.out) / "tiles";
+  std::set<int> counts;
+  std::error_code ec;
+  static const std::regex form(R"(tile-(\d+)-of-(\d+)\.exr)");
+  for (const auto& entry : fs::directory_iterator(tiles, ec)) {
+    std::smatch m;
+    const std::string name = entry.path().filename().string();
+    if (std::regex_match(name, m, form)) counts.insert(std::stoi(m[2]));
+  }
+  if (ec || counts.empty()) ThrowUserError(tiles.string(), "", "holds no tiles (run 'phos fit map --tile i/N' first)");
+  if (counts.size() > 1) ThrowUserError(tiles.string(), "", "holds tiles of more than one count N: remove the old ones");
+  const int count = *counts.begin();
+  const std::string inputs = MapInputs(args, count);
+  std::string missing;
+  for (int i = 0; i < count; ++i) {
+    // With SESSION given, the tiles must be of it and these options; without, any whole tile does.
+    const fs::path done = TilePath(args.out, i, count, ".json");
+    if (args.session.empty() ? !ReadTaskDone(done) : !TaskIsDone(done, inputs))
+      missing += (missing.empty() ? "" : ", ") + std::to_string(i);
+  }
+  if (!missing.empty())
+    ThrowUserError(tiles.string(), "",
+                   "tile(s) " + missing + " of " + std::to_string(count) +
+                       " not done for these inputs (session, --weights, --no-background): nothing merged");
+  MapImage map;
+  for (int i = 0; i < count; ++i) {
+    const fs::path exr = TilePath(args.out, i, count, ".exr");
+    auto in = OIIO::ImageInput::open(exr.string());
+    if (!in) ThrowUserError(exr.string(), "", "cannot read: " + OIIO::geterror());
+    const OIIO::ImageSpec& spec = in->spec();
+    const int first_row = spec.get_int_attribute("phos:first_row", -1);
+    if (i == 0) {
+      map.width = spec.width;
+      map.height = spec.get_int_attribute("phos:map_height", 0);
+      map.names = spec.channelnames;
+      map.frames = static_cast<std::size_t>(spec.get_int_attribute("phos:frames", 0));
+      map.clipped = spec.get_int_attribute("phos:clipped_frames", 0);
+      map.pixels.resize(static_cast<std::size_t>(map.width) * map.height * map.names.size());
+    }
+    if (spec.width != map.width || spec.channelnames != map.names || first_row < 0 ||
+        first_row + spec.height > map.height)
+      ThrowUserError(exr.string(), "", "does not fit the other tiles (size, channels or rows)");
+    const std::size_t row_values = static_cast<std::size_t>(map.width) * map.names.size();
+    if (!in->read_image(0, 0, 0, static_cast<int>(map.names.size()), OIIO::TypeDesc::FLOAT,
+                        map.pixels.data() + first_row * row_values))
+      ThrowUserError(exr.string(), "", "cannot read: " + in->geterror());
+    map.no_decay += static_cast<std::size_t>(spec.get_int_attribute("phos:pixels_without_decay", 0));
+    map.seconds += spec.get_float_attribute("phos:seconds", 0.0f);
+  }
+  WriteMapOutputs(args, map, tiles.string());
+}
+
+void RunFitMap(const MapArgs& args) {
+  if (args.merge) return RunFitMapMerge(args);
+  if (args.session.empty()) ThrowUserError("", "SESSION", "is required (except with --merge)");
+  if (!args.tile.empty()) return RunFitMapTile(args);
+  const MapFrames frames = ReadMapFrames(args, 0, 1);
+  if (frames.clipped > 0 && !args.json) std::printf("phos fit map: %d clipped frame(s) left out\n", frames.clipped);
+  WriteMapOutputs(args, MapImageOf(FitMapFrames(args, frames), frames), args.session);
 }
 
 // ---- phos fit batch ----------------------------------------------------------
 
 struct BatchArgs {
   std::vector<std::string> inputs;
-  std::string out, weights = "poisson";
+  std::string out, weights = "poisson", task;
   int jobs = 0, components = 0;
-  bool reports = true, json = false;
+  bool reports = true, json = false, merge = false;
 };
 
 // <item>.done.json: an item of a batch is done. Written last (after the
@@ -403,7 +568,17 @@ void RunFitBatch(const BatchArgs& args) {
   SessionFitOptions options;
   options.components = args.components;
   options.weighting = ParseWeightsOption(args.weights);
-  const std::vector<fs::path> items = BatchItems(args.inputs);
+  std::vector<fs::path> items = BatchItems(args.inputs);
+  // --task i/N: this array task's share of the items, in order (the items'
+  // own done records make it idempotent; the summary is the merge's).
+  int task_index = 0, task_count = 0;
+  if (!args.task.empty()) {
+    if (!ParseTaskIndex(args.task, &task_index, &task_count))
+      ThrowUserError("", "--task", "expected i/N with 0 <= i < N, got \"" + args.task + "\"");
+    const auto [first, last] = TaskShare(items.size(), task_index, task_count);
+    items = std::vector<fs::path>(items.begin() + first, items.begin() + last);
+  }
+  const auto task_start = std::chrono::steady_clock::now();
   std::error_code ec;
   fs::create_directories(args.out, ec);
   if (ec) ThrowUserError(args.out, "", "cannot create the output folder: " + ec.message());
@@ -433,6 +608,11 @@ void RunFitBatch(const BatchArgs& args) {
       if (!why.empty()) rows[i].detail = "its .done.json " + why + ": fitted again";
       todo.push_back(i);
     }
+  }
+  if (args.merge && !todo.empty()) {
+    std::string missing;
+    for (std::size_t i : todo) missing += (missing.empty() ? "" : ", ") + rows[i].name;
+    ThrowUserError(args.out, "--merge", "item(s) not fitted yet: " + missing + " (nothing merged)");
   }
   ProgressBar progress("fit batch", todo.size());
   std::atomic<std::size_t> next{0};
@@ -504,7 +684,7 @@ void RunFitBatch(const BatchArgs& args) {
         .append(detail)
         .append("\"\n");
   }
-  WriteFileAtomically(fs::path(args.out) / "summary.csv", csv);
+  if (args.task.empty()) WriteFileAtomically(fs::path(args.out) / "summary.csv", csv);
   if (args.json)
     std::printf("%s\n", nlohmann::json({{"items", json_rows},
                                         {"fitted_now", todo.size() - failed},
@@ -514,12 +694,25 @@ void RunFitBatch(const BatchArgs& args) {
                             .dump()
                             .c_str());
   else
-    std::printf("phos fit batch: %zu item(s), %zu fitted now, %zu kept, %d failed -> %s (summary.csv)\n", rows.size(),
-                todo.size() - failed, rows.size() - todo.size(), failed, args.out.c_str());
+    std::printf("phos fit batch: %zu item(s)%s, %zu fitted now, %zu kept, %d failed -> %s%s\n", rows.size(),
+                args.task.empty() ? "" : (" (task " + args.task + ")").c_str(), todo.size() - failed,
+                rows.size() - todo.size(), failed, args.out.c_str(), args.task.empty() ? " (summary.csv)" : "");
   if (failed > 0)
     ThrowUserError(
         "", "fit batch",
         std::to_string(failed) + " item(s) could not be fitted (see the table and " + args.out + "/<item>.failed.txt)");
+  if (!args.task.empty()) {
+    // The task's record (phos slurm status counts them), after its items' own.
+    TaskDoneRecord record{"fit batch task " + args.task, "", {}, 0, HostName()};
+    for (const fs::path& item : items) {
+      record.inputs += item.string() + ";";
+      record.outputs.push_back((fs::path(args.out) / (item.filename().string() + ".json")).string());
+    }
+    record.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - task_start).count();
+    WriteTaskDone(fs::path(args.out) / "tasks" /
+                      ("task-" + std::to_string(task_index) + "-of-" + std::to_string(task_count) + ".json"),
+                  record);
+  }
 }
 
 }  // namespace
@@ -562,8 +755,16 @@ void RegisterFit(CLI::App& app) {
       "channels, an amplitude and a background per channel, by variable projection on a shared rate grid\n"
       "and Newton steps, in parallel. Writes decay-map.exr (float: kr, amplitude.*, background.*, rms)\n"
       "and kr.png (kr in grey, 1st to 99th percentile) into --out.");
-  mp->add_option("SESSION", map_args->session, "a decay session folder")->required();
+  mp->add_option("SESSION", map_args->session, "a decay session folder (required unless --merge)");
   mp->add_option("--out", map_args->out, "output folder")->required();
+  mp->add_option("--tile", map_args->tile,
+                 "i/N: fit only the i-th (0-based) of N bands of rows (a Slurm array task), into\n"
+                 "<out>/tiles/tile-i-of-N.exr, then its done record tile-i-of-N.json; a rerun with the record\n"
+                 "does nothing. The pixels equal the whole map's bit for bit (docs/scale.md)");
+  mp->add_flag("--merge", map_args->merge,
+               "assemble <out>/tiles into decay-map.exr and kr.png, the same as one run writes; every tile\n"
+               "must be done for the same session and options")
+      ->excludes("--tile");
   mp->add_option("--weights", map_args->weights, "poisson (default) or none");
   mp->add_flag("--no-background", map_args->no_background, "no background term (dark signal already removed)");
   mp->add_flag("--json", map_args->json, "print one JSON object (size, frames, kr percentiles, outputs)");
@@ -583,6 +784,13 @@ void RegisterFit(CLI::App& app) {
   b->add_option("--components", batch->components, "fix the number of states (1-4; default: BIC)");
   b->add_option("--weights", batch->weights, "poisson (default) or none");
   b->add_flag("--json", batch->json, "print one JSON object (the rows of the summary table) instead of the table");
+  b->add_option("--task", batch->task,
+                "i/N: fit only the i-th (0-based) of N near-equal consecutive shares of the items (a Slurm\n"
+                "array task); no summary.csv (the merge writes it); then <out>/tasks/task-i-of-N.json");
+  b->add_flag("--merge", batch->merge,
+              "fit nothing: write summary.csv of items all fitted already (by the array tasks); an item\n"
+              "without its .done.json is an error naming it")
+      ->excludes("--task");
   b->callback([batch] { RunFitBatch(*batch); });
   RequireFiniteNumbers(*fit);
 }
