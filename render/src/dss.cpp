@@ -73,10 +73,15 @@ GBuffer RenderGBuffer(const SceneGeometry& geometry, const Scene& scene, double 
 
 namespace {
 
+// Occluders are summed per side, four floats per receiver: the form factors
+// of the surfels facing it (their front towards it) and their y-weighted
+// sums, then those of the surfels it sees from behind. See ResolveOcclusion.
+constexpr int kSides = 4;
+
 // Accumulates one surfel into one receiver pixel, weighted.
 inline void Accumulate(const GBuffer& g, std::size_t p, const Surfel& s, const float* B, int channels, float weight,
-                       float* occlusion, float* occlusion_y, float* irradiance,
-                       const std::vector<Dipole>* dipoles = nullptr, const std::vector<float>* near_m = nullptr) {
+                       float* sides, float* irradiance, const std::vector<Dipole>* dipoles = nullptr,
+                       const std::vector<float>* near_m = nullptr) {
   if (dipoles) {
     // Subsurface: light that entered at the surfel leaves at the receiver.
     if (g.object[p] != s.object) return;
@@ -90,8 +95,9 @@ inline void Accumulate(const GBuffer& g, std::size_t p, const Surfel& s, const f
   float cos_q = 0, w_y = 0;
   const float F = SurfelFormFactor(g.position[p], g.normal[p], s, &cos_q, &w_y);
   if (F <= 0) return;
-  occlusion[p] += weight * F;
-  occlusion_y[p] += weight * F * w_y;
+  float* side = &sides[p * kSides + (cos_q < 0 ? 0 : 2)];
+  side[0] += weight * F;
+  side[1] += weight * F * w_y;
   // Light arrives from the surfel's front only (it faces the receiver).
   if (channels > 0 && cos_q < 0)
     for (int c = 0; c < channels; ++c) irradiance[p * channels + c] += weight * F * B[c];
@@ -110,14 +116,28 @@ DssResult EmptyResult(int width, int height, int channels) {
   return r;
 }
 
-// Occlusion above 1 (surfels behind surfels) is scaled back to 1, and the
-// directional sum with it.
-void ClampOcclusion(DssResult& r) {
-  for (std::size_t p = 0; p < r.occlusion.size(); ++p)
+// Occlusion from the per-side sums. A ray from a receiver outside a closed
+// surface crosses it as often from the front as from the back (it enters
+// and leaves): summing both sides counted every closed occluder twice, the
+// block and its far side (the floor of the ambient occlusion study, docs/
+// dss-trade.md). A closed surface's back-facing surfels therefore never sum
+// to more than its front-facing ones, and the front sum is the right one. An
+// open sheet seen from behind (a quad facing away) has only back-facing
+// surfels: then the back sum is the larger and is kept. So occlusion is the
+// larger of the two sums, its directional sum with it, and above 1 (surfels
+// behind surfels: visibility, which blending does not know) both are
+// scaled back to 1.
+void ResolveOcclusion(const std::vector<float>& sides, DssResult& r) {
+  for (std::size_t p = 0; p < r.occlusion.size(); ++p) {
+    const float* side = &sides[p * kSides];
+    const float* kept = side[2] > side[0] ? side + 2 : side;
+    r.occlusion[p] = kept[0];
+    r.occlusion_y[p] = kept[1];
     if (r.occlusion[p] > 1) {
       r.occlusion_y[p] /= r.occlusion[p];
       r.occlusion[p] = 1;
     }
+  }
 }
 
 }  // namespace
@@ -127,15 +147,16 @@ DssResult GatherAllSurfels(const GBuffer& g, const std::vector<Surfel>& surfels,
   const auto started = std::chrono::steady_clock::now();
   DssResult r = EmptyResult(g.width, g.height, channels);
   const std::size_t n = static_cast<std::size_t>(g.width) * g.height;
+  std::vector<float> sides(n * kSides, 0.0f);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n), [&](const tbb::blocked_range<std::size_t>& range) {
     for (std::size_t p = range.begin(); p != range.end(); ++p) {
       if (g.object[p] < 0) continue;
       for (std::size_t s = 0; s < surfels.size(); ++s)
-        Accumulate(g, p, surfels[s], channels > 0 ? &radiosity[s * channels] : nullptr, channels, 1.0f,
-                   r.occlusion.data(), r.occlusion_y.data(), r.irradiance.data(), dipoles, near_m);
+        Accumulate(g, p, surfels[s], channels > 0 ? &radiosity[s * channels] : nullptr, channels, 1.0f, sides.data(),
+                   r.irradiance.data(), dipoles, near_m);
     }
   });
-  ClampOcclusion(r);
+  ResolveOcclusion(sides, r);
   r.splats = static_cast<std::uint64_t>(n) * surfels.size();
   r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
   return r;
@@ -272,16 +293,15 @@ DssResult SplatDeepScreenSpace(const GBuffer& g, const CameraRays& camera, const
   const int W = g.width, H = g.height, L = std::max(1, options.levels), C = std::max(0, options.channels);
   const std::size_t n = static_cast<std::size_t>(W) * H;
   // One accumulation buffer per level (they are blurred separately).
-  std::vector<std::vector<float>> occlusion(L, std::vector<float>(n, 0.0f));
-  std::vector<std::vector<float>> occlusion_y(L, std::vector<float>(n, 0.0f));
+  std::vector<std::vector<float>> sides(L, std::vector<float>(n * kSides, 0.0f));
   std::vector<std::vector<float>> irradiance(L, std::vector<float>(n * C, 0.0f));
 
   const std::vector<Reach> reach = ComputeReach(g, camera, surfels, radiosity, options);
 
   const std::uint64_t splats =
       GatherShells(g, surfels, reach, L, options.tile_px, [&](std::size_t p, std::size_t i, int l, float weight) {
-        Accumulate(g, p, surfels[i], C > 0 ? &radiosity[i * C] : nullptr, C, weight, occlusion[l].data(),
-                   occlusion_y[l].data(), irradiance[l].data(), options.dipoles, options.near_m);
+        Accumulate(g, p, surfels[i], C > 0 ? &radiosity[i * C] : nullptr, C, weight, sides[l].data(),
+                   irradiance[l].data(), options.dipoles, options.near_m);
       });
 
   // Unshuffle and blur: level l's pixels each saw a quarter^l of the shells;
@@ -289,6 +309,7 @@ DssResult SplatDeepScreenSpace(const GBuffer& g, const CameraRays& camera, const
   // once) restores the sum, weighted by depth and normal so it does not
   // leak across edges.
   DssResult r = EmptyResult(W, H, C);
+  std::vector<float> summed(n * kSides, 0.0f);
   for (int l = 0; l < L; ++l) {
     const int block = 1 << l;
     const bool blur = options.blur && l > 0;
@@ -298,15 +319,14 @@ DssResult SplatDeepScreenSpace(const GBuffer& g, const CameraRays& camera, const
           const std::size_t p = static_cast<std::size_t>(y) * W + x;
           if (g.object[p] < 0) continue;
           if (!blur) {
-            r.occlusion[p] += occlusion[l][p];
-            r.occlusion_y[p] += occlusion_y[l][p];
+            for (int k = 0; k < kSides; ++k) summed[p * kSides + k] += sides[l][p * kSides + k];
             for (int c = 0; c < C; ++c) r.irradiance[p * C + c] += irradiance[l][p * C + c];
             continue;
           }
           // The block of 2^l x 2^l pixels around (x, y), clamped inside the image.
           const int bx = std::clamp(x - block / 2, 0, std::max(0, W - block)),
                     by = std::clamp(y - block / 2, 0, std::max(0, H - block));
-          float wsum = 0, osum = 0, oysum = 0;
+          float wsum = 0, osum[kSides] = {};
           float isum[16] = {};
           for (int v = by; v < std::min(H, by + block); ++v)
             for (int u = bx; u < std::min(W, bx + block); ++u) {
@@ -320,19 +340,17 @@ DssResult SplatDeepScreenSpace(const GBuffer& g, const CameraRays& camera, const
               const float w = normal_w * (depth_ratio < 0.05f && same ? 1.0f : 0.0f);
               if (w <= 0) continue;
               wsum += w;
-              osum += w * occlusion[l][q];
-              oysum += w * occlusion_y[l][q];
+              for (int k = 0; k < kSides; ++k) osum[k] += w * sides[l][q * kSides + k];
               for (int c = 0; c < C && c < 16; ++c) isum[c] += w * irradiance[l][q * C + c];
             }
           if (wsum > 0) {
-            r.occlusion[p] += osum / wsum;
-            r.occlusion_y[p] += oysum / wsum;
+            for (int k = 0; k < kSides; ++k) summed[p * kSides + k] += osum[k] / wsum;
             for (int c = 0; c < C && c < 16; ++c) r.irradiance[p * C + c] += isum[c] / wsum;
           }
         }
     });
   }
-  ClampOcclusion(r);
+  ResolveOcclusion(summed, r);
   r.splats = splats;
   r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
   return r;
@@ -493,6 +511,13 @@ DssResult SplatBouncedZBuffer(const GBuffer& g, const CameraRays& camera, const 
   r.splats = splats;
   r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
   return r;
+}
+
+std::vector<float> SubsurfaceNearField(const GBuffer& g, float s, float fov_deg) {
+  const float tan_half = std::tan(fov_deg * kPiF / 360.0f);
+  std::vector<float> near(g.depth.size(), 0.0f);
+  for (std::size_t p = 0; p < near.size(); ++p) near[p] = 2 * s * tan_half * g.depth[p];
+  return near;
 }
 
 std::vector<Surfel> SurfelsFromGBuffer(const GBuffer& g, const CameraRays& camera) {

@@ -120,6 +120,43 @@ TEST(DeepScreenSpace, TheHierarchyFollowsTheExactGatherAndCostsLess) {
   EXPECT_LT(dss.splats, exact.splats / 4);  // far shells touch a quarter^l of their pixels
 }
 
+// The cosine-weighted occlusion, unbounded in distance, of a point under the
+// centre of a parallel a x b rectangle at height h (the ray-traced
+// reference's definition, RayTracedOcclusion): the point-to-rectangle form
+// factor, four times the corner case of the catalogues of configuration
+// factors (e.g. Howell's),
+// F = (2 / pi) [X / sqrt(1 + X^2) atan(Y / sqrt(1 + X^2)) + Y / sqrt(1 + Y^2) atan(X / sqrt(1 + Y^2))],
+// X = a / 2h, Y = b / 2h.
+double CentredRectangleFormFactor(double a, double b, double h) {
+  const double X = a / (2 * h), Y = b / (2 * h), sx = std::sqrt(1 + X * X), sy = std::sqrt(1 + Y * Y);
+  return 2 / 3.14159265358979323846 * (X / sx * std::atan(Y / sx) + Y / sy * std::atan(X / sy));
+}
+
+TEST(DeepScreenSpace, AClosedSlabOverheadOccludesOnceAndAnOpenSheetFromBehindToo) {
+  // A 1 m square at h = 1 m over a floor point: F = 0.2394. As a closed slab
+  // (a box 5 cm thick), every ray into it crosses its near face and then its
+  // far side: blending both sides gave 2F (0.46). As a single quad facing up
+  // (away from the point), only its back is seen, and it still hides F.
+  const double a = 1.0, h = 1.0, thickness = 0.05, F = CentredRectangleFormFactor(a, a, h);
+  ASSERT_NEAR(F, 0.2394, 1e-4);
+  for (const bool closed : {true, false}) {
+    render::Scene scene = testing::DiskOverFloor(0.5f, 1.0f);  // the floor, camera and centre pixel
+    render::Mesh occluder = closed ? render::MakeBox(render::Vec3(a, thickness, a), false) : render::MakeQuad(a, a);
+    for (auto& p : occluder.positions) p.y() += static_cast<float>(h + (closed ? thickness / 2 : 0.0));
+    scene.objects[1] = testing::MakeObject(closed ? "slab" : "sheet", occluder, 0.5);
+    render::SceneGeometry geometry(scene);
+    const render::CameraRays camera(scene, 0);
+    render::SurfelOptions options;
+    options.s = 0.03f;
+    const auto surfels = render::Surfelize(geometry, camera.origin(), 60, options);
+    const render::GBuffer g = render::RenderGBuffer(geometry, scene, 0);
+    const std::size_t centre = 16 * 33 + 16;
+    ASSERT_EQ(g.object[centre], 0);
+    EXPECT_NEAR(render::GatherAllSurfels(g, surfels, {}, 0).occlusion[centre], F, 0.03 * F) << closed;
+    EXPECT_NEAR(render::SplatDeepScreenSpace(g, camera, surfels, {}, {}).occlusion[centre], F, 0.05 * F) << closed;
+  }
+}
+
 }  // namespace
 }  // namespace phos
 

@@ -31,11 +31,17 @@
 // Receivers are the G-buffer's pixels. Per receiver p with normal n, a
 // surfel at q with normal m and area A contributes the point-to-disk form
 // factor F = A cos_p |cos_q| / (pi r^2 + A) (r = |q - p|; only surfels in
-// front of the receiver, cos_p > 0): ambient occlusion is min(1, sum F) over
-// all surfels, and one-bounce diffuse irradiance is sum B F over surfels
-// facing the receiver (cos_q < 0 seen from q), B the surfel's radiosity
-// (for a phosphor, pi Lp: a glowing wall lighting a box in the dark).
+// front of the receiver, cos_p > 0). Ambient occlusion sums F separately
+// over the surfels facing the receiver and those it sees from behind, and
+// keeps the larger sum, at most 1: a ray crosses a closed surface once from
+// each side, so summing both counted every closed occluder twice (a block
+// and its far side), while an open sheet seen from behind has only its back
+// (dss.cpp, ResolveOcclusion). One-bounce diffuse irradiance is sum B F over
+// surfels facing the receiver (cos_q < 0 seen from q), B the surfel's
+// radiosity (for a phosphor, pi Lp: a glowing wall lighting a box in the dark).
 
+#include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <vector>
 
@@ -167,6 +173,20 @@ std::vector<Surfel> SurfelsFromGBuffer(const GBuffer& gbuffer, const CameraRays&
 // hit anything (no distance limit, as DSS has none beyond epsilon). With many
 // rays, the reference; with few, the "same budget" rival.
 std::vector<float> RayTracedOcclusion(const SceneGeometry& geometry, const GBuffer& gbuffer, int rays, unsigned seed);
+
+// The sky's irradiance per unit radiance through directional occlusion: the
+// sky L (1 + g w_y) (scene.h's Environment) less what the surfels hide,
+// E / L = pi (1 - occlusion) + g (2 pi / 3 n_y - pi occlusion_y), at least 0
+// (DssResult's occlusion and occlusion_y, n_y the receiver normal's y).
+inline float SkyIrradianceFromOcclusion(float occlusion, float occlusion_y, float normal_y, float gradient) {
+  return std::max(0.0f, kPiF * (1 - occlusion) + gradient * (2 * kPiF / 3 * normal_y - kPiF * occlusion_y));
+}
+
+// Per receiver pixel, the radius of the subsurface near field (DssOptions::
+// near_m): two target surfel radii at its depth, 2 s tan(fov/2) depth, inside
+// which the caller integrates the dipole in closed form (subsurface.h's
+// AnnulusIntegral); surfels carry the rest.
+std::vector<float> SubsurfaceNearField(const GBuffer& gbuffer, float s, float fov_deg);
 
 // The point-to-disk form factor above; 0 behind the receiver. Optionally
 // the cosine at the surfel and the y component of the unit direction to it.
