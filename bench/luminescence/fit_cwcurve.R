@@ -1,7 +1,11 @@
-# The R Luminescence package's fit_CWCurve on its own example decay curves:
+# The R Luminescence package's fit_CWCurve on its own example CW-OSL curves:
 # writes each curve as a phos CSV (t,value) and one summary row per curve
-# with the number of components it chose (F-test), its residual sum of
-# squares and its time per fit (median of 5 timed runs after one warm-up).
+# with the number of components it chose (its F-test, up to 3), its residual
+# sum of squares and its time per fit in process (median of 5 timed runs after
+# one warm-up).
+# Curves (63): ExampleData.CW_OSL_Curve; the 14 OSL curves of ExampleData.XSYG;
+# and from ExampleData.BINfileData (CWOSL.SAR.Data, 24 aliquots) the first two
+# OSL curves of each aliquot, its natural signal Ln and test dose Tn.
 # Usage: Rscript fit_cwcurve.R OUTDIR
 suppressMessages(library(Luminescence))
 args <- commandArgs(trailingOnly = TRUE)
@@ -17,21 +21,35 @@ for (i in seq_along(osl@records)) {
   m <- osl@records[[i]]@data
   curves[[sprintf("XSYG_OSL_%02d", i)]] <- data.frame(x = m[, 1], y = m[, 2])
 }
+data(ExampleData.BINfileData, envir = environment())
+meta <- CWOSL.SAR.Data@METADATA
+for (position in sort(unique(meta$POSITION))) {
+  records <- which(meta$LTYPE == "OSL" & meta$POSITION == position)[1:2]
+  for (j in seq_along(records)) {
+    r <- records[j]
+    n <- meta$NPOINTS[r]
+    # Channel k (1..n) ends at k * HIGH / n seconds of stimulation.
+    t <- seq_len(n) * meta$HIGH[r] / n
+    curves[[sprintf("BIN_pos%02d_%s", position, c("Ln", "Tn")[j])]] <-
+      data.frame(x = t, y = as.numeric(CWOSL.SAR.Data@DATA[[r]]))
+  }
+}
 
 rows <- list()
 for (name in names(curves)) {
   values <- curves[[name]]
   write.csv(data.frame(t = values$x, value = values$y), file.path(out, paste0(name, ".csv")),
             row.names = FALSE, quote = FALSE)
-  fit <- function() suppressWarnings(fit_CWCurve(values = values, n.components.max = 4, plot = FALSE,
+  fit <- function() suppressWarnings(fit_CWCurve(values = values, n.components.max = 3, plot = FALSE,
                                                  output.terminal = FALSE, verbose = FALSE))
   result <- tryCatch(fit(), error = function(e) NULL)
+  times <- numeric(5)
+  for (k in 1:5) times[k] <- system.time(tryCatch(fit(), error = function(e) NULL))[["elapsed"]]
   if (is.null(result) || is.null(result@data$fit)) {
-    rows[[name]] <- data.frame(curve = name, points = nrow(values), n_components = NA, rss = NA, seconds = NA)
+    rows[[name]] <- data.frame(curve = name, points = nrow(values), n_components = NA, rss = NA,
+                               seconds = median(times))
     next
   }
-  times <- numeric(5)
-  for (k in 1:5) times[k] <- system.time(fit())[["elapsed"]]
   rows[[name]] <- data.frame(curve = name, points = nrow(values), n_components = result@data$data$n.components,
                              rss = deviance(result@data$fit), seconds = median(times))
 }

@@ -8,7 +8,9 @@
 #include <numeric>
 
 #include <ceres/ceres.h>
+#include <Eigen/Cholesky>
 #include <Eigen/Core>
+#include <Eigen/Eigenvalues>
 
 #include "phos/util/error.h"
 #include "phos/util/format.h"
@@ -85,6 +87,9 @@ class ChannelDecayCost final : public ceres::CostFunction {
   int c_, nc_;
 };
 
+// The most components a decay fit places (DecayFitOptions: 1..4).
+constexpr int kMaxDecayComponents = 4;
+
 struct Fit {
   std::vector<double> theta;           // log rates
   std::vector<std::vector<double>> A;  // [c][i], fit units
@@ -136,24 +141,80 @@ void Project(const Data& d, const std::vector<double>& rates, Fit* fit) {
   }
 }
 
+// The rates a new component is scanned over, their columns e^{-k t}, and
+// per channel the columns' weighted inner products that do not depend on
+// the components already placed: with the data, with themselves and with
+// the background's column of ones. Computed once per fit, not per stage.
+struct RateGrid {
+  Eigen::ArrayXd rates;
+  Eigen::MatrixXd columns;  // m x rates
+  std::vector<Eigen::ArrayXd> with_y, with_self, with_ones;  // [channel][rate]
+};
+
+RateGrid MakeRateGrid(const Data& d, Eigen::ArrayXd rates) {
+  RateGrid grid;
+  const int n = static_cast<int>(rates.size());
+  grid.columns.resize(d.m, n);
+  // On a uniform time axis (the usual camera schedule) a column is powers
+  // of one factor: a multiply per sample instead of an exp (relative drift
+  // ~ m eps / 8, irrelevant to a scan), in 8 interleaved chains so the
+  // multiplies do not wait on each other.
+  bool uniform = d.m >= 2;
+  for (int j = 2; j < d.m && uniform; ++j)
+    uniform = std::fabs((d.t[j] - d.t[j - 1]) - (d.t[1] - d.t[0])) <= 1e-9 * (d.t[1] - d.t[0]);
+  for (int g = 0; g < n; ++g) {
+    if (!uniform) {
+      grid.columns.col(g) = (-rates[g] * d.t).exp().matrix();
+      continue;
+    }
+    constexpr int kChains = 8;
+    const double dt = d.t[1] - d.t[0];
+    double value[kChains];
+    for (int l = 0; l < kChains; ++l) value[l] = std::exp(-rates[g] * (d.t[0] + l * dt));
+    const double step = std::exp(-rates[g] * kChains * dt);
+    double* out = grid.columns.col(g).data();
+    int j = 0;
+    for (; j + kChains <= d.m; j += kChains)
+      for (int l = 0; l < kChains; ++l) {
+        out[j + l] = value[l];
+        value[l] *= step;
+      }
+    for (int l = 0; j < d.m; ++j, ++l) out[j] = value[l];
+  }
+  for (int c = 0; c < d.C; ++c) {
+    const Eigen::ArrayXd w2 = d.w[c].square();
+    Eigen::ArrayXd with_y(n), with_self(n), with_ones(n);
+    for (int g = 0; g < n; ++g) {
+      const auto column = grid.columns.col(g).array();
+      with_y[g] = (w2 * column * d.y[c]).sum();
+      with_self[g] = (w2 * column.square()).sum();
+      with_ones[g] = (w2 * column).sum();
+    }
+    grid.with_y.push_back(with_y);
+    grid.with_self.push_back(with_self);
+    grid.with_ones.push_back(with_ones);
+  }
+  grid.rates = std::move(rates);
+  return grid;
+}
+
 // Adds one component to `start` (rates fixed) by scanning the grid; returns
 // the best projection. Each candidate only needs its own column's inner
 // products with the others, so the scan is one small matrix product.
-Fit ScanNewComponent(const Data& d, const std::vector<double>& rates, const Eigen::ArrayXd& grid,
-                     const Eigen::MatrixXd& grid_columns) {
+Fit ScanNewComponent(const Data& d, const std::vector<double>& rates, const RateGrid& grid) {
   const int p = static_cast<int>(rates.size());
+  const int n = static_cast<int>(grid.rates.size());
   Fit best;
   std::vector<double> trial = rates;
   trial.push_back(0);
   // Columns of the components already present (and the background).
   const int q = p + (d.background ? 1 : 0);
   const Eigen::MatrixXd Phi = DesignMatrix(d, rates.data(), p);
-  std::vector<double> cost(grid.size(), 0.0);
-  std::vector<bool> usable(grid.size(), true);
-  for (int g = 0; g < grid.size(); ++g)
+  std::vector<double> cost(n, 0.0);
+  std::vector<bool> usable(n, true);
+  for (int g = 0; g < n; ++g)
     for (double r : rates)
-      if (std::fabs(std::log(grid[g] / r)) < 0.15) usable[g] = false;  // too close to an existing rate
-  Eigen::VectorXd weighted_column(d.m);
+      if (std::fabs(std::log(grid.rates[g] / r)) < 0.15) usable[g] = false;  // too close to an existing rate
   for (int c = 0; c < d.C; ++c) {
     const Eigen::VectorXd w2 = d.w[c].square().matrix();
     const Eigen::VectorXd w2y = (d.w[c].square() * d.y[c]).matrix();
@@ -161,28 +222,29 @@ Fit ScanNewComponent(const Data& d, const std::vector<double>& rates, const Eige
     const SmallMatrix G_old = Gram(WPhi);
     const SmallVector b_old = InnerProducts(Phi, w2y);
     const double yy = (d.w[c] * d.y[c]).matrix().squaredNorm();
+    // The components present, weighted twice: their inner product with a
+    // candidate's column is then a plain dot product.
+    const Eigen::MatrixXd W2Phi = w2.asDiagonal() * Phi.leftCols(p);
     // New component first among the constrained ones: order [A_new, A_old..., B].
     SmallMatrix G(q + 1, q + 1);
     SmallVector b(q + 1);
     G.block(1, 1, q, q) = G_old;
     b.tail(q) = b_old;
-    for (int g = 0; g < grid.size(); ++g) {
+    for (int g = 0; g < n; ++g) {
       if (!usable[g]) continue;
-      // One column at a time: no m x grid temporaries (they would be fresh
-      // pages from the kernel on every call).
-      weighted_column = w2.cwiseProduct(grid_columns.col(g));
-      G(0, 0) = weighted_column.dot(grid_columns.col(g));
-      for (int i = 0; i < q; ++i) G(i + 1, 0) = G(0, i + 1) = Phi.col(i).dot(weighted_column);
-      b[0] = weighted_column.dot(d.y[c].matrix());
+      G(0, 0) = grid.with_self[c][g];
+      for (int i = 0; i < p; ++i) G(i + 1, 0) = G(0, i + 1) = W2Phi.col(i).dot(grid.columns.col(g));
+      if (d.background) G(q, 0) = G(0, q) = grid.with_ones[c][g];
+      b[0] = grid.with_y[c][g];
       SmallNnlsResult r = SolveSmallNnls(G, b, p + 1);
       cost[g] += std::max(0.0, yy + 2 * r.cost);
     }
   }
   int chosen = -1;
-  for (int g = 0; g < grid.size(); ++g)
+  for (int g = 0; g < n; ++g)
     if (usable[g] && (chosen < 0 || cost[g] < cost[chosen])) chosen = g;
   if (chosen < 0) return best;
-  trial.back() = grid[chosen];
+  trial.back() = grid.rates[chosen];
   Project(d, trial, &best);
   best.theta.clear();
   for (double r : trial) best.theta.push_back(std::log(r));
@@ -255,9 +317,217 @@ class VarProCost final : public ceres::CostFunction {
   int nc_;
 };
 
-// Ceres refinement of the rates of `fit` by variable projection, then the
+// The variable-projection problem at given log rates, reduced to what a
+// Levenberg-Marquardt step needs: 0.5 |r|^2 and, for Kaufman's Jacobian J
+// (the same one VarProCost writes out for Ceres), J'J and J'r, which are
+// nc x nc and nc. J is never formed: with V_i = w t k_i A_i e^{-k_i t} (the
+// derivative of the residual with the amplitudes held) and Q an orthonormal
+// basis of the columns in use, J = (I - QQ')V, so J'J = V'V - (Q'V)'(Q'V)
+// and J'r = V'r - (Q'V)'(Q'r): inner products of length m only, into
+// buffers sized once per refinement.
+//
+// It also gives the exact Hessian of the reduced objective (the amplitudes
+// eliminated, their active set held), for Newton steps: Gauss-Newton
+// converges only linearly on these curves, whose residuals are large
+// (noise and misfit), about 10 iterations per stage. With the full
+// problem's Hessian H (parameters log rates and amplitudes x), the reduced
+// one is H_tt - H_tx G^-1 H_xt, G = Phi'Phi over the columns in use:
+//   H_tt = V'V + diag(x_i T_i),   T_i = sum r w k_i t e_i (1 - k_i t),
+//   H_tx = -V'Phi + S,            S_ia = [a = i] s_i, s_i = sum r w k_i t e_i,
+// and with Phi = QR, G^-1 = R^-1 R^-T, so with M = R^-T S':
+//   H_red = J'J + diag(x T) + (Q'V)'M + M'(Q'V) - M'M.
+class VarProNormalEquations {
+ public:
+  VarProNormalEquations(const Data& d, int nc)
+      : d_(d), nc_(nc), q_(nc + (d.background ? 1 : 0)), E_(d.m, nc), WPhi_(d.m, q_), Q_(d.m, q_), V_(d.m, nc),
+        r_(d.m) {
+    for (int c = 0; c < d.C; ++c) wy_.push_back(d.w[c] * d.y[c]);
+  }
+
+  struct Point {
+    double cost = 0;  // 0.5 |r|^2, as Ceres counts it
+    SmallMatrix JtJ;
+    SmallVector Jtr;
+    SmallMatrix hessian;  // of the reduced objective (JtJ where a column in use was dropped as dependent)
+  };
+
+  // False where a rate over- or underflows (as VarProCost refuses it).
+  bool Evaluate(const double* theta, Point* out) {
+    const int m = d_.m;
+    double k[kMaxDecayComponents];
+    for (int i = 0; i < nc_; ++i) {
+      k[i] = std::exp(theta[i]);
+      if (!std::isfinite(k[i]) || !(k[i] > 0)) return false;
+      E_.col(i) = (-k[i] * d_.t).exp();
+    }
+    out->cost = 0;
+    out->JtJ = SmallMatrix::Zero(nc_, nc_);
+    out->Jtr = SmallVector::Zero(nc_);
+    out->hessian = SmallMatrix::Zero(nc_, nc_);
+    bool exact = true;
+    for (int c = 0; c < d_.C; ++c) {
+      const Eigen::ArrayXd& w = d_.w[c];
+      for (int i = 0; i < nc_; ++i) WPhi_.col(i) = w * E_.col(i);
+      if (d_.background) WPhi_.col(nc_) = w;
+      SmallMatrix G(q_, q_);
+      SmallVector b(q_);
+      for (int i = 0; i < q_; ++i) {
+        b[i] = (WPhi_.col(i) * wy_[c]).sum();
+        for (int j = 0; j <= i; ++j) G(i, j) = G(j, i) = (WPhi_.col(i) * WPhi_.col(j)).sum();
+      }
+      const SmallNnlsResult x = SolveSmallNnls(G, b, nc_);
+      r_ = wy_[c];
+      for (int i = 0; i < q_; ++i)
+        if (x.x[i] != 0) r_ -= x.x[i] * WPhi_.col(i);
+      out->cost += 0.5 * r_.square().sum();
+      // Orthonormal basis of the columns in use (components with a positive
+      // amplitude, and the background), by Gram-Schmidt done twice ("twice
+      // is enough", Giraud et al. 2005).
+      int rank = 0, active = 0, column_of[5];
+      SmallMatrix R = SmallMatrix::Zero(q_, q_);  // Q'Phi over the columns in use: upper triangular
+      for (int a = 0; a < q_; ++a) {
+        if (a < nc_ && !(x.x[a] > 0)) continue;
+        ++active;
+        auto v = Q_.col(rank);
+        v = WPhi_.col(a);
+        const double norm0 = std::sqrt(v.square().sum());
+        for (int pass = 0; pass < 2; ++pass)
+          for (int o = 0; o < rank; ++o) {
+            const double projection = (Q_.col(o) * v).sum();
+            R(o, rank) += projection;
+            v -= projection * Q_.col(o);
+          }
+        const double norm = std::sqrt(v.square().sum());
+        if (norm > 1e-12 * norm0) {
+          v /= norm;
+          R(rank, rank) = norm;
+          column_of[rank++] = a;
+        } else {
+          R.col(rank).setZero();  // a column the others already span
+        }
+      }
+      exact = exact && rank == active;
+      double QtV[5][kMaxDecayComponents], Qtr[5], T[kMaxDecayComponents], s_[kMaxDecayComponents];
+      for (int i = 0; i < nc_; ++i) {
+        // w k t e^{-k t}: the derivative of a column with respect to its log rate, negated.
+        V_.col(i) = WPhi_.col(i) * d_.t * k[i];
+        s_[i] = (V_.col(i) * r_).sum();
+        T[i] = s_[i] - k[i] * (V_.col(i) * d_.t * r_).sum();
+        V_.col(i) *= x.x[i];
+      }
+      for (int o = 0; o < rank; ++o) {
+        Qtr[o] = (Q_.col(o) * r_).sum();
+        for (int i = 0; i < nc_; ++i) QtV[o][i] = (Q_.col(o) * V_.col(i)).sum();
+      }
+      // M = R^-T S' by forward substitution (R' is lower triangular).
+      double M[5][kMaxDecayComponents];
+      for (int i = 0; i < nc_; ++i)
+        for (int o = 0; o < rank; ++o) {
+          double value = column_of[o] == i ? s_[i] : 0.0;
+          for (int p = 0; p < o; ++p) value -= R(p, o) * M[p][i];
+          M[o][i] = value / R(o, o);
+        }
+      for (int i = 0; i < nc_; ++i) {
+        double g = (V_.col(i) * r_).sum();
+        for (int o = 0; o < rank; ++o) g -= QtV[o][i] * Qtr[o];
+        out->Jtr[i] += g;
+        for (int j = 0; j <= i; ++j) {
+          double h = (V_.col(i) * V_.col(j)).sum();
+          for (int o = 0; o < rank; ++o) h -= QtV[o][i] * QtV[o][j];
+          out->JtJ(i, j) += h;
+          double second = i == j ? x.x[i] * T[i] : 0.0;
+          for (int o = 0; o < rank; ++o) second += QtV[o][i] * M[o][j] + M[o][i] * QtV[o][j] - M[o][i] * M[o][j];
+          out->hessian(i, j) += h + second;
+        }
+      }
+    }
+    for (int i = 0; i < nc_; ++i)
+      for (int j = 0; j < i; ++j) {
+        out->JtJ(j, i) = out->JtJ(i, j);
+        out->hessian(j, i) = out->hessian(i, j);
+      }
+    if (!exact) out->hessian = out->JtJ;
+    return std::isfinite(out->cost) && out->Jtr.allFinite() && out->JtJ.allFinite() && out->hessian.allFinite();
+  }
+
+ private:
+  const Data& d_;
+  int nc_, q_;
+  std::vector<Eigen::ArrayXd> wy_;  // per channel
+  Eigen::ArrayXXd E_, WPhi_, Q_, V_;
+  Eigen::ArrayXd r_;
+};
+
+// Levenberg-Marquardt over the log rates (at most 4 parameters) on the normal
+// equations, (J'J + D / radius) step = -J'r with D = diag(J'J): the
+// trust-region strategy of Ceres's LEVENBERG_MARQUARDT (radius update of
+// Nielsen 1999, as in Madsen, Nielsen and Tingleff 2004) and the same
+// tolerances as the Ceres refinement (RefineWithCeres), without Ceres's
+// general machinery. For an m x 3 Jacobian that machinery (a QR of the whole
+// Jacobian, column scaling, array checks on every iteration) cost more than
+// evaluating the model. Returns the iterations taken.
+int LevenbergMarquardt(const Data& d, int max_iterations, std::vector<double>* theta) {
+  constexpr double kFunctionTolerance = 1e-10, kGradientTolerance = 1e-12, kParameterTolerance = 1e-10;
+  constexpr double kMinRelativeDecrease = 1e-3;   // a step must achieve this share of its predicted decrease
+  constexpr double kMinDiagonal = 1e-6, kMaxDiagonal = 1e32;  // Ceres's min/max_lm_diagonal
+  const int nc = static_cast<int>(theta->size());
+  VarProNormalEquations equations(d, nc);
+  VarProNormalEquations::Point here, there;
+  if (!equations.Evaluate(theta->data(), &here)) return 0;
+  SmallVector x(nc);
+  for (int i = 0; i < nc; ++i) x[i] = (*theta)[i];
+  double radius = 1e4, decrease = 2;  // Ceres's initial_trust_region_radius
+  int iteration = 0;
+  while (iteration < max_iterations) {
+    ++iteration;
+    if (here.Jtr.cwiseAbs().maxCoeff() <= kGradientTolerance) break;
+    // Newton's model where the reduced Hessian is positive definite (near a
+    // minimum), Gauss-Newton's (Kaufman's J'J) elsewhere.
+    const bool newton = here.hessian.llt().info() == Eigen::Success;
+    const SmallMatrix& B = newton ? here.hessian : here.JtJ;
+    SmallMatrix A = B;
+    for (int i = 0; i < nc; ++i) A(i, i) += std::clamp(here.JtJ(i, i), kMinDiagonal, kMaxDiagonal) / radius;
+    const SmallVector step = A.ldlt().solve(-here.Jtr);
+    if (!step.allFinite()) break;
+    if (step.norm() <= kParameterTolerance * (x.norm() + kParameterTolerance)) break;
+    const SmallVector candidate = x + step;
+    const double predicted = -(here.Jtr.dot(step) + 0.5 * step.dot(B * step));
+    // Converged when even Newton's model (exact near the minimum) promises
+    // less than the function tolerance (there rounding decides whether a step
+    // "succeeds", and rejecting it only shrinks the region step by step).
+    if (newton && predicted <= kFunctionTolerance * here.cost) break;
+    const bool evaluated = equations.Evaluate(candidate.data(), &there);
+    const double actual = evaluated ? here.cost - there.cost : -1;
+    if (evaluated && predicted > 0 && actual > kMinRelativeDecrease * predicted) {
+      const double rho = actual / predicted;
+      const double previous = here.cost;
+      x = candidate;
+      std::swap(here, there);
+      radius = std::min(1e16, radius / std::max(1.0 / 3.0, 1.0 - std::pow(2 * rho - 1, 3)));
+      decrease = 2;
+      if (actual <= kFunctionTolerance * previous) break;
+    } else {
+      radius /= decrease;
+      decrease *= 2;
+      if (radius < 1e-32) break;
+    }
+  }
+  for (int i = 0; i < nc; ++i) (*theta)[i] = x[i];
+  return iteration;
+}
+
+// Refinement of the rates of `fit` by variable projection, then the
 // amplitudes and background at the refined rates.
 void Refine(const Data& d, int max_iterations, Fit* fit) {
+  fit->iterations += LevenbergMarquardt(d, max_iterations, &fit->theta);
+  std::vector<double> rates;
+  for (double th : fit->theta) rates.push_back(std::exp(th));
+  Project(d, rates, fit);
+}
+
+// The same refinement by Ceres (the first implementation, for
+// FitDecayReference).
+void RefineWithCeres(const Data& d, int max_iterations, Fit* fit) {
   const int nc = static_cast<int>(fit->theta.size());
   ceres::Problem problem;
   problem.AddResidualBlock(new VarProCost(d, nc), nullptr, fit->theta.data());
@@ -303,12 +573,14 @@ void CheckComponents(double theta_lo, double theta_hi, Fit* fit) {
   }
 }
 
-// The most components a decay fit places (DecayFitOptions: 1..4).
-constexpr int kMaxDecayComponents = 4;
+// How the rates are refined and their covariance computed: by our own
+// Levenberg-Marquardt on the normal equations (FitDecay), or by Ceres for
+// both (FitDecayReference, the first implementation).
+enum class Solver { kOwn, kCeres };
 
-}  // namespace
-
-DecayFitSummary FitDecay(const Curve& curve, const DecayFitOptions& options, const std::string& where) {
+DecayFitSummary FitDecayWith(const Curve& curve, const DecayFitOptions& options, const std::string& where,
+                             Solver solver) {
+  const auto refine = solver == Solver::kOwn ? Refine : RefineWithCeres;
   const auto start = std::chrono::steady_clock::now();
   std::string error;
   if (!options.IsValid(&error)) ThrowUserError(where, "options", error);
@@ -346,32 +618,17 @@ DecayFitSummary FitDecay(const Curve& curve, const DecayFitOptions& options, con
   const double span = curve.t_s.back() - curve.t_s.front();
   const double spacing = SmallestTimeStep(curve);
   const double k_lo = 0.02 / span, k_hi = std::max(3.0 / spacing, 10 * k_lo);
-  Eigen::ArrayXd grid(options.rate_grid_size);
-  for (int g = 0; g < grid.size(); ++g)
-    grid[g] = k_lo * std::pow(k_hi / k_lo, static_cast<double>(g) / (grid.size() - 1));
-  // Candidate columns e^{-k t} of the scan. On a uniform time axis (the
-  // usual camera schedule) they are powers of one factor: a multiply per
-  // sample instead of an exp (relative drift ~ m eps, irrelevant to a scan).
-  Eigen::MatrixXd grid_columns(d.m, grid.size());
-  bool uniform = true;
-  for (int j = 2; j < d.m && uniform; ++j)
-    uniform = std::fabs((d.t[j] - d.t[j - 1]) - (d.t[1] - d.t[0])) <= 1e-9 * (d.t[1] - d.t[0]);
-  for (int g = 0; g < grid.size(); ++g) {
-    if (!uniform) {
-      grid_columns.col(g) = (-grid[g] * d.t).exp().matrix();
-      continue;
-    }
-    const double step = std::exp(-grid[g] * (d.t[1] - d.t[0]));
-    double value = std::exp(-grid[g] * d.t[0]);
-    for (int j = 0; j < d.m; ++j, value *= step) grid_columns(j, g) = value;
-  }
+  Eigen::ArrayXd grid_rates(options.rate_grid_size);
+  for (int g = 0; g < grid_rates.size(); ++g)
+    grid_rates[g] = k_lo * std::pow(k_hi / k_lo, static_cast<double>(g) / (grid_rates.size() - 1));
+  const RateGrid grid = MakeRateGrid(d, std::move(grid_rates));
   const double theta_lo = std::log(k_lo / 10), theta_hi = std::log(k_hi * 10);
 
   std::vector<Fit> fits;
   std::vector<double> rates;
   int iterations = 0;
   for (int nc = 1; nc <= max_nc; ++nc) {
-    Fit fit = ScanNewComponent(d, rates, grid, grid_columns);
+    Fit fit = ScanNewComponent(d, rates, grid);
     if (fit.theta.empty()) break;  // no room for another rate
     if (nc == 1) {
       // A decay must stand out of the noise: the best single exponential
@@ -394,7 +651,7 @@ DecayFitSummary FitDecay(const Curve& curve, const DecayFitOptions& options, con
     // rates (the grid scan already solves their amplitudes exactly); when
     // the count is chosen, every stage is a candidate and is refined.
     if (options.components == 0 || nc == max_nc) {
-      Refine(d, options.max_iterations, &fit);
+      refine(d, options.max_iterations, &fit);
       iterations += fit.iterations;
     }
     CheckComponents(theta_lo, theta_hi, &fit);
@@ -418,7 +675,7 @@ DecayFitSummary FitDecay(const Curve& curve, const DecayFitOptions& options, con
           start.push_back(std::exp(next.theta[i]));
         }
       Project(d, start, &candidate);
-      Refine(d, options.max_iterations, &candidate);
+      refine(d, options.max_iterations, &candidate);
       iterations += candidate.iterations;
       CheckComponents(theta_lo, theta_hi, &candidate);
       if (candidate.valid && (!stage.valid || candidate.wrss < stage.wrss)) stage = std::move(candidate);
@@ -430,9 +687,9 @@ DecayFitSummary FitDecay(const Curve& curve, const DecayFitOptions& options, con
   } else if (!fits.empty() && !fits.back().valid && max_nc < kMaxDecayComponents &&
              curve.size() * C > static_cast<std::size_t>(max_nc + 1) * (1 + C) + (options.background ? C : 0)) {
     // A fixed count that collapsed: one stage more, for its rates only.
-    Fit next = ScanNewComponent(d, rates, grid, grid_columns);
+    Fit next = ScanNewComponent(d, rates, grid);
     if (!next.theta.empty()) {
-      Refine(d, options.max_iterations, &next);
+      refine(d, options.max_iterations, &next);
       iterations += next.iterations;
       retry_from(fits.back(), next);
     }
@@ -475,7 +732,24 @@ DecayFitSummary FitDecay(const Curve& curve, const DecayFitOptions& options, con
   ceres::Covariance::Options covariance_options;
   covariance_options.algorithm_type = ceres::DENSE_SVD;
   covariance_options.null_space_rank = -1;  // a vanished component must not fail the rest
-  if (options.compute_uncertainties) {
+  if (options.compute_uncertainties && solver == Solver::kOwn) {
+    // Rates: as below, (J'J)^+ from the normal equations the refinement
+    // solves, with the same rule for a degenerate direction as Ceres's
+    // DENSE_SVD with null_space_rank -1: eigenvalues of J'J (squared
+    // singular values of J) below 1e-14 of the largest are dropped.
+    VarProNormalEquations equations(d, nc);
+    VarProNormalEquations::Point at;
+    if (equations.Evaluate(fit.theta.data(), &at)) {
+      Eigen::SelfAdjointEigenSolver<SmallMatrix> eigen(at.JtJ);
+      const Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 5, 1> lambda = eigen.eigenvalues();
+      const double largest = lambda.maxCoeff();
+      SmallMatrix inverse = SmallMatrix::Zero(nc, nc);
+      for (int e = 0; e < nc; ++e)
+        if (lambda[e] > 1e-14 * largest)
+          inverse += eigen.eigenvectors().col(e) * eigen.eigenvectors().col(e).transpose() / lambda[e];
+      for (int i = 0; i < nc; ++i) theta_var[i] = inverse(i, i) * reduced_chi2;
+    }
+  } else if (options.compute_uncertainties) {
     // Rates: the covariance of the variable-projection problem. Its Jacobian
     // is the rates' Jacobian projected off the amplitudes' columns, so J'J is
     // the Schur complement of the full normal matrix: the rates' marginal
@@ -532,14 +806,26 @@ DecayFitSummary FitDecay(const Curve& curve, const DecayFitOptions& options, con
   summary.n_components = nc;
   summary.weighted_rss = fit.wrss;
   summary.iterations = iterations;
+  // The plain residual in data units (EvaluateDecay's model, a column at a time).
   summary.rss = 0;
-  for (int c = 0; c < C; ++c)
-    for (int j = 0; j < d.m; ++j) {
-      const double r = curve.channels[c][j] - EvaluateDecay(summary, c, curve.t_s[j]);
-      summary.rss += r * r;
-    }
+  for (int c = 0; c < C; ++c) {
+    Eigen::ArrayXd model = Eigen::ArrayXd::Constant(d.m, summary.background[c]);
+    for (const DecayComponent& component : summary.components)
+      model += component.amplitude[c] * (-component.rate * d.t).exp();
+    summary.rss += (Eigen::Map<const Eigen::ArrayXd>(curve.channels[c].data(), d.m) - model).square().sum();
+  }
   summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return summary;
+}
+
+}  // namespace
+
+DecayFitSummary FitDecay(const Curve& curve, const DecayFitOptions& options, const std::string& where) {
+  return FitDecayWith(curve, options, where, Solver::kOwn);
+}
+
+DecayFitSummary FitDecayReference(const Curve& curve, const DecayFitOptions& options, const std::string& where) {
+  return FitDecayWith(curve, options, where, Solver::kCeres);
 }
 
 double EvaluateDecay(const DecayFitSummary& fit, int channel, double t_s) {

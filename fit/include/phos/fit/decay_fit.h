@@ -11,17 +11,19 @@
 //     other rates held; for every candidate the amplitudes are solved exactly
 //     as a non-negative least-squares problem, so no initial amplitude is
 //     ever guessed and the start does not hinge on one guess.
-//  2. From the best candidate, Ceres refines all rates (as log k, so they
-//     stay positive), amplitudes (lower bound 0) and backgrounds together,
-//     with an analytic Jacobian and a dense QR solver.
+//  2. From the best candidate, the rates (as log k, so they stay positive)
+//     are refined by Levenberg-Marquardt on the variable-projection problem
+//     (amplitudes >= 0 and backgrounds solved exactly at every step), with
+//     Kaufman's Jacobian, on its nc x nc normal equations.
 //  3. The number of components, when not fixed, is the one with the lowest
 //     Bayesian information criterion, BIC = N ln(wRSS / N) + P ln N, among
 //     fits whose components are all present (some amplitude > 0) and
 //     distinct (rates more than 2% apart).
-//  4. 1-sigma uncertainties come from ceres::Covariance (dense SVD, so a
+//  4. 1-sigma uncertainties come from the pseudo-inverse of J'J (so a
 //     degenerate direction does not fail it), scaled by the reduced
 //     chi-square: for the rates, of the variable-projection problem (their
-//     marginal covariance); for the amplitudes, on request, of the full one.
+//     marginal covariance); for the amplitudes, on request, of the full one
+//     (ceres::Covariance, dense SVD).
 // Components are sorted fastest first.
 
 #include <string>
@@ -70,6 +72,11 @@ struct DecayFitSummary {
 // Fits the curve; bad data (too few samples, constant, not decaying) is a
 // UserError naming `where`.
 DecayFitSummary FitDecay(const Curve& curve, const DecayFitOptions& options, const std::string& where);
+
+// The same fit with Ceres for every refinement and for the rates' covariance
+// (the first implementation, several times slower on small curves): the
+// reference the tests hold FitDecay to.
+DecayFitSummary FitDecayReference(const Curve& curve, const DecayFitOptions& options, const std::string& where);
 
 // The fitted model at time t for channel c.
 double EvaluateDecay(const DecayFitSummary& fit, int channel, double t_s);
