@@ -384,6 +384,7 @@ void RunFitMapTile(const MapArgs& args) {
     std::printf("phos fit map: tile %d/%d already fitted (%s): nothing to do\n", index, count, done.c_str());
     return;
   }
+  RemoveTemporaries(done.parent_path(), {done.filename().string(), TilePath(args.out, index, count, ".exr").filename().string()});
   const MapFrames frames = ReadMapFrames(args, index, count);
   const std::size_t first_row = frames.first_row, last_row = first_row + frames.input.height;
   const MapImage tile = MapImageOf(FitMapFrames(args, frames), frames);
@@ -608,6 +609,13 @@ void RunFitBatch(const BatchArgs& args) {
       if (!why.empty()) rows[i].detail = "its .done.json " + why + ": fitted again";
       todo.push_back(i);
     }
+  }
+  if (!args.task.empty()) {
+    // A killed run of this task left the temporary of the file it was writing: gone first.
+    std::vector<std::string> names;
+    for (std::size_t i : todo)
+      for (const char* suffix : {".json", ".html", ".done.json", ".failed.txt"}) names.push_back(rows[i].name + suffix);
+    RemoveTemporaries(args.out, names);
   }
   if (args.merge && !todo.empty()) {
     std::string missing;

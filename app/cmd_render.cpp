@@ -289,6 +289,18 @@ void Run(const RenderArgs& args) {
     return;
   }
   PositionSolver(solver.get(), args.checkpoints, times, range.first);
+  if (!range.whole) {
+    // A killed run of this range left the temporary of the frame it was writing: gone first.
+    std::vector<std::string> names;
+    for (std::size_t f = range.first; f < range.last; ++f) {
+      char name[32];
+      for (const char* suffix : {".exr", ".png", "-night.png"}) {
+        std::snprintf(name, sizeof name, "frame-%04zu%s", f, suffix);
+        names.push_back(name);
+      }
+    }
+    RemoveTemporaries(args.out, names);
+  }
   FrameOptions options = DefaultFrameOptions(scene, transport);
   if (args.spp > 0) options.spp = options.direct_spp = args.spp;
   if (args.indirect_visibility && transport != Transport::kDss)

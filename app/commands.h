@@ -49,6 +49,9 @@ inline constexpr CommandSummary kCommands[] = {
     {"editor",
      "Serve the material editor page: the scene at any time, a timeline, and constraints placed\n"
      "by clicking the image; every edit re-solves the material (Sec. 8.6). Listens on 127.0.0.1."},
+    {"slurm",
+     "Run a render, a decay map or a fit batch on a Slurm cluster as a job array, then a merge job\n"
+     "(afterok); 'phos slurm status DIR' counts the tasks' done records. See docs/scale.md."},
 };
 // The summary of a command of kCommands ("" for another name).
 constexpr const char* Summary(std::string_view command) {
@@ -81,6 +84,7 @@ void RegisterCapture(CLI::App& app);
 void RegisterRender(CLI::App& app);
 void RegisterEdit(CLI::App& app);
 void RegisterEditor(CLI::App& app);
+void RegisterSlurm(CLI::App& app);
 
 // --weights of every fit command: none or poisson, else a UserError naming the option.
 Weighting ParseWeightsOption(const std::string& text);

@@ -31,6 +31,8 @@ PACKAGES=(
   chromium nodejs
   # the README test (scripts/readme_check.py)
   python3
+  # phos slurm's test runs a one-node Slurm cluster (munged, slurmctld, slurmd)
+  slurm-wlm munge
 )
 
 missing=()

@@ -4,6 +4,7 @@
 
 #include <climits>
 #include <cstdlib>
+#include <set>
 
 #include "phos/util/atomic_file.h"
 #include "phos/util/error.h"
@@ -61,6 +62,19 @@ std::optional<TaskDoneRecord> ReadTaskDone(const std::filesystem::path& path, st
 bool TaskIsDone(const std::filesystem::path& path, const std::string& inputs) {
   const std::optional<TaskDoneRecord> record = ReadTaskDone(path);
   return record && record->inputs == inputs;
+}
+
+std::size_t RemoveTemporaries(const std::filesystem::path& dir, const std::vector<std::string>& names) {
+  const std::set<std::string> wanted(names.begin(), names.end());
+  std::vector<std::filesystem::path> stale;
+  std::error_code ec;
+  for (const auto& entry : std::filesystem::directory_iterator(dir.empty() ? "." : dir, ec)) {
+    const std::string name = entry.path().filename().string();
+    const std::size_t tmp = name.find(".tmp.");
+    if (tmp != std::string::npos && wanted.count(name.substr(0, tmp))) stale.push_back(entry.path());
+  }
+  for (const auto& path : stale) std::filesystem::remove(path, ec);
+  return stale.size();
 }
 
 bool ParseTaskIndex(const std::string& text, int* index, int* count) {

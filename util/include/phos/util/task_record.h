@@ -40,6 +40,12 @@ std::optional<TaskDoneRecord> ReadTaskDone(const std::filesystem::path& path, st
 // task is done and a rerun does nothing.
 bool TaskIsDone(const std::filesystem::path& path, const std::string& inputs);
 
+// A killed task leaves, besides the files it finished, the temporary of the
+// one it was writing (atomic_file.h: "<name>.tmp.<pid><ext>"). Its rerun
+// removes those of its outputs (`names`, in folder `dir`) first, so no
+// partial output outlives it. Returns how many were removed.
+std::size_t RemoveTemporaries(const std::filesystem::path& dir, const std::vector<std::string>& names);
+
 // "i/N" (0 <= i < N, N >= 1): task i of N. False if the text is not that.
 bool ParseTaskIndex(const std::string& text, int* index, int* count);
 // Task i of N's share of `items` in order: [first, last), the shares differing by at most one.

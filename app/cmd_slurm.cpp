@@ -1,0 +1,370 @@
+// phos slurm: render, map and batch as Slurm job arrays (docs/scale.md).
+//   phos slurm render|map|batch --tasks N --job-dir DIR [site options] -- <the command's own arguments>
+//   phos slurm status DIR [--json]
+// Writes the sbatch scripts into DIR and submits them: for a render, the
+// solver pass (the states are sequential in time), then the array of frame
+// ranges; for a map, the array of tiles; for a batch, the array of item
+// shares; then a merge job. Each job depends on the one before
+// (--dependency=afterok), so a failed task stops what follows. Every task is
+// idempotent (its done record, util/task_record.h), so Slurm's requeue and a
+// resubmission are safe; `status` counts the records.
+
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <climits>
+#include <cstdio>
+#include <filesystem>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "commands.h"
+#include "phos/util/atomic_file.h"
+#include "phos/util/error.h"
+#include "phos/util/format.h"
+#include "phos/util/json.h"
+#include "phos/util/task_record.h"
+
+namespace phos::app {
+namespace {
+
+namespace fs = std::filesystem;
+
+// Where Slurm's defaults are not the site's, these pass through to every job.
+struct SiteOptions {
+  std::string partition, account;       // "": the cluster's default partition, the user's default account
+  std::string time_per_task = "01:00:00";  // --time of each job: HH:MM:SS
+  std::string mem_per_task = "4G";         // --mem of each job
+  int cpus_per_task = 2;
+  std::vector<std::string> extra;  // more sbatch options, without their dashes ("qos=short")
+};
+
+struct SubmitArgs {
+  std::string kind;  // render, map, batch
+  int tasks = 0;
+  std::string job_dir, sbatch = "sbatch";
+  bool no_submit = false, json = false;
+  SiteOptions site;
+  std::vector<std::string> command;  // the phos command's own arguments
+};
+
+// One job of the chain: its script, its Slurm id once submitted, and the done
+// records that say it finished (a merge: the files it writes).
+struct SlurmStage {
+  std::string name;    // "solve", "tasks", "merge"
+  std::string script;  // path
+  std::string job_id;  // "" before submission
+  std::vector<std::string> done;
+
+  nlohmann::json ToJson() const { return {{"name", name}, {"script", script}, {"job_id", job_id}, {"done", done}}; }
+  static SlurmStage FromJson(const JsonField& j) {
+    j.RejectUnknownKeys({"name", "script", "job_id", "done"});
+    SlurmStage s{j["name"].NonEmptyString(), j["script"].String(), j["job_id"].String(), {}};
+    const JsonField done = j["done"];
+    for (std::size_t i = 0; i < done.ArraySize(); ++i) s.done.push_back(done.At(i).String());
+    return s;
+  }
+};
+
+// <job-dir>/job.json: what was submitted (phos.slurm-job/1), read by `status`.
+struct SlurmJob {
+  static constexpr const char* kFormat = "phos.slurm-job/1";
+  std::string kind;
+  int tasks = 0;
+  std::vector<std::string> command;
+  std::vector<SlurmStage> stages;
+  double submitted_s = 0;  // seconds sbatch took for the whole chain
+
+  nlohmann::json ToJson() const {
+    nlohmann::json stages_json = nlohmann::json::array();
+    for (const SlurmStage& s : stages) stages_json.push_back(s.ToJson());
+    return {{"format", kFormat}, {"kind", kind},          {"tasks", tasks},
+            {"command", command}, {"stages", stages_json}, {"submitted_s", submitted_s}};
+  }
+  static SlurmJob FromJson(const JsonField& j) {
+    j.RejectUnknownKeys({"format", "kind", "tasks", "command", "stages", "submitted_s"});
+    if (j["format"].String() != kFormat) j["format"].Fail(std::string("expected \"") + kFormat + "\"");
+    SlurmJob job;
+    job.kind = j["kind"].NonEmptyString();
+    job.tasks = j["tasks"].Integer(1, 1000000);
+    const JsonField command = j["command"];
+    for (std::size_t i = 0; i < command.ArraySize(); ++i) job.command.push_back(command.At(i).String());
+    const JsonField stages = j["stages"];
+    for (std::size_t i = 0; i < stages.ArraySize(); ++i) job.stages.push_back(SlurmStage::FromJson(stages.At(i)));
+    job.submitted_s = j["submitted_s"].NumberAtLeast(0);
+    return job;
+  }
+};
+
+// 'text' for a shell, whatever it holds.
+std::string ShellQuote(const std::string& text) {
+  std::string quoted = "'";
+  for (char c : text) quoted += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return quoted + "'";
+}
+
+// The phos beside this executable (the same bin folder): the jobs run this build.
+std::string PhosExecutable() {
+  char path[PATH_MAX];
+  const ssize_t n = readlink("/proc/self/exe", path, sizeof path - 1);
+  if (n <= 0) return "phos";
+  return (fs::path(std::string(path, static_cast<std::size_t>(n))).parent_path() / "phos").string();
+}
+
+// The value of --out in the command's arguments, absolute ("" if absent).
+std::string OutFolder(const std::vector<std::string>& command) {
+  for (std::size_t i = 0; i < command.size(); ++i) {
+    if (command[i] == "--out" && i + 1 < command.size()) return fs::absolute(command[i + 1]).lexically_normal().string();
+    if (command[i].rfind("--out=", 0) == 0) return fs::absolute(command[i].substr(6)).lexically_normal().string();
+  }
+  return "";
+}
+
+std::string TaskRecordName(const char* prefix, int i, int n) {
+  return std::string(prefix) + std::to_string(i) + "-of-" + std::to_string(n) + ".json";
+}
+
+// One sbatch script: the site's options, then `body`.
+std::string Script(const SubmitArgs& args, const std::string& name, int array_tasks, const std::string& body) {
+  const SiteOptions& site = args.site;
+  const fs::path logs = fs::path(args.job_dir) / "logs";
+  std::string s = "#!/bin/bash\n# Written by phos slurm " + args.kind + " (docs/scale.md).\n";
+  s += "#SBATCH --job-name=phos-" + args.kind + "-" + name + "\n";
+  if (array_tasks > 0) s += "#SBATCH --array=0-" + std::to_string(array_tasks - 1) + "\n";
+  s += "#SBATCH --output=" + (logs / (array_tasks > 0 ? name + "-%A_%a.out" : name + "-%j.out")).string() + "\n";
+  s += "#SBATCH --chdir=" + fs::current_path().string() + "\n";
+  s += "#SBATCH --ntasks=1\n#SBATCH --cpus-per-task=" + std::to_string(site.cpus_per_task) + "\n";
+  s += "#SBATCH --time=" + site.time_per_task + "\n#SBATCH --mem=" + site.mem_per_task + "\n";
+  // A task lost with its node (or preempted) runs again: it redoes its share whole.
+  s += "#SBATCH --requeue\n";
+  if (!site.partition.empty()) s += "#SBATCH --partition=" + site.partition + "\n";
+  if (!site.account.empty()) s += "#SBATCH --account=" + site.account + "\n";
+  for (const std::string& option : site.extra) s += std::string("#SBATCH ") + (option.rfind('-', 0) == 0 ? "" : "--") + option + "\n";
+  s += "set -euo pipefail\n" + body + "\n";
+  return s;
+}
+
+std::string Command(const std::vector<std::string>& words) {
+  std::string s;
+  for (const std::string& w : words) s += (s.empty() ? "" : " ") + (w.rfind("${", 0) == 0 ? w : ShellQuote(w));
+  return s;
+}
+
+// Runs sbatch --parsable on a script; the job id, or a UserError with sbatch's words.
+std::string Submit(const std::string& sbatch, const std::string& script, const std::string& after) {
+  const std::string command = ShellQuote(sbatch) + " --parsable" +
+                              (after.empty() ? "" : " --dependency=afterok:" + after) + " " + ShellQuote(script) +
+                              " 2>&1";
+  FILE* pipe = popen(command.c_str(), "r");
+  if (!pipe) ThrowUserError("", "--sbatch", "cannot run '" + sbatch + "'");
+  std::string out;
+  char buffer[512];
+  while (std::fgets(buffer, sizeof buffer, pipe)) out += buffer;
+  const int status = pclose(pipe);
+  while (!out.empty() && (out.back() == '\n' || out.back() == ' ')) out.pop_back();
+  if (status != 0 || out.empty() || out.find_first_not_of("0123456789;") != out.find(';'))
+    ThrowUserError(script, "sbatch", "failed: " + (out.empty() ? "exit status " + std::to_string(status) : out));
+  return out.substr(0, out.find(';'));  // "id;cluster" on federated clusters
+}
+
+void RunSubmit(const SubmitArgs& args) {
+  if (args.command.empty())
+    ThrowUserError("", "COMMAND", "give the phos " + args.kind + " arguments after --, e.g. -- SCENE --out OUT");
+  const std::string out = OutFolder(args.command);
+  if (out.empty()) ThrowUserError("", "COMMAND", "needs --out OUT (the tasks' outputs and done records go there)");
+  const fs::path dir = fs::absolute(args.job_dir).lexically_normal();
+  if (fs::exists(dir / "job.json"))
+    ThrowUserError((dir / "job.json").string(), "",
+                   "a job was already submitted from this folder ('phos slurm status " + dir.string() +
+                       "'); give another --job-dir");
+  std::error_code ec;
+  fs::create_directories(dir / "logs", ec);
+  if (ec) ThrowUserError(dir.string(), "--job-dir", "cannot create: " + ec.message());
+  SubmitArgs a = args;
+  a.job_dir = dir.string();
+  const std::string phos = PhosExecutable(), n = std::to_string(args.tasks), task = "${SLURM_ARRAY_TASK_ID}/" + n;
+  std::vector<std::string> base = {phos};
+  if (args.kind == "map" || args.kind == "batch") base.push_back("fit");
+  base.push_back(args.kind);
+  base.insert(base.end(), args.command.begin(), args.command.end());
+
+  SlurmJob job{args.kind, args.tasks, args.command, {}, 0};
+  auto stage = [&](const std::string& name, int array, const std::vector<std::string>& extra,
+                   std::vector<std::string> done) {
+    std::vector<std::string> words = base;
+    words.insert(words.end(), extra.begin(), extra.end());
+    const fs::path script = dir / (name + ".sbatch");
+    WriteFileAtomically(script, Script(a, name, array, Command(words)));
+    job.stages.push_back({name, script.string(), "", std::move(done)});
+  };
+  std::vector<std::string> task_done;
+  if (args.kind == "render") {
+    const std::string states = (dir / "states").string();
+    stage("solve", 0, {"--solve-only", "--checkpoints", states, "--tasks", n}, {(dir / "states" / "done.json").string()});
+    for (int i = 0; i < args.tasks; ++i) task_done.push_back((fs::path(out) / "done" / TaskRecordName("task-", i, args.tasks)).string());
+    stage("tasks", args.tasks, {"--task", task, "--checkpoints", states}, task_done);
+    // Nothing to assemble: the frames are the outputs. The last job checks that every range is done.
+    const fs::path script = dir / "merge.sbatch";
+    WriteFileAtomically(script, Script(a, "merge", 0, Command({phos, "slurm", "status", dir.string(), "--require-done"})));
+    job.stages.push_back({"merge", script.string(), "", {}});
+  } else if (args.kind == "map") {
+    for (int i = 0; i < args.tasks; ++i) task_done.push_back((fs::path(out) / "tiles" / TaskRecordName("tile-", i, args.tasks)).string());
+    stage("tasks", args.tasks, {"--tile", task}, task_done);
+    stage("merge", 0, {"--merge"}, {(fs::path(out) / "decay-map.exr").string(), (fs::path(out) / "kr.png").string()});
+  } else {
+    for (int i = 0; i < args.tasks; ++i) task_done.push_back((fs::path(out) / "tasks" / TaskRecordName("task-", i, args.tasks)).string());
+    stage("tasks", args.tasks, {"--task", task}, task_done);
+    stage("merge", 0, {"--merge"}, {(fs::path(out) / "summary.csv").string()});
+  }
+  if (!args.no_submit) {
+    const auto start = std::chrono::steady_clock::now();
+    std::string after;
+    for (SlurmStage& s : job.stages) after = s.job_id = Submit(args.sbatch, s.script, after);
+    job.submitted_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  }
+  WriteFileAtomically(dir / "job.json", job.ToJson().dump(2) + "\n");
+  if (args.json) {
+    std::printf("%s\n", job.ToJson().dump().c_str());
+    return;
+  }
+  std::printf("phos slurm %s: %d task(s), %s -> %s\n", args.kind.c_str(), args.tasks,
+              args.no_submit ? "scripts written (not submitted)" : "submitted", dir.c_str());
+  std::string after;
+  for (const SlurmStage& s : job.stages) {
+    if (args.no_submit)
+      std::printf("  %-5s sbatch --parsable%s %s\n", s.name.c_str(),
+                  after.empty() ? "" : " --dependency=afterok:<previous job>", s.script.c_str());
+    else
+      std::printf("  %-5s job %s%s  %s\n", s.name.c_str(), s.job_id.c_str(),
+                  after.empty() ? "" : (" after " + after).c_str(), s.script.c_str());
+    after = args.no_submit ? "x" : s.job_id;
+  }
+  std::printf("  progress: phos slurm status %s\n", dir.c_str());
+}
+
+// ---- phos slurm status ------------------------------------------------------
+
+struct StatusArgs {
+  std::string dir;
+  bool json = false, require_done = false;
+};
+
+void RunStatus(const StatusArgs& args) {
+  const fs::path file = fs::path(args.dir) / "job.json";
+  const nlohmann::json json = ReadJsonFile(file);
+  const SlurmJob job = SlurmJob::FromJson(JsonField(json, file.string()));
+  nlohmann::json stages = nlohmann::json::array();
+  bool all = true;
+  std::string text;
+  for (const SlurmStage& s : job.stages) {
+    std::vector<int> missing;
+    double seconds = 0;
+    for (std::size_t i = 0; i < s.done.size(); ++i) {
+      // A task's record, or a merge's output file.
+      const bool record = fs::path(s.done[i]).extension() == ".json";
+      if (record) {
+        const std::optional<TaskDoneRecord> r = ReadTaskDone(s.done[i]);
+        if (r)
+          seconds += r->seconds;
+        else
+          missing.push_back(static_cast<int>(i));
+      } else if (!fs::exists(s.done[i])) {
+        missing.push_back(static_cast<int>(i));
+      }
+    }
+    const std::size_t done = s.done.size() - missing.size();
+    const bool whole = missing.empty() && (!s.done.empty() || all);  // a check stage is done when all before it are
+    all = all && whole;
+    stages.push_back({{"name", s.name},
+                      {"job_id", s.job_id},
+                      {"done", done},
+                      {"of", s.done.size()},
+                      {"missing", missing},
+                      {"task_seconds", seconds}});
+    std::string line = "  " + s.name + std::string(s.name.size() < 7 ? 7 - s.name.size() : 1, ' ');
+    if (s.name == "tasks") {
+      line += std::to_string(done) + "/" + std::to_string(s.done.size()) + " done";
+      if (!missing.empty()) {
+        line += "; not done:";
+        for (int i : missing) line += " " + std::to_string(i);
+      }
+      if (done > 0) line += "; " + FormatShort(seconds / done, 3) + " s per task";
+    } else {
+      line += whole ? "done" : "not done";
+      if (seconds > 0) line += " (" + FormatShort(seconds, 3) + " s)";
+    }
+    text += line + (s.job_id.empty() ? "" : "  [job " + s.job_id + "]") + "\n";
+  }
+  if (args.json) {
+    std::printf("%s\n",
+                nlohmann::json({{"kind", job.kind}, {"tasks", job.tasks}, {"done", all}, {"stages", stages}}).dump().c_str());
+  } else {
+    std::printf("phos slurm status: %s, %d task(s): %s\n%s", job.kind.c_str(), job.tasks, all ? "done" : "not done",
+                text.c_str());
+  }
+  if (args.require_done && !all) ThrowUserError(args.dir, "", "not every task is done (see the lines above)");
+}
+
+void AddSubmit(CLI::App& slurm, const std::string& kind, const std::string& what) {
+  auto args = std::make_shared<SubmitArgs>();
+  args->kind = kind;
+  CLI::App* cmd = slurm.add_subcommand(kind, what);
+  cmd->add_option("--tasks", args->tasks, "Array tasks (the work is split in N near-equal shares)")
+      ->required()
+      ->check(CLI::Range(1, 100000));
+  cmd->add_option("--job-dir", args->job_dir,
+                  "Folder for the scripts, job.json and the logs (on the shared filesystem)")
+      ->required();
+  cmd->add_option("--partition", args->site.partition, "sbatch --partition (default: the cluster's default)");
+  cmd->add_option("--account", args->site.account, "sbatch --account (default: your default account)");
+  cmd->add_option("--time-per-task", args->site.time_per_task, "sbatch --time of each job, [D-]HH:MM:SS")
+      ->default_str("01:00:00");
+  cmd->add_option("--mem-per-task", args->site.mem_per_task,
+                  "sbatch --mem of each job (docs/scale.md says what each kind needs)")
+      ->default_str("4G");
+  cmd->add_option("--cpus-per-task", args->site.cpus_per_task, "sbatch --cpus-per-task")
+      ->default_str("2")
+      ->check(CLI::Range(1, 1024));
+  cmd->add_option("--sbatch-option", args->site.extra,
+                  "Another sbatch option for every job, without its dashes, e.g. --sbatch-option qos=short\n"
+                  "(#SBATCH --qos=short; repeatable)")
+      ->allow_extra_args(false);  // one value each time: a -- after it still starts COMMAND
+  cmd->add_option("--sbatch", args->sbatch, "The sbatch to run")->default_str("sbatch");
+  cmd->add_flag("--no-submit", args->no_submit, "Write the scripts and job.json only; print the sbatch commands");
+  cmd->add_flag("--json", args->json, "Print job.json (the stages, their scripts and job ids)");
+  cmd->add_option("COMMAND", args->command, "After --: the arguments of 'phos " +
+                                                 std::string(kind == "render" ? "render" : "fit " + kind) +
+                                                 "', --out included")
+      ->required();
+  cmd->callback([args] { RunSubmit(*args); });
+}
+
+}  // namespace
+
+void RegisterSlurm(CLI::App& app) {
+  CLI::App* slurm = app.add_subcommand("slurm", Summary("slurm"));
+  slurm->require_subcommand(1);
+  AddSubmit(*slurm, "render",
+            "Render a scene's frames as a job array: the solver pass (one job: the states are sequential in\n"
+            "time), then N ranges of frames (phos render --task i/N), then a check that every range is done.\n"
+            "Example: phos slurm render --tasks 8 --job-dir jobs/box -- scene.json --out frames --transport path");
+  AddSubmit(*slurm, "map",
+            "Fit a decay map as a job array: N bands of rows (phos fit map --tile i/N), then the merge\n"
+            "(--merge: decay-map.exr and kr.png). Example: phos slurm map --tasks 4 --job-dir jobs/m -- S --out M");
+  AddSubmit(*slurm, "batch",
+            "Fit a batch as a job array: N shares of the items (phos fit batch --task i/N), then the merge\n"
+            "(summary.csv). Example: phos slurm batch --tasks 16 --job-dir jobs/b -- captures --out materials");
+  auto status = std::make_shared<StatusArgs>();
+  CLI::App* s = slurm->add_subcommand("status", "Progress of a submitted job from its tasks' done records");
+  s->add_option("DIR", status->dir, "The --job-dir of the submission")->required();
+  s->add_flag("--json", status->json, "Print one JSON object");
+  s->add_flag("--require-done", status->require_done, "Exit 2 unless every stage is done (the render's last job)");
+  s->callback([status] { RunStatus(*status); });
+}
+
+}  // namespace phos::app
