@@ -207,10 +207,16 @@ Material ToMaterial(const Problem& p, const std::vector<int>& bands, const Param
 
 // Excitation rate per step of a state at a point: a = sum_b ke_b E_b.
 template <typename T>
-std::vector<T> ExcitationPerStep(const Point& point, const PointSamples& s, const std::vector<int>& lit, const T* ke) {
-  std::vector<T> a(s.steps.size(), T(0.0));
+void ExcitationPerStep(const Point& point, const PointSamples& s, const std::vector<int>& lit, const T* ke,
+                       std::vector<T>& a) {
+  a.assign(s.steps.size(), T(0.0));
   for (std::size_t j = 0; j < a.size(); ++j)
     for (std::size_t l = 0; l < lit.size(); ++l) a[j] += ke[l] * point.irradiance[s.steps[j].frame][lit[l]];
+}
+template <typename T>
+std::vector<T> ExcitationPerStep(const Point& point, const PointSamples& s, const std::vector<int>& lit, const T* ke) {
+  std::vector<T> a;
+  ExcitationPerStep(point, s, lit, ke, a);
   return a;
 }
 
@@ -1058,49 +1064,71 @@ std::optional<Solution> SolveGridBaseline(const Problem& p, std::string* why) {
   double best_cost = std::numeric_limits<double>::infinity();
   int evaluations = 0;
   std::vector<std::vector<double>> r(p.points.size());
+  // Every sample the cost reads, flattened once: which state value it takes,
+  // and per band its reflected light, target and weight. The loops below then
+  // do the same arithmetic in the same order as on the constraints
+  // themselves (the grid's 10^4 x 3 x 10 cost evaluations were mostly
+  // lookups through them), so the grid finds the same point.
+  struct Term {
+    int point = 0, sample = 0;
+    Constraint::Kind kind = Constraint::Kind::kTarget;
+    double weight = 0;
+    std::vector<double> reflected, radiance;  // per band
+  };
+  std::vector<Term> terms;
+  for (std::size_t k = 0; k < p.constraints.size(); ++k) {
+    const Constraint& con = p.constraints[k];
+    const Point& point = p.points[con.point];
+    const std::vector<int> samples =
+        con.kind == Constraint::Kind::kTarget ? std::vector<int>{s.target_sample[k]} : s.bound_samples[k];
+    for (int m : samples) {
+      Term term{con.point, m, con.kind, con.weight, {}, con.radiance};
+      for (int b = 0; b < nb; ++b)
+        term.reflected.push_back(point.albedo[b] * point.irradiance[s.points[con.point].frame[m]][b] / kPi);
+      terms.push_back(std::move(term));
+    }
+  }
+  std::vector<double> state(terms.size());  // r at each term's sample
+  std::vector<double> ke(nb), Lambda_of_band(nb), excitation;  // reused: no allocation per grid point
   const int ke_combinations = static_cast<int>(std::pow(10, nb));
   for (double kr : kr_grid)
     for (int combination = 0; combination < ke_combinations; ++combination) {
-      std::vector<double> ke(nb);
       for (int b = 0, rest = combination; b < nb; ++b, rest /= 10) ke[b] = ke_grid[rest % 10];
-      for (std::size_t q = 0; q < p.points.size(); ++q)
-        StateAtSamples(s.points[q], ExcitationPerStep(p.points[q], s.points[q], all_bands, ke.data()), kr, r[q]);
+      for (std::size_t q = 0; q < p.points.size(); ++q) {
+        ExcitationPerStep(p.points[q], s.points[q], all_bands, ke.data(), excitation);
+        StateAtSamples(s.points[q], excitation, kr, r[q]);
+      }
       ++evaluations;
+      for (std::size_t j = 0; j < terms.size(); ++j) state[j] = r[terms[j].point][terms[j].sample];
       // The cost separates over bands, and Lambda_b enters band b only: the
       // best Lambda grid point per band gives the grid's best over all 10^3.
-      Parameters x{{kr}, {ke}, {std::vector<double>(nb, 0.0)}};
+      std::fill(Lambda_of_band.begin(), Lambda_of_band.end(), 0.0);
       double cost = 0;
       for (int b = 0; b < nb; ++b) {
         double best_band = std::numeric_limits<double>::infinity();
         for (double Lambda : Lambda_grid) {
+          const double Lambda_kr = Lambda * kr;
           double c = 0;
-          for (std::size_t k = 0; k < p.constraints.size(); ++k) {
-            const Constraint& con = p.constraints[k];
-            const Point& point = p.points[con.point];
-            auto L = [&](int m) {
-              return Lambda * kr * r[con.point][m] +
-                     point.albedo[b] * point.irradiance[s.points[con.point].frame[m]][b] / kPi;
-            };
-            if (con.kind == Constraint::Kind::kTarget) {
-              c += con.weight * std::pow(L(s.target_sample[k]) - con.radiance[b], 2);
+          for (std::size_t j = 0; j < terms.size(); ++j) {
+            const Term& term = terms[j];
+            const double L = Lambda_kr * state[j] + term.reflected[b];
+            if (term.kind == Constraint::Kind::kTarget) {
+              c += term.weight * std::pow(L - term.radiance[b], 2);
             } else {
-              for (int m : s.bound_samples[k]) {
-                const double miss =
-                    con.kind == Constraint::Kind::kAtLeast ? con.radiance[b] - L(m) : L(m) - con.radiance[b];
-                if (miss > 0) c += con.weight * miss * miss;
-              }
+              const double miss = term.kind == Constraint::Kind::kAtLeast ? term.radiance[b] - L : L - term.radiance[b];
+              if (miss > 0) c += term.weight * miss * miss;
             }
           }
           if (c < best_band) {
             best_band = c;
-            x.Lambda[0][b] = Lambda;
+            Lambda_of_band[b] = Lambda;
           }
         }
         cost += best_band;
       }
       if (cost < best_cost) {
         best_cost = cost;
-        best = x;
+        best = Parameters{{kr}, {ke}, {Lambda_of_band}};
       }
     }
   return Finish(p, s, all_bands, best, start, evaluations);
