@@ -76,12 +76,70 @@ namespace {
 // Occluders are summed per side, four floats per receiver: the form factors
 // of the surfels facing it (their front towards it) and their y-weighted
 // sums, then those of the surfels it sees from behind. See ResolveOcclusion.
+// With direction cells (DssOptions::occlusion_cells) each receiver then
+// holds per cell the front and the back sum.
 constexpr int kSides = 4;
 
-// Accumulates one surfel into one receiver pixel, weighted.
+// The N x N grid over the unit disk onto which a receiver's cosine-weighted
+// hemisphere projects (Nusselt's analogue): per cell, its share of the disk
+// (area / pi: the most a cell can be occluded) and its centroid.
+struct DirectionCells {
+  int n = 0;
+  std::vector<float> share, x, y;
+  explicit DirectionCells(int cells) : n(std::max(0, cells)) {
+    share.assign(n * n, 0.0f);
+    x.assign(n * n, 0.0f);
+    y.assign(n * n, 0.0f);
+    constexpr int kSub = 32;  // sub-samples per cell side, to measure the part inside the disk
+    for (int c = 0; c < n * n; ++c) {
+      int inside = 0;
+      for (int i = 0; i < kSub; ++i)
+        for (int j = 0; j < kSub; ++j) {
+          const float u = -1 + 2 * ((c % n) + (i + 0.5f) / kSub) / n, v = -1 + 2 * ((c / n) + (j + 0.5f) / kSub) / n;
+          if (u * u + v * v > 1) continue;
+          ++inside;
+          x[c] += u;
+          y[c] += v;
+        }
+      share[c] = static_cast<float>(inside) * 4 / (n * n * kSub * kSub) / kPiF;
+      if (inside) x[c] /= static_cast<float>(inside), y[c] /= static_cast<float>(inside);
+    }
+  }
+  int stride() const { return kSides + 2 * n * n; }
+  int CellOf(float u, float v) const {
+    const int i = std::clamp(static_cast<int>((u + 1) / 2 * n), 0, n - 1),
+              j = std::clamp(static_cast<int>((v + 1) / 2 * n), 0, n - 1);
+    return j * n + i;
+  }
+};
+
+// Adds weight F to the cells of a surfel's footprint on the unit disk: a
+// disk of area pi F (radius sqrt F) about its direction (u, v), shared in
+// proportion to the cells' shares; smaller than a cell, into the cell it
+// falls in. (The weight, 4^l at level l, scales the amount, not the
+// footprint.)
+inline void AddToCells(const DirectionCells& cells, float u, float v, float F, float weight, float* sums) {
+  const float radius = std::sqrt(F), half_cell = 1.0f / static_cast<float>(cells.n);
+  if (radius > half_cell) {
+    int covered[256], count = 0;
+    float total = 0;
+    for (int c = 0; c < cells.n * cells.n && count < 256; ++c)
+      if (cells.share[c] > 0 && std::pow(cells.x[c] - u, 2) + std::pow(cells.y[c] - v, 2) <= radius * radius)
+        covered[count++] = c, total += cells.share[c];
+    if (count > 0) {
+      for (int k = 0; k < count; ++k) sums[2 * covered[k]] += weight * F * cells.share[covered[k]] / total;
+      return;
+    }
+  }
+  sums[2 * cells.CellOf(u, v)] += weight * F;
+}
+
+// Accumulates one surfel into one receiver pixel, weighted; `cells` null
+// without direction cells, `sides` then holds kSides floats per pixel, else
+// cells->stride().
 inline void Accumulate(const GBuffer& g, std::size_t p, const Surfel& s, const float* B, int channels, float weight,
                        float* sides, float* irradiance, const std::vector<Dipole>* dipoles = nullptr,
-                       const std::vector<float>* near_m = nullptr) {
+                       const std::vector<float>* near_m = nullptr, const DirectionCells* cells = nullptr) {
   if (dipoles) {
     // Subsurface: light that entered at the surfel leaves at the receiver.
     if (g.object[p] != s.object) return;
@@ -95,9 +153,16 @@ inline void Accumulate(const GBuffer& g, std::size_t p, const Surfel& s, const f
   float cos_q = 0, w_y = 0;
   const float F = SurfelFormFactor(g.position[p], g.normal[p], s, &cos_q, &w_y);
   if (F <= 0) return;
-  float* side = &sides[p * kSides + (cos_q < 0 ? 0 : 2)];
+  float* record = &sides[p * (cells ? cells->stride() : kSides)];
+  float* side = record + (cos_q < 0 ? 0 : 2);
   side[0] += weight * F;
   side[1] += weight * F * w_y;
+  if (cells && g.normal[p].squaredNorm() > 0) {
+    // The direction's point on the unit disk, in the receiver's tangent frame.
+    const Vec3f n = g.normal[p], t = n.unitOrthogonal(), b = n.cross(t);
+    const Vec3f w = (s.position - g.position[p]).normalized();
+    AddToCells(*cells, w.dot(t), w.dot(b), F, weight, record + kSides + (cos_q < 0 ? 0 : 1));
+  }
   // Light arrives from the surfel's front only (it faces the receiver).
   if (channels > 0 && cos_q < 0)
     for (int c = 0; c < channels; ++c) irradiance[p * channels + c] += weight * F * B[c];
@@ -127,8 +192,29 @@ DssResult EmptyResult(int width, int height, int channels) {
 // larger of the two sums, its directional sum with it, and above 1 (surfels
 // behind surfels: visibility, which blending does not know) both are
 // scaled back to 1.
-void ResolveOcclusion(const std::vector<float>& sides, DssResult& r) {
+//
+// With direction cells the same choice is made per cell, and a cell counts
+// at most its share of the disk; the directional sum takes each cell's
+// occlusion along its centroid's direction.
+void ResolveOcclusion(const std::vector<float>& sides, DssResult& r, const GBuffer& g,
+                      const DirectionCells* cells = nullptr) {
   for (std::size_t p = 0; p < r.occlusion.size(); ++p) {
+    if (cells && cells->n > 0) {
+      if (g.object[p] < 0) continue;
+      const float* sums = &sides[p * cells->stride() + kSides];
+      const Vec3f n = g.normal[p], t = n.unitOrthogonal(), b = n.cross(t);
+      float occlusion = 0, occlusion_y = 0;
+      for (int c = 0; c < cells->n * cells->n; ++c) {
+        const float covered = std::min(cells->share[c], std::max(sums[2 * c], sums[2 * c + 1]));
+        if (!(covered > 0)) continue;
+        const float u = cells->x[c], v = cells->y[c], up = std::sqrt(std::max(0.0f, 1 - u * u - v * v));
+        occlusion += covered;
+        occlusion_y += covered * (u * t + v * b + up * n).y();
+      }
+      r.occlusion[p] = std::min(1.0f, occlusion);
+      r.occlusion_y[p] = occlusion_y;
+      continue;
+    }
     const float* side = &sides[p * kSides];
     const float* kept = side[2] > side[0] ? side + 2 : side;
     r.occlusion[p] = kept[0];
@@ -156,7 +242,7 @@ DssResult GatherAllSurfels(const GBuffer& g, const std::vector<Surfel>& surfels,
                    r.irradiance.data(), dipoles, near_m);
     }
   });
-  ResolveOcclusion(sides, r);
+  ResolveOcclusion(sides, r, g);
   r.splats = static_cast<std::uint64_t>(n) * surfels.size();
   r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
   return r;
@@ -293,7 +379,10 @@ DssResult SplatDeepScreenSpace(const GBuffer& g, const CameraRays& camera, const
   const int W = g.width, H = g.height, L = std::max(1, options.levels), C = std::max(0, options.channels);
   const std::size_t n = static_cast<std::size_t>(W) * H;
   // One accumulation buffer per level (they are blurred separately).
-  std::vector<std::vector<float>> sides(L, std::vector<float>(n * kSides, 0.0f));
+  const DirectionCells cells(options.dipoles ? 0 : options.occlusion_cells);
+  const DirectionCells* cells_used = cells.n > 0 ? &cells : nullptr;
+  const int S = cells_used ? cells.stride() : kSides;  // floats per pixel of occlusion sums
+  std::vector<std::vector<float>> sides(L, std::vector<float>(n * S, 0.0f));
   std::vector<std::vector<float>> irradiance(L, std::vector<float>(n * C, 0.0f));
 
   const std::vector<Reach> reach = ComputeReach(g, camera, surfels, radiosity, options);
@@ -301,7 +390,7 @@ DssResult SplatDeepScreenSpace(const GBuffer& g, const CameraRays& camera, const
   const std::uint64_t splats =
       GatherShells(g, surfels, reach, L, options.tile_px, [&](std::size_t p, std::size_t i, int l, float weight) {
         Accumulate(g, p, surfels[i], C > 0 ? &radiosity[i * C] : nullptr, C, weight, sides[l].data(),
-                   irradiance[l].data(), options.dipoles, options.near_m);
+                   irradiance[l].data(), options.dipoles, options.near_m, cells_used);
       });
 
   // Unshuffle and blur: level l's pixels each saw a quarter^l of the shells;
@@ -309,24 +398,26 @@ DssResult SplatDeepScreenSpace(const GBuffer& g, const CameraRays& camera, const
   // once) restores the sum, weighted by depth and normal so it does not
   // leak across edges.
   DssResult r = EmptyResult(W, H, C);
-  std::vector<float> summed(n * kSides, 0.0f);
+  std::vector<float> summed(n * S, 0.0f);
   for (int l = 0; l < L; ++l) {
     const int block = 1 << l;
     const bool blur = options.blur && l > 0;
     tbb::parallel_for(tbb::blocked_range<int>(0, H), [&](const tbb::blocked_range<int>& rows) {
+      std::vector<float> osum(S);
       for (int y = rows.begin(); y != rows.end(); ++y)
         for (int x = 0; x < W; ++x) {
           const std::size_t p = static_cast<std::size_t>(y) * W + x;
           if (g.object[p] < 0) continue;
           if (!blur) {
-            for (int k = 0; k < kSides; ++k) summed[p * kSides + k] += sides[l][p * kSides + k];
+            for (int k = 0; k < S; ++k) summed[p * S + k] += sides[l][p * S + k];
             for (int c = 0; c < C; ++c) r.irradiance[p * C + c] += irradiance[l][p * C + c];
             continue;
           }
           // The block of 2^l x 2^l pixels around (x, y), clamped inside the image.
           const int bx = std::clamp(x - block / 2, 0, std::max(0, W - block)),
                     by = std::clamp(y - block / 2, 0, std::max(0, H - block));
-          float wsum = 0, osum[kSides] = {};
+          float wsum = 0;
+          std::fill(osum.begin(), osum.end(), 0.0f);
           float isum[16] = {};
           for (int v = by; v < std::min(H, by + block); ++v)
             for (int u = bx; u < std::min(W, bx + block); ++u) {
@@ -340,17 +431,17 @@ DssResult SplatDeepScreenSpace(const GBuffer& g, const CameraRays& camera, const
               const float w = normal_w * (depth_ratio < 0.05f && same ? 1.0f : 0.0f);
               if (w <= 0) continue;
               wsum += w;
-              for (int k = 0; k < kSides; ++k) osum[k] += w * sides[l][q * kSides + k];
+              for (int k = 0; k < S; ++k) osum[k] += w * sides[l][q * S + k];
               for (int c = 0; c < C && c < 16; ++c) isum[c] += w * irradiance[l][q * C + c];
             }
           if (wsum > 0) {
-            for (int k = 0; k < kSides; ++k) summed[p * kSides + k] += osum[k] / wsum;
+            for (int k = 0; k < S; ++k) summed[p * S + k] += osum[k] / wsum;
             for (int c = 0; c < C && c < 16; ++c) r.irradiance[p * C + c] += isum[c] / wsum;
           }
         }
     });
   }
-  ResolveOcclusion(summed, r);
+  ResolveOcclusion(summed, r, g, cells_used);
   r.splats = splats;
   r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
   return r;

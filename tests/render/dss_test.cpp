@@ -6,6 +6,7 @@
 
 #include "phos/render/dss.h"
 
+#include <algorithm>
 #include <cmath>
 #include <gtest/gtest.h>
 
@@ -155,6 +156,58 @@ TEST(DeepScreenSpace, AClosedSlabOverheadOccludesOnceAndAnOpenSheetFromBehindToo
     EXPECT_NEAR(render::GatherAllSurfels(g, surfels, {}, 0).occlusion[centre], F, 0.03 * F) << closed;
     EXPECT_NEAR(render::SplatDeepScreenSpace(g, camera, surfels, {}, {}).occlusion[centre], F, 0.05 * F) << closed;
   }
+}
+
+// The cosine-weighted occlusion of a point with normal n by a polygon above
+// its horizon (vertices relative to the point, either winding): Lambert's
+// closed form, F = (1 / 2 pi) sum_i gamma_i n . (v_i x v_{i+1}) / |v_i x v_{i+1}|,
+// gamma_i the angle between the unit vectors to consecutive vertices.
+double PolygonFormFactor(const std::vector<Eigen::Vector3d>& vertices, const Eigen::Vector3d& n) {
+  double sum = 0;
+  for (std::size_t i = 0; i < vertices.size(); ++i) {
+    const Eigen::Vector3d a = vertices[i].normalized(), b = vertices[(i + 1) % vertices.size()].normalized();
+    const Eigen::Vector3d c = a.cross(b);
+    sum += std::acos(std::clamp(a.dot(b), -1.0, 1.0)) * n.dot(c.normalized());
+  }
+  return std::fabs(sum) / (2 * 3.14159265358979323846);
+}
+
+TEST(DeepScreenSpace, DirectionCellsCountAWallBehindAWallOnce) {
+  // A floor point at the origin; a wall at x = 0.5 (20 m high, 40 m wide)
+  // facing it, and behind it a wall twice as large at x = 1, which hides
+  // nothing more (the same directions). Truth: the near wall alone (Lambert,
+  // 0.4858; an infinite wall would give 1/2). Blending sums both (about 2x);
+  // direction cells count the covered directions once. (A cell that both
+  // walls cover in part counts whole: here the grazing directions past the
+  // walls' ends, 0.014, and the tolerance allows for them.)
+  const double d = 0.5, height = 20, half_width = 20;
+  const double truth = PolygonFormFactor({{d, 0, -half_width}, {d, 0, half_width}, {d, height, half_width},
+                                          {d, height, -half_width}},
+                                         Eigen::Vector3d::UnitY());
+  ASSERT_NEAR(truth, 0.4858, 1e-4);
+  render::Scene scene = testing::DiskOverFloor(0.5f, 1.0f);
+  scene.objects.pop_back();
+  for (const double scale : {1.0, 2.0}) {
+    render::Mesh wall = render::MakeQuad(2 * half_width * scale, height * scale);  // in y = 0, normal +y
+    // (x, y, z) -> (y, z, -x): turns the quad upright, its normal to -x.
+    for (auto& p : wall.positions)
+      p = Eigen::Vector3f(static_cast<float>(d * scale) + p.y(), p.z() + static_cast<float>(height * scale / 2), -p.x());
+    scene.objects.push_back(testing::MakeObject(scale == 1 ? "near wall" : "far wall", wall, 0.5));
+  }
+  render::SceneGeometry geometry(scene);
+  ASSERT_LT(geometry.FrontNormal(1, 0).x(), 0);  // the walls face the point
+  ASSERT_LT(geometry.FrontNormal(2, 0).x(), 0);
+  const render::CameraRays camera(scene, 0);
+  const auto surfels = render::Surfelize(geometry, camera.origin(), 60, Coarse());
+  const render::GBuffer g = render::RenderGBuffer(geometry, scene, 0);
+  const std::size_t centre = 16 * 33 + 16;
+  ASSERT_EQ(g.object[centre], 0);
+  render::DssOptions options;
+  const float blended = render::SplatDeepScreenSpace(g, camera, surfels, {}, options).occlusion[centre];
+  options.occlusion_cells = 4;
+  const float cells = render::SplatDeepScreenSpace(g, camera, surfels, {}, options).occlusion[centre];
+  EXPECT_GT(blended, 1.7 * truth);  // the far wall counted again
+  EXPECT_NEAR(cells, truth, 0.04 * truth);
 }
 
 }  // namespace

@@ -109,6 +109,15 @@ struct DssOptions {
   // lost it all).
   float epsilon = 1e-6f;
   bool blur = true;  // geometry-aware blur of the interleaved levels
+  // Occlusion by direction cells (0: off). Blending sums form factors and
+  // cannot tell a surfel from the one behind it (a block and the wall behind
+  // count twice). With N > 0 each receiver's cosine-weighted hemisphere,
+  // projected onto the unit disk (Nusselt's analogue: a surfel covers pi F
+  // of it), is cut into an N x N grid; a surfel's F goes to the cells its
+  // footprint (radius sqrt F) covers, and each cell counts at most its
+  // share of the disk: what lies behind a covered direction counts once.
+  // Costs 2 N^2 floats per pixel and level.
+  int occlusion_cells = 0;
   int tile_px = 32;
   // Radiosity per surfel and channel (B, e.g. pi Lp per band), or empty for
   // occlusion only.
