@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # phos against the R Luminescence package's fit_CWCurve on its example CW-OSL
-# curves (63: ExampleData.CW_OSL_Curve, the 14 OSL curves of ExampleData.XSYG,
-# and the Ln and Tn curves of the 24 aliquots of ExampleData.BINfileData),
+# curves (62: ExampleData.CW_OSL_Curve, the 14 OSL curves of ExampleData.XSYG,
+# and the Ln and Tn curves of the 24 aliquots of ExampleData.BINfileData but
+# aliquot 1's Ln, which is CW_OSL_Curve),
 # both choosing the number of components (1..3) and both timed in process in
 # this one run; then phos's residual at fit_CWCurve's count, and one
 # `phos fit decay-curve` call on every file. Installs r-cran-luminescence from
@@ -79,7 +80,8 @@ END {
   printf "Written by `scripts/compare-luminescence.sh` on %s (%s; load %s at the end).\n", date, machine, load
   printf "%d example CW-OSL curves of the R package: ExampleData.CW_OSL_Curve, the 14 OSL curves of\n", NR
   print "ExampleData.XSYG, and the natural (Ln) and test-dose (Tn) OSL curves of the 24 aliquots of"
-  print "ExampleData.BINfileData (CWOSL.SAR.Data). Unweighted, no background, on both sides."
+  print "ExampleData.BINfileData (CWOSL.SAR.Data) but aliquot 1 Ln, which is CW_OSL_Curve itself."
+  print "Unweighted, no background, on both sides."
   print ""
   print "- **Model choice, in process.** fit_CWCurve chooses the count by its F-test (n.components.max = 3),"
   print "  phos by BIC over 1..3 (build/bin/fit_timing 0). Time per fit after a warm-up: median of 5 calls"

@@ -3,9 +3,10 @@
 # with the number of components it chose (its F-test, up to 3), its residual
 # sum of squares and its time per fit in process (median of 5 timed runs after
 # one warm-up).
-# Curves (63): ExampleData.CW_OSL_Curve; the 14 OSL curves of ExampleData.XSYG;
+# Curves (62): ExampleData.CW_OSL_Curve; the 14 OSL curves of ExampleData.XSYG;
 # and from ExampleData.BINfileData (CWOSL.SAR.Data, 24 aliquots) the first two
-# OSL curves of each aliquot, its natural signal Ln and test dose Tn.
+# OSL curves of each aliquot, its natural signal Ln and test dose Tn, less
+# aliquot 1's Ln, which is ExampleData.CW_OSL_Curve itself.
 # Usage: Rscript fit_cwcurve.R OUTDIR
 suppressMessages(library(Luminescence))
 args <- commandArgs(trailingOnly = TRUE)
@@ -30,8 +31,10 @@ for (position in sort(unique(meta$POSITION))) {
     n <- meta$NPOINTS[r]
     # Channel k (1..n) ends at k * HIGH / n seconds of stimulation.
     t <- seq_len(n) * meta$HIGH[r] / n
-    curves[[sprintf("BIN_pos%02d_%s", position, c("Ln", "Tn")[j])]] <-
-      data.frame(x = t, y = as.numeric(CWOSL.SAR.Data@DATA[[r]]))
+    y <- as.numeric(CWOSL.SAR.Data@DATA[[r]])
+    # ExampleData.CW_OSL_Curve is aliquot 1's Ln: each curve once.
+    if (any(vapply(curves, function(c) length(c$y) == length(y) && all(c$y == y), logical(1)))) next
+    curves[[sprintf("BIN_pos%02d_%s", position, c("Ln", "Tn")[j])]] <- data.frame(x = t, y = y)
   }
 }
 
