@@ -174,8 +174,8 @@ void SolveOnly(const RenderArgs& args, const render::Scene& scene, render::Coupl
   if (!solver)
     std::printf("%s: no phosphorescence, no states: ranges render without checkpoints\n", scene.name.c_str());
   else
-    std::printf("%s: solved %zu frame(s) in %.3f s; state at the start of %zu range(s) -> %s\n", scene.name.c_str(),
-                times.size(), record.seconds, written.size(), dir.c_str());
+    std::printf("%s: %zu frame(s) solved (%.3f s); the state at the start of %zu range(s) -> %s\n",
+                scene.name.c_str(), times.size(), record.seconds, written.size(), dir.c_str());
 }
 
 // Brings the solver to the frame before `first`, so that the range's first

@@ -232,19 +232,22 @@ void RunSubmit(const SubmitArgs& args) {
     std::printf("%s\n", job.ToJson().dump().c_str());
     return;
   }
+  // Paths as the user gave the folder (job.json has them absolute).
+  const fs::path shown = args.job_dir;
   std::printf("phos slurm %s: %d task(s), %s -> %s\n", args.kind.c_str(), args.tasks,
-              args.no_submit ? "scripts written (not submitted)" : "submitted", dir.c_str());
+              args.no_submit ? "scripts written (not submitted)" : "submitted", shown.c_str());
   std::string after;
   for (const SlurmStage& s : job.stages) {
+    const std::string script = (shown / fs::path(s.script).filename()).string();
     if (args.no_submit)
       std::printf("  %-5s sbatch --parsable%s %s\n", s.name.c_str(),
-                  after.empty() ? "" : " --dependency=afterok:<previous job>", s.script.c_str());
+                  after.empty() ? "" : " --dependency=afterok:<previous job>", script.c_str());
     else
       std::printf("  %-5s job %s%s  %s\n", s.name.c_str(), s.job_id.c_str(),
-                  after.empty() ? "" : (" after " + after).c_str(), s.script.c_str());
+                  after.empty() ? "" : (" after " + after).c_str(), script.c_str());
     after = args.no_submit ? "x" : s.job_id;
   }
-  std::printf("  progress: phos slurm status %s\n", dir.c_str());
+  std::printf("  progress: phos slurm status %s\n", shown.c_str());
 }
 
 // ---- phos slurm status ------------------------------------------------------

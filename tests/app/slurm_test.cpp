@@ -223,7 +223,7 @@ TEST(SlurmCluster, ArraysEqualOneProcessAndARequeuedTaskIsRedoneWhole) {
             0);
   for (const char* name : {"orange", "blue"})
     ASSERT_EQ(RunPhos("capture all --sim-material " + Fixture(std::string("materials/") + name + ".json").string() +
-                      " --out " + (work / "captures" / name).string())
+                      " --sim-size 16x12 --out " + (work / "captures" / name).string())
                   .exit_code,
               0);
   const fs::path map_job = work / "map-job", batch_job = work / "batch-job";
