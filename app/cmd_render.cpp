@@ -131,7 +131,8 @@ void SolveOnly(const RenderArgs& args, const render::Scene& scene, render::Coupl
   using namespace phos::render;
   const auto start = std::chrono::steady_clock::now();
   const std::filesystem::path dir = args.checkpoints, done = dir / "done.json";
-  const std::string inputs = RangeInputs(args, {0, times.size(), true, ""}) + " tasks=" + std::to_string(args.solve_tasks);
+  const std::string inputs =
+      RangeInputs(args, {0, times.size(), true, ""}) + " tasks=" + std::to_string(args.solve_tasks);
   nlohmann::json result = {{"scene", args.scene}, {"frames", times.size()}, {"tasks", args.solve_tasks}};
   if (TaskIsDone(done, inputs)) {
     result["done_before"] = true;
@@ -174,8 +175,8 @@ void SolveOnly(const RenderArgs& args, const render::Scene& scene, render::Coupl
   if (!solver)
     std::printf("%s: no phosphorescence, no states: ranges render without checkpoints\n", scene.name.c_str());
   else
-    std::printf("%s: %zu frame(s) solved (%.3f s); the state at the start of %zu range(s) -> %s\n",
-                scene.name.c_str(), times.size(), record.seconds, written.size(), dir.c_str());
+    std::printf("%s: %zu frame(s) solved (%.3f s); the state at the start of %zu range(s) -> %s\n", scene.name.c_str(),
+                times.size(), record.seconds, written.size(), dir.c_str());
 }
 
 // Brings the solver to the frame before `first`, so that the range's first
@@ -268,7 +269,8 @@ void Run(const RenderArgs& args) {
   if (!range.whole && !args.solve_only && TaskIsDone(done, inputs)) {
     // A rerun of a finished range (Slurm's requeue, a resubmitted array) does nothing.
     if (args.json)
-      std::cout << nlohmann::json({{"scene", args.scene}, {"done_before", true}, {"done", done.string()}}).dump() << "\n";
+      std::cout << nlohmann::json({{"scene", args.scene}, {"done_before", true}, {"done", done.string()}}).dump()
+                << "\n";
     else
       std::printf("%s: frames %zu:%zu already rendered (%s): nothing to do\n", scene.name.c_str(), range.first,
                   range.last, done.c_str());
@@ -348,7 +350,10 @@ void Run(const RenderArgs& args) {
   nlohmann::json frames = nlohmann::json::array();
   std::vector<Image> sheet_frames;
   std::vector<std::string> sheet_labels;
-  ProgressBar progress("render " + scene.name, times.size());
+  // Counted in rows of pixels, so the bar moves inside a long (path-traced) frame.
+  ProgressBar progress("render " + scene.name,
+                       (range.last - range.first) * static_cast<std::size_t>(scene.camera.height));
+  options.progress_rows = &progress;
   for (std::size_t f = range.first; f < range.last; ++f) {
     const double t = times[f];
     options.frame = f;  // the path tracer's seed: pixel, frame and sample
@@ -392,14 +397,16 @@ void Run(const RenderArgs& args) {
       entry["night_png"] = night_png.string();
     }
     frames.push_back(entry);
-    progress.Advance();
   }
   progress.Finish();
   if (!args.contact_sheet.empty()) WriteContactSheet(args.contact_sheet, sheet_frames, sheet_labels, 4);
   if (!range.whole) {
     // Last, after every frame is whole on disk: the range is done.
-    TaskDoneRecord record{"render frames " + std::to_string(range.first) + ":" + std::to_string(range.last), inputs,
-                          {}, Seconds(task_start), HostName()};
+    TaskDoneRecord record{"render frames " + std::to_string(range.first) + ":" + std::to_string(range.last),
+                          inputs,
+                          {},
+                          Seconds(task_start),
+                          HostName()};
     for (const auto& frame : frames) record.outputs.push_back(frame["exr"].get<std::string>());
     WriteTaskDone(done, record);
   }

@@ -12,6 +12,9 @@
 //     phosphorescence over one without; counter `ratio`.
 //   BM_FrameAfterLightsOut: a frame an hour after lights-out over one a second
 //     after; counter `ratio` (the goal: within 20% of 1).
+//   BM_PathAgainstBareEmbree: a path-traced frame over bare rtcIntersect1 /
+//     rtcOccluded1 calls on the very rays that frame cast (recorded, then
+//     replayed in the same order); counter `ratio` (issue 17: at most 1.5).
 //
 // Run: build/bin/bench_render (make bench saves the output in docs/bench/).
 
@@ -22,6 +25,8 @@
 #include <memory>
 #include <random>
 
+#include <embree3/rtcore.h>
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
 #include "phos/render/dss.h"
@@ -153,6 +158,109 @@ void BM_EmbreeCeilingIncoherent(benchmark::State& state) {
   state.counters["Mrays/s"] = benchmark::Counter(static_cast<double>(rays) * 1e-6, benchmark::Counter::kIsRate);
 }
 BENCHMARK(BM_EmbreeCeilingIncoherent)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// Every ray a frame casts, per thread in the order cast.
+class ThreadRayLog : public RayRecorder {
+ public:
+  void Record(const CastRay& ray) override { rays_.local().push_back(ray); }
+  std::vector<CastRay> Flatten() const {
+    std::vector<CastRay> all;
+    for (const auto& rays : rays_) all.insert(all.end(), rays.begin(), rays.end());
+    return all;
+  }
+
+ private:
+  tbb::enumerable_thread_specific<std::vector<CastRay>> rays_;
+};
+
+// Embree alone on recorded rays: the renderer's calls without anything
+// around them (no hit record, no shading), in blocks of consecutive rays.
+int ReplayBare(RTCScene scene, const std::vector<CastRay>& rays) {
+  std::atomic<int> hits{0};
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, rays.size(), 4096),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      RTCIntersectContext context;
+                      rtcInitIntersectContext(&context);
+                      int h = 0;
+                      for (std::size_t i = r.begin(); i < r.end(); ++i) {
+                        const CastRay& c = rays[i];
+                        RTCRayHit ray{};
+                        ray.ray.org_x = c.origin.x();
+                        ray.ray.org_y = c.origin.y();
+                        ray.ray.org_z = c.origin.z();
+                        ray.ray.dir_x = c.direction.x();
+                        ray.ray.dir_y = c.direction.y();
+                        ray.ray.dir_z = c.direction.z();
+                        ray.ray.tfar = c.t_far;
+                        ray.ray.mask = 0xFFFFFFFFu;
+                        if (c.occlusion) {
+                          rtcOccluded1(scene, &context, &ray.ray);
+                          h += ray.ray.tfar < 0;
+                        } else {
+                          ray.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+                          rtcIntersect1(scene, &context, &ray);
+                          h += ray.hit.geomID != RTC_INVALID_GEOMETRY_ID;
+                        }
+                      }
+                      hits += h;
+                    });
+  return hits.load();
+}
+
+// The same rays through SceneGeometry's Intersect and Occluded (the hit
+// record: position, normal, side).
+int ReplayWrapped(const SceneGeometry& geometry, const std::vector<CastRay>& rays) {
+  std::atomic<int> hits{0};
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, rays.size(), 4096),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      int h = 0;
+                      for (std::size_t i = r.begin(); i < r.end(); ++i) {
+                        const CastRay& c = rays[i];
+                        h += c.occlusion ? geometry.Occluded(c.origin, c.direction, c.t_far)
+                                         : static_cast<bool>(geometry.Intersect(c.origin, c.direction, c.t_far));
+                      }
+                      hits += h;
+                    });
+  return hits.load();
+}
+
+// The path tracer (1 spp, lit at 20 s or dark at 40 s) against bare Embree on
+// the same rays: what shading, sampling and bookkeeping add to tracing.
+// Alternated; best of each side.
+void BM_PathAgainstBareEmbree(benchmark::State& state) {
+  Cornell c;
+  c.solver->AdvanceTo(static_cast<double>(state.range(0)));
+  FrameOptions options = DefaultFrameOptions(c.scene, Transport::kPath);
+  options.spp = 1;
+  ThreadRayLog log;
+  c.geometry->SetRayRecorder(&log);
+  FrameStats recorded;
+  RenderBands(*c.geometry, c.solver.get(), options, &recorded);
+  c.geometry->SetRayRecorder(nullptr);
+  const std::vector<CastRay> rays = log.Flatten();
+  std::size_t shadow = 0;
+  for (const CastRay& r : rays) shadow += r.occlusion;
+  double best_path = 1e9, best_bare = 1e9, best_wrapped = 1e9;
+  for (auto _ : state) {
+    double start = Now();
+    Image image = RenderBands(*c.geometry, c.solver.get(), options);
+    best_path = std::min(best_path, Now() - start);
+    start = Now();
+    benchmark::DoNotOptimize(ReplayBare(c.geometry->embree_scene(), rays));
+    best_bare = std::min(best_bare, Now() - start);
+    start = Now();
+    benchmark::DoNotOptimize(ReplayWrapped(*c.geometry, rays));
+    best_wrapped = std::min(best_wrapped, Now() - start);
+    benchmark::DoNotOptimize(image.pixels.data());
+  }
+  state.counters["wrapped_ratio"] = best_wrapped / best_bare;
+  state.counters["rays"] = static_cast<double>(rays.size());
+  state.counters["shadow_share"] = static_cast<double>(shadow) / static_cast<double>(rays.size());
+  state.counters["path_Mrays/s"] = static_cast<double>(rays.size()) * 1e-6 / best_path;
+  state.counters["bare_Mrays/s"] = static_cast<double>(rays.size()) * 1e-6 / best_bare;
+  state.counters["ratio"] = best_path / best_bare;
+}
+BENCHMARK(BM_PathAgainstBareEmbree)->Arg(20)->Arg(40)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(2.0);
 
 // A frame of an animation at 30 fps while the LED is on: the coupled step for
 // 1/30 s and the direct render, against the render alone of the same scene

@@ -39,6 +39,8 @@ SceneGeometry::SceneGeometry(const Scene& scene) : scene_(scene), embree_(std::m
   embree_->scene = rtcNewScene(embree_->device);
   rtcSetSceneBuildQuality(embree_->scene, RTC_BUILD_QUALITY_HIGH);
   world_.resize(scene.objects.size());
+  front_normal_.resize(scene.objects.size());
+  area_.resize(scene.objects.size());
   time_s_ = scene.start_s;
   for (std::size_t o = 0; o < scene.objects.size(); ++o) {
     const Mesh& mesh = *scene.objects[o].mesh;
@@ -81,7 +83,20 @@ void SceneGeometry::Upload(int object) {
   }
   rtcUpdateGeometryBuffer(embree_->geometries[object], RTC_BUFFER_TYPE_VERTEX, 0);
   rtcCommitGeometry(embree_->geometries[object]);
+  const std::size_t triangles = o.mesh->triangles.size();
+  front_normal_[object].resize(triangles);
+  area_[object].resize(triangles);
+  for (std::size_t t = 0; t < triangles; ++t) {
+    const int triangle = static_cast<int>(t);
+    const Vec3f v0 = Vertex(object, triangle, 0);
+    const Vec3f n = (Vertex(object, triangle, 1) - v0).cross(Vertex(object, triangle, 2) - v0);
+    const float length = n.norm();
+    front_normal_[object][t] = length > 0 ? Vec3f(n / length) : Vec3f(0, 0, 1);
+    area_[object][t] = 0.5f * length;
+  }
 }
+
+RTCSceneTy* SceneGeometry::embree_scene() const { return embree_->scene; }
 
 bool SceneGeometry::SetTime(double t_s) {
   bool moved = false;
@@ -101,6 +116,8 @@ bool SceneGeometry::SetTime(double t_s) {
 }
 
 Hit SceneGeometry::Intersect(const Vec3f& origin, const Vec3f& direction, float t_far) const {
+  if (recorder_) [[unlikely]]
+    recorder_->Record({origin, direction, t_far, false});
   RTCIntersectContext context;
   rtcInitIntersectContext(&context);
   RTCRayHit ray{};
@@ -130,6 +147,8 @@ Hit SceneGeometry::Intersect(const Vec3f& origin, const Vec3f& direction, float 
 }
 
 bool SceneGeometry::Occluded(const Vec3f& origin, const Vec3f& direction, float t_far) const {
+  if (recorder_) [[unlikely]]
+    recorder_->Record({origin, direction, t_far, true});
   RTCIntersectContext context;
   rtcInitIntersectContext(&context);
   RTCRay ray{};
@@ -151,18 +170,6 @@ Vec3f SceneGeometry::Point(int object, int triangle, float b1, float b2) const {
          b2 * Vertex(object, triangle, 2);
 }
 
-Vec3f SceneGeometry::FrontNormal(int object, int triangle) const {
-  const Vec3f v0 = Vertex(object, triangle, 0);
-  const Vec3f n = (Vertex(object, triangle, 1) - v0).cross(Vertex(object, triangle, 2) - v0);
-  const float length = n.norm();
-  return length > 0 ? Vec3f(n / length) : Vec3f(0, 0, 1);
-}
-
-float SceneGeometry::Area(int object, int triangle) const {
-  const Vec3f v0 = Vertex(object, triangle, 0);
-  return 0.5f * (Vertex(object, triangle, 1) - v0).cross(Vertex(object, triangle, 2) - v0).norm();
-}
-
 LightPose PoseAt(const Light& light, double t_s) {
   LightPose pose;
   pose.kind = light.kind;
@@ -179,24 +186,35 @@ LightPose PoseAt(const Light& light, double t_s) {
   return pose;
 }
 
-float UnitIrradiance(const SceneGeometry& geometry, const LightPose& light, const Vec3f& p, const Vec3f& n,
-                     std::uint64_t* rays) {
-  const Vec3f origin = p + geometry.ray_epsilon() * n;
+LightRay RayToLight(const SceneGeometry& geometry, const LightPose& light, const Vec3f& p, const Vec3f& n) {
+  LightRay ray;
+  ray.origin = p + geometry.ray_epsilon() * n;
   if (light.kind == Light::Kind::kPoint) {
     const Vec3f d = light.at - p;
     const float distance2 = d.squaredNorm(), distance = std::sqrt(distance2);
     const float cosine = distance > 0 ? n.dot(d) / distance : 0.0f;
-    if (!(cosine > 0)) return 0.0f;  // behind the surface: only its front charges and reflects
-    if (rays) ++*rays;
-    if (geometry.Occluded(origin, d / distance, distance * (1 - 1e-4f) - geometry.ray_epsilon())) return 0.0f;
-    return cosine / distance2;
+    if (!(cosine > 0)) return ray;  // behind the surface: only its front charges and reflects
+    ray.direction = d / distance;
+    ray.t_far = distance * (1 - 1e-4f) - geometry.ray_epsilon();
+    ray.unit = cosine / distance2;
+    return ray;
   }
-  if (light.SheetMask(p) == 0) return 0.0f;
+  if (light.SheetMask(p) == 0) return ray;
   const Vec3f to_light = -light.at;
   const float cosine = n.dot(to_light);
-  if (!(cosine > 0)) return 0.0f;
+  if (!(cosine > 0)) return ray;
+  ray.direction = to_light;
+  ray.t_far = 1e30f;
+  ray.unit = cosine;
+  return ray;
+}
+
+float UnitIrradiance(const SceneGeometry& geometry, const LightPose& light, const Vec3f& p, const Vec3f& n,
+                     std::uint64_t* rays) {
+  const LightRay ray = RayToLight(geometry, light, p, n);
+  if (ray.unit == 0) return 0.0f;
   if (rays) ++*rays;
-  return geometry.Occluded(origin, to_light, 1e30f) ? 0.0f : cosine;
+  return geometry.Occluded(ray.origin, ray.direction, ray.t_far) ? 0.0f : ray.unit;
 }
 
 float UnitSkyIrradiance(const SceneGeometry& geometry, const Environment& environment, const Vec3f& p, const Vec3f& n,

@@ -18,9 +18,26 @@
 
 #include "phos/render/scene.h"
 
+struct RTCSceneTy;  // Embree 3's scene handle (RTCScene), for benchmarks that call Embree directly
+
 namespace phos::render {
 
 using Vec3f = Eigen::Vector3f;
+
+// A ray as SceneGeometry cast it: bench_render replays a frame's own rays
+// through bare rtcIntersect1 / rtcOccluded1 to measure what the renderer
+// adds to Embree's cost (issue 17).
+struct CastRay {
+  Vec3f origin, direction;
+  float t_far;
+  bool occlusion;  // a shadow ray (Occluded), else a closest hit (Intersect)
+};
+// Receives every ray cast while it is installed, from any thread.
+class RayRecorder {
+ public:
+  virtual ~RayRecorder() = default;
+  virtual void Record(const CastRay& ray) = 0;
+};
 
 // The sub-triangle of barycentric (b1, b2) (weights of vertices 1 and 2) in
 // a triangle split m x m: an index in [0, m^2). Row i = floor(b1 m) holds
@@ -72,18 +89,29 @@ class SceneGeometry {
     return world_[object][scene_.objects[object].mesh->triangles[triangle][corner]];
   }
   Vec3f Point(int object, int triangle, float b1, float b2) const;
-  Vec3f FrontNormal(int object, int triangle) const;
-  float Area(int object, int triangle) const;
+  // The unit normal on the side the triangle's winding faces (counter-
+  // clockwise seen from the front), and the area: computed once per pose in
+  // Upload, since every ray hit asks for them.
+  const Vec3f& FrontNormal(int object, int triangle) const { return front_normal_[object][triangle]; }
+  float Area(int object, int triangle) const { return area_[object][triangle]; }
   // A distance to step off a surface before casting a ray from it.
   float ray_epsilon() const { return ray_epsilon_; }
   float diagonal_m() const { return diagonal_; }
+
+  // Installs a recorder of every ray cast (nullptr removes it). Not while
+  // rays are being cast.
+  void SetRayRecorder(RayRecorder* recorder) { recorder_ = recorder; }
+  RTCSceneTy* embree_scene() const;
 
  private:
   void Upload(int object);
   const Scene& scene_;
   struct Embree;
   std::unique_ptr<Embree> embree_;
-  std::vector<std::vector<Vec3f>> world_;  // world-space vertices per object
+  std::vector<std::vector<Vec3f>> world_;         // world-space vertices per object
+  std::vector<std::vector<Vec3f>> front_normal_;  // per object, per triangle
+  std::vector<std::vector<float>> area_;          // per object, per triangle, m^2
+  RayRecorder* recorder_ = nullptr;
   double time_s_ = 0;
   std::uint64_t version_ = 0;
   float ray_epsilon_ = 1e-4f, diagonal_ = 1.0f;
@@ -129,6 +157,14 @@ LightPose PoseAt(const Light& light, double t_s);
 // Sec. 8.5). If `rays` is given, it counts the shadow rays cast. Used by the
 // coupled solver, every transport, the comparison methods and the editor, so
 // that all of them light a point the same way.
+// UnitIrradiance in two steps, for callers that cast their shadow rays in
+// batches (the path tracer): the ray, and what the point receives if nothing
+// blocks it (unit = 0: nothing to test, the light does not reach it).
+struct LightRay {
+  Vec3f origin = Vec3f::Zero(), direction = Vec3f::Zero();
+  float t_far = 0, unit = 0;
+};
+LightRay RayToLight(const SceneGeometry& geometry, const LightPose& light, const Vec3f& p, const Vec3f& n);
 float UnitIrradiance(const SceneGeometry& geometry, const LightPose& light, const Vec3f& p, const Vec3f& n,
                      std::uint64_t* rays = nullptr);
 

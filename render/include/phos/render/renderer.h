@@ -32,6 +32,10 @@
 #include "phos/render/scene.h"
 #include "phos/render/solver.h"
 
+namespace phos {
+class ProgressBar;
+}
+
 namespace phos::render {
 
 enum class Transport { kDirect, kPath, kDss };
@@ -61,6 +65,9 @@ struct FrameOptions {
   int interval_layers = 4;           // dss with media: points per pixel of the transmittance interval map
   int sky_rays = 16;                 // direct (and what dss surfels receive): shadow rays per point for the sky
   bool indirect_visibility = false;  // dss: the bounced z-buffer (no leaking, no over-occlusion) instead of blending
+  // Advanced by one for every row of pixels finished (a path-traced frame
+  // can take minutes: the bar moves inside it). Null: no progress.
+  ProgressBar* progress_rows = nullptr;
 };
 FrameOptions DefaultFrameOptions(const Scene& scene, Transport transport);
 

@@ -9,5 +9,9 @@ namespace phos {
 
 inline constexpr double kPi = std::numbers::pi;
 inline constexpr float kPiF = std::numbers::pi_v<float>;
+// 1 / pi, for multiplying where a division would sit on a hot path (a
+// division by the constant kPiF is not turned into a multiplication without
+// -ffast-math).
+inline constexpr float kInvPiF = std::numbers::inv_pi_v<float>;
 
 }  // namespace phos
