@@ -39,6 +39,7 @@ SceneGeometry::SceneGeometry(const Scene& scene) : scene_(scene), embree_(std::m
   embree_->scene = rtcNewScene(embree_->device);
   rtcSetSceneBuildQuality(embree_->scene, RTC_BUILD_QUALITY_HIGH);
   world_.resize(scene.objects.size());
+  corners_.resize(scene.objects.size());
   front_normal_.resize(scene.objects.size());
   area_.resize(scene.objects.size());
   time_s_ = scene.start_s;
@@ -84,10 +85,12 @@ void SceneGeometry::Upload(int object) {
   rtcUpdateGeometryBuffer(embree_->geometries[object], RTC_BUFFER_TYPE_VERTEX, 0);
   rtcCommitGeometry(embree_->geometries[object]);
   const std::size_t triangles = o.mesh->triangles.size();
+  corners_[object].resize(triangles);
   front_normal_[object].resize(triangles);
   area_[object].resize(triangles);
   for (std::size_t t = 0; t < triangles; ++t) {
     const int triangle = static_cast<int>(t);
+    for (int c = 0; c < 3; ++c) corners_[object][t][c] = Vertex(object, triangle, c);
     const Vec3f v0 = Vertex(object, triangle, 0);
     const Vec3f n = (Vertex(object, triangle, 1) - v0).cross(Vertex(object, triangle, 2) - v0);
     const float length = n.norm();
@@ -146,6 +149,74 @@ Hit SceneGeometry::Intersect(const Vec3f& origin, const Vec3f& direction, float 
   return hit;
 }
 
+namespace {
+// Embree's stream calls take arrays; a thread's scratch keeps them allocated.
+thread_local std::vector<RTCRayHit> stream_ray_hits;
+thread_local std::vector<RTCRay> stream_rays;
+
+void SetRay(RTCRay& ray, const Vec3f& origin, const Vec3f& direction, float t_far) {
+  ray.org_x = origin.x();
+  ray.org_y = origin.y();
+  ray.org_z = origin.z();
+  ray.tnear = 0.0f;
+  ray.dir_x = direction.x();
+  ray.dir_y = direction.y();
+  ray.dir_z = direction.z();
+  ray.time = 0.0f;
+  ray.tfar = t_far;
+  ray.mask = 0xFFFFFFFFu;
+  ray.id = 0;
+  ray.flags = 0;
+}
+}  // namespace
+
+void SceneGeometry::IntersectMany(const RayQuery* queries, std::size_t count, Hit* hits, bool coherent) const {
+  if (count == 0) return;
+  std::vector<RTCRayHit>& rays = stream_ray_hits;
+  rays.resize(count);
+  for (std::size_t i = 0; i < count; ++i) {
+    if (recorder_) [[unlikely]]
+      recorder_->Record({queries[i].origin, queries[i].direction, queries[i].t_far, false});
+    SetRay(rays[i].ray, queries[i].origin, queries[i].direction, queries[i].t_far);
+    rays[i].hit.geomID = RTC_INVALID_GEOMETRY_ID;
+    rays[i].hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+  }
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  context.flags = coherent ? RTC_INTERSECT_CONTEXT_FLAG_COHERENT : RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
+  rtcIntersect1M(embree_->scene, &context, rays.data(), static_cast<unsigned>(count), sizeof(RTCRayHit));
+  for (std::size_t i = 0; i < count; ++i) {
+    const RTCRayHit& ray = rays[i];
+    Hit& hit = hits[i];
+    hit = Hit{};
+    if (ray.hit.geomID == RTC_INVALID_GEOMETRY_ID) continue;
+    hit.object = static_cast<int>(ray.hit.geomID);
+    hit.triangle = static_cast<int>(ray.hit.primID);
+    hit.b1 = ray.hit.u;
+    hit.b2 = ray.hit.v;
+    hit.distance = ray.ray.tfar;
+    hit.position = Point(hit.object, hit.triangle, hit.b1, hit.b2);
+    hit.normal = FrontNormal(hit.object, hit.triangle);
+    hit.front = hit.normal.dot(queries[i].direction) < 0;
+  }
+}
+
+void SceneGeometry::OccludedMany(const RayQuery* queries, std::size_t count, bool* occluded) const {
+  if (count == 0) return;
+  std::vector<RTCRay>& rays = stream_rays;
+  rays.resize(count);
+  for (std::size_t i = 0; i < count; ++i) {
+    if (recorder_) [[unlikely]]
+      recorder_->Record({queries[i].origin, queries[i].direction, queries[i].t_far, true});
+    SetRay(rays[i], queries[i].origin, queries[i].direction, queries[i].t_far);
+  }
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  context.flags = RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
+  rtcOccluded1M(embree_->scene, &context, rays.data(), static_cast<unsigned>(count), sizeof(RTCRay));
+  for (std::size_t i = 0; i < count; ++i) occluded[i] = rays[i].tfar < 0.0f;  // -inf on a hit
+}
+
 bool SceneGeometry::Occluded(const Vec3f& origin, const Vec3f& direction, float t_far) const {
   if (recorder_) [[unlikely]]
     recorder_->Record({origin, direction, t_far, true});
@@ -166,8 +237,8 @@ bool SceneGeometry::Occluded(const Vec3f& origin, const Vec3f& direction, float 
 }
 
 Vec3f SceneGeometry::Point(int object, int triangle, float b1, float b2) const {
-  return (1 - b1 - b2) * Vertex(object, triangle, 0) + b1 * Vertex(object, triangle, 1) +
-         b2 * Vertex(object, triangle, 2);
+  const std::array<Vec3f, 3>& v = corners_[object][triangle];
+  return (1 - b1 - b2) * v[0] + b1 * v[1] + b2 * v[2];
 }
 
 LightPose PoseAt(const Light& light, double t_s) {

@@ -9,6 +9,7 @@
 // O(1) arithmetic.
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <memory>
@@ -81,6 +82,16 @@ class SceneGeometry {
   Hit Intersect(const Vec3f& origin, const Vec3f& direction, float t_far = 1e30f) const;
   // True if something lies between origin and origin + t_far * direction.
   bool Occluded(const Vec3f& origin, const Vec3f& direction, float t_far) const;
+  // Many independent rays at once, through Embree's stream interface
+  // (rtcIntersect1M, rtcOccluded1M), which traces them in packets: the path
+  // tracer's wavefront. `coherent`: rays from one point through neighbouring
+  // pixels (camera rays), else scattered. Each hit as Intersect would find it.
+  struct RayQuery {
+    Vec3f origin, direction;
+    float t_far = 1e30f;
+  };
+  void IntersectMany(const RayQuery* queries, std::size_t count, Hit* hits, bool coherent) const;
+  void OccludedMany(const RayQuery* queries, std::size_t count, bool* occluded) const;
 
   const Scene& scene() const { return scene_; }
   int object_count() const { return static_cast<int>(world_.size()); }
@@ -108,7 +119,11 @@ class SceneGeometry {
   const Scene& scene_;
   struct Embree;
   std::unique_ptr<Embree> embree_;
-  std::vector<std::vector<Vec3f>> world_;         // world-space vertices per object
+  std::vector<std::vector<Vec3f>> world_;  // world-space vertices per object
+  // Per object, per triangle: its three world-space vertices side by side, so
+  // that a hit's position is one cache line away, not a walk through the
+  // mesh's index buffer.
+  std::vector<std::vector<std::array<Vec3f, 3>>> corners_;
   std::vector<std::vector<Vec3f>> front_normal_;  // per object, per triangle
   std::vector<std::vector<float>> area_;          // per object, per triangle, m^2
   RayRecorder* recorder_ = nullptr;
