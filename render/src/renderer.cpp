@@ -744,8 +744,7 @@ Image RenderBands(const SceneGeometry& geometry, const CoupledSolver* solver, co
           // Directional occlusion: the sky less what the surfels hide of it.
           const float gradient = static_cast<float>(scene.environment->gradient);
           const float unit =
-              std::max(0.0f, kPiF * (1 - indirect.occlusion[p]) +
-                                 gradient * (2 * kPiF / 3 * g.normal[p].y() - kPiF * indirect.occlusion_y[p]));
+              SkyIrradianceFromOcclusion(indirect.occlusion[p], indirect.occlusion_y[p], g.normal[p].y(), gradient);
           for (int b = 0; b < nb; ++b) out[b] += T * albedo[b] * tracer.sky_L()[b] * unit / kPiF;
         }
       }
@@ -764,9 +763,8 @@ Image RenderBands(const SceneGeometry& geometry, const CoupledSolver* solver, co
       }
       // The near field of each receiver (two target surfel radii at its
       // depth) from its own irradiance in closed form; the surfels send the rest.
-      const float tan_half = std::tan(static_cast<float>(scene.camera.fov_deg) * kPiF / 360.0f);
-      std::vector<float> near(g.depth.size(), 0.0f);
-      for (std::size_t p = 0; p < near.size(); ++p) near[p] = 2 * SurfelOptions{}.s * tan_half * g.depth[p];
+      const std::vector<float> near =
+          SubsurfaceNearField(g, SurfelOptions{}.s, static_cast<float>(scene.camera.fov_deg));
       DssOptions sss_options = dss;
       sss_options.dipoles = &dipoles;
       sss_options.near_m = &near;
