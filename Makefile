@@ -3,7 +3,8 @@
 #   make test   install what is missing, build under ASan+UBSan, run every test (ctest),
 #               then every fuzz harness for FUZZ_CI_SECONDS (4 s) each
 # Other targets: build (Release only), bench (benchmarks, Release), study
-# (regenerate the integrator error, Glassner and nc trade studies in docs/),
+# (regenerate the integrator error, Glassner, nc, dss, appearance and path
+# tracer convergence studies in docs/),
 # fuzz (the libFuzzer harnesses for FUZZ_SECONDS each, docs/fuzzing.md), format
 # (clang-format, .clang-format, on every tracked C++ file), clean.
 
@@ -40,6 +41,7 @@ study: build
 	@build/bin/phos-nc-study --out docs
 	@build/bin/phos-dss-study --out docs
 	@build/bin/phos-appearance-study --out docs
+	@build/bin/phos-path-study --out docs
 
 # The harnesses (fuzz/, its own CMake project: clang, libFuzzer, ASan + UBSan,
 # only the loaders' sources), each run for FUZZ_SECONDS, one at a time.
