@@ -118,37 +118,6 @@ bool SceneGeometry::SetTime(double t_s) {
   return moved;
 }
 
-Hit SceneGeometry::Intersect(const Vec3f& origin, const Vec3f& direction, float t_far) const {
-  if (recorder_) [[unlikely]]
-    recorder_->Record({origin, direction, t_far, false});
-  RTCIntersectContext context;
-  rtcInitIntersectContext(&context);
-  RTCRayHit ray{};
-  ray.ray.org_x = origin.x();
-  ray.ray.org_y = origin.y();
-  ray.ray.org_z = origin.z();
-  ray.ray.dir_x = direction.x();
-  ray.ray.dir_y = direction.y();
-  ray.ray.dir_z = direction.z();
-  ray.ray.tnear = 0.0f;
-  ray.ray.tfar = t_far;
-  ray.ray.mask = 0xFFFFFFFFu;
-  ray.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-  ray.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
-  rtcIntersect1(embree_->scene, &context, &ray);
-  Hit hit;
-  if (ray.hit.geomID == RTC_INVALID_GEOMETRY_ID) return hit;
-  hit.object = static_cast<int>(ray.hit.geomID);
-  hit.triangle = static_cast<int>(ray.hit.primID);
-  hit.b1 = ray.hit.u;
-  hit.b2 = ray.hit.v;
-  hit.distance = ray.ray.tfar;
-  hit.position = Point(hit.object, hit.triangle, hit.b1, hit.b2);
-  hit.normal = FrontNormal(hit.object, hit.triangle);
-  hit.front = hit.normal.dot(direction) < 0;
-  return hit;
-}
-
 namespace {
 // Embree's stream calls take arrays; a thread's scratch keeps them allocated.
 thread_local std::vector<RTCRayHit> stream_ray_hits;
@@ -168,7 +137,40 @@ void SetRay(RTCRay& ray, const Vec3f& origin, const Vec3f& direction, float t_fa
   ray.id = 0;
   ray.flags = 0;
 }
+
+void SetRayHit(RTCRayHit& ray, const Vec3f& origin, const Vec3f& direction, float t_far) {
+  SetRay(ray.ray, origin, direction, t_far);
+  ray.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+  ray.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+}
+
+// The hit record of a traced ray: position from the barycentrics (closer to
+// the surface than origin + t direction), the front normal, and the side.
+Hit HitOf(const SceneGeometry& geometry, const RTCRayHit& ray, const Vec3f& direction) {
+  Hit hit;
+  if (ray.hit.geomID == RTC_INVALID_GEOMETRY_ID) return hit;
+  hit.object = static_cast<int>(ray.hit.geomID);
+  hit.triangle = static_cast<int>(ray.hit.primID);
+  hit.b1 = ray.hit.u;
+  hit.b2 = ray.hit.v;
+  hit.distance = ray.ray.tfar;
+  hit.position = geometry.Point(hit.object, hit.triangle, hit.b1, hit.b2);
+  hit.normal = geometry.FrontNormal(hit.object, hit.triangle);
+  hit.front = hit.normal.dot(direction) < 0;
+  return hit;
+}
 }  // namespace
+
+Hit SceneGeometry::Intersect(const Vec3f& origin, const Vec3f& direction, float t_far) const {
+  if (recorder_) [[unlikely]]
+    recorder_->Record({origin, direction, t_far, false});
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  RTCRayHit ray{};
+  SetRayHit(ray, origin, direction, t_far);
+  rtcIntersect1(embree_->scene, &context, &ray);
+  return HitOf(*this, ray, direction);
+}
 
 void SceneGeometry::IntersectMany(const RayQuery* queries, std::size_t count, Hit* hits, bool coherent) const {
   if (count == 0) return;
@@ -177,28 +179,13 @@ void SceneGeometry::IntersectMany(const RayQuery* queries, std::size_t count, Hi
   for (std::size_t i = 0; i < count; ++i) {
     if (recorder_) [[unlikely]]
       recorder_->Record({queries[i].origin, queries[i].direction, queries[i].t_far, false});
-    SetRay(rays[i].ray, queries[i].origin, queries[i].direction, queries[i].t_far);
-    rays[i].hit.geomID = RTC_INVALID_GEOMETRY_ID;
-    rays[i].hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+    SetRayHit(rays[i], queries[i].origin, queries[i].direction, queries[i].t_far);
   }
   RTCIntersectContext context;
   rtcInitIntersectContext(&context);
   context.flags = coherent ? RTC_INTERSECT_CONTEXT_FLAG_COHERENT : RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
   rtcIntersect1M(embree_->scene, &context, rays.data(), static_cast<unsigned>(count), sizeof(RTCRayHit));
-  for (std::size_t i = 0; i < count; ++i) {
-    const RTCRayHit& ray = rays[i];
-    Hit& hit = hits[i];
-    hit = Hit{};
-    if (ray.hit.geomID == RTC_INVALID_GEOMETRY_ID) continue;
-    hit.object = static_cast<int>(ray.hit.geomID);
-    hit.triangle = static_cast<int>(ray.hit.primID);
-    hit.b1 = ray.hit.u;
-    hit.b2 = ray.hit.v;
-    hit.distance = ray.ray.tfar;
-    hit.position = Point(hit.object, hit.triangle, hit.b1, hit.b2);
-    hit.normal = FrontNormal(hit.object, hit.triangle);
-    hit.front = hit.normal.dot(queries[i].direction) < 0;
-  }
+  for (std::size_t i = 0; i < count; ++i) hits[i] = HitOf(*this, rays[i], queries[i].direction);
 }
 
 void SceneGeometry::OccludedMany(const RayQuery* queries, std::size_t count, bool* occluded) const {
@@ -223,15 +210,7 @@ bool SceneGeometry::Occluded(const Vec3f& origin, const Vec3f& direction, float 
   RTCIntersectContext context;
   rtcInitIntersectContext(&context);
   RTCRay ray{};
-  ray.org_x = origin.x();
-  ray.org_y = origin.y();
-  ray.org_z = origin.z();
-  ray.dir_x = direction.x();
-  ray.dir_y = direction.y();
-  ray.dir_z = direction.z();
-  ray.tnear = 0.0f;
-  ray.tfar = t_far;
-  ray.mask = 0xFFFFFFFFu;
+  SetRay(ray, origin, direction, t_far);
   rtcOccluded1(embree_->scene, &context, &ray);
   return ray.tfar < 0.0f;  // Embree sets tfar to -inf on a hit
 }

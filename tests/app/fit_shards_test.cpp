@@ -24,7 +24,8 @@ TEST(FitShards, MapTilesMergeIntoTheWholeMap) {
   const CommandResult whole = RunPhos("fit map " + session + " --out " + (dir / "whole").string());
   ASSERT_EQ(whole.exit_code, 0) << whole.err;
   const std::string tiled = (dir / "tiled").string();
-  for (int i : {2, 0}) ASSERT_EQ(RunPhos("fit map " + session + " --out " + tiled + " --tile " + std::to_string(i) + "/3").exit_code, 0);
+  for (int i : {2, 0})
+    ASSERT_EQ(RunPhos("fit map " + session + " --out " + tiled + " --tile " + std::to_string(i) + "/3").exit_code, 0);
   // A tile missing: the merge names it and writes nothing.
   CommandResult merge = RunPhos("fit map " + session + " --out " + tiled + " --merge");
   EXPECT_EQ(merge.exit_code, 2);
@@ -58,7 +59,7 @@ TEST(FitShards, BatchTasksThenMergeEqualOneBatch) {
   TempDir dir;
   for (const char* name : {"orange", "blue"})
     ASSERT_EQ(RunPhos("capture all --sim-material " + Fixture(std::string("materials/") + name + ".json").string() +
-                      " --out " + (dir / "captures" / name).string())
+                      " --sim-size 16x12 --out " + (dir / "captures" / name).string())
                   .exit_code,
               0);
   const std::string captures = (dir / "captures").string();
@@ -75,7 +76,8 @@ TEST(FitShards, BatchTasksThenMergeEqualOneBatch) {
   ASSERT_EQ(merge.exit_code, 0) << merge.err;
   EXPECT_EQ(nlohmann::json::parse(merge.out)["kept"].get<int>(), 2);
   for (const char* name : {"orange", "blue"})
-    EXPECT_EQ(ReadText(dir / "whole" / (std::string(name) + ".json")), ReadText(dir / "tasks" / (std::string(name) + ".json")))
+    EXPECT_EQ(ReadText(dir / "whole" / (std::string(name) + ".json")),
+              ReadText(dir / "tasks" / (std::string(name) + ".json")))
         << name;
 }
 
