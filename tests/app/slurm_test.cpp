@@ -20,6 +20,8 @@
 #include <cstring>
 #include <functional>
 #include <map>
+#include <set>
+#include <string>
 #include <thread>
 
 #include <nlohmann/json.hpp>
