@@ -230,12 +230,6 @@ class Tracer {
     const int slot = solver_->atlas().SlotOf(hit.object);
     if (slot < 0) return;
     const std::size_t texel = solver_->atlas().TexelOf(slot, hit.triangle, hit.b1, hit.b2);
-    if (!glow_by_texel_.empty()) {
-      const GlowByTexel& glow = glow_by_texel_[slot];
-      const float* Lp = &glow.Lp[texel * glow.bands.size()];
-      for (std::size_t i = 0; i < glow.bands.size(); ++i) L[glow.bands[i]] += Lp[i];
-      return;
-    }
     for (int b : solver_->emission_bands(slot)) L[b] += solver_->Lp(slot, b, texel);
   }
 
