@@ -4,10 +4,16 @@
 // Writes the sbatch scripts into DIR and submits them: for a render, the
 // solver pass (the states are sequential in time), then the array of frame
 // ranges; for a map, the array of tiles; for a batch, the array of item
-// shares; then a merge job. Each job depends on the one before
-// (--dependency=afterok), so a failed task stops what follows. Every task is
-// idempotent (its done record, util/task_record.h), so Slurm's requeue and a
-// resubmission are safe; `status` counts the records.
+// shares; then a merge job. The array waits for the solver pass to succeed
+// (--dependency=afterok). The merge waits for every task to end
+// (--dependency=afterany) and checks the done records itself. afterok on an
+// array is judged on the array's whole record, and a requeue can leave it
+// unsatisfiable forever: in CI a merge stayed PENDING
+// (DependencyNeverSatisfied) once a task requeued mid-run had ended (Slurm
+// 22.05's test_job_array_complete also reads the array's max_exit_code, which
+// the killed run can set). Every task
+// is idempotent (its done record, util/task_record.h), so Slurm's requeue and
+// a resubmission are safe; `status` counts the records.
 
 #include <sys/wait.h>
 #include <unistd.h>
@@ -155,11 +161,16 @@ std::string Command(const std::vector<std::string>& words) {
   return s;
 }
 
+// How a stage waits for the one before: a merge checks the done records
+// itself, so it runs once every task has ended, however it ended (see the top).
+const char* Dependency(const std::string& stage_name) { return stage_name == "merge" ? "afterany" : "afterok"; }
+
 // Runs sbatch --parsable on a script; the job id, or a UserError with sbatch's words.
-std::string Submit(const std::string& sbatch, const std::string& script, const std::string& after) {
+std::string Submit(const std::string& sbatch, const std::string& script, const std::string& dependency,
+                   const std::string& after) {
   const std::string command = ShellQuote(sbatch) + " --parsable" +
-                              (after.empty() ? "" : " --dependency=afterok:" + after) + " " + ShellQuote(script) +
-                              " 2>&1";
+                              (after.empty() ? "" : " --dependency=" + dependency + ":" + after) + " " +
+                              ShellQuote(script) + " 2>&1";
   FILE* pipe = popen(command.c_str(), "r");
   if (!pipe) ThrowUserError("", "--sbatch", "cannot run '" + sbatch + "'");
   std::string out;
@@ -224,7 +235,7 @@ void RunSubmit(const SubmitArgs& args) {
   if (!args.no_submit) {
     const auto start = std::chrono::steady_clock::now();
     std::string after;
-    for (SlurmStage& s : job.stages) after = s.job_id = Submit(args.sbatch, s.script, after);
+    for (SlurmStage& s : job.stages) after = s.job_id = Submit(args.sbatch, s.script, Dependency(s.name), after);
     job.submitted_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   }
   WriteFileAtomically(dir / "job.json", job.ToJson().dump(2) + "\n");
@@ -241,7 +252,8 @@ void RunSubmit(const SubmitArgs& args) {
     const std::string script = (shown / fs::path(s.script).filename()).string();
     if (args.no_submit)
       std::printf("  %-5s sbatch --parsable%s %s\n", s.name.c_str(),
-                  after.empty() ? "" : " --dependency=afterok:<previous job>", script.c_str());
+                  after.empty() ? "" : (std::string(" --dependency=") + Dependency(s.name) + ":<previous job>").c_str(),
+                  script.c_str());
     else
       std::printf("  %-5s job %s%s  %s\n", s.name.c_str(), s.job_id.c_str(),
                   after.empty() ? "" : (" after " + after).c_str(), script.c_str());

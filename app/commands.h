@@ -51,7 +51,7 @@ inline constexpr CommandSummary kCommands[] = {
      "by clicking the image; every edit re-solves the material (Sec. 8.6). Listens on 127.0.0.1."},
     {"slurm",
      "Run a render, a decay map or a fit batch on a Slurm cluster as a job array, then a merge job\n"
-     "(afterok); 'phos slurm status DIR' counts the tasks' done records. See docs/scale.md."},
+     "that checks every task's done record; 'phos slurm status DIR' counts them. See docs/scale.md."},
 };
 // The summary of a command of kCommands ("" for another name).
 constexpr const char* Summary(std::string_view command) {

@@ -182,6 +182,21 @@ bool HasTemporaries(const fs::path& dir) {
   return false;
 }
 
+// What the jobs of a chain printed (their logs), and Slurm's record of each, for a failure's message.
+std::string Logs(const fs::path& job_dir) {
+  std::string text;
+  if (fs::exists(job_dir / "logs"))
+    for (const auto& entry : fs::directory_iterator(job_dir / "logs"))
+      text += "\n--- " + entry.path().string() + "\n" + Tail(entry.path());
+  const std::string job = ReadText(job_dir / "job.json");
+  for (std::size_t at = job.find("\"job_id\""); at != std::string::npos; at = job.find("\"job_id\"", at + 1)) {
+    const std::size_t open = job.find('"', job.find(':', at)) + 1;
+    text += "\n--- scontrol show job " + job.substr(open, job.find('"', open) - open) + "\n" +
+            Shell("scontrol -o show job " + job.substr(open, job.find('"', open) - open)).out;
+  }
+  return text;
+}
+
 nlohmann::json Job(const fs::path& job_dir) { return nlohmann::json::parse(ReadText(job_dir / "job.json")); }
 std::string JobId(const fs::path& job_dir, int stage) {
   return Job(job_dir)["stages"][stage]["job_id"].get<std::string>();
@@ -245,7 +260,7 @@ TEST(SlurmCluster, ArraysEqualOneProcessAndARequeuedTaskIsRedoneWhole) {
 
   // Every job of the three chains ends, and ends well.
   const bool ended = WaitFor([] { return Shell("squeue -h").out.empty(); }, 180, 0.25);
-  ASSERT_TRUE(ended) << Shell("squeue").out;
+  ASSERT_TRUE(ended) << Shell("squeue").out << Tail(slurm.dir() / "slurmctld.log") << Logs(render_job) << Logs(map_job) << Logs(batch_job);
   for (const fs::path& job : {render_job, map_job, batch_job}) {
     const nlohmann::json record = Job(job);  // kept: a loop over Job(job)["stages"] read a destroyed temporary
     for (const auto& stage : record["stages"]) {
@@ -256,7 +271,7 @@ TEST(SlurmCluster, ArraysEqualOneProcessAndARequeuedTaskIsRedoneWhole) {
       for (std::size_t at = shown.find("JobState="); at != std::string::npos; at = shown.find("JobState=", at + 1))
         states.insert(shown.substr(at, shown.find(' ', at) - at));
       EXPECT_EQ(states, std::set<std::string>{"JobState=COMPLETED"})
-          << job << " " << stage["name"] << " (job " << id << "): " << shown;
+          << job << " " << stage["name"] << " (job " << id << "): " << shown << Logs(job);
     }
     const CommandResult status = RunPhos("slurm status " + job.string() + " --json");
     ASSERT_EQ(status.exit_code, 0) << status.err;
@@ -292,6 +307,9 @@ TEST(SlurmScripts, NoSubmitWritesTheChainAndStatusCountsRecords) {
                            "#SBATCH --requeue\n", "'--tile' ${SLURM_ARRAY_TASK_ID}/4\n", "'--weights' 'none'"})
     EXPECT_NE(tasks.find(line), std::string::npos) << line << " not in\n" << tasks;
   EXPECT_NE(ReadText(dir / "job" / "merge.sbatch").find("'--merge'"), std::string::npos);
+  // The tiles wait for nothing; the merge waits for every tile to end, however it ended, and checks the records.
+  EXPECT_NE(r.out.find("  tasks sbatch --parsable "), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("  merge sbatch --parsable --dependency=afterany:<previous job> "), std::string::npos) << r.out;
   // Nothing done yet; then two tiles' records: 2/4.
   CommandResult status = RunPhos("slurm status " + (dir / "job").string());
   ASSERT_EQ(status.exit_code, 0) << status.err;
