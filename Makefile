@@ -39,7 +39,7 @@ study: build
 	@build/bin/phos-integrator-study --out docs
 	@build/bin/phos-glassner-study --out docs
 	@build/bin/phos-nc-study --out docs
-	@build/bin/phos-dss-study --out docs
+	@build/bin/phos-dss-study --out docs --quality-table render/data/transport-quality.json
 	@build/bin/phos-appearance-study --out docs
 	@build/bin/phos-path-study --out docs
 

@@ -43,7 +43,9 @@
 #include "phos/render/solver.h"
 #include "phos/render/scene.h"
 #include "phos/render/subsurface.h"
+#include "phos/render/transport_quality.h"
 #include "phos/render/volume.h"
+#include "phos/util/atomic_file.h"
 #include "phos/util/format.h"
 #include "phos/util/json.h"
 #include "phos/util/math.h"
@@ -247,6 +249,25 @@ struct Run {
   float epsilon = 0, s = 0;
 };
 
+// The glow's-bounce runs as the renderer's table of expected quality per
+// transport (transport_quality.h): direct, dss with its defaults (no bounced
+// z-buffer: what --budget-s picks), and the path tracer per spp.
+void WriteQualityTable(const fs::path& path, const std::vector<Run>& glow, int size, int reference_spp) {
+  TransportQuality q;
+  q.source = "build/bin/phos-dss-study --out docs --quality-table render/data/transport-quality.json (make study); "
+             "docs/dss-trade.md, 'The glow's bounce'";
+  q.scene = "fixtures/scenes/cornell-phosphor.json";
+  q.view = "t = 40 s (10 s after the LED went off), " + std::to_string(size) + " x " + std::to_string(size) +
+           " px, the bands summed, relative to the brightest pixel";
+  q.reference = "mean SSIM against the path tracer at " + std::to_string(reference_spp) + " samples per pixel";
+  for (const Run& r : glow) {
+    if (r.method == "direct (no bounce)") q.direct_ssim = r.error.ssim;
+    if (r.method == "deep screen space (direct + one bounce)") q.dss_ssim = r.error.ssim;
+    if (r.method == "path tracer") q.path_ssim.emplace_back(std::stoi(r.parameters.substr(4)), r.error.ssim);
+  }
+  WriteFileAtomically(path, q.ToJson().dump(2) + "\n");
+}
+
 }  // namespace
 }  // namespace phos::render
 
@@ -261,6 +282,11 @@ int main(int argc, char** argv) {
   app.add_option("--out", out, "folder for the CSVs, plots and dss-trade.md (default docs)");
   app.add_option("--size", size, "image size in pixels, square (default 128)");
   app.add_option("--reference-rays", reference_rays, "rays per pixel of the ray-traced truth (default 2048)");
+  std::string quality_table;
+  app.add_option("--quality-table", quality_table,
+                 "also write the glow's-bounce SSIMs as the renderer's expected quality of each transport\n"
+                 "(phos.transport-quality/1; make study writes render/data/transport-quality.json, which the\n"
+                 "build compiles into --budget-s and --quality) (default: not written)");
   CLI11_PARSE(app, argc, argv);
   try {
     const std::vector<std::string> views = {"cornell-phosphor", "still-life"};
@@ -407,6 +433,7 @@ int main(int argc, char** argv) {
         add("path tracer", "spp=" + std::to_string(spp), path, seconds);
       }
     }
+    if (!quality_table.empty()) WriteQualityTable(quality_table, glow, size, 4 * reference_rays / 8);
     std::string glow_md =
         "\n## The glow's bounce (what phos uses it for)\n\nThe Cornell box 10 s after its LED went off, " +
         std::to_string(size) +

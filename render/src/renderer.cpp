@@ -15,6 +15,7 @@
 
 #include "phos/render/dss.h"
 #include "phos/render/subsurface.h"
+#include "phos/render/transport_quality.h"
 #include "phos/render/volume.h"
 #include "phos/util/atomic_file.h"
 #include "phos/util/colour.h"
@@ -809,22 +810,22 @@ std::vector<TransportCandidate> MeasureTransportCandidates(const SceneGeometry& 
     RenderBands(geometry, solver, options);
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   };
+  const TransportQuality& quality = MeasuredTransportQuality();
   std::vector<TransportCandidate> candidates;
   FrameOptions direct = base;
   direct.transport = Transport::kDirect;
   direct.direct_spp = 1;
-  candidates.push_back({direct, 0.44, time_of(direct), "direct"});
+  candidates.push_back({direct, quality.direct_ssim, time_of(direct), "direct"});
   FrameOptions dss = direct;
   dss.transport = Transport::kDss;
-  candidates.push_back({dss, 0.90, time_of(dss), "dss"});
+  candidates.push_back({dss, quality.dss_ssim, time_of(dss), "dss"});
   FrameOptions path = base;
   path.transport = Transport::kPath;
   path.spp = 1;
   const double path_1spp_s = time_of(path);
-  for (const auto& [spp, ssim] :
-       std::vector<std::pair<int, double>>{{4, 0.59}, {16, 0.80}, {64, 0.93}, {256, 0.965}, {1024, 0.9825}}) {
+  for (int spp : {4, 16, 64, 256, 1024}) {
     path.spp = spp;
-    candidates.push_back({path, ssim, path_1spp_s * spp, "path " + std::to_string(spp) + " spp"});
+    candidates.push_back({path, quality.PathSsim(spp), path_1spp_s * spp, "path " + std::to_string(spp) + " spp"});
   }
   return candidates;
 }

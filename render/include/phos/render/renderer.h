@@ -74,11 +74,11 @@ FrameOptions DefaultFrameOptions(const Scene& scene, Transport transport);
 // Choosing a transport for the user's budget. The candidates are direct,
 // dss and the path tracer at 4 to 1024 spp; each carries the perceptual
 // quality (mean SSIM against the path tracer at 1024 spp) that the trade
-// study measured for the glow's light in the Cornell box after lights-out
-// (docs/dss-trade.md: direct 0.44, dss 0.90, path 4/16/64 spp 0.59/0.80/0.93;
-// beyond 64 spp 1 - SSIM is taken to halve per 4x samples, as noise does).
-// Costs are measured on this scene now: one frame each of direct, dss and
-// the path tracer at 1 spp (path time scales with spp).
+// study measured for the glow's light in the Cornell box after lights-out:
+// MeasuredTransportQuality() (transport_quality.h), the study's output
+// render/data/transport-quality.json built in. Costs are measured on this
+// scene now: one frame each of direct, dss and the path tracer at 1 spp
+// (path time scales with spp).
 struct TransportCandidate {
   FrameOptions options;
   double expected_ssim = 0;
