@@ -202,13 +202,16 @@ void RunFitSession(const SessionArgs& args) {
 
 struct MapArgs {
   std::string session, out, weights = "poisson", tile;
+  int states = 1;
   bool no_background = false, json = false, merge = false;
 };
 
 // What the map's pixels are made from: a tile's done record for other inputs is not this map's.
+// (One state writes the record it always wrote, so older tiles stay done.)
 std::string MapInputs(const MapArgs& args, int tiles) {
   return "session=" + args.session + " weights=" + args.weights +
-         " background=" + std::to_string(!args.no_background) + " tiles=" + std::to_string(tiles);
+         " background=" + std::to_string(!args.no_background) + " tiles=" + std::to_string(tiles) +
+         (args.states == 1 ? "" : " states=" + std::to_string(args.states));
 }
 
 // The session's frames as a map's input, only the rows of tile `index` of
@@ -272,24 +275,31 @@ MapFrames ReadMapFrames(const MapArgs& args, int index, int count) {
 }
 
 // A map's parameter image: kr, then amplitude and background per camera
-// channel, then rms, interleaved per pixel (the channels of decay-map.exr).
+// channel, then rms, interleaved per pixel (the channels of decay-map.exr);
+// with two states then kr2 and amplitude2 per camera channel.
 struct MapImage {
   int width = 0, height = 0;
   std::vector<std::string> names;
   std::vector<float> pixels;
   std::size_t no_decay = 0;
+  std::size_t one_state = 0;  // two states: decaying pixels where one state sufficed
   std::size_t frames = 0;
   int clipped = 0;
   double seconds = 0;
 };
 
 MapImage MapImageOf(const DecayMap& map, const MapFrames& frames) {
-  MapImage image{map.width, map.height, {"kr"}, {}, map.no_decay, frames.input.frames.size(), frames.clipped,
-                 map.seconds};
-  const int C = map.channels, nch = 2 + 2 * C;
+  MapImage image{map.width, map.height, {"kr"}, {}, map.no_decay, map.one_state, frames.input.frames.size(),
+                 frames.clipped, map.seconds};
+  const bool two_states = !map.kr2.empty();
+  const int C = map.channels, nch = 2 + 2 * C + (two_states ? 1 + C : 0);
   for (int c = 0; c < C; ++c) image.names.push_back("amplitude." + frames.channel_names[c]);
   for (int c = 0; c < C; ++c) image.names.push_back("background." + frames.channel_names[c]);
   image.names.push_back("rms");
+  if (two_states) {
+    image.names.push_back("kr2");
+    for (int c = 0; c < C; ++c) image.names.push_back("amplitude2." + frames.channel_names[c]);
+  }
   const std::size_t pixels = static_cast<std::size_t>(map.width) * map.height;
   image.pixels.resize(pixels * nch);
   for (std::size_t p = 0; p < pixels; ++p) {
@@ -300,6 +310,10 @@ MapImage MapImageOf(const DecayMap& map, const MapFrames& frames) {
       out[1 + C + c] = map.background[p * C + c];
     }
     out[1 + 2 * C] = map.rms[p];
+    if (two_states) {
+      out[2 + 2 * C] = map.kr2[p];
+      for (int c = 0; c < C; ++c) out[3 + 2 * C + c] = map.amplitude2[p * C + c];
+    }
   }
   return image;
 }
@@ -331,8 +345,9 @@ void WriteMapOutputs(const MapArgs& args, const MapImage& map, const std::string
   for (std::size_t p = 0; p < pixels; ++p)
     grey[p] = std::isfinite(kr[p]) ? std::clamp((kr[p] - lo) / std::max(hi - lo, 1e-12f), 0.0f, 1.0f) : 0.0f;
   WriteFloatImage(fs::path(args.out) / "kr.png", map.width, map.height, {"Y"}, grey);
+  const bool two_states = std::find(map.names.begin(), map.names.end(), "kr2") != map.names.end();
   if (args.json) {
-    std::printf("%s\n", nlohmann::json({{"width", map.width},
+    nlohmann::json json = nlohmann::json({{"width", map.width},
                                         {"height", map.height},
                                         {"frames", map.frames},
                                         {"clipped_frames", map.clipped},
@@ -342,22 +357,26 @@ void WriteMapOutputs(const MapArgs& args, const MapImage& map, const std::string
                                         {"kr_median_per_s", median},
                                         {"kr_p01_per_s", lo},
                                         {"kr_p99_per_s", hi},
-                                        {"pixels_without_decay", map.no_decay}})
-                            .dump()
-                            .c_str());
+                                        {"pixels_without_decay", map.no_decay}});
+    if (two_states) json["pixels_with_one_state"] = map.one_state;
+    std::printf("%s\n", json.dump().c_str());
     return;
   }
-  std::printf(
-      "phos fit map: %dx%d pixels, %zu frames, fitted in %s s -> %s (kr, amplitude.*, background.*, rms), kr.png\n",
-      map.width, map.height, map.frames, FormatShort(map.seconds).c_str(), exr.string().c_str());
+  std::printf("phos fit map: %dx%d pixels, %zu frames, fitted in %s s -> %s (kr, amplitude.*, background.*, rms%s), "
+              "kr.png\n",
+              map.width, map.height, map.frames, FormatShort(map.seconds).c_str(), exr.string().c_str(),
+              two_states ? ", kr2, amplitude2.*" : "");
   std::printf("  kr: median %s /s, 1%%-99%% %s to %s /s; %zu pixel(s) without a decay\n", FormatShort(median).c_str(),
               FormatShort(lo).c_str(), FormatShort(hi).c_str(), map.no_decay);
+  if (two_states)
+    std::printf("  two states: %zu decaying pixel(s) kept one state (kr2 NaN there)\n", map.one_state);
 }
 
 DecayMap FitMapFrames(const MapArgs& args, const MapFrames& frames) {
   DecayMapOptions options;
   options.background = !args.no_background;
   options.weighting = ParseWeightsOption(args.weights);
+  options.states = args.states;
   ProgressBar fitting("fitting pixels", static_cast<std::size_t>(frames.input.height));
   DecayMap map = FitDecayMap(frames.input, options, args.session, [&](std::size_t) { fitting.Advance(); });
   fitting.Finish();
@@ -401,6 +420,8 @@ void RunFitMapTile(const MapArgs& args) {
     spec.attribute("phos:first_row", static_cast<int>(first_row));
     spec.attribute("phos:map_height", frames.full_height);
     spec.attribute("phos:pixels_without_decay", static_cast<int>(tile.no_decay));
+    if (std::find(tile.names.begin(), tile.names.end(), "kr2") != tile.names.end())
+      spec.attribute("phos:pixels_with_one_state", static_cast<int>(tile.one_state));
     spec.attribute("phos:frames", static_cast<int>(tile.frames));
     spec.attribute("phos:clipped_frames", tile.clipped);
     spec.attribute("phos:seconds", static_cast<float>(tile.seconds));
@@ -442,7 +463,7 @@ void RunFitMapMerge(const MapArgs& args) {
   if (!missing.empty())
     ThrowUserError(tiles.string(), "",
                    "tile(s) " + missing + " of " + std::to_string(count) +
-                       " not done for these inputs (session, --weights, --no-background): nothing merged");
+                       " not done for these inputs (session, --weights, --no-background, --states): nothing merged");
   MapImage map;
   for (int i = 0; i < count; ++i) {
     const fs::path exr = TilePath(args.out, i, count, ".exr");
@@ -466,6 +487,7 @@ void RunFitMapMerge(const MapArgs& args) {
                         map.pixels.data() + first_row * row_values))
       ThrowUserError(exr.string(), "", "cannot read: " + in->geterror());
     map.no_decay += static_cast<std::size_t>(spec.get_int_attribute("phos:pixels_without_decay", 0));
+    map.one_state += static_cast<std::size_t>(spec.get_int_attribute("phos:pixels_with_one_state", 0));
     map.seconds += spec.get_float_attribute("phos:seconds", 0.0f);
   }
   WriteMapOutputs(args, map, tiles.string());
@@ -761,8 +783,8 @@ void RegisterFit(CLI::App& app) {
       "map",
       "Fit every pixel of a decay session (a spatially varying sample): one rate shared by the pixel's\n"
       "channels, an amplitude and a background per channel, by variable projection on a shared rate grid\n"
-      "and Newton steps, in parallel. Writes decay-map.exr (float: kr, amplitude.*, background.*, rms)\n"
-      "and kr.png (kr in grey, 1st to 99th percentile) into --out.");
+      "and Newton steps, in parallel. Writes decay-map.exr (float: kr, amplitude.*, background.*, rms;\n"
+      "with --states 2 also kr2, amplitude2.*) and kr.png (kr in grey, 1st to 99th percentile) into --out.");
   mp->add_option("SESSION", map_args->session, "a decay session folder (required unless --merge)");
   mp->add_option("--out", map_args->out, "output folder")->required();
   mp->add_option("--tile", map_args->tile,
@@ -775,6 +797,10 @@ void RegisterFit(CLI::App& app) {
       ->excludes("--tile");
   mp->add_option("--weights", map_args->weights, "poisson (default) or none");
   mp->add_flag("--no-background", map_args->no_background, "no background term (dark signal already removed)");
+  mp->add_option("--states", map_args->states,
+                 "1 (default) or 2: exponentials per pixel. With 2, kr is the slow state's rate and kr2 the\n"
+                 "fast one's, where BIC keeps both; elsewhere kr2 is NaN (docs/two-state-map.md)")
+      ->check(CLI::Range(1, 2));
   mp->add_flag("--json", map_args->json, "print one JSON object (size, frames, kr percentiles, outputs)");
   mp->callback([map_args] { RunFitMap(*map_args); });
 

@@ -4,11 +4,13 @@
 #include <tbb/parallel_for.h>
 
 #include <Eigen/Core>
+#include <Eigen/LU>
 #include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <utility>
 
 #include "phos/util/error.h"
 
@@ -292,6 +294,11 @@ struct BlockWork {
   Array channel_cost;   // per n
   PixelData pixel;
   BasisWithDerivatives basis;
+  Array one_state_cost;  // per pixel of the block: the one-state fit's cost (two states compare with it)
+  // Two states: sums of the pair grid, the pairs' costs, a pixel's two bases.
+  Matrix pair_sums, pair_value_sums, pair_cost;
+  Array b1, d1, b2, d2;  // exp(-k s), exp(-k (s + e)) of the two rates
+  Matrix pair_products, pair_weighted, pair_values;
 };
 
 void FitBlock(const DecayMapInput& in, const DecayMapOptions& options, const RateGrid& grid, const Matrix& grid_basis,
@@ -322,6 +329,7 @@ void FitBlock(const DecayMapInput& in, const DecayMapOptions& options, const Rat
 
   work.pixel_cost.resize(G, count);
   work.channel_cost.resize(n);
+  work.one_state_cost.resize(count);
   for (int g = 0; g < G; ++g) {
     ProjectedCosts(n, &work.rate_sums(0, G + g), &work.rate_sums(0, g), &work.value_sums(0, g), work.S11.data(),
                    work.S1y.data(), work.Syy.data(), work.constant.data(), options.background,
@@ -346,6 +354,7 @@ void FitBlock(const DecayMapInput& in, const DecayMapOptions& options, const Rat
       px.peak[c] = work.peak(i);
     }
     const RateFit fit = RefinePixel(px, times, grid, &work.pixel_cost(0, p), options, work.basis);
+    work.one_state_cost(p) = fit.cost;
     // It decays if some channel's fitted decay is more than rounding (a
     // millionth of the pixel's largest value) over the recorded span.
     const std::size_t pixel = first_pixel + p;
@@ -359,6 +368,315 @@ void FitBlock(const DecayMapInput& in, const DecayMapOptions& options, const Rat
       map.kr[pixel] = static_cast<float>(std::exp(fit.u));
     else
       ++no_decay;
+    map.rms[pixel] = static_cast<float>(std::sqrt(std::max(0.0, fit.cost) / (C * m)));
+  }
+}
+
+// ---------------------------------------------------------------------------
+// Two states (options.states = 2): y_c = A1_c b(k1) + A2_c b(k2) + B_c.
+
+// One channel's normal equations for the basis pair (b1, b2) and the
+// constant c: the Gram entries s.., the right-hand sides r.. and y'Wy.
+struct PairGram {
+  double s11, s12, s22, s1c, s2c, scc, r1, r2, rc, yy;
+};
+struct PairChannelFit {
+  double a1, a2, background, cost;
+};
+
+// Non-negative least squares for (A1, A2) with B free, as SolveSmallNnls
+// does it (every support's unconstrained solution; the best feasible one is
+// the optimum), written out for 3 unknowns and branch-free so that a loop
+// over pixel-channels vectorises. The cost of a support's solution x is
+// yy - x'r. A support whose Gram is singular to rounding (k1 = k2) is left
+// out: the one-rate supports cover it.
+[[gnu::always_inline]] inline PairChannelFit ProjectPair(const PairGram& g, bool background) {
+  constexpr double inf = std::numeric_limits<double>::infinity();
+  PairChannelFit best{0, 0, 0, g.yy};
+  auto take = [&best](bool ok, double a1, double a2, double b, double cost) {
+    const bool better = ok & (cost < best.cost);  // & not &&: no branch
+    best.a1 = better ? a1 : best.a1;
+    best.a2 = better ? a2 : best.a2;
+    best.background = better ? b : best.background;
+    best.cost = better ? cost : best.cost;
+  };
+  if (background) {
+    best.cost = inf;
+    const double c11 = g.s22 * g.scc - g.s2c * g.s2c, c12 = g.s1c * g.s2c - g.s12 * g.scc,
+                 c13 = g.s12 * g.s2c - g.s22 * g.s1c, c22 = g.s11 * g.scc - g.s1c * g.s1c,
+                 c23 = g.s12 * g.s1c - g.s11 * g.s2c, c33 = g.s11 * g.s22 - g.s12 * g.s12;
+    const double det = g.s11 * c11 + g.s12 * c12 + g.s1c * c13, inverse = 1 / det;
+    const double x1 = (c11 * g.r1 + c12 * g.r2 + c13 * g.rc) * inverse,
+                 x2 = (c12 * g.r1 + c22 * g.r2 + c23 * g.rc) * inverse,
+                 x3 = (c13 * g.r1 + c23 * g.r2 + c33 * g.rc) * inverse;
+    take((det > 1e-9 * g.s11 * g.s22 * g.scc) & (x1 > 0) & (x2 > 0), x1, x2, x3, g.yy - x1 * g.r1 - x2 * g.r2 - x3 * g.rc);
+    const double d1 = g.s11 * g.scc - g.s1c * g.s1c, i1 = 1 / d1;
+    const double a1 = (g.r1 * g.scc - g.s1c * g.rc) * i1, b1 = (g.s11 * g.rc - g.s1c * g.r1) * i1;
+    take((d1 > 1e-12 * g.s11 * g.scc) & (a1 > 0), a1, 0, b1, g.yy - a1 * g.r1 - b1 * g.rc);
+    const double d2 = g.s22 * g.scc - g.s2c * g.s2c, i2 = 1 / d2;
+    const double a2 = (g.r2 * g.scc - g.s2c * g.rc) * i2, b2 = (g.s22 * g.rc - g.s2c * g.r2) * i2;
+    take((d2 > 1e-12 * g.s22 * g.scc) & (a2 > 0), 0, a2, b2, g.yy - a2 * g.r2 - b2 * g.rc);
+    const double b0 = g.rc / std::max(g.scc, 1e-300);  // scc > 0: every weight is
+    take(true, 0, 0, b0, g.yy - b0 * g.rc);
+  } else {
+    const double det = g.s11 * g.s22 - g.s12 * g.s12, inverse = 1 / det;
+    const double x1 = (g.r1 * g.s22 - g.s12 * g.r2) * inverse, x2 = (g.s11 * g.r2 - g.s12 * g.r1) * inverse;
+    take((det > 1e-9 * g.s11 * g.s22) & (x1 > 0) & (x2 > 0), x1, x2, 0, g.yy - x1 * g.r1 - x2 * g.r2);
+    const double a1 = g.r1 / g.s11, a2 = g.r2 / g.s22;
+    take((g.s11 > 0) & (a1 > 0), a1, 0, 0, g.yy - a1 * g.r1);
+    take((g.s22 > 0) & (a2 > 0), 0, a2, 0, g.yy - a2 * g.r2);
+  }
+  return best;
+}
+
+// ProjectPair's cost for n pixel-channels at one pair of rates (a loop the
+// compiler vectorises, as ProjectedCosts).
+template <bool kBackground>
+void PairCostsOf(int n, const double* s11, const double* s12, const double* s22, const double* s1c,
+                 const double* s2c, const double* scc, const double* r1, const double* r2, const double* rc,
+                 const double* yy, double* __restrict__ cost) {
+  for (int j = 0; j < n; ++j)
+    cost[j] = ProjectPair({s11[j], s12[j], s22[j], s1c[j], s2c[j], scc[j], r1[j], r2[j], rc[j], yy[j]}, kBackground).cost;
+}
+void PairCosts(int n, const double* s11, const double* s12, const double* s22, const double* s1c, const double* s2c,
+               const double* scc, const double* r1, const double* r2, const double* rc, const double* yy,
+               bool background, double* __restrict__ cost) {
+  if (background)
+    PairCostsOf<true>(n, s11, s12, s22, s1c, s2c, scc, r1, r2, rc, yy, cost);
+  else
+    PairCostsOf<false>(n, s11, s12, s22, s1c, s2c, scc, r1, r2, rc, yy, cost);
+}
+
+// The pairs (i < j) of a coarse rate grid over the rate grid's range, and
+// their basis as one m x (2 P + P (P - 1) / 2) matrix: every rate's samples,
+// their squares, then the products of every pair, so that one product with
+// a block's weights gives every Gram entry that depends on the rates.
+struct PairGrid {
+  int P = 0;
+  std::vector<double> log_k;
+  std::vector<std::pair<int, int>> pairs;
+  Matrix basis;
+};
+
+PairGrid MakePairGrid(const DecayMapInput& in, const RateGrid& grid, const DecayMapOptions& options) {
+  const int m = static_cast<int>(in.frames.size());
+  PairGrid pg;
+  pg.P = std::max(4, options.pair_grid_size);
+  pg.basis.resize(m, 2 * pg.P + pg.P * (pg.P - 1) / 2);
+  std::vector<double> b(m);
+  for (int i = 0; i < pg.P; ++i) {
+    pg.log_k.push_back(grid.log_k.front() + (grid.log_k.back() - grid.log_k.front()) * i / (pg.P - 1));
+    Basis(std::exp(pg.log_k[i]), in.t_s, in.exposure_s, b.data());
+    for (int j = 0; j < m; ++j) {
+      pg.basis(j, i) = b[j];
+      pg.basis(j, pg.P + i) = b[j] * b[j];
+    }
+  }
+  int column = 2 * pg.P;
+  for (int i = 0; i < pg.P; ++i)
+    for (int k = i + 1; k < pg.P; ++k, ++column) {
+      pg.pairs.emplace_back(i, k);
+      pg.basis.col(column) = pg.basis.col(i).cwiseProduct(pg.basis.col(k));
+    }
+  return pg;
+}
+
+// A pixel's two-state fit at (u1, u2) = (log k1, log k2): the projected cost,
+// its gradient (exact: the envelope theorem, the amplitudes being optimal)
+// and its Gauss-Newton Hessian with Kaufman's projection, per channel
+//   H += 2 (J'WJ - J'W Phi M^-1 Phi'WJ),   J = [A1 b1_u, A2 b2_u],
+// Phi the basis columns on the channel's support and M their Gram.
+struct PairFit {
+  double u1 = 0, u2 = 0, cost = std::numeric_limits<double>::infinity();
+  double g[2] = {}, H[2][2] = {};
+  double a1[8] = {}, a2[8] = {}, background[8] = {};
+};
+
+void EvaluateBasisAndSlope(double u, const FrameTimes& f, Array& P, Array& Q, double* b, double* b_u) {
+  const double k = std::exp(u);
+  const int m = static_cast<int>(f.s.size());
+  P = (-k * f.s).exp();
+  Q = (-k * f.s_plus_e).exp();
+  for (int j = 0; j < m; ++j) {
+    b[j] = (P[j] - Q[j]) / (k * f.e[j]);
+    b_u[j] = -k * f.s[j] * b[j] + Q[j] - b[j];
+  }
+}
+
+// The columns of `products` (m x 14): b1, b2, b1_u, b2_u, then the products
+// whose weighted sums the Gram, the gradient and the Hessian need; one
+// product with a pixel's weights (C x m) gives every channel's sums at once.
+enum PairColumn { kB1, kB2, kD1, kD2, kB1B1, kB1B2, kB2B2, kB1D1, kB2D1, kB1D2, kB2D2, kD1D1, kD2D2, kD1D2, kPairColumns };
+
+PairFit EvaluatePair(double u1, double u2, const PixelData& px, const FrameTimes& f, bool background,
+                     BlockWork& work) {
+  const int m = px.m;
+  Matrix& V = work.pair_products;
+  V.resize(m, kPairColumns);
+  EvaluateBasisAndSlope(u1, f, work.b1, work.d1, &V(0, kB1), &V(0, kD1));
+  EvaluateBasisAndSlope(u2, f, work.b2, work.d2, &V(0, kB2), &V(0, kD2));
+  const auto b1 = V.col(kB1).array(), b2 = V.col(kB2).array(), d1 = V.col(kD1).array(), d2 = V.col(kD2).array();
+  V.col(kB1B1).array() = b1 * b1;
+  V.col(kB1B2).array() = b1 * b2;
+  V.col(kB2B2).array() = b2 * b2;
+  V.col(kB1D1).array() = b1 * d1;
+  V.col(kB2D1).array() = b2 * d1;
+  V.col(kB1D2).array() = b1 * d2;
+  V.col(kB2D2).array() = b2 * d2;
+  V.col(kD1D1).array() = d1 * d1;
+  V.col(kD2D2).array() = d2 * d2;
+  V.col(kD1D2).array() = d1 * d2;
+  Matrix& S = work.pair_weighted;  // C x 14: sum w v
+  Matrix& R = work.pair_values;    // C x 4: sum w y v
+  S.noalias() = px.w.transpose().lazyProduct(V);
+  R.noalias() = px.wy.transpose().lazyProduct(V.leftCols(4));
+  PairFit fit;
+  fit.u1 = u1;
+  fit.u2 = u2;
+  fit.cost = 0;
+  for (int c = 0; c < px.channels; ++c) {
+    const PairGram gram{S(c, kB1B1), S(c, kB1B2), S(c, kB2B2), S(c, kB1), S(c, kB2),
+                        px.S11[c],   R(c, kB1),   R(c, kB2),   px.S1y[c], px.Syy[c]};
+    const PairChannelFit cf = ProjectPair(gram, background);
+    fit.a1[c] = cf.a1;
+    fit.a2[c] = cf.a2;
+    fit.background[c] = cf.background;
+    fit.cost += cf.cost;
+    if (!(cf.a1 > 0) && !(cf.a2 > 0)) continue;
+    const double wd1 = S(c, kD1), wd2 = S(c, kD2);
+    const double b1d1 = S(c, kB1D1), b2d1 = S(c, kB2D1), b1d2 = S(c, kB1D2), b2d2 = S(c, kB2D2);
+    const double B = cf.background;
+    // sum w r b_i_u, r the residual
+    const double rd1 = R(c, kD1) - cf.a1 * b1d1 - cf.a2 * b2d1 - B * wd1;
+    const double rd2 = R(c, kD2) - cf.a1 * b1d2 - cf.a2 * b2d2 - B * wd2;
+    fit.g[0] += -2 * cf.a1 * rd1;
+    fit.g[1] += -2 * cf.a2 * rd2;
+    const bool on[3] = {cf.a1 > 0, cf.a2 > 0, background};
+    Eigen::Matrix3d M;
+    M << gram.s11, gram.s12, gram.s1c, gram.s12, gram.s22, gram.s2c, gram.s1c, gram.s2c, gram.scc;
+    Eigen::Matrix<double, 3, 2> PhiJ;
+    PhiJ << cf.a1 * b1d1, cf.a2 * b1d2, cf.a1 * b2d1, cf.a2 * b2d2, cf.a1 * wd1, cf.a2 * wd2;
+    for (int i = 0; i < 3; ++i)
+      if (!on[i]) {
+        M.row(i).setZero();
+        M.col(i).setZero();
+        M(i, i) = 1;
+        PhiJ.row(i).setZero();
+      }
+    const Eigen::Matrix2d projected = PhiJ.transpose() * M.inverse() * PhiJ;
+    fit.H[0][0] += 2 * (cf.a1 * cf.a1 * S(c, kD1D1) - projected(0, 0));
+    fit.H[0][1] += 2 * (cf.a1 * cf.a2 * S(c, kD1D2) - projected(0, 1));
+    fit.H[1][1] += 2 * (cf.a2 * cf.a2 * S(c, kD2D2) - projected(1, 1));
+  }
+  fit.H[1][0] = fit.H[0][1];
+  return fit;
+}
+
+// Levenberg-Marquardt on (u1, u2) from the best pair of the coarse grid:
+// a step is kept only if it lowers the cost; they stop once a step is below
+// 1e-4 in log k. Rates stay inside the rate grid's range.
+PairFit RefinePair(const PixelData& px, const FrameTimes& f, const RateGrid& grid, const PairGrid& pg,
+                   const double* pair_cost, const DecayMapOptions& options, BlockWork& work) {
+  int best = 0;
+  const int pairs = static_cast<int>(pg.pairs.size());
+  for (int q = 1; q < pairs; ++q)
+    if (pair_cost[q] < pair_cost[best]) best = q;
+  PairFit fit = EvaluatePair(pg.log_k[pg.pairs[best].first], pg.log_k[pg.pairs[best].second], px, f,
+                             options.background, work);
+  const double lo = grid.log_k.front(), hi = grid.log_k.back();
+  double lambda = 1e-3;
+  for (int step = 0; step < options.pair_steps; ++step) {
+    const double floor = 1e-12 * (std::fabs(fit.H[0][0]) + std::fabs(fit.H[1][1])) + 1e-300;
+    const double h00 = fit.H[0][0] + lambda * std::max(fit.H[0][0], floor),
+                 h11 = fit.H[1][1] + lambda * std::max(fit.H[1][1], floor), h01 = fit.H[0][1];
+    const double det = h00 * h11 - h01 * h01;
+    if (!(det > 0)) {
+      lambda *= 10;
+      if (lambda > 1e10) break;
+      continue;
+    }
+    const double du1 = -(h11 * fit.g[0] - h01 * fit.g[1]) / det, du2 = -(h00 * fit.g[1] - h01 * fit.g[0]) / det;
+    const double u1 = std::clamp(fit.u1 + du1, lo, hi), u2 = std::clamp(fit.u2 + du2, lo, hi);
+    if (u1 == fit.u1 && u2 == fit.u2) break;
+    const PairFit trial = EvaluatePair(u1, u2, px, f, options.background, work);
+    if (trial.cost < fit.cost) {
+      const bool converged = std::max(std::fabs(u1 - fit.u1), std::fabs(u2 - fit.u2)) < 1e-4;
+      fit = trial;
+      lambda = std::max(lambda / 4, 1e-9);
+      if (converged) break;
+    } else {
+      lambda *= 8;
+      if (lambda > 1e10) break;
+    }
+  }
+  if (fit.u1 > fit.u2) {  // the slow state first
+    std::swap(fit.u1, fit.u2);
+    std::swap(fit.a1, fit.a2);
+  }
+  return fit;
+}
+
+// The block's second pass: the pair grid's costs for every pixel-channel
+// (from the weights FitBlock left in `work`), then per pixel the refinement
+// and BIC's choice between the one-state fit already in `map` and two states.
+void FitBlockPairs(const DecayMapInput& in, const DecayMapOptions& options, const RateGrid& grid, const PairGrid& pg,
+                   const FrameTimes& times, std::size_t first_pixel, int count, BlockWork& work, DecayMap& map,
+                   std::atomic<std::size_t>& one_state) {
+  const int C = in.channels, m = static_cast<int>(in.frames.size()), P = pg.P;
+  const int n = count * C, pairs = static_cast<int>(pg.pairs.size());
+  work.pair_sums.noalias() = work.w * pg.basis;
+  work.pair_value_sums.noalias() = work.wy * pg.basis.leftCols(P);
+  work.pair_cost.setZero(pairs, count);
+  for (int q = 0; q < pairs; ++q) {
+    const int i = pg.pairs[q].first, k = pg.pairs[q].second;
+    const double *s1 = &work.pair_sums(0, i), *s2 = &work.pair_sums(0, k), *s11 = &work.pair_sums(0, P + i),
+                 *s22 = &work.pair_sums(0, P + k), *s12 = &work.pair_sums(0, 2 * P + q),
+                 *r1 = &work.pair_value_sums(0, i), *r2 = &work.pair_value_sums(0, k);
+    PairCosts(n, s11, s12, s22, s1, s2, work.S11.data(), r1, r2, work.S1y.data(), work.Syy.data(), options.background,
+              work.channel_cost.data());
+    for (int p = 0; p < count; ++p) work.pair_cost(q, p) = work.channel_cost.segment(p * C, C).sum();
+  }
+
+  PixelData& px = work.pixel;
+  const double N = static_cast<double>(C) * m;
+  for (int p = 0; p < count; ++p) {
+    const std::size_t pixel = first_pixel + p;
+    if (std::isnan(map.kr[pixel])) continue;  // nothing decays: no state at all
+    for (int c = 0; c < C; ++c) {
+      const int i = p * C + c;
+      px.w.col(c) = work.w.row(i).transpose();
+      px.wy.col(c) = work.wy.row(i).transpose();
+      px.S11[c] = work.S11(i);
+      px.S1y[c] = work.S1y(i);
+      px.Syy[c] = work.Syy(i);
+      px.constant[c] = work.constant(i);
+      px.peak[c] = work.peak(i);
+    }
+    const PairFit fit = RefinePair(px, times, grid, pg, &work.pair_cost(0, p), options, work);
+    // Both states must decay by more than rounding over the recorded span (as
+    // one state must), and BIC must prefer two: N ln(cost1 / cost2) > (C + 1) ln N.
+    const double k1 = std::exp(fit.u1), k2 = std::exp(fit.u2);
+    const double t0 = in.t_s.front(), t1 = in.t_s.back();
+    const double span1 = std::exp(-k1 * t0) - std::exp(-k1 * t1), span2 = std::exp(-k2 * t0) - std::exp(-k2 * t1);
+    bool slow = false, fast = false;
+    for (int c = 0; c < C; ++c) {
+      slow = slow || fit.a1[c] * span1 > 1e-6 * px.peak[c];
+      fast = fast || fit.a2[c] * span2 > 1e-6 * px.peak[c];
+    }
+    const double cost1 = work.one_state_cost(p);
+    const bool two = slow && fast && fit.u2 > fit.u1 && fit.cost < cost1 &&
+                     N * std::log(cost1 / std::max(fit.cost, 1e-300)) > (C + 1) * std::log(N);
+    if (!two) {
+      ++one_state;
+      continue;
+    }
+    map.kr[pixel] = static_cast<float>(k1);
+    map.kr2[pixel] = static_cast<float>(k2);
+    for (int c = 0; c < C; ++c) {
+      map.amplitude[pixel * C + c] = static_cast<float>(fit.a1[c]);
+      map.amplitude2[pixel * C + c] = static_cast<float>(fit.a2[c]);
+      map.background[pixel * C + c] = static_cast<float>(fit.background[c]);
+    }
     map.rms[pixel] = static_cast<float>(std::sqrt(std::max(0.0, fit.cost) / (C * m)));
   }
 }
@@ -484,6 +802,11 @@ DecayMap FitDecayMap(const DecayMapInput& in, const DecayMapOptions& options, co
                      const std::function<void(std::size_t)>& progress) {
   const auto started = std::chrono::steady_clock::now();
   Validate(in, where);
+  if (options.states != 1 && options.states != 2)
+    ThrowUserError(where, "states", "must be 1 or 2, got " + std::to_string(options.states));
+  // Two states have 2 + 3 C parameters: the rates need more than 4 frames.
+  if (options.states == 2 && in.frames.size() < 6)
+    ThrowUserError(where, "", "needs at least 6 frames for a two-state map, has " + std::to_string(in.frames.size()));
   const RateGrid grid = MakeRateGrid(in, options);
   const int m = static_cast<int>(in.frames.size());
   // The basis as an m x 2G matrix: every grid rate's samples, then their
@@ -493,20 +816,29 @@ DecayMap FitDecayMap(const DecayMapInput& in, const DecayMapOptions& options, co
   grid_basis.rightCols(grid.G) = grid_basis.leftCols(grid.G).array().square().matrix();
   const FrameTimes times = MakeFrameTimes(in);
 
+  const bool two_states = options.states == 2;
+  const PairGrid pair_grid = two_states ? MakePairGrid(in, grid, options) : PairGrid{};
+
   DecayMap map = EmptyMap(in);
-  std::atomic<std::size_t> no_decay{0}, rows_done{0};
+  if (two_states) {
+    map.kr2.assign(map.kr.size(), std::nanf(""));
+    map.amplitude2.assign(map.amplitude.size(), 0.0f);
+  }
+  std::atomic<std::size_t> no_decay{0}, one_state{0}, rows_done{0};
   tbb::parallel_for(tbb::blocked_range<int>(0, in.height), [&](const tbb::blocked_range<int>& rows) {
     BlockWork work;
     for (int row = rows.begin(); row != rows.end(); ++row) {
       for (int x = 0; x < in.width; x += kBlockPixels) {
         const int count = std::min(kBlockPixels, in.width - x);
-        FitBlock(in, options, grid, grid_basis, times, static_cast<std::size_t>(row) * in.width + x, count, work, map,
-                 no_decay);
+        const std::size_t first = static_cast<std::size_t>(row) * in.width + x;
+        FitBlock(in, options, grid, grid_basis, times, first, count, work, map, no_decay);
+        if (two_states) FitBlockPairs(in, options, grid, pair_grid, times, first, count, work, map, one_state);
       }
       if (progress) progress(++rows_done);
     }
   });
   map.no_decay = no_decay;
+  map.one_state = one_state;
   map.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
   return map;
 }

@@ -257,6 +257,67 @@ TEST(FitBatchCommand, FitsInParallelResumesAndSummarizes) {
             std::string::npos);
 }
 
+TEST(FitMapCommand, TwoStatesMapATwoStateSampleWithAOneStateInset) {
+  // Two-state ratio 20 (kr 0.015 and 0.3 /s) with a disk of blue (one state,
+  // 0.032 /s) in the middle: --states 2 finds both rates outside and keeps
+  // one state inside.
+  testing::TempDir dir;
+  ASSERT_EQ(RunPhos("capture decay --sim-material " + testing::Fixture("materials/two-state-ratio20.json").string() +
+                    " --sim-inset " + testing::Fixture("materials/blue.json").string() + " --sim-size 40x30 --out " +
+                    (dir / "s").string() + " --charge-s 1800")
+                .exit_code,
+            0);
+  auto result = RunPhos("fit map " + (dir / "s").string() + " --out " + (dir / "map").string() + " --states 2 --json");
+  ASSERT_EQ(result.exit_code, 0) << result.err;
+  const nlohmann::json summary = nlohmann::json::parse(result.out);
+  auto in = OIIO::ImageInput::open((dir / "map" / "decay-map.exr").string());
+  ASSERT_TRUE(in);
+  const OIIO::ImageSpec spec = in->spec();
+  // kr, amplitude x3, background x3, rms, then kr2, amplitude2 x3 (EXR
+  // files keep channels in their own order: readers go by name).
+  std::vector<std::string> names = spec.channelnames, said = summary["channels"].get<std::vector<std::string>>();
+  ASSERT_EQ(said.size(), 12u);
+  EXPECT_EQ(said[8], "kr2");
+  EXPECT_EQ(said[9], "amplitude2.R");
+  std::sort(names.begin(), names.end());
+  std::sort(said.begin(), said.end());
+  EXPECT_EQ(names, said);
+  const int kr = spec.channelindex("kr"), kr2 = spec.channelindex("kr2");
+  ASSERT_GE(kr, 0);
+  ASSERT_GE(kr2, 0);
+  std::vector<float> pixels(static_cast<std::size_t>(spec.width) * spec.height * spec.nchannels);
+  ASSERT_TRUE(in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, pixels.data()));
+  auto at = [&](int x, int y, int channel) {
+    return pixels[(static_cast<std::size_t>(y) * spec.width + x) * spec.nchannels + channel];
+  };
+  // A 6 x 6 patch in a corner (two states) and in the centre (blue).
+  std::vector<float> k1, k2, centre_k;
+  int centre_two = 0, centre_one = 0;
+  for (int y = 1; y < 7; ++y)
+    for (int x = 1; x < 7; ++x) {
+      k1.push_back(at(x, y, kr));
+      k2.push_back(at(x, y, kr2));
+      if (std::isnan(at(x + 16, y + 11, kr2)))
+        ++centre_one, centre_k.push_back(at(x + 16, y + 11, kr));
+      else
+        ++centre_two;
+    }
+  auto median = [](std::vector<float> v) {
+    std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+    return v[v.size() / 2];
+  };
+  EXPECT_NEAR(median(k1), 0.015, 0.05 * 0.015);
+  EXPECT_NEAR(median(k2), 0.3, 0.1 * 0.3);
+  EXPECT_GE(centre_one, 34) << centre_two << " of 36 blue pixels have a second state";
+  ASSERT_FALSE(centre_k.empty());
+  EXPECT_NEAR(median(centre_k), 0.032, 0.03 * 0.032);
+  EXPECT_GE(summary["pixels_with_one_state"].get<int>(), centre_one);
+
+  EXPECT_TRUE(testing::IsOneLineUserError(
+      RunPhos("fit map " + (dir / "s").string() + " --out " + (dir / "m2").string() + " --states 3"), "--states"));
+  EXPECT_FALSE(std::filesystem::exists(dir / "m2"));
+}
+
 TEST(FitMapCommand, MapsASpatiallyVaryingSample) {
   // Orange with a disk of blue in the middle: the map must show each its kr.
   testing::TempDir dir;

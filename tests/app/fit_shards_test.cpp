@@ -55,6 +55,35 @@ TEST(FitShards, MapTilesMergeIntoTheWholeMap) {
   EXPECT_EQ(merge.exit_code, 2);
 }
 
+TEST(FitShards, TwoStateMapTilesMergeIntoTheWholeMap) {
+  TempDir dir;
+  const std::string session = (dir / "s").string();
+  ASSERT_EQ(RunPhos("capture decay --sim-material " + Fixture("materials/two-state-ratio20.json").string() +
+                    " --sim-inset " + Fixture("materials/blue.json").string() +
+                    " --sim-size 24x18 --charge-s 1800 --out " + session)
+                .exit_code,
+            0);
+  const CommandResult whole = RunPhos("fit map " + session + " --out " + (dir / "whole").string() + " --states 2");
+  ASSERT_EQ(whole.exit_code, 0) << whole.err;
+  const std::string tiled = (dir / "tiled").string();
+  for (int i : {0, 1})
+    ASSERT_EQ(RunPhos("fit map " + session + " --out " + tiled + " --states 2 --tile " + std::to_string(i) + "/2")
+                  .exit_code,
+              0);
+  // Tiles of one state are not this map's: the merge with --states 1 refuses them.
+  CommandResult merge = RunPhos("fit map " + session + " --out " + tiled + " --merge");
+  EXPECT_EQ(merge.exit_code, 2);
+  merge = RunPhos("fit map " + session + " --out " + tiled + " --merge --states 2");
+  ASSERT_EQ(merge.exit_code, 0) << merge.err;
+  const render::Image a = render::ReadImage(dir / "whole" / "decay-map.exr"),
+                      b = render::ReadImage(dir / "tiled" / "decay-map.exr");
+  EXPECT_EQ(a.channels, 12);
+  ASSERT_EQ(a.pixels.size(), b.pixels.size());
+  EXPECT_EQ(std::memcmp(a.pixels.data(), b.pixels.data(), a.pixels.size() * sizeof(float)), 0);
+  // The merge says what one run says, the count of one-state pixels too.
+  EXPECT_EQ(whole.out.substr(whole.out.find("  kr:")), merge.out.substr(merge.out.find("  kr:")));
+}
+
 TEST(FitShards, BatchTasksThenMergeEqualOneBatch) {
   TempDir dir;
   for (const char* name : {"orange", "blue"})

@@ -17,6 +17,28 @@
 // frame integrates the glow over its exposure e, so the basis is
 // exp(-k t) sinh(k e / 2) / (k e / 2) at the exposure's middle, exact for
 // any exposure. Rows run in parallel (TBB).
+//
+// Two states (options.states = 2, docs/two-state-map.md): the model of the
+// two-state materials (model/synthetic.h: two traps feeding one emitting
+// centre),
+//
+//   y_c(t) = A1_c exp(-k1 t) + A2_c exp(-k2 t) + B_c,   k1 < k2,
+//
+// with A1_c, A2_c >= 0 per channel. Both states share one emission colour,
+// so A1 and A2 are proportional over channels in the model; the map does not
+// impose it: with it the amplitudes are no longer linear (a rank-one 2 x C
+// matrix) and variable projection loses its closed form, and a pixel that
+// sees two materials of different colours breaks it anyway. The map first
+// fits one state (exactly as above), then per block the projected cost of
+// every pair of a coarse rate grid (cross sums of the basis as one more
+// matrix product), then Levenberg-Marquardt on (log k1, log k2) with the
+// projected cost's exact gradient and its Gauss-Newton Hessian (Kaufman's
+// approximation of the variable-projection Jacobian). A pixel keeps the
+// second state only if BIC says so (as FitDecay chooses components): the
+// drop in cost from one state to two must pay for the C + 1 more parameters,
+// N ln(cost1 / cost2) > (C + 1) ln N with N = C m samples, and both states
+// must have an amplitude. Otherwise it is a one-state pixel: kr2 NaN,
+// amplitude2 0, the one-state fit in kr, amplitude, background and rms.
 
 #include <cstddef>
 #include <functional>
@@ -40,6 +62,14 @@ struct DecayMapOptions {
   bool background = true;
   Weighting weighting = Weighting::kPoisson;  // photon counting, scaled by sqrt(exposure)
   int newton_steps = 4;  // at most; they stop when a step is below 1e-4 in log k
+  int states = 1;        // 1 or 2 (exponentials per pixel)
+  // Two states: the coarse grid whose pairs start the refinement (log-spaced
+  // over the same range as the rate grid), and the refinement's steps.
+  int pair_grid_size = 16;
+  // Levenberg-Marquardt, at most; they stop below 1e-4 in log k. The valley
+  // of a slow state against the background is long: 12 steps left 3 of 384
+  // noiseless pixels (tests/fit/decay_map_test.cpp) short of the truth.
+  int pair_steps = 50;
 };
 
 struct DecayMap {
@@ -49,12 +79,17 @@ struct DecayMap {
   std::vector<float> background;  // per pixel and channel
   std::vector<float> rms;         // per pixel: weighted rms residual per sample
   std::size_t no_decay = 0;       // pixels whose best amplitude is 0 in every channel
+  // Two states only (empty for one): kr is the slow state's rate k1 and
+  // amplitude its amplitudes; kr2 the fast state's (k2 > k1), NaN where one
+  // state suffices; amplitude2 per pixel and channel (0 there).
+  std::vector<float> kr2, amplitude2;
+  std::size_t one_state = 0;  // decaying pixels where BIC keeps one state
   double seconds = 0;
 };
 
 // `progress(rows_done)` is called from worker threads as rows finish.
 // Bad input (frames of unequal size, fewer than 3 frames, times not
-// increasing) is a UserError naming `where`.
+// increasing, states other than 1 or 2) is a UserError naming `where`.
 DecayMap FitDecayMap(const DecayMapInput& input, const DecayMapOptions& options, const std::string& where,
                      const std::function<void(std::size_t)>& progress = {});
 
