@@ -117,6 +117,25 @@ std::size_t LatestCheckpoint(const std::string& dir, std::size_t frame) {
   return best;
 }
 
+// Once per object, on stderr: a phosphor that lights were on for but that
+// never received their irradiance (a winding facing away, or a shadow), so
+// it will not glow; and the names, for --json.
+nlohmann::json WarnNeverCharged(const render::Scene& scene, const render::CoupledSolver& solver) {
+  nlohmann::json names = nlohmann::json::array();
+  for (std::size_t o = 0; o < scene.objects.size(); ++o) {
+    const int slot = solver.atlas().SlotOf(static_cast<int>(o));
+    if (slot < 0 || !solver.charge_report(slot).NeverCharged()) continue;
+    names.push_back(scene.objects[o].name);
+    std::fprintf(stderr, "phos render: warning: '%s' receives no irradiance in a lit scene, so it never glows: %s\n",
+                 scene.objects[o].name.c_str(),
+                 solver.charge_report(slot).lit_from_behind
+                     ? "the light reaches its back (a phosphor charges on its front only, the side its triangles' "
+                       "counter-clockwise winding faces; reverse the winding or the mesh's normal)"
+                     : "no light reaches its front (in shadow, or facing away from every light)");
+  }
+  return names;
+}
+
 double Seconds(std::chrono::steady_clock::time_point since) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
 }
@@ -167,6 +186,7 @@ void SolveOnly(const RenderArgs& args, const render::Scene& scene, render::Coupl
   record.seconds = Seconds(start);
   WriteTaskDone(done, record);
   result["checkpoints"] = written;
+  if (solver) result["never_charged"] = WarnNeverCharged(scene, *solver);
   result["seconds"] = record.seconds;
   if (args.json) {
     std::cout << result.dump() << "\n";
@@ -421,7 +441,8 @@ void Run(const RenderArgs& args) {
                         {"lit_steps", s.steps},
                         {"dark_jumps", s.dark_jumps},
                         {"irradiance_updates", s.irradiance_updates},
-                        {"shadow_rays", s.shadow_rays}};
+                        {"shadow_rays", s.shadow_rays},
+                        {"never_charged", WarnNeverCharged(scene, *solver)}};
     if (const VolumeMedia* media = solver->media()) {
       const VolumeStats& v = media->stats();
       result["solver"]["volumes"] = {{"voxels", v.voxels},         {"phosphor_voxels", v.phosphor_voxels},

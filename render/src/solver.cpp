@@ -274,6 +274,22 @@ const std::vector<float>& CoupledSolver::UnitIrradiance(Group& g, int l) {
   return unit;
 }
 
+void CoupledSolver::NoteCharge(Group& g, int l, const std::vector<float>& unit) {
+  g.charge.light_on = true;
+  if (std::any_of(unit.begin(), unit.end(), [](float u) { return u > 0; })) {
+    g.charge.received = true;
+    return;
+  }
+  if (g.charge.lit_from_behind) return;
+  // Nothing reached the front: would the light reach the back? Up to 64
+  // texels, evenly spread, with their normals turned around.
+  const LightPose pose = PoseAt(scene_.lights[l], geometry_.time_s());
+  const std::size_t n = g.states.n, stride = std::max<std::size_t>(1, n / 64);
+  for (std::size_t j = 0; j < n && !g.charge.lit_from_behind; j += stride)
+    g.charge.lit_from_behind =
+        render::UnitIrradiance(geometry_, pose, g.texel_position[j], Eigen::Vector3f(-g.texel_normal[j])) > 0;
+}
+
 bool CoupledSolver::GatherIrradiance(Group& g, double t_s) {
   const std::size_t n = g.states.n;
   const int n_exc = static_cast<int>(g.excitation_bands.size());
@@ -286,6 +302,7 @@ bool CoupledSolver::GatherIrradiance(Group& g, double t_s) {
     for (int b : g.excitation_bands) reaches = reaches || light.E_per_band[b] > 0;
     if (!reaches) continue;
     const std::vector<float>& unit = UnitIrradiance(g, static_cast<int>(l));
+    if (!g.charge.received) NoteCharge(g, static_cast<int>(l), unit);
     // E[b] = sum over lights of level * E_light[b] * (cos / d^2, shadowed): the
     // first light writes, the others add.
     for (int bi = 0; bi < n_exc; ++bi) {
@@ -321,6 +338,8 @@ bool CoupledSolver::GatherIrradiance(Group& g, double t_s) {
         ++stats_.irradiance_updates;
         stats_.shadow_rays += n * kSkyRays;
       }
+      g.charge.light_on = true;
+      g.charge.received = g.charge.received || std::any_of(g.unit_sky.begin(), g.unit_sky.end(), [](float u) { return u > 0; });
       for (int bi = 0; bi < n_exc; ++bi) {
         const float scale = static_cast<float>(level * env.L_per_band[g.excitation_bands[bi]]);
         float* E = g.E.data() + static_cast<std::size_t>(bi) * n;

@@ -4,6 +4,9 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <filesystem>
+
 #include <nlohmann/json.hpp>
 
 #include "phos/render/renderer.h"
@@ -104,6 +107,61 @@ TEST(RenderCommand, TimesPastTheScenesEndAreRenderedWithAWarning) {
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_EQ(nlohmann::json::parse(r.out)["frames"].size(), 2u);
   EXPECT_EQ(r.err, "phos render: warning: --times: 3600 s is past the scene's end (90 s); rendered all the same\n");
+}
+
+// A phosphor tile under a lamp that is on for 10 s: facing it, wound the
+// other way round (its back towards the lamp), or under a roof. Only the
+// first charges; the others are named, once each, with the reason.
+CommandResult RenderTile(const TempDir& dir, bool flipped, bool roof) {
+  nlohmann::json tile = {{"name", "sign"},
+                         {"shape", {{"type", "quad"}, {"size", {1, 1}}}},
+                         {"phosphor", Fixture("materials/blue.json").string()},
+                         {"albedo", 0.8}};
+  if (flipped) tile["transform"] = {{"rotate", {{"axis", {1, 0, 0}}, {"deg", 180}}}};
+  nlohmann::json objects = nlohmann::json::array({tile});
+  if (roof)
+    objects.push_back({{"name", "roof"},
+                       {"shape", {{"type", "box"}, {"size", {3, 0.05, 3}}}},
+                       {"transform", {{"translate", {0, 0.5, 0}}}},
+                       {"albedo", 0.5}});
+  const nlohmann::json scene = {
+      {"schema", "phos.scene/1"},
+      {"name", "tile"},
+      {"time", {{"start_s", 0}, {"end_s", 20}, {"fps", 0.1}}},
+      {"texel_size_m", 0.1},
+      {"camera",
+       {{"position", {0, 0.3, 2}}, {"look_at", {0, 0, 0}}, {"fov_deg", 60}, {"width", 16}, {"height", 16}}},
+      {"objects", objects},
+      {"lights",
+       {{{"name", "lamp"},
+         {"type", "point"},
+         {"position", {0, 1, 0}},
+         {"intensity", 0.5},
+         {"spectrum", {{"type", "led"}, {"center_nm", 405}, {"fwhm_nm", 15}}},
+         {"schedule", {{{"t_s", 0}, {"level", 1}}, {{"t_s", 10}, {"level", 0}}}}}}}};
+  const std::filesystem::path path = dir / (std::string(flipped ? "flipped" : "facing") + (roof ? "-roof" : "") + ".json");
+  WriteText(path, scene.dump());
+  return RunPhos("render " + path.string() + " --out " + (dir / path.stem()).string() + " --times 5,15 --json");
+}
+
+TEST(RenderCommand, APhosphorThatNoLightChargesIsNamedOnceWithTheReason) {
+  TempDir dir;
+  const CommandResult facing = RenderTile(dir, false, false);
+  ASSERT_EQ(facing.exit_code, 0) << facing.err;
+  EXPECT_EQ(facing.err, "");
+  EXPECT_EQ(nlohmann::json::parse(facing.out)["solver"]["never_charged"], nlohmann::json::array());
+
+  const CommandResult flipped = RenderTile(dir, true, false);
+  ASSERT_EQ(flipped.exit_code, 0) << flipped.err;
+  EXPECT_EQ(nlohmann::json::parse(flipped.out)["solver"]["never_charged"], nlohmann::json::array({"sign"}));
+  EXPECT_EQ(std::count(flipped.err.begin(), flipped.err.end(), '\n'), 1) << flipped.err;  // once, for two frames
+  EXPECT_NE(flipped.err.find("'sign' receives no irradiance in a lit scene"), std::string::npos) << flipped.err;
+  EXPECT_NE(flipped.err.find("the light reaches its back"), std::string::npos) << flipped.err;
+
+  const CommandResult roofed = RenderTile(dir, false, true);
+  ASSERT_EQ(roofed.exit_code, 0) << roofed.err;
+  EXPECT_EQ(nlohmann::json::parse(roofed.out)["solver"]["never_charged"], nlohmann::json::array({"sign"}));
+  EXPECT_NE(roofed.err.find("no light reaches its front"), std::string::npos) << roofed.err;
 }
 
 TEST(RenderCommand, BadInputIsOneLineAndExitTwo) {

@@ -100,6 +100,21 @@ class CoupledSolver {
   // checkpoint that does not fit the scene's texels is a UserError naming `source`.
   void Restore(const SolverCheckpoint& checkpoint, const std::string& source);
 
+  // Phosphors that a light never charged (issue 14: a triangle wound away
+  // from its light is lit but never glows, and nothing said why). Since this
+  // solver started, for each object slot: was a light (or the sky) that
+  // reaches the material's excitation bands on, and did any texel of the
+  // object receive its irradiance? If not, were some texels lit on their
+  // back (the front is the side the counter-clockwise winding faces; only
+  // the front charges, Sec. 8.3.4)?
+  struct ChargeReport {
+    bool light_on = false;        // a light reaching its excitation bands was on
+    bool received = false;        // some texel received irradiance
+    bool lit_from_behind = false;  // while none did, some sampled texel faced away from a light that reached its back
+    bool NeverCharged() const { return light_on && !received; }
+  };
+  const ChargeReport& charge_report(int slot) const { return groups_[slot].charge; }
+
   // The irradiance (per scene band) that the lights put on texel j of slot s now.
   std::vector<double> TexelIrradiance(int slot, std::size_t texel);
   // With phosphor_irradiance: the irradiance (per scene band) the phosphors'
@@ -125,7 +140,10 @@ class CoupledSolver {
     std::vector<std::uint32_t> texel_patch;  // phosphor_irradiance: the glow patch of each texel
     std::vector<float> unit_sky;             // the sky's irradiance per unit of its radiance, per texel
     std::uint64_t unit_sky_version = ~std::uint64_t{0};
+    ChargeReport charge;
   };
+  // Updates g.charge for light l (on, reaching g's excitation bands) with its unit irradiance.
+  void NoteCharge(Group& g, int l, const std::vector<float>& unit);
 
   // phosphor_irradiance (Sec. 8.5's optional term): every phosphorescent
   // triangle is split into at most 8 x 8 patches; irradiance from patch k
