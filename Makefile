@@ -42,6 +42,7 @@ study: build
 	@build/bin/phos-dss-study --out docs --quality-table render/data/transport-quality.json
 	@build/bin/phos-appearance-study --out docs
 	@build/bin/phos-path-study --out docs
+	@build/bin/phos-two-state-map-study --out docs
 
 # The harnesses (fuzz/, its own CMake project: clang, libFuzzer, ASan + UBSan,
 # only the loaders' sources), each run for FUZZ_SECONDS, one at a time.

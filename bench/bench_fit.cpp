@@ -71,8 +71,11 @@ BENCHMARK(BM_ChargeFit)->Unit(benchmark::kMicrosecond);
 // image, with Gaussian noise of photon-counting size (Poisson sampling of
 // 113 million values would take longer than the fit). The target:
 // a map of it in at most 2 s on 2 cores, in at most twice its memory.
-const DecayMapInput& MegapixelStack() {
-  static const DecayMapInput stack = [] {
+// With `two_states`, every pixel also has a fast state of 8 times the rate
+// and the same colour, as bright as the slow one at t = 0 (two-state maps,
+// docs/two-state-map.md).
+DecayMapInput MakeMegapixelStack(bool two_states) {
+  {
     DecayMapInput in;
     in.width = in.height = 1024;
     in.channels = 3;
@@ -87,9 +90,10 @@ const DecayMapInput& MegapixelStack() {
       std::vector<float> frame(static_cast<std::size_t>(in.width) * in.height * 3);
       for (int y = 0; y < in.height; ++y)
         for (int x = 0; x < in.width; ++x) {
-          const double k = 0.015 * (1 + x / 1024.0);
+          const double k = 0.015 * (1 + x / 1024.0), k2 = 8 * k;
           for (int c = 0; c < 3; ++c) {
-            const double rate = amplitude[c] * std::exp(-k * start) * -std::expm1(-k * e) / (k * e) + 2;
+            double rate = amplitude[c] * std::exp(-k * start) * -std::expm1(-k * e) / (k * e) + 2;
+            if (two_states) rate += amplitude[c] * std::exp(-k2 * start) * -std::expm1(-k2 * e) / (k2 * e);
             frame[(static_cast<std::size_t>(y) * in.width + x) * 3 + c] =
                 static_cast<float>(rate + unit(rng) * std::sqrt(rate / (4 * e)));
           }
@@ -97,7 +101,11 @@ const DecayMapInput& MegapixelStack() {
       in.frames.push_back(std::move(frame));
     }
     return in;
-  }();
+  }
+}
+
+const DecayMapInput& MegapixelStack() {
+  static const DecayMapInput stack = MakeMegapixelStack(false);
   return stack;
 }
 
@@ -128,6 +136,39 @@ void BM_DecayMap1Megapixel(benchmark::State& state) {
   state.counters["peak_rss_per_input"] = usage.ru_maxrss * 1024.0 / InputBytes(stack);
 }
 BENCHMARK(BM_DecayMap1Megapixel)->Unit(benchmark::kSecond)->Iterations(2)->UseRealTime();
+
+// Two states per pixel (options.states = 2) on the two-state stack: speed,
+// and the largest relative errors of k1 and k2 against the rates it was made
+// with over all pixels, their medians, and the pixels where BIC kept one
+// state (here a miss: every pixel has two).
+void BM_DecayMap1MegapixelTwoStates(benchmark::State& state) {
+  static const DecayMapInput stack = MakeMegapixelStack(true);
+  DecayMapOptions options;
+  options.states = 2;
+  DecayMap map;
+  for (auto _ : state) {
+    map = FitDecayMap(stack, options, "bench");
+    benchmark::ClobberMemory();
+    state.counters["pixels_per_s"] = 1024.0 * 1024.0 / map.seconds;
+  }
+  std::vector<double> e1, e2;
+  for (int y = 0; y < stack.height; ++y)
+    for (int x = 0; x < stack.width; ++x) {
+      const std::size_t p = static_cast<std::size_t>(y) * stack.width + x;
+      if (std::isnan(map.kr2[p])) continue;
+      const double k = 0.015 * (1 + x / 1024.0);
+      e1.push_back(std::fabs(map.kr[p] - k) / k);
+      e2.push_back(std::fabs(map.kr2[p] - 8 * k) / (8 * k));
+    }
+  std::sort(e1.begin(), e1.end());
+  std::sort(e2.begin(), e2.end());
+  state.counters["one_state"] = static_cast<double>(map.one_state);
+  state.counters["k1_err_median"] = e1.empty() ? NAN : e1[e1.size() / 2];
+  state.counters["k2_err_median"] = e2.empty() ? NAN : e2[e2.size() / 2];
+  state.counters["k1_err_max"] = e1.empty() ? NAN : e1.back();
+  state.counters["k2_err_max"] = e2.empty() ? NAN : e2.back();
+}
+BENCHMARK(BM_DecayMap1MegapixelTwoStates)->Unit(benchmark::kSecond)->Iterations(2)->UseRealTime();
 
 // The first algorithm (FitDecayMapReference) on the same stack, once: its
 // speed, and the largest differences of the fast map from it over every
