@@ -191,7 +191,8 @@ struct TwoStateTruth {
   std::vector<double> k1, k2, a1, a2;  // per pixel; a_i * colour[c] is the amplitude of channel c
 };
 
-DecayMapInput TwoStateStack(unsigned seed, int width, int height, double gain, TwoStateTruth* truth) {
+DecayMapInput TwoStateStack(unsigned seed, int width, int height, double gain, TwoStateTruth* truth,
+                            double background = 2) {
   DecayMapInput in;
   in.width = width;
   in.height = height;
@@ -223,7 +224,7 @@ DecayMapInput TwoStateStack(unsigned seed, int width, int height, double gain, T
         // Counts over the exposure: the exact integral of the model.
         const double mean = colour[c] * (t.a1[p] * std::exp(-t.k1[p] * start) * -std::expm1(-t.k1[p] * e) / t.k1[p] +
                                          t.a2[p] * std::exp(-t.k2[p] * start) * -std::expm1(-t.k2[p] * e) / t.k2[p]) +
-                            2 * e;
+                            background * e;
         if (gain > 0) {
           std::poisson_distribution<long long> counts(gain * mean);
           frame[p * 3 + c] = static_cast<float>(counts(rng) / gain / e);
@@ -237,25 +238,31 @@ DecayMapInput TwoStateStack(unsigned seed, int width, int height, double gain, T
 }
 
 TEST(DecayMapTwoStates, RecoversBothRatesOfANoiselessStackExactly) {
-  TwoStateTruth truth;
-  const DecayMapInput in = TwoStateStack(11, 16, 8, 0, &truth);
-  DecayMapOptions options;
-  options.states = 2;
-  const DecayMap map = FitDecayMap(in, options, "stack");
-  ASSERT_EQ(map.kr2.size(), map.kr.size());
-  ASSERT_EQ(map.amplitude2.size(), map.amplitude.size());
-  EXPECT_EQ(map.one_state, 0u);
-  double worst_k1 = 0, worst_k2 = 0, worst_a = 0;
-  for (std::size_t p = 0; p < map.kr.size(); ++p) {
-    worst_k1 = std::max(worst_k1, std::fabs(map.kr[p] - truth.k1[p]) / truth.k1[p]);
-    worst_k2 = std::max(worst_k2, std::fabs(map.kr2[p] - truth.k2[p]) / truth.k2[p]);
-    worst_a = std::max({worst_a, std::fabs(map.amplitude[p * 3] - truth.a1[p]) / truth.a1[p],
-                        std::fabs(map.amplitude2[p * 3] - truth.a2[p]) / truth.a2[p]});
+  // With a background and photon weights; without a background term (none
+  // in the stack) and unweighted.
+  for (const bool background : {true, false}) {
+    TwoStateTruth truth;
+    const DecayMapInput in = TwoStateStack(11, 16, 8, 0, &truth, background ? 2 : 0);
+    DecayMapOptions options;
+    options.states = 2;
+    options.background = background;
+    options.weighting = background ? Weighting::kPoisson : Weighting::kNone;
+    const DecayMap map = FitDecayMap(in, options, "stack");
+    ASSERT_EQ(map.kr2.size(), map.kr.size());
+    ASSERT_EQ(map.amplitude2.size(), map.amplitude.size());
+    EXPECT_EQ(map.one_state, 0u);
+    double worst_k1 = 0, worst_k2 = 0, worst_a = 0;
+    for (std::size_t p = 0; p < map.kr.size(); ++p) {
+      worst_k1 = std::max(worst_k1, std::fabs(map.kr[p] - truth.k1[p]) / truth.k1[p]);
+      worst_k2 = std::max(worst_k2, std::fabs(map.kr2[p] - truth.k2[p]) / truth.k2[p]);
+      worst_a = std::max({worst_a, std::fabs(map.amplitude[p * 3] - truth.a1[p]) / truth.a1[p],
+                          std::fabs(map.amplitude2[p * 3] - truth.a2[p]) / truth.a2[p]});
+    }
+    // The frames are float: rates and amplitudes to a part in 1e3 or better.
+    EXPECT_LT(worst_k1, 1e-3) << "background " << background;
+    EXPECT_LT(worst_k2, 1e-3) << "background " << background;
+    EXPECT_LT(worst_a, 1e-3) << "background " << background;
   }
-  // The frames are float: rates to a part in 1e4 or better.
-  EXPECT_LT(worst_k1, 1e-3);
-  EXPECT_LT(worst_k2, 1e-3);
-  EXPECT_LT(worst_a, 1e-3);
 }
 
 TEST(DecayMapTwoStates, RecoversBothRatesOfNoisyRandomStacks) {
