@@ -167,6 +167,11 @@ void BM_DecayMap1MegapixelTwoStates(benchmark::State& state) {
   state.counters["k2_err_median"] = e2.empty() ? NAN : e2[e2.size() / 2];
   state.counters["k1_err_max"] = e1.empty() ? NAN : e1.back();
   state.counters["k2_err_max"] = e2.empty() ? NAN : e2.back();
+  // As BM_DecayMap1Megapixel's: the whole process's peak, so it means the
+  // two-state map's own only when this bench runs alone (--benchmark_filter=TwoStates).
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  state.counters["peak_rss_per_input"] = usage.ru_maxrss * 1024.0 / InputBytes(stack);
 }
 BENCHMARK(BM_DecayMap1MegapixelTwoStates)->Unit(benchmark::kSecond)->Iterations(2)->UseRealTime();
 
