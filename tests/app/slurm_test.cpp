@@ -228,9 +228,22 @@ TEST(SlurmCluster, ArraysEqualOneProcessAndARequeuedTaskIsRedoneWhole) {
       120, 0.005);
   ASSERT_TRUE(mid_run) << "task 0 was never caught between its first and last frame";
   ASSERT_EQ(Shell("scontrol requeue " + render_tasks + "_0").exit_code, 0);
-  // A requeued job waits (BeginTime, about 2 minutes): let it start now.
+  // A requeued job waits (BeginTime, about 2 minutes), which gives the node
+  // time to end the killed run. Let it start sooner, but only once that run
+  // is over: its phos process gone and no job completing on the node. (Forced
+  // to start at once, the rerun was launched while the node still completed
+  // the killed run, and failed at once with exit code 1 and no output: CI,
+  // 3 December.)
   ASSERT_TRUE(WaitFor([&] { return JobState(render_tasks + "_0") == "PENDING"; }, 30, 0.05))
       << JobState(render_tasks + "_0");
+  const bool killed_run_over = WaitFor(
+      [] {
+        // "[-]-task" matches the task's own argument, not this shell's command line.
+        return Shell("pgrep -f '[-]-task 0/2'").out.empty() && Shell("squeue -h -t CG").out.empty() &&
+               Shell("sinfo -h -o %T").out.find("completing") == std::string::npos;
+      },
+      120, 0.1);
+  ASSERT_TRUE(killed_run_over) << Shell("squeue").out << Shell("sinfo").out;
   ASSERT_EQ(Shell("scontrol update JobId=" + render_tasks + "_0 StartTime=now").exit_code, 0);
 
   // The map (3 tiles) and the batch (2 shares of 2 items).
