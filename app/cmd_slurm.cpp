@@ -6,12 +6,11 @@
 // ranges; for a map, the array of tiles; for a batch, the array of item
 // shares; then a merge job. The array waits for the solver pass to succeed
 // (--dependency=afterok). The merge waits for every task to end
-// (--dependency=afterany) and checks the done records itself. afterok on an
-// array is judged on the array's whole record, and a requeue can leave it
-// unsatisfiable forever: in CI a merge stayed PENDING
-// (DependencyNeverSatisfied) once a task requeued mid-run had ended (Slurm
-// 22.05's test_job_array_complete also reads the array's max_exit_code, which
-// the killed run can set). Every task
+// (--dependency=afterany) and checks the done records itself: with afterok,
+// a task that failed (a requeued task whose rerun failed, in CI) left the
+// merge PENDING forever (DependencyNeverSatisfied) with nothing said; with
+// afterany the merge runs and fails with one line naming the missing tasks,
+// which `status` shows too. Every task
 // is idempotent (its done record, util/task_record.h), so Slurm's requeue and
 // a resubmission are safe; `status` counts the records.
 
