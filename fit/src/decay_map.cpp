@@ -301,6 +301,20 @@ struct BlockWork {
   Matrix pair_products, pair_weighted, pair_values;
 };
 
+// Pixel p of the block's sums (C channels), channel by channel, into px (sized for them and the frames).
+void LoadPixel(const BlockWork& work, int p, int C, PixelData& px) {
+  for (int c = 0; c < C; ++c) {
+    const int i = p * C + c;
+    px.w.col(c) = work.w.row(i).transpose();
+    px.wy.col(c) = work.wy.row(i).transpose();
+    px.S11[c] = work.S11(i);
+    px.S1y[c] = work.S1y(i);
+    px.Syy[c] = work.Syy(i);
+    px.constant[c] = work.constant(i);
+    px.peak[c] = work.peak(i);
+  }
+}
+
 void FitBlock(const DecayMapInput& in, const DecayMapOptions& options, const RateGrid& grid, const Matrix& grid_basis,
               const FrameTimes& times, std::size_t first_pixel, int count, BlockWork& work, DecayMap& map,
               std::atomic<std::size_t>& no_decay) {
@@ -343,16 +357,7 @@ void FitBlock(const DecayMapInput& in, const DecayMapOptions& options, const Rat
   px.w.resize(m, C);
   px.wy.resize(m, C);
   for (int p = 0; p < count; ++p) {
-    for (int c = 0; c < C; ++c) {
-      const int i = p * C + c;
-      px.w.col(c) = work.w.row(i).transpose();
-      px.wy.col(c) = work.wy.row(i).transpose();
-      px.S11[c] = work.S11(i);
-      px.S1y[c] = work.S1y(i);
-      px.Syy[c] = work.Syy(i);
-      px.constant[c] = work.constant(i);
-      px.peak[c] = work.peak(i);
-    }
+    LoadPixel(work, p, C, px);
     const RateFit fit = RefinePixel(px, times, grid, &work.pixel_cost(0, p), options, work.basis);
     work.one_state_cost(p) = fit.cost;
     // It decays if some channel's fitted decay is more than rounding (a
@@ -642,16 +647,7 @@ void FitBlockPairs(const DecayMapInput& in, const DecayMapOptions& options, cons
   for (int p = 0; p < count; ++p) {
     const std::size_t pixel = first_pixel + p;
     if (std::isnan(map.kr[pixel])) continue;  // nothing decays: no state at all
-    for (int c = 0; c < C; ++c) {
-      const int i = p * C + c;
-      px.w.col(c) = work.w.row(i).transpose();
-      px.wy.col(c) = work.wy.row(i).transpose();
-      px.S11[c] = work.S11(i);
-      px.S1y[c] = work.S1y(i);
-      px.Syy[c] = work.Syy(i);
-      px.constant[c] = work.constant(i);
-      px.peak[c] = work.peak(i);
-    }
+    LoadPixel(work, p, C, px);
     const PairFit fit = RefinePair(px, times, grid, pg, &work.pair_cost(0, p), options, work);
     // Both states must decay by more than rounding over the recorded span (as
     // one state must), and BIC must prefer two: N ln(cost1 / cost2) > (C + 1) ln N.
