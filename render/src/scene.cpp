@@ -333,6 +333,11 @@ bool Scene::HasPhosphors() const {
          std::any_of(volumes.begin(), volumes.end(), [](const Volume& v) { return v.phosphor != nullptr; });
 }
 
+bool Scene::AnyLightOnAt(double t_s) const {
+  return std::any_of(lights.begin(), lights.end(), [&](const Light& l) { return l.schedule.LevelAt(t_s) > 0; }) ||
+         (environment && environment->schedule.LevelAt(t_s) > 0);
+}
+
 Scene LoadScene(const std::filesystem::path& path) {
   return SceneFromJson(ReadJsonFile(path), path.parent_path(), path.string());
 }
@@ -395,7 +400,15 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
   if (auto f = camera.Optional("fov_deg")) scene.camera.fov_deg = f->NumberInRange(1, 170);
   if (auto f = camera.Optional("width")) scene.camera.width = f->Integer(1, 16384);
   if (auto f = camera.Optional("height")) scene.camera.height = f->Integer(1, 16384);
-  if (auto f = camera.Optional("exposure")) scene.camera.exposure = f->NumberInRange(0, 1e9);
+  if (auto f = camera.Optional("exposure")) {
+    const nlohmann::json& value = f->value();
+    if (value == "auto")
+      scene.camera.exposure_auto = true;
+    else if (value.is_number() && value.get<double>() >= 0 && value.get<double>() <= 1e9)
+      scene.camera.exposure = value.get<double>();
+    else
+      f->Fail("expected \"auto\" or a number in [0, 1e9], got " + DescribeJson(value));
+  }
   if (static_cast<double>(scene.camera.width) * scene.camera.height > kMaxPixels)
     camera.Fail(std::to_string(scene.camera.width) + " x " + std::to_string(scene.camera.height) +
                 " pixels is more than the limit of " + std::to_string(kMaxPixels) + " pixels per frame");

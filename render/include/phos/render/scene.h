@@ -181,6 +181,9 @@ struct Camera {
   double fov_deg = 45.0;  // vertical
   int width = 320, height = 240;
   double exposure = 1.0;  // scale applied before tone mapping (PNG only)
+  // "exposure": "auto": chosen once per sequence from its frames after dark
+  // (render/exposure.h); `exposure` is then unused.
+  bool exposure_auto = false;
   CameraKey At(double t_s) const;
 };
 
@@ -212,6 +215,9 @@ struct Scene {
   // The frame times from start_s to end_s at fps.
   std::vector<double> FrameTimes() const;
   bool HasPhosphors() const;
+  // Whether a light or the sky shines at t_s (level > 0). Frames where none
+  // does are after dark: only the glow is seen, and "exposure": "auto" meters them.
+  bool AnyLightOnAt(double t_s) const;
 };
 
 // Loads and validates a scene. Paths inside it are relative to its folder.
