@@ -22,6 +22,7 @@
 #include "cli_finite.h"
 #include "commands.h"
 #include "phos/model/material.h"
+#include "phos/render/exposure.h"
 #include "phos/render/night_vision.h"
 #include "phos/render/renderer.h"
 #include "phos/render/scene.h"
@@ -39,7 +40,10 @@ struct RenderArgs {
   std::string scene, out, times, transport = "direct";
   bool no_phosphorescence = false, json = false;
   int spp = 0, width = 0, height = 0;
-  double exposure = 0;
+  std::string exposure_text;  // --exposure as given: a number or "auto"
+  bool exposure_given = false;
+  double exposure = 0;        // --exposure's number (0: not given or "auto")
+  bool exposure_auto = false;  // --exposure auto
   double night_vision_cd = 0;
   double budget_s = 0, quality = 0;
   bool transport_given = false, indirect_visibility = false;
@@ -134,6 +138,81 @@ nlohmann::json WarnNeverCharged(const render::Scene& scene, const render::Couple
                      : "no light reaches its front (in shadow, or facing away from every light)");
   }
   return names;
+}
+
+// --exposure: "auto" or a positive number, into exposure_auto and exposure.
+void ParseExposureOption(RenderArgs* args) {
+  if (!args->exposure_given) return;
+  if (args->exposure_text == "auto") {
+    args->exposure_auto = true;
+    return;
+  }
+  if (!ParseDouble(args->exposure_text, &args->exposure) || !(args->exposure > 0))
+    ThrowUserError("", "--exposure", "expected \"auto\" or a positive number, got \"" + args->exposure_text + "\"");
+}
+
+// The frames "exposure": "auto" meters: those after dark, or every frame when
+// none is (a scene lit throughout).
+struct MeteredFrames {
+  std::vector<bool> metered;  // per frame of the run
+  bool after_dark = true;     // false: no frame is after dark, all are metered
+  std::size_t count = 0;
+};
+MeteredFrames FramesToMeter(const render::Scene& scene, const std::vector<double>& times) {
+  MeteredFrames frames{std::vector<bool>(times.size()), true, 0};
+  for (std::size_t f = 0; f < times.size(); ++f) frames.metered[f] = !scene.AnyLightOnAt(times[f]);
+  frames.count = static_cast<std::size_t>(std::count(frames.metered.begin(), frames.metered.end(), true));
+  if (frames.count == 0) frames = {std::vector<bool>(times.size(), true), false, times.size()};
+  return frames;
+}
+
+std::string FrameStem(std::size_t frame) {
+  char name[32];
+  std::snprintf(name, sizeof name, "frame-%04zu", frame);
+  return name;
+}
+
+// The frames laid out by --contact-sheet, tone-mapped, with their labels.
+struct ContactSheet {
+  std::vector<render::Image> frames;
+  std::vector<std::string> labels;
+};
+
+// What a frame shows at `exposure`: frame-NNNN.png, with --night-vision
+// frame-NNNN-night.png (its path goes into `entry`), and its cell of the
+// contact sheet (with --contact-sheet).
+void WriteFrameViews(const RenderArgs& args, const render::Scene& scene, std::size_t frame, double t, double exposure,
+                     const render::Image& rgb, const render::Image& bands, nlohmann::json* entry,
+                     ContactSheet* sheet) {
+  using namespace phos::render;
+  const std::filesystem::path out = args.out;
+  WritePng(out / (FrameStem(frame) + ".png"), rgb, exposure);
+  if (!args.contact_sheet.empty()) {
+    sheet->frames.push_back(ToneMap(rgb, exposure));
+    sheet->labels.push_back("t = " + FormatShort(t, 4) + " s");
+  }
+  if (args.night_vision_cd > 0) {
+    NightVisionOptions night;
+    night.cd_per_unit = args.night_vision_cd;
+    night.exposure = exposure;
+    night.seed = scene.settings.seed * 1000003ull + frame;  // fresh grain every frame
+    const std::filesystem::path night_png = out / (FrameStem(frame) + "-night.png");
+    WritePng(night_png, NightVision(bands, rgb, scene.bands, night), 1.0);
+    (*entry)["night_png"] = night_png.string();
+  }
+}
+
+// A frame's linear sRGB and bands back from its EXR (32-bit float, as
+// WriteExr wrote them: the values rendered, bit for bit).
+void ReadFrameExr(const std::filesystem::path& path, int band_count, render::Image* rgb, render::Image* bands) {
+  const render::Image exr = render::ReadImage(path);
+  PHOS_CHECK(exr.channels == 3 + band_count);
+  *rgb = render::Image(exr.width, exr.height, 3);
+  *bands = render::Image(exr.width, exr.height, band_count);
+  for (std::size_t p = 0; p < static_cast<std::size_t>(exr.width) * exr.height; ++p) {
+    std::copy_n(&exr.pixels[p * exr.channels], 3, &rgb->pixels[3 * p]);
+    std::copy_n(&exr.pixels[p * exr.channels + 3], band_count, &bands->pixels[p * band_count]);
+  }
 }
 
 double Seconds(std::chrono::steady_clock::time_point since) {
@@ -234,7 +313,11 @@ void Run(const RenderArgs& args) {
   Scene scene = LoadScene(args.scene);
   if (args.width > 0) scene.camera.width = args.width;
   if (args.height > 0) scene.camera.height = args.height;
-  if (args.exposure > 0) scene.camera.exposure = args.exposure;
+  if (args.exposure > 0) {
+    scene.camera.exposure = args.exposure;
+    scene.camera.exposure_auto = false;
+  }
+  if (args.exposure_auto) scene.camera.exposure_auto = true;
   // --material OBJECT=FILE: try another (say, a freshly fitted) material in the scene.
   for (const std::string& assignment : args.materials) {
     const auto equals = assignment.find('=');
@@ -280,6 +363,11 @@ void Run(const RenderArgs& args) {
                    "is timed on each machine, so ranges could choose differently: give --transport");
   if (!range.whole && !args.contact_sheet.empty())
     ThrowUserError("", "--contact-sheet", "needs every frame: not with --frames or --task");
+  if (!range.whole && !args.solve_only && scene.camera.exposure_auto) {
+    const std::string why = "\"auto\" meters every frame after dark: not with --frames or --task; give a number";
+    if (args.exposure_auto) ThrowUserError("", "--exposure", why);
+    ThrowUserError(args.scene, "camera.exposure", why + " with --exposure");
+  }
   if (args.solve_only && args.checkpoints.empty())
     ThrowUserError("", "--solve-only", "writes the states to --checkpoints DIR: give it");
   if (!args.solve_only && args.out.empty()) ThrowUserError("", "--out", "is required (except with --solve-only)");
@@ -368,8 +456,10 @@ void Run(const RenderArgs& args) {
   }
 
   nlohmann::json frames = nlohmann::json::array();
-  std::vector<Image> sheet_frames;
-  std::vector<std::string> sheet_labels;
+  ContactSheet sheet;
+  // "auto": the views wait for the exposure, which needs every metered frame.
+  const MeteredFrames metered = FramesToMeter(scene, times);
+  ExposureMeter meter;
   // Counted in rows of pixels, so the bar moves inside a long (path-traced) frame.
   ProgressBar progress("render " + scene.name,
                        (range.last - range.first) * static_cast<std::size_t>(scene.camera.height));
@@ -390,16 +480,9 @@ void Run(const RenderArgs& args) {
     const double render_s = Seconds(render_start);
     const double seconds = Seconds(start);
 
-    char name[64];
-    std::snprintf(name, sizeof name, "frame-%04zu", f);
-    const std::filesystem::path exr = std::filesystem::path(args.out) / (std::string(name) + ".exr");
-    const std::filesystem::path png = std::filesystem::path(args.out) / (std::string(name) + ".png");
+    const std::filesystem::path exr = std::filesystem::path(args.out) / (FrameStem(f) + ".exr");
+    const std::filesystem::path png = std::filesystem::path(args.out) / (FrameStem(f) + ".png");
     WriteExr(exr, rgb, bands, scene.bands);
-    WritePng(png, rgb, scene.camera.exposure);
-    if (!args.contact_sheet.empty()) {
-      sheet_frames.push_back(ToneMap(rgb, scene.camera.exposure));
-      sheet_labels.push_back("t = " + FormatShort(t, 4) + " s");
-    }
     nlohmann::json entry = {{"t", t},
                             {"exr", exr.string()},
                             {"png", png.string()},
@@ -407,19 +490,30 @@ void Run(const RenderArgs& args) {
                             {"solver_seconds", solver_s},
                             {"render_seconds", render_s},
                             {"rays", stats.rays}};
-    if (args.night_vision_cd > 0) {
-      NightVisionOptions night;
-      night.cd_per_unit = args.night_vision_cd;
-      night.exposure = scene.camera.exposure;
-      night.seed = scene.settings.seed * 1000003ull + f;  // fresh grain every frame
-      const std::filesystem::path night_png = std::filesystem::path(args.out) / (std::string(name) + "-night.png");
-      WritePng(night_png, NightVision(bands, rgb, scene.bands, night), 1.0);
-      entry["night_png"] = night_png.string();
-    }
+    if (!scene.camera.exposure_auto)
+      WriteFrameViews(args, scene, f, t, scene.camera.exposure, rgb, bands, &entry, &sheet);
+    else if (metered.metered[f])
+      meter.Add(rgb);
     frames.push_back(entry);
   }
   progress.Finish();
-  if (!args.contact_sheet.empty()) WriteContactSheet(args.contact_sheet, sheet_frames, sheet_labels, 4);
+  double exposure = scene.camera.exposure;
+  AutoExposure chosen;
+  if (scene.camera.exposure_auto) {
+    chosen = meter.Choose();
+    exposure = chosen.exposure;
+    if (chosen.glowing_pixels == 0)
+      std::fprintf(stderr, "phos render: warning: exposure auto: the %zu %s are black (no pixel glows): exposure 1\n",
+                   chosen.metered_frames,
+                   metered.after_dark ? "frame(s) after dark" : "frame(s) (none is after dark)");
+    // The views now, from the EXRs: the frames need not all stay in memory.
+    for (std::size_t f = range.first; f < range.last; ++f) {
+      Image rgb, bands;
+      ReadFrameExr(frames[f - range.first]["exr"].get<std::string>(), scene.bands.band_count(), &rgb, &bands);
+      WriteFrameViews(args, scene, f, times[f], exposure, rgb, bands, &frames[f - range.first], &sheet);
+    }
+  }
+  if (!args.contact_sheet.empty()) WriteContactSheet(args.contact_sheet, sheet.frames, sheet.labels, 4);
   if (!range.whole) {
     // Last, after every frame is whole on disk: the range is done.
     TaskDoneRecord record{"render frames " + std::to_string(range.first) + ":" + std::to_string(range.last),
@@ -435,6 +529,14 @@ void Run(const RenderArgs& args) {
       {"scene", args.scene},         {"transport", TransportName(transport)}, {"phosphorescence", solver != nullptr},
       {"width", scene.camera.width}, {"height", scene.camera.height},         {"frames", frames}};
   if (choose) result["transport_choice"] = choice_json;
+  result["exposure"] = exposure;
+  if (scene.camera.exposure_auto)
+    result["exposure_auto"] = {{"metered", metered.after_dark ? "after dark" : "all frames"},
+                               {"metered_frames", chosen.metered_frames},
+                               {"glowing_pixels", chosen.glowing_pixels},
+                               {"metered_luminance", chosen.metered_luminance},
+                               {"percentile", kMeteredPercentile * 100},
+                               {"display_luminance", kMeteredDisplayLuminance}};
   if (solver) {
     const SolverStats& s = solver->stats();
     result["solver"] = {{"texels", s.texels},
@@ -462,6 +564,12 @@ void Run(const RenderArgs& args) {
   std::printf("%s: %zu frame(s), %dx%d, transport %s, %s\n", scene.name.c_str(), frames.size(), scene.camera.width,
               scene.camera.height, TransportName(transport), states.c_str());
   if (choose) std::printf("  transport for the %s\n", choice_line.c_str());
+  if (scene.camera.exposure_auto)
+    std::printf("  exposure auto: %s, metered on %zu %s: the median glowing pixel (luminance %s) shown as mid-grey "
+                "(%s)\n",
+                FormatShort(exposure, 4).c_str(), chosen.metered_frames,
+                metered.after_dark ? "frame(s) after dark" : "frame(s) (none is after dark)",
+                FormatShort(chosen.metered_luminance, 4).c_str(), FormatShort(kMeteredDisplayLuminance).c_str());
   for (const auto& frame : frames)
     std::printf("  t = %8s s  %7.3f s  %s\n", FormatDouble(frame["t"].get<double>()).c_str(),
                 frame["seconds"].get<double>(), frame["png"].get<std::string>().c_str());
@@ -500,9 +608,11 @@ void RegisterRender(CLI::App& app) {
       ->check(CLI::Range(1, 1 << 20));
   cmd->add_option("--width", args->width, "Override the camera's width in pixels")->check(CLI::Range(1, 16384));
   cmd->add_option("--height", args->height, "Override the camera's height in pixels")->check(CLI::Range(1, 16384));
-  cmd->add_option("--exposure", args->exposure, "PNG exposure (default: the camera's); EXR files are never scaled")
-      ->check(kFinite)
-      ->check(CLI::PositiveNumber);
+  cmd->add_option("--exposure", args->exposure_text,
+                  "PNG exposure: a positive number, or auto: one exposure for the sequence that shows the median\n"
+                  "glowing pixel of the frames after dark (no light on; all frames if none is) as mid-grey\n"
+                  "(docs/render.md); default: the camera's \"exposure\" (1 if not given). EXR files are never scaled")
+      ->each([args](const std::string&) { args->exposure_given = true; });
   cmd->add_option("--night-vision", args->night_vision_cd,
                   "Also write frame-NNNN-night.png as a dark-adapted eye sees it (Thompson et al. 2002:\n"
                   "blue shift, loss of acuity, grain); the value is the luminance in cd/m^2 of radiance 1")
@@ -533,7 +643,10 @@ void RegisterRender(CLI::App& app) {
   cmd->add_option("--tasks", args->solve_tasks, "With --solve-only: the number of frame ranges (default 1)")
       ->check(CLI::Range(1, 1000000))
       ->needs("--solve-only");
-  cmd->callback([args] { Run(*args); });
+  cmd->callback([args] {
+    ParseExposureOption(args.get());
+    Run(*args);
+  });
 }
 
 }  // namespace phos::app

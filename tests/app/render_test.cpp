@@ -5,11 +5,14 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <filesystem>
 
 #include <nlohmann/json.hpp>
 
+#include "phos/render/exposure.h"
 #include "phos/render/renderer.h"
+#include "phos/util/colour.h"
 #include "test_util.h"
 
 namespace phos::testing {
@@ -185,6 +188,146 @@ TEST(RenderCommand, BadInputIsOneLineAndExitTwo) {
   WriteText(dir / "broken.json", "{\"schema\": ");
   EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + (dir / "broken.json").string() + out), "broken.json"));
   // Nothing was written by the failed runs.
+  EXPECT_FALSE(std::filesystem::exists(dir / "frame-0000.exr"));
+}
+
+// --exposure auto, worked out here from the EXRs: the nearest-rank median of
+// the glowing pixels' luminance of the given frames, shown as mid-grey.
+double MidGreyExposureOf(const std::vector<std::string>& exrs) {
+  std::vector<float> glowing;
+  for (const std::string& exr : exrs) {
+    const render::Image image = render::ReadImage(exr);
+    for (std::size_t p = 0; p < image.pixels.size() / image.channels; ++p) {
+      const float* c = &image.pixels[p * image.channels];
+      const double Y = LinearSrgbLuminance(c[0], c[1], c[2]);
+      if (Y > 0) glowing.push_back(static_cast<float>(Y));
+    }
+  }
+  EXPECT_FALSE(glowing.empty());
+  std::sort(glowing.begin(), glowing.end());
+  const double median = glowing[(glowing.size() + 1) / 2 - 1];
+  return 0.18 / (1 - 0.18) / median;
+}
+
+// The frame's PNG is its EXR's R, G, B through ToneMap at `exposure`, to the 8-bit rounding.
+::testing::AssertionResult PngShowsExrAt(const nlohmann::json& frame, double exposure) {
+  const render::Image exr = render::ReadImage(frame["exr"].get<std::string>());
+  render::Image rgb(exr.width, exr.height, 3);
+  for (std::size_t p = 0; p < rgb.pixels.size() / 3; ++p)
+    std::copy_n(&exr.pixels[p * exr.channels], 3, &rgb.pixels[3 * p]);
+  const render::Image expected = render::ToneMap(rgb, exposure);
+  const render::Image png = render::ReadImage(frame["png"].get<std::string>());
+  for (std::size_t i = 0; i < png.pixels.size(); ++i)
+    if (std::lround(png.pixels[i] * 255) != std::lround(expected.pixels[i] * 255))
+      return ::testing::AssertionFailure() << frame["png"] << " value " << i << ": " << png.pixels[i] * 255
+                                           << " against " << expected.pixels[i] * 255 << " at exposure " << exposure;
+  return ::testing::AssertionSuccess();
+}
+
+// The Cornell fixture with another camera.exposure, written into `dir` (its
+// meshes' and materials' paths made absolute, so the copy finds them).
+std::string CornellWithExposure(const TempDir& dir, const std::string& name, const nlohmann::json& exposure) {
+  nlohmann::json scene = nlohmann::json::parse(ReadText(kCornell));
+  scene["camera"]["exposure"] = exposure;
+  for (auto& object : scene["objects"])
+    for (const char* key : {"mesh", "phosphor"})
+      if (object.contains(key))
+        object[key] = (Fixture("scenes") / object[key].get<std::string>()).lexically_normal().string();
+  const std::filesystem::path path = dir / (name + ".json");
+  WriteText(path, scene.dump());
+  return path.string();
+}
+
+TEST(RenderCommand, AutoExposureMetersTheFramesAfterDark) {
+  // The LED is on until 30 s: 20 s is lit, 40 and 60 s are after dark.
+  TempDir dir;
+  const CommandResult r =
+      RunPhos("render " + kCornell + " --out " + dir.path().string() + " --times 20,40,60 --width 24 --height 24" +
+              " --exposure auto --night-vision 0.05 --contact-sheet " + (dir / "sheet.png").string() + " --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.err, "");
+  const nlohmann::json json = nlohmann::json::parse(r.out);
+  const nlohmann::json& metering = json["exposure_auto"];
+  EXPECT_EQ(metering["metered"], "after dark");
+  EXPECT_EQ(metering["metered_frames"].get<int>(), 2);
+  EXPECT_EQ(metering["display_luminance"].get<double>(), 0.18);
+  const double exposure = json["exposure"].get<double>();
+  const double expected = MidGreyExposureOf({json["frames"][1]["exr"], json["frames"][2]["exr"]});
+  EXPECT_NEAR(exposure, expected, 1e-9 * expected);
+  EXPECT_GT(exposure, 10.0);  // the glow is far dimmer than the camera's exposure 1 shows
+  // Every view of every frame, the lit one too, is at that one exposure.
+  for (const auto& frame : json["frames"]) {
+    EXPECT_TRUE(PngShowsExrAt(frame, exposure));
+    EXPECT_TRUE(std::filesystem::exists(frame["night_png"].get<std::string>()));
+  }
+  EXPECT_TRUE(std::filesystem::exists(dir / "sheet.png"));
+
+  const CommandResult text = RunPhos("render " + kCornell + " --out " + dir.path().string() +
+                                     " --times 20,40,60 --width 24 --height 24 --exposure auto");
+  ASSERT_EQ(text.exit_code, 0) << text.err;
+  EXPECT_NE(text.out.find("  exposure auto: "), std::string::npos) << text.out;
+  EXPECT_NE(text.out.find("metered on 2 frame(s) after dark"), std::string::npos) << text.out;
+}
+
+TEST(RenderCommand, ANumericExposureIsUsedAsItIs) {
+  TempDir dir;
+  const std::string common = " --out " + dir.path().string() + " --times 40 --width 16 --height 16 --json";
+  const nlohmann::json by_scene = nlohmann::json::parse(RunPhos("render " + kCornell + common).out);
+  EXPECT_EQ(by_scene["exposure"].get<double>(), 1.0);  // the fixture's camera.exposure
+  EXPECT_FALSE(by_scene.contains("exposure_auto"));
+  EXPECT_TRUE(PngShowsExrAt(by_scene["frames"][0], 1.0));
+  const nlohmann::json given = nlohmann::json::parse(RunPhos("render " + kCornell + common + " --exposure 3").out);
+  EXPECT_EQ(given["exposure"].get<double>(), 3.0);
+  EXPECT_TRUE(PngShowsExrAt(given["frames"][0], 3.0));
+  // A number on the command line wins over a scene's "auto".
+  const std::string auto_scene = CornellWithExposure(dir, "auto", "auto");
+  const nlohmann::json overridden = nlohmann::json::parse(RunPhos("render " + auto_scene + common + " --exposure 3").out);
+  EXPECT_EQ(overridden["exposure"].get<double>(), 3.0);
+  EXPECT_FALSE(overridden.contains("exposure_auto"));
+  const nlohmann::json from_scene = nlohmann::json::parse(RunPhos("render " + auto_scene + common).out);
+  EXPECT_EQ(from_scene["exposure_auto"]["metered"], "after dark");
+}
+
+TEST(RenderCommand, AutoExposureWithNoFrameAfterDarkMetersEveryFrame) {
+  TempDir dir;
+  const CommandResult r = RunPhos("render " + kCornell + " --out " + dir.path().string() +
+                                  " --times 5,10 --width 16 --height 16 --exposure auto --json");  // LED on
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.err, "");
+  const nlohmann::json json = nlohmann::json::parse(r.out);
+  EXPECT_EQ(json["exposure_auto"]["metered"], "all frames");
+  EXPECT_EQ(json["exposure_auto"]["metered_frames"].get<int>(), 2);
+  const double expected = MidGreyExposureOf({json["frames"][0]["exr"], json["frames"][1]["exr"]});
+  EXPECT_NEAR(json["exposure"].get<double>(), expected, 1e-9 * expected);
+}
+
+TEST(RenderCommand, AutoExposureOfBlackFramesAfterDarkIsOneAndSaidOnce) {
+  TempDir dir;
+  const CommandResult r = RunPhos("render " + kCornell + " --out " + dir.path().string() +
+                                  " --times 20,40,60 --width 16 --height 16 --exposure auto --no-phosphorescence --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.err, "phos render: warning: exposure auto: the 2 frame(s) after dark are black (no pixel glows): "
+                   "exposure 1\n");
+  const nlohmann::json json = nlohmann::json::parse(r.out);
+  ASSERT_TRUE(json["exposure"].is_number());  // not null (NaN) nor inf
+  EXPECT_EQ(json["exposure"].get<double>(), 1.0);
+  EXPECT_EQ(json["exposure_auto"]["glowing_pixels"].get<int>(), 0);
+  for (const auto& frame : json["frames"]) EXPECT_TRUE(PngShowsExrAt(frame, 1.0));
+}
+
+TEST(RenderCommand, BadExposuresAreOneLineAndExitTwo) {
+  TempDir dir;
+  const std::string out = " --out " + dir.path().string() + " --times 40 --width 8 --height 8";
+  for (const std::string bad : {"autox", "-1", "nan", "inf", "0", "1e400", ""})
+    EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + kCornell + out + " --exposure '" + bad + "'"),
+                                   "--exposure: expected \"auto\" or a positive number, got \"" + bad + "\""));
+  EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + CornellWithExposure(dir, "autox", "autox") + out),
+                                 "autox.json: camera.exposure: expected \"auto\" or a number in [0, 1e9], got "));
+  // A range of frames cannot see the others' frames after dark.
+  EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + kCornell + out + " --exposure auto --task 0/2"),
+                                 "--exposure: \"auto\" meters every frame after dark: not with --frames or --task"));
+  EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + CornellWithExposure(dir, "auto", "auto") + out + " --frames 0:1"),
+                                 "auto.json: camera.exposure: \"auto\" meters every frame after dark"));
   EXPECT_FALSE(std::filesystem::exists(dir / "frame-0000.exr"));
 }
 
