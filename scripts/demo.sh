@@ -47,56 +47,51 @@ mkdir -p "$OUT/fitted"
 # Render the still life (Fig. 8.1): lamp on until 20 s, then a minute of
 # darkness. The orange ball wears the material just fitted from the capture
 # (results/fitted/orange.json).
+# Every scene: one exposure per sequence that shows the glow (chosen from the
+# frames after dark, docs/render.md "Exposure") and the night-vision frames.
+VIEWS="--exposure auto --night-vision 0.05"
 material_args=()
 if [ -f "$OUT/fitted/orange.json" ]; then
   material_args=(--material "orange ball=$OUT/fitted/orange.json")
 fi
 rm -rf "$OUT/still-life" "$OUT/cornell" "$OUT/light-trail"
 "$PHOS" render fixtures/scenes/still-life.json --out "$OUT/still-life" --times 0,10,19,21,30,50,80 \
-  --contact-sheet "$OUT/still-life.png" --night-vision 0.05 "${material_args[@]}"
+  --contact-sheet "$OUT/still-life.png" $VIEWS "${material_args[@]}"
 # The Cornell box of Fig. 8.15, path traced 10 s after the LED went off: the
 # glowing walls light the white blocks.
 "$PHOS" render fixtures/scenes/cornell-phosphor.json --out "$OUT/cornell" --times 20,31,40,90 \
-  --transport path --contact-sheet "$OUT/cornell.png"
+  --transport path --contact-sheet "$OUT/cornell.png" $VIEWS
 # The same box 10 s after lights-out with one bounce through deep screen
 # space instead of paths (docs/render.md compares the two).
 rm -rf "$OUT/cornell-dss"
 "$PHOS" render fixtures/scenes/cornell-phosphor.json --out "$OUT/cornell-dss" --times 40 --transport dss \
-  --contact-sheet "$OUT/cornell-dss.png"
+  --contact-sheet "$OUT/cornell-dss.png" $VIEWS
 # A moving 405 nm LED writes a fading trail into a painted floor.
 "$PHOS" render fixtures/scenes/light-trail.json --out "$OUT/light-trail" --times 1,3,5,7,9,10,12,15 \
-  --contact-sheet "$OUT/light-trail.png"
+  --contact-sheet "$OUT/light-trail.png" $VIEWS
 # Phosphorescent media: a dust cloud swept by laser sheets (Fig. 8.17) and a
 # glowing liquid charged from above (Fig. 8.18), one state per voxel.
 rm -rf "$OUT/dust-sheets" "$OUT/glowing-liquid"
 "$PHOS" render fixtures/scenes/dust-sheets.json --out "$OUT/dust-sheets" --times 1.5,3,3.55,5,8 \
-  --contact-sheet "$OUT/dust-sheets.png"
+  --contact-sheet "$OUT/dust-sheets.png" $VIEWS
 "$PHOS" render fixtures/scenes/glowing-liquid.json --out "$OUT/glowing-liquid" --times 10,20,40,80 \
-  --contact-sheet "$OUT/glowing-liquid.png"
+  --contact-sheet "$OUT/glowing-liquid.png" $VIEWS
 # Translucent wax through deep screen space: light bleeds into the post's
 # shadow and through the slab's sides (dipole diffusion).
 rm -rf "$OUT/translucent-shadow"
 "$PHOS" render fixtures/scenes/translucent-shadow.json --out "$OUT/translucent-shadow" --times 2,8 --transport dss \
-  --contact-sheet "$OUT/translucent-shadow.png"
+  --contact-sheet "$OUT/translucent-shadow.png" $VIEWS
 # A sign charged by the sky through the afternoon glows at dusk; the porch
 # roof's shadow of the sky is directional occlusion through deep space.
 rm -rf "$OUT/dusk-sign"
 "$PHOS" render fixtures/scenes/dusk-sign.json --out "$OUT/dusk-sign" --times 30,45,55,62,90 --transport dss \
-  --contact-sheet "$OUT/dusk-sign.png"
+  --contact-sheet "$OUT/dusk-sign.png" $VIEWS
 
-# The gallery: every fixture scene's contact sheet on one page.
-{
-  echo '<!doctype html><meta charset="utf-8"><title>phos gallery</title>'
-  echo '<style>body{background:#222;color:#ddd;font-family:sans-serif;margin:2em}img{max-width:100%}</style>'
-  echo '<h1>phos: the fixture scenes (make demo)</h1>'
-  # sheet:scene file:how it was rendered
-  for entry in still-life:still-life:direct cornell:cornell-phosphor:path cornell-dss:cornell-phosphor:dss \
-               light-trail:light-trail:direct dust-sheets:dust-sheets:direct glowing-liquid:glowing-liquid:direct \
-               translucent-shadow:translucent-shadow:dss dusk-sign:dusk-sign:dss; do
-    IFS=: read -r sheet scene transport <<< "$entry"
-    echo "<h2>$sheet</h2><p>fixtures/scenes/$scene.json, --transport $transport</p><img src=\"$sheet.png\">"
-  done
-} > "$OUT/gallery.html.tmp" && mv "$OUT/gallery.html.tmp" "$OUT/gallery.html"
+# The gallery: every fixture scene on one page, with its description, its
+# contact sheet and its night-vision frames.
+python3 scripts/gallery.py "$OUT" still-life:still-life:direct cornell:cornell-phosphor:path \
+  cornell-dss:cornell-phosphor:dss light-trail:light-trail:direct dust-sheets:dust-sheets:direct \
+  glowing-liquid:glowing-liquid:direct translucent-shadow:translucent-shadow:dss dusk-sign:dusk-sign:dss
 
 echo "phos demo: simulated 11 Table 8.1 presets (60 s charge, 300 s dark, exact integrator)"
 echo "  curves (CSV: t,r_1,L_1..L_8):  $OUT/<material>.csv"
