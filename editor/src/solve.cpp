@@ -129,9 +129,17 @@ void StateAtSamples(const PointSamples& s, const std::vector<T>& a, const T& kr,
 template <typename T>
 using Emitted = std::vector<std::vector<std::vector<T>>>;
 
-// The residuals of Eq. 8.7 given the emitted radiance (reflection added here).
+// Where a residual reads the radiance, and its slope dr/dL there: w for a
+// target, -w (at least) or w (at most) for a violated bound, 0 for a met one.
+struct ResidualSite {
+  int point = 0, sample = 0, band = 0;
+  double slope = 0;
+};
+
+// The residuals of Eq. 8.7 given the emitted radiance (reflection added here),
+// and, if `sites` is given, where each one reads it.
 template <typename T>
-void Residuals(const Problem& p, const Samples& s, const Emitted<T>& Lp, T* out) {
+void Residuals(const Problem& p, const Samples& s, const Emitted<T>& Lp, T* out, ResidualSite* sites = nullptr) {
   const int nb = p.bands.band_count();
   int k = 0;
   for (std::size_t c = 0; c < p.constraints.size(); ++c) {
@@ -143,13 +151,18 @@ void Residuals(const Problem& p, const Samples& s, const Emitted<T>& Lp, T* out)
       return Lp[con.point][sample][b] + point.albedo[b] * point.irradiance[ps.frame[sample]][b] / kPi;
     };
     if (con.kind == Constraint::Kind::kTarget) {
-      for (int b = 0; b < nb; ++b) out[k++] = w * (L(s.target_sample[c], b) - con.radiance[b]);
+      for (int b = 0; b < nb; ++b) {
+        if (sites) sites[k] = {con.point, s.target_sample[c], b, w};
+        out[k++] = w * (L(s.target_sample[c], b) - con.radiance[b]);
+      }
     } else {
+      const bool at_least = con.kind == Constraint::Kind::kAtLeast;
       for (int sample : s.bound_samples[c])
         for (int b = 0; b < nb; ++b) {
-          const T miss = con.kind == Constraint::Kind::kAtLeast ? T(con.radiance[b]) - L(sample, b)
-                                                                : L(sample, b) - T(con.radiance[b]);
-          out[k++] = miss > T(0.0) ? T(w) * miss : T(0.0);
+          const T miss = at_least ? T(con.radiance[b]) - L(sample, b) : L(sample, b) - T(con.radiance[b]);
+          const bool violated = miss > T(0.0);
+          if (sites) sites[k] = {con.point, sample, b, violated ? (at_least ? -w : w) : 0.0};
+          out[k++] = violated ? T(w) * miss : T(0.0);
         }
     }
   }
@@ -437,22 +450,101 @@ std::vector<const StateCurve<T>*> Pointers(const std::vector<StateCurve<T>>& g) 
   return out;
 }
 
-// Ceres functor over log kr, log ke (lit bands), Lambda (all bands), all states.
-struct EditCost {
-  const Problem* p;
-  const Samples* s;
-  const std::vector<int>* lit;
-  int nc, nb;
-  template <typename T>
-  bool operator()(T const* const* parameters, T* residuals) const {
-    const std::vector<StateCurve<T>> g = CurvesOfLogs(*p, *s, *lit, nc, parameters[0], parameters[1]);
-    std::vector<std::vector<T>> Lambda(nc);
-    for (int i = 0; i < nc; ++i) Lambda[i].assign(parameters[2] + i * nb, parameters[2] + (i + 1) * nb);
-    Emitted<T> Lp;
-    EmitInto(*p, *s, Pointers(g), Lambda, Lp);
-    Residuals(*p, *s, Lp, residuals);
+// One state's curve g = kr r(t) at every point's samples, and with `slopes`
+// its derivatives with respect to the state's own log kr and log ke (lit
+// bands): dg[point][sample * (1 + n_lit) + d], d = 0 for log kr. A state's
+// curve depends on its own rates only, so automatic derivatives run over
+// 1 + n_lit parameters (in Jets of 8), not over every state's and Lambda.
+struct CurveWithSlopes {
+  StateCurve<double> g;
+  std::vector<std::vector<double>> dg;
+};
+
+CurveWithSlopes CurveAndSlopes(const Problem& p, const Samples& s, const std::vector<int>& lit, double log_kr,
+                               const double* log_ke, bool slopes) {
+  using Jet = ceres::Jet<double, 8>;
+  const int n_lit = static_cast<int>(lit.size()), dims = 1 + n_lit;
+  CurveWithSlopes c;
+  if (!slopes) {
+    std::vector<double> ke(n_lit);
+    for (int l = 0; l < n_lit; ++l) ke[l] = std::exp(log_ke[l]);
+    c.g = CurveOf(p, s, lit, std::exp(log_kr), ke.data());
+    return c;
+  }
+  c.dg.resize(p.points.size());
+  for (int first = 0; first < dims; first += 8) {
+    // Seeds the parameters [first, first + 8) of this state.
+    const auto seeded = [&](double value, int d) {
+      return d >= first && d < first + 8 ? Jet(value, d - first) : Jet(value);
+    };
+    std::vector<Jet> ke(n_lit);
+    for (int l = 0; l < n_lit; ++l) ke[l] = exp(seeded(log_ke[l], 1 + l));
+    const StateCurve<Jet> g = CurveOf(p, s, lit, Jet(exp(seeded(log_kr, 0))), ke.data());
+    if (first == 0) c.g.assign(p.points.size(), {});
+    for (std::size_t q = 0; q < g.size(); ++q) {
+      c.g[q].resize(g[q].size());
+      c.dg[q].resize(g[q].size() * dims);
+      for (std::size_t m = 0; m < g[q].size(); ++m) {
+        c.g[q][m] = g[q][m].a;
+        for (int d = first; d < std::min(dims, first + 8); ++d) c.dg[q][m * dims + d] = g[q][m].v[d - first];
+      }
+    }
+  }
+  return c;
+}
+
+// The full cost of Eq. 8.7 for Ceres, over log kr (nc), log ke (nc x lit
+// bands) and Lambda (nc x bands). L is linear in Lambda, so its derivatives
+// are closed-form: dL_b / dLambda_i[b] = g_i and dL_b / dtheta_i =
+// Lambda_i[b] dg_i / dtheta_i. Only the curves need automatic derivatives
+// (CurveAndSlopes), which makes a bound's every-frame residuals cheap.
+class EditCost final : public ceres::CostFunction {
+ public:
+  EditCost(const Problem& p, const Samples& s, const std::vector<int>& lit, int nc)
+      : p_(p), s_(s), lit_(lit), nc_(nc), nb_(p.bands.band_count()), n_lit_(static_cast<int>(lit.size())) {
+    *mutable_parameter_block_sizes() = {nc_, nc_ * n_lit_, nc_ * nb_};
+    set_num_residuals(ResidualCount(p, s));
+  }
+
+  bool Evaluate(double const* const* parameters, double* residuals, double** jacobians) const override {
+    const bool slopes = jacobians != nullptr;
+    std::vector<CurveWithSlopes> curves;
+    for (int i = 0; i < nc_; ++i)
+      curves.push_back(CurveAndSlopes(p_, s_, lit_, parameters[0][i], parameters[1] + i * n_lit_, slopes));
+    std::vector<std::vector<double>> Lambda(nc_);
+    for (int i = 0; i < nc_; ++i) Lambda[i].assign(parameters[2] + i * nb_, parameters[2] + (i + 1) * nb_);
+    std::vector<const StateCurve<double>*> g;
+    for (const CurveWithSlopes& c : curves) g.push_back(&c.g);
+    Emitted<double> Lp;
+    EmitInto(p_, s_, g, Lambda, Lp);
+    std::vector<ResidualSite> sites(num_residuals());
+    Residuals(p_, s_, Lp, residuals, sites.data());
+    if (!slopes) return true;
+    const int sizes[3] = {nc_, nc_ * n_lit_, nc_ * nb_};
+    for (int j = 0; j < 3; ++j)
+      if (jacobians[j]) std::fill(jacobians[j], jacobians[j] + num_residuals() * sizes[j], 0.0);
+    const int dims = 1 + n_lit_;
+    for (int k = 0; k < num_residuals(); ++k) {
+      const ResidualSite& site = sites[k];
+      if (site.slope == 0) continue;
+      for (int i = 0; i < nc_; ++i) {
+        const double scale = site.slope * Lambda[i][site.band];
+        const double* dg = &curves[i].dg[site.point][site.sample * dims];
+        if (jacobians[0]) jacobians[0][k * sizes[0] + i] = scale * dg[0];
+        if (jacobians[1])
+          for (int l = 0; l < n_lit_; ++l) jacobians[1][k * sizes[1] + i * n_lit_ + l] = scale * dg[1 + l];
+        if (jacobians[2])
+          jacobians[2][k * sizes[2] + i * nb_ + site.band] = site.slope * curves[i].g[site.point][site.sample];
+      }
+    }
     return true;
   }
+
+ private:
+  const Problem& p_;
+  const Samples& s_;
+  const std::vector<int>& lit_;
+  const int nc_, nb_, n_lit_;
 };
 
 // Ceres functor over log kr and log ke only, Lambda projected out (BestLambda).
@@ -896,13 +988,9 @@ Parameters Refine(const Problem& p, const Samples& s, const TargetSystem& t, con
 
   for (int i = 0; i < nc; ++i)
     for (int b = 0; b < nb; ++b) Lambda[i * nb + b] = x.Lambda[i][b];
-  auto* cost = new ceres::DynamicAutoDiffCostFunction<EditCost, 8>(new EditCost{&p, &s, &lit, nc, nb});
-  cost->AddParameterBlock(nc);
-  cost->AddParameterBlock(nc * n_lit);
-  cost->AddParameterBlock(nc * nb);
-  cost->SetNumResiduals(residuals);
   ceres::Problem problem;
-  problem.AddResidualBlock(cost, ScaleToTargets(p), {log_kr.data(), log_ke.data(), Lambda.data()});
+  problem.AddResidualBlock(new EditCost(p, s, lit, nc), ScaleToTargets(p),
+                           {log_kr.data(), log_ke.data(), Lambda.data()});
   for (int q = 0; q < nc * nb; ++q) problem.SetParameterLowerBound(Lambda.data(), q, 0.0);
   BoundLogRates(ke_upper, problem, log_kr, log_ke);
   ceres::Solve(solver, &problem, &summary);
@@ -1088,7 +1176,7 @@ std::optional<Solution> SolveGridBaseline(const Problem& p, std::string* why) {
       terms.push_back(std::move(term));
     }
   }
-  std::vector<double> state(terms.size());  // r at each term's sample
+  std::vector<double> state(terms.size());                     // r at each term's sample
   std::vector<double> ke(nb), Lambda_of_band(nb), excitation;  // reused: no allocation per grid point
   const int ke_combinations = static_cast<int>(std::pow(10, nb));
   for (double kr : kr_grid)
