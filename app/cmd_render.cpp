@@ -134,7 +134,7 @@ nlohmann::json WarnNeverCharged(const render::Scene& scene, const render::Couple
                  scene.objects[o].name.c_str(),
                  solver.charge_report(slot).lit_from_behind
                      ? "the light reaches its back (a phosphor charges on its front only, the side its triangles' "
-                       "counter-clockwise winding faces; reverse the winding or the mesh's normal)"
+                       "counter-clockwise winding faces; reverse the winding, or make it \"two_sided\": true)"
                      : "no light reaches its front (in shadow, or facing away from every light)");
   }
   return names;

@@ -98,6 +98,7 @@ struct EmitterDistribution {
   std::vector<Entry> entries;
   std::vector<Column> columns;
   std::vector<std::vector<float>> pdf;  // per object, per triangle: probability of choosing it, per m^2 of it
+  std::vector<std::uint8_t> two_sided;  // per texel slot: the object glows from both faces
   bool empty() const { return entries.empty(); }
 
   EmitterDistribution(const SceneGeometry& geometry, const CoupledSolver* solver) {
@@ -105,6 +106,8 @@ struct EmitterDistribution {
     if (!solver) return;
     const TexelAtlas& atlas = solver->atlas();
     PHOS_CHECK(atlas.objects().size() <= 32767);
+    for (const TexelAtlas::ObjectTexels& texels : atlas.objects())
+      two_sided.push_back(geometry.scene().objects[texels.object].two_sided);
     std::vector<double> power;
     double total = 0;
     for (std::size_t s = 0; s < atlas.objects().size(); ++s) {
@@ -223,26 +226,29 @@ class Tracer {
     }
   }
 
-  // Lp at a surface point seen from its front; zero elsewhere.
-  // L += Lp at the hit (front sides of phosphors only): the emissive term of
-  // Eq. 8.2 in a frame, added band by band with no temporary.
+  // Whether the side of a hit shows its glow: the front, or either face of a
+  // two-sided phosphor (Object::two_sided).
+  bool ShowsGlow(const Hit& hit) const { return hit.front || scene_.objects[hit.object].two_sided; }
+
+  // L += Lp at the hit (the glowing sides of phosphors only): the emissive
+  // term of Eq. 8.2 in a frame, added band by band with no temporary.
   void AddEmission(const Hit& hit, Bands& L) const {
-    if (!solver_ || !hit.front) return;
+    if (!solver_ || !ShowsGlow(hit)) return;
     const int slot = solver_->atlas().SlotOf(hit.object);
     if (slot < 0) return;
     const std::size_t texel = solver_->atlas().TexelOf(slot, hit.triangle, hit.b1, hit.b2);
     for (int b : solver_->emission_bands(slot)) L[b] += solver_->Lp(slot, b, texel);
   }
 
-  // The texel-major glow of a front-side hit on a phosphor (path transport):
-  // its emission bands and their Lp, prefetched; empty elsewhere.
+  // The texel-major glow of a hit on a phosphor's glowing side (path
+  // transport): its emission bands and their Lp, prefetched; empty elsewhere.
   struct GlowTexel {
     const std::vector<int>* bands = nullptr;
     const float* Lp = nullptr;
     explicit operator bool() const { return Lp != nullptr; }
   };
   GlowTexel GlowAt(const Hit& hit) const {
-    if (glow_by_texel_.empty() || !hit.front) return {};
+    if (glow_by_texel_.empty() || !ShowsGlow(hit)) return {};
     const int slot = solver_->atlas().SlotOf(hit.object);
     if (slot < 0) return {};
     return GlowAt(slot, solver_->atlas().TexelOf(slot, hit.triangle, hit.b1, hit.b2));
@@ -257,7 +263,7 @@ class Tracer {
 
   // Le = Lp at the hit; false where nothing glows.
   bool Emission(const Hit& hit, Bands& Le) const {
-    if (!solver_ || !hit.front || solver_->atlas().SlotOf(hit.object) < 0) return false;
+    if (!solver_ || !ShowsGlow(hit) || solver_->atlas().SlotOf(hit.object) < 0) return false;
     Le.setZero(nb_);
     AddEmission(hit, Le);
     return true;
@@ -473,7 +479,8 @@ class Tracer {
       const float distance2 = lane.wi.squaredNorm();
       lane.emitter_distance = std::sqrt(distance2);
       lane.wi *= 1.0f / lane.emitter_distance;
-      const float cos_s = n_s.dot(lane.wi), cos_l = -entry.normal.dot(lane.wi);
+      const float cos_s = n_s.dot(lane.wi), cos_front = -entry.normal.dot(lane.wi);
+      const float cos_l = emitters_.two_sided[entry.slot] ? std::abs(cos_front) : cos_front;  // the side facing us
       if (cos_s > 0 && cos_l > 0) {
         lane.glow_there = GlowAt(entry.slot, entry.Texel(solver_->atlas(), b1, b2));
         // f cos / p_light with MIS (power heuristic) against the BSDF's

@@ -432,7 +432,8 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
   for (std::size_t i = 0; i < objects.ArraySize(); ++i) {
     const JsonField o = objects.At(i);
     o.RejectUnknownKeys({"name", "mesh", "group", "shape", "albedo", "phosphor", "unknown_ke", "initial",
-                         "texel_size_m", "texels", "uv_resolution", "transform", "animation", "subsurface"});
+                         "texel_size_m", "texels", "uv_resolution", "transform", "animation", "subsurface",
+                         "two_sided"});
     Object object;
     object.name = o.Has("name") ? o["name"].NonEmptyString() : "object " + std::to_string(i);
     if (o.Has("mesh") == o.Has("shape")) o.Fail("give exactly one of 'mesh' (a file) or 'shape'");
@@ -476,6 +477,11 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
       o.Fail("missing 'albedo' (a number or one value per band)");
     }
     ReadPhosphorPolicy(o, object.phosphor != nullptr, object.unknown_ke_as_zero, object.initial);
+    if (auto f = o.Optional("two_sided")) {
+      object.two_sided = f->Boolean();
+      if (object.two_sided && !object.phosphor)
+        f->Fail("only a phosphor is one- or two-sided (every object reflects on both faces)");
+    }
     if (auto f = o.Optional("texel_size_m")) object.texel_size_m = f->NumberInRange(1e-6, 1e6);
     if (auto f = o.Optional("texels")) {
       object.texels = f->String();

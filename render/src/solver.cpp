@@ -262,15 +262,20 @@ const std::vector<float>& CoupledSolver::UnitIrradiance(Group& g, int l) {
   if (!unit.empty() && pose == g.unit_E_light_at[l] && g.unit_E_version[l] == geometry_.version()) return unit;
   UpdateTexelFrames(g);
   const std::size_t n = g.states.n;
+  const bool two_sided = scene_.objects[g.object].two_sided;
   unit.resize(n);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 256), [&](const tbb::blocked_range<std::size_t>& range) {
-    for (std::size_t j = range.begin(); j != range.end(); ++j)
+    for (std::size_t j = range.begin(); j != range.end(); ++j) {
       unit[j] = render::UnitIrradiance(geometry_, pose, g.texel_position[j], g.texel_normal[j]);
+      // A two-sided sheet: its state also takes the irradiance on its back.
+      if (two_sided)
+        unit[j] += render::UnitIrradiance(geometry_, pose, g.texel_position[j], Eigen::Vector3f(-g.texel_normal[j]));
+    }
   });
   g.unit_E_light_at[l] = pose;
   g.unit_E_version[l] = geometry_.version();
   ++stats_.irradiance_updates;
-  stats_.shadow_rays += n;
+  stats_.shadow_rays += two_sided ? 2 * n : n;
   return unit;
 }
 
@@ -280,9 +285,10 @@ void CoupledSolver::NoteCharge(Group& g, int l, const std::vector<float>& unit) 
     g.charge.received = true;
     return;
   }
-  if (g.charge.lit_from_behind) return;
-  // Nothing reached the front: would the light reach the back? Up to 64
-  // texels, evenly spread, with their normals turned around.
+  // Nothing reached the front (nor, two-sided, the back): would the light
+  // reach the back? Up to 64 texels, evenly spread, with their normals turned
+  // around. A two-sided sheet has counted its back already.
+  if (g.charge.lit_from_behind || scene_.objects[g.object].two_sided) return;
   const LightPose pose = PoseAt(scene_.lights[l], geometry_.time_s());
   const std::size_t n = g.states.n, stride = std::max<std::size_t>(1, n / 64);
   for (std::size_t j = 0; j < n && !g.charge.lit_from_behind; j += stride)
@@ -326,20 +332,26 @@ bool CoupledSolver::GatherIrradiance(Group& g, double t_s) {
     for (int b : g.excitation_bands) reaches = reaches || env.L_per_band[b] > 0;
     if (level > 0 && reaches) {
       constexpr int kSkyRays = 64;
+      const bool two_sided = scene_.objects[g.object].two_sided;
       if (g.unit_sky.empty() || g.unit_sky_version != geometry_.version()) {
         UpdateTexelFrames(g);
         g.unit_sky.resize(n);
         tbb::parallel_for(
             tbb::blocked_range<std::size_t>(0, n, 256), [&](const tbb::blocked_range<std::size_t>& range) {
-              for (std::size_t j = range.begin(); j != range.end(); ++j)
+              for (std::size_t j = range.begin(); j != range.end(); ++j) {
                 g.unit_sky[j] = UnitSkyIrradiance(geometry_, env, g.texel_position[j], g.texel_normal[j], kSkyRays, j);
+                if (two_sided)  // the sky over its back too, with rays of their own
+                  g.unit_sky[j] += UnitSkyIrradiance(geometry_, env, g.texel_position[j],
+                                                     Eigen::Vector3f(-g.texel_normal[j]), kSkyRays, n + j);
+              }
             });
         g.unit_sky_version = geometry_.version();
         ++stats_.irradiance_updates;
-        stats_.shadow_rays += n * kSkyRays;
+        stats_.shadow_rays += (two_sided ? 2 : 1) * n * kSkyRays;
       }
       g.charge.light_on = true;
-      g.charge.received = g.charge.received || std::any_of(g.unit_sky.begin(), g.unit_sky.end(), [](float u) { return u > 0; });
+      g.charge.received =
+          g.charge.received || std::any_of(g.unit_sky.begin(), g.unit_sky.end(), [](float u) { return u > 0; });
       for (int bi = 0; bi < n_exc; ++bi) {
         const float scale = static_cast<float>(level * env.L_per_band[g.excitation_bands[bi]]);
         float* E = g.E.data() + static_cast<std::size_t>(bi) * n;

@@ -115,12 +115,13 @@ TEST(RenderCommand, TimesPastTheScenesEndAreRenderedWithAWarning) {
 // A phosphor tile under a lamp that is on for 10 s: facing it, wound the
 // other way round (its back towards the lamp), or under a roof. Only the
 // first charges; the others are named, once each, with the reason.
-CommandResult RenderTile(const TempDir& dir, bool flipped, bool roof) {
+CommandResult RenderTile(const TempDir& dir, bool flipped, bool roof, bool two_sided = false) {
   nlohmann::json tile = {{"name", "sign"},
                          {"shape", {{"type", "quad"}, {"size", {1, 1}}}},
                          {"phosphor", Fixture("materials/blue.json").string()},
                          {"albedo", 0.8}};
   if (flipped) tile["transform"] = {{"rotate", {{"axis", {1, 0, 0}}, {"deg", 180}}}};
+  if (two_sided) tile["two_sided"] = true;
   nlohmann::json objects = nlohmann::json::array({tile});
   if (roof)
     objects.push_back({{"name", "roof"},
@@ -132,8 +133,7 @@ CommandResult RenderTile(const TempDir& dir, bool flipped, bool roof) {
       {"name", "tile"},
       {"time", {{"start_s", 0}, {"end_s", 20}, {"fps", 0.1}}},
       {"texel_size_m", 0.1},
-      {"camera",
-       {{"position", {0, 0.3, 2}}, {"look_at", {0, 0, 0}}, {"fov_deg", 60}, {"width", 16}, {"height", 16}}},
+      {"camera", {{"position", {0, 0.3, 2}}, {"look_at", {0, 0, 0}}, {"fov_deg", 60}, {"width", 16}, {"height", 16}}},
       {"objects", objects},
       {"lights",
        {{{"name", "lamp"},
@@ -142,7 +142,8 @@ CommandResult RenderTile(const TempDir& dir, bool flipped, bool roof) {
          {"intensity", 0.5},
          {"spectrum", {{"type", "led"}, {"center_nm", 405}, {"fwhm_nm", 15}}},
          {"schedule", {{{"t_s", 0}, {"level", 1}}, {{"t_s", 10}, {"level", 0}}}}}}}};
-  const std::filesystem::path path = dir / (std::string(flipped ? "flipped" : "facing") + (roof ? "-roof" : "") + ".json");
+  const std::filesystem::path path = dir / (std::string(flipped ? "flipped" : "facing") + (roof ? "-roof" : "") +
+                                            (two_sided ? "-two-sided" : "") + ".json");
   WriteText(path, scene.dump());
   return RunPhos("render " + path.string() + " --out " + (dir / path.stem()).string() + " --times 5,15 --json");
 }
@@ -165,6 +166,24 @@ TEST(RenderCommand, APhosphorThatNoLightChargesIsNamedOnceWithTheReason) {
   ASSERT_EQ(roofed.exit_code, 0) << roofed.err;
   EXPECT_EQ(nlohmann::json::parse(roofed.out)["solver"]["never_charged"], nlohmann::json::array({"sign"}));
   EXPECT_NE(roofed.err.find("no light reaches its front"), std::string::npos) << roofed.err;
+}
+
+// The tile turned over and two-sided: lit on its back and seen from it, it
+// charges and glows as the tile facing the lamp does (the quad and the lamp
+// are symmetric under the turn, up to where its texels fall), with no warning.
+TEST(RenderCommand, ATwoSidedPhosphorLitFromBehindChargesAndGlows) {
+  TempDir dir;
+  const CommandResult facing = RenderTile(dir, false, false);
+  ASSERT_EQ(facing.exit_code, 0) << facing.err;
+  const CommandResult sheet = RenderTile(dir, true, false, true);
+  ASSERT_EQ(sheet.exit_code, 0) << sheet.err;
+  EXPECT_EQ(sheet.err, "");
+  EXPECT_EQ(nlohmann::json::parse(sheet.out)["solver"]["never_charged"], nlohmann::json::array());
+  for (const char* frame : {"frame-0000.exr", "frame-0001.exr"}) {  // lit (5 s), then after dark (15 s)
+    const double expected = ImageSum((dir / "facing" / frame).string());
+    ASSERT_GT(expected, 0.0) << frame;
+    EXPECT_NEAR(ImageSum((dir / "flipped-two-sided" / frame).string()), expected, 0.01 * expected) << frame;
+  }
 }
 
 TEST(RenderCommand, BadInputIsOneLineAndExitTwo) {
@@ -281,7 +300,8 @@ TEST(RenderCommand, ANumericExposureIsUsedAsItIs) {
   EXPECT_TRUE(PngShowsExrAt(given["frames"][0], 3.0));
   // A number on the command line wins over a scene's "auto".
   const std::string auto_scene = CornellWithExposure(dir, "auto", "auto");
-  const nlohmann::json overridden = nlohmann::json::parse(RunPhos("render " + auto_scene + common + " --exposure 3").out);
+  const nlohmann::json overridden =
+      nlohmann::json::parse(RunPhos("render " + auto_scene + common + " --exposure 3").out);
   EXPECT_EQ(overridden["exposure"].get<double>(), 3.0);
   EXPECT_FALSE(overridden.contains("exposure_auto"));
   const nlohmann::json from_scene = nlohmann::json::parse(RunPhos("render " + auto_scene + common).out);
@@ -303,11 +323,13 @@ TEST(RenderCommand, AutoExposureWithNoFrameAfterDarkMetersEveryFrame) {
 
 TEST(RenderCommand, AutoExposureOfBlackFramesAfterDarkIsOneAndSaidOnce) {
   TempDir dir;
-  const CommandResult r = RunPhos("render " + kCornell + " --out " + dir.path().string() +
-                                  " --times 20,40,60 --width 16 --height 16 --exposure auto --no-phosphorescence --json");
+  const CommandResult r =
+      RunPhos("render " + kCornell + " --out " + dir.path().string() +
+              " --times 20,40,60 --width 16 --height 16 --exposure auto --no-phosphorescence --json");
   ASSERT_EQ(r.exit_code, 0) << r.err;
-  EXPECT_EQ(r.err, "phos render: warning: exposure auto: the 2 frame(s) after dark are black (no pixel glows): "
-                   "exposure 1\n");
+  EXPECT_EQ(r.err,
+            "phos render: warning: exposure auto: the 2 frame(s) after dark are black (no pixel glows): "
+            "exposure 1\n");
   const nlohmann::json json = nlohmann::json::parse(r.out);
   ASSERT_TRUE(json["exposure"].is_number());  // not null (NaN) nor inf
   EXPECT_EQ(json["exposure"].get<double>(), 1.0);

@@ -257,6 +257,15 @@ TEST(Scenes, BadInputNamesTheFileAndField) {
               j["objects"][0]["initial"] = "equilibrium";
             }).find("only a phosphorescent object"),
             std::string::npos);
+  EXPECT_NE(ErrorAfterEdit([](nlohmann::json& j) {
+              j["objects"][0]["two_sided"] = true;
+            }).find("objects[0].two_sided: only a phosphor is one- or two-sided"),
+            std::string::npos);
+  EXPECT_NE(ErrorAfterEdit([](nlohmann::json& j) {
+              j["objects"][2]["two_sided"] = "yes";
+            }).find("objects[2].two_sided: expected true or false"),
+            std::string::npos);
+  EXPECT_EQ(ErrorAfterEdit([](nlohmann::json& j) { j["objects"][2]["two_sided"] = true; }), "(no error)");
   EXPECT_NE(ErrorAfterEdit([](nlohmann::json& j) { j["schema"] = "phos.scene/2"; }).find("schema"), std::string::npos);
   EXPECT_NE(
       ErrorAfterEdit([](nlohmann::json& j) { j["camera"]["look_at"] = j["camera"]["position"]; }).find("must differ"),

@@ -107,6 +107,56 @@ TEST(Transport, OpenPlaneDirectIsAlbedoTimesIrradianceOverPiAndPathAgrees) {
   EXPECT_NEAR(m_path.mean, m_direct.mean, 0.01 * m_direct.mean);  // only pixel jitter differs
 }
 
+// A glowing disk 1 m above a grey floor, its state set (no light), seen
+// from below: its front facing down; or facing up, one- or two-sided. A
+// two-sided sheet seen and sampled from its back must be the first case
+// exactly (direct: the glow the camera sees) and within noise (path: the
+// floor lit by next-event estimation toward its back and by paths that hit
+// it); one-sided and facing away, it neither shows a glow nor lights the
+// floor, so the comparison can fail.
+Image GlowingDiskOverAFloor(bool faces_down, bool two_sided, Transport transport) {
+  Scene scene = EmptyScene(48, 48);
+  scene.camera.keys = {{0, Vec3(0, 0.4, 2.5), Vec3(0, 0.3, 0)}};
+  scene.texel_size_m = 0.1;
+  scene.objects.push_back(MakeObject("floor", MakeQuad(4, 4), 0.5));
+  render::Mesh disk = phos::testing::DiskFacingDown(0.5f, 1.0f, 24);
+  if (!faces_down)
+    for (auto& triangle : disk.triangles) std::swap(triangle[1], triangle[2]);
+  scene.objects.push_back(
+      MakeObject("sheet", disk, 0.5, UniformPhosphor(0.2, std::vector<double>(8, 0.1), {0, 0, 1, 2, 1, 0, 0, 0})));
+  scene.objects[1].initial = {InitialState::Kind::kUniform, 0.5};
+  scene.objects[1].two_sided = two_sided;
+  SceneGeometry geometry(scene);
+  CoupledSolver solver(scene, geometry);
+  FrameOptions options;
+  options.transport = transport;
+  options.spp = 32;
+  return RenderBands(geometry, &solver, options);
+}
+
+TEST(Transport, ATwoSidedSheetGlowsAndLightsFromItsBackAsOthersFromTheirFront) {
+  const Image front = GlowingDiskOverAFloor(true, false, Transport::kDirect);
+  const Image back = GlowingDiskOverAFloor(false, true, Transport::kDirect);
+  const Image away = GlowingDiskOverAFloor(false, false, Transport::kDirect);
+  ASSERT_GT(ChannelMean(front, 3).mean, 0);
+  for (std::size_t i = 0; i < front.pixels.size(); ++i) ASSERT_FLOAT_EQ(back.pixels[i], front.pixels[i]) << i;
+  EXPECT_EQ(ChannelMean(away, 3).mean, 0.0);  // one-sided, seen from its back: no glow, and nothing lit
+
+  const Image front_path = GlowingDiskOverAFloor(true, false, Transport::kPath);
+  const Image back_path = GlowingDiskOverAFloor(false, true, Transport::kPath);
+  const Image away_path = GlowingDiskOverAFloor(false, false, Transport::kPath);
+  // The floor's share: the path image less the glow the camera sees directly.
+  auto floor_light = [&](const Image& path, const Image& direct) {
+    double sum = 0;
+    for (std::size_t p = 0; p < path.pixels.size() / 8; ++p) sum += path.pixels[p * 8 + 3] - direct.pixels[p * 8 + 3];
+    return sum / static_cast<double>(path.pixels.size() / 8);
+  };
+  const double lit_by_front = floor_light(front_path, front), lit_by_back = floor_light(back_path, back);
+  ASSERT_GT(lit_by_front, 0);
+  EXPECT_NEAR(lit_by_back, lit_by_front, 0.02 * lit_by_front);
+  EXPECT_LT(floor_light(away_path, away), 0.05 * lit_by_front);  // the floor sees the dark back only
+}
+
 // Compares with a stored reference in blocks; writes the difference on failure.
 void ExpectMatchesReference(const Image& image, const std::string& name, double block_tolerance) {
   const std::filesystem::path reference_path = Fixture("render/" + name + ".exr");

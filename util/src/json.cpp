@@ -169,6 +169,11 @@ double JsonField::NumberInRange(double lower, double upper) const {
   return v;
 }
 
+bool JsonField::Boolean() const {
+  if (!value_->is_boolean()) Fail("expected true or false, got " + DescribeJson(*value_));
+  return value_->get<bool>();
+}
+
 int JsonField::Integer(int lower, int upper) const {
   if (!value_->is_number_integer() &&
       !(value_->is_number() && std::floor(value_->get<double>()) == value_->get<double>()))

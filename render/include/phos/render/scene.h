@@ -93,6 +93,11 @@ struct Object {
   std::string phosphor_path;
   bool unknown_ke_as_zero = false;  // the scene's explicit assumption, never phos's guess
   InitialState initial;
+  // A phosphor coated on both faces of a thin sheet (a sticker in a window):
+  // each texel's one state is charged by the irradiance on either face and
+  // glows from both. false: the front face only (Sec. 8.3.4's layer on one
+  // side), the side the triangles' counter-clockwise winding faces.
+  bool two_sided = false;
   double texel_size_m = 0.0;  // edge of the automatic atlas's texels (0: scene default)
   // Texels: "auto" (per-triangle atlas), "uv" (the mesh's UV map) or "" (the
   // UV map when the mesh has one, else auto). uv_resolution: texels per UV

@@ -60,6 +60,7 @@ class JsonField {
   double NumberAtLeast(double lower) const;
   double NumberInRange(double lower, double upper) const;
   int Integer(int lower, int upper) const;
+  bool Boolean() const;  // true or false
   std::string String() const;
   std::string NonEmptyString() const;
   // An array of finite numbers >= lower with exactly `size` elements (any size if 0).
