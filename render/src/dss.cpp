@@ -54,6 +54,9 @@ GBuffer RenderGBuffer(const SceneGeometry& geometry, const Scene& scene, double 
   g.normal.assign(n, Vec3f::Zero());
   g.depth.assign(n, 0.0f);
   g.object.assign(n, -1);
+  g.triangle.assign(n, -1);
+  g.b1.assign(n, 0.0f);
+  g.b2.assign(n, 0.0f);
   const CameraRays camera(scene, t_s);
   tbb::parallel_for(tbb::blocked_range<int>(0, g.height), [&](const tbb::blocked_range<int>& rows) {
     for (int y = rows.begin(); y != rows.end(); ++y)
@@ -66,6 +69,9 @@ GBuffer RenderGBuffer(const SceneGeometry& geometry, const Scene& scene, double 
         g.normal[p] = hit.front ? hit.normal : Vec3f(-hit.normal);  // the side the camera sees
         g.depth[p] = hit.distance;
         g.object[p] = hit.object;
+        g.triangle[p] = hit.triangle;
+        g.b1[p] = hit.b1;
+        g.b2[p] = hit.b2;
       }
   });
   return g;

@@ -6,6 +6,7 @@
 
 #include <embree3/rtcore.h>
 
+#include "phos/render/albedo_texture.h"
 #include "phos/util/error.h"
 #include "phos/util/math.h"
 #include "phos/util/random.h"
@@ -60,6 +61,11 @@ SceneGeometry::SceneGeometry(const Scene& scene) : scene_(scene), embree_(std::m
     rtcAttachGeometryByID(embree_->scene, geometry, static_cast<unsigned>(o));
   }
   rtcCommitScene(embree_->scene);
+  for (const Object& object : scene.objects)
+    if (object.albedo_texture) {
+      albedo_textures_ = std::make_unique<AlbedoTextures>(scene);
+      break;
+    }
   Eigen::AlignedBox3f box;
   for (const auto& vertices : world_)
     for (const Vec3f& v : vertices) box.extend(v);

@@ -56,7 +56,54 @@ void CheckCounts(std::size_t vertices, std::size_t triangles, const std::string&
         "mesh '" + file + "' has more than the limit of " + std::to_string(kMaxMeshTriangles) + " triangles");
 }
 
-Mesh ParseObj(std::string_view text, const std::string& name, const std::string& group, const std::string& where) {
+// A texture a mesh file names, relative to the file's folder: it must be a
+// regular file (OpenImageIO decodes it when the renderer first looks it up;
+// render/albedo_texture.h says there whether it is an image).
+std::filesystem::path TextureFile(const std::filesystem::path& base_dir, const std::string& name,
+                                  const std::string& where, const std::string& field) {
+  const std::filesystem::path file = base_dir / name;
+  std::error_code ec;
+  if (!std::filesystem::exists(file, ec))
+    ThrowUserError(where, field, "texture file '" + file.string() + "' does not exist");
+  if (!std::filesystem::is_regular_file(file, ec))
+    ThrowUserError(where, field, "texture file '" + file.string() + "' is not a regular file");
+  return file;
+}
+
+// Keeps one base colour per mesh: each primitive or face group's in turn;
+// when they differ, none (an albedo varying per triangle is not modelled).
+void MergeBaseColour(Mesh& mesh, const std::optional<BaseColour>& colour, bool first) {
+  if (first) {
+    mesh.base_colour = colour;
+    return;
+  }
+  if (mesh.base_colours_differ.empty() && mesh.base_colour != colour) {
+    mesh.base_colours_differ = "its parts have different materials" +
+                               std::string(mesh.base_colour ? " (" + mesh.base_colour->field + ")" : "") +
+                               (colour ? " (" + colour->field + ")" : "");
+    mesh.base_colour.reset();
+  }
+}
+
+// The name after "mtllib" in an OBJ, empty if none (the first one only).
+std::string MtllibName(std::string_view text) {
+  for (std::size_t a = 0; a < text.size();) {
+    std::size_t b = text.find('\n', a);
+    if (b == std::string_view::npos) b = text.size();
+    std::string_view line = text.substr(a, b - a);
+    if (line.substr(0, 7) == "mtllib " || line.substr(0, 7) == "mtllib\t") {
+      std::string name(line.substr(7));
+      while (!name.empty() && std::isspace(static_cast<unsigned char>(name.back()))) name.pop_back();
+      while (!name.empty() && std::isspace(static_cast<unsigned char>(name.front()))) name.erase(0, 1);
+      return name;
+    }
+    a = b + 1;
+  }
+  return "";
+}
+
+Mesh ParseObj(std::string_view text, const std::filesystem::path& base_dir, const std::string& name,
+              const std::string& group, const std::string& where) {
   // Counts before allocation: a vertex is a line "v ...", and a face of k
   // corners "f ..." gives k - 2 triangles, fewer than its fields.
   std::size_t vertex_lines = 0, face_fields = 0;
@@ -75,9 +122,24 @@ Mesh ParseObj(std::string_view text, const std::string& name, const std::string&
   config.triangulate = true;
   config.vertex_color = false;
   tinyobj::ObjReader reader;
-  // No .mtl is read (an empty material text): phos uses no OBJ materials, and
-  // a mtllib naming a FIFO or /dev/zero must not hang the load.
-  if (!reader.ParseFromString(std::string(text), std::string(), config))
+  // The .mtl (its Kd and map_Kd are the base colour) is read by
+  // ReadFileText, as a regular file within the size limit: a mtllib naming a
+  // FIFO or /dev/zero must not hang the load.
+  std::string mtl_text;
+  const std::string mtllib = MtllibName(text);
+  if (!mtllib.empty()) {
+    const std::filesystem::path mtl_file = base_dir / mtllib;
+    std::error_code ec;
+    if (!std::filesystem::exists(mtl_file, ec))
+      ThrowUserError(where, "mtllib", "OBJ '" + name + "' names material file '" + mtl_file.string() +
+                                          "', which does not exist");
+    try {
+      mtl_text = ReadFileText(mtl_file);
+    } catch (const UserError& e) {
+      ThrowUserError(where, "mtllib", e.what());
+    }
+  }
+  if (!reader.ParseFromString(std::string(text), mtl_text, config))
     ThrowUserError(where, "", "cannot read OBJ '" + name + "': " + OneLine(reader.Error()));
   Mesh mesh;
   mesh.source = name + (group.empty() ? "" : "#" + group);
@@ -90,10 +152,36 @@ Mesh ParseObj(std::string_view text, const std::string& name, const std::string&
   bool every_corner_has_uv = !mesh.uvs.empty();
   bool found = group.empty();
   std::string names;
+  const std::vector<tinyobj::material_t>& materials = reader.GetMaterials();
+  const std::string mtl_where = where + " (" + (base_dir / mtllib).string() + ")";
+  // Kd and map_Kd of material m, or none for faces without one.
+  auto base_colour_of = [&](int m) -> std::optional<BaseColour> {
+    if (m < 0 || m >= static_cast<int>(materials.size())) return std::nullopt;
+    const tinyobj::material_t& material = materials[m];
+    BaseColour colour;
+    colour.field = "newmtl " + material.name;
+    colour.v_up = true;
+    colour.factor = Eigen::Vector3f(material.diffuse[0], material.diffuse[1], material.diffuse[2]);
+    if (!colour.factor.allFinite() || colour.factor.minCoeff() < 0 || colour.factor.maxCoeff() > 1)
+      ThrowUserError(mtl_where, colour.field + ": Kd", "expected values in [0, 1]");
+    if (!material.diffuse_texname.empty()) {
+      colour.field += ": map_Kd";
+      colour.texture = TextureFile(base_dir, material.diffuse_texname, mtl_where, colour.field);
+      // A texture under a black Kd: the file left Kd out (tinyobjloader
+      // reads a missing Kd as 0); no exporter means black.
+      if (colour.factor.isZero()) colour.factor.setOnes();
+    }
+    return colour;
+  };
+  bool first_face = true;
   for (const tinyobj::shape_t& shape : reader.GetShapes()) {
     if (names.size() < 200) names += (names.empty() ? "" : ", ") + shape.name;
     if (!group.empty() && shape.name != group) continue;
     found = true;
+    for (int m : shape.mesh.material_ids) {
+      MergeBaseColour(mesh, base_colour_of(m), first_face);
+      first_face = false;
+    }
     const auto& indices = shape.mesh.indices;
     CheckCounts(0, mesh.triangles.size() + indices.size() / 3, where, name);
     for (std::size_t i = 0; i + 2 < indices.size(); i += 3) {
@@ -225,11 +313,43 @@ bool GltfNoWrite(std::string* err, const std::string&, const std::vector<unsigne
   if (err) *err += "phos writes no glTF files\n";
   return false;
 }
-// Images are not decoded: phos uses none, and a crafted image must not cost
-// memory or time.
+// Images are not decoded here: a base colour texture is read through
+// OpenImageIO's TextureSystem when rendering (albedo_texture.h), and a
+// crafted image must not cost memory or time at load.
 bool GltfSkipImage(tinygltf::Image*, const int, std::string*, std::string*, int, int, const unsigned char*, int,
                    void*) {
   return true;
+}
+
+// The base colour of glTF material `index` (pbrMetallicRoughness
+// baseColorFactor, linear, and baseColorTexture, sRGB), none without one.
+std::optional<BaseColour> GltfBaseColour(const tinygltf::Model& model, int index,
+                                         const std::filesystem::path& base_dir, const std::string& where) {
+  if (index < 0) return std::nullopt;
+  const std::string field = "materials[" + std::to_string(index) + "]";
+  if (index >= static_cast<int>(model.materials.size())) ThrowUserError(where, field, "material index out of range");
+  const tinygltf::PbrMetallicRoughness& pbr = model.materials[index].pbrMetallicRoughness;
+  BaseColour colour;
+  colour.field = field + ".pbrMetallicRoughness.baseColorFactor";
+  if (pbr.baseColorFactor.size() < 3) ThrowUserError(where, colour.field, "expected 4 numbers");
+  colour.factor = Eigen::Vector3d(pbr.baseColorFactor[0], pbr.baseColorFactor[1], pbr.baseColorFactor[2]).cast<float>();
+  if (!colour.factor.allFinite() || colour.factor.minCoeff() < 0 || colour.factor.maxCoeff() > 1)
+    ThrowUserError(where, colour.field, "expected values in [0, 1]");
+  const tinygltf::TextureInfo& info = pbr.baseColorTexture;
+  if (info.index < 0) return colour;
+  colour.field = field + ".pbrMetallicRoughness.baseColorTexture";
+  if (info.texCoord != 0) ThrowUserError(where, colour.field + ".texCoord", "only TEXCOORD_0 is supported");
+  if (info.index >= static_cast<int>(model.textures.size()))
+    ThrowUserError(where, colour.field + ".index", "texture index out of range");
+  const int source = model.textures[info.index].source;
+  if (source < 0 || source >= static_cast<int>(model.images.size()))
+    ThrowUserError(where, "textures[" + std::to_string(info.index) + "].source", "image index out of range");
+  const tinygltf::Image& image = model.images[source];
+  const std::string image_field = "images[" + std::to_string(source) + "].uri";
+  if (image.uri.empty() || image.uri.rfind("data:", 0) == 0)
+    ThrowUserError(where, image_field, "only images in their own files are supported (not embedded ones)");
+  colour.texture = TextureFile(base_dir, image.uri, where, image_field);
+  return colour;
 }
 
 Mesh ParseGltf(std::string_view data, bool binary, const std::filesystem::path& base_dir, const std::string& name,
@@ -254,6 +374,7 @@ Mesh ParseGltf(std::string_view data, bool binary, const std::filesystem::path& 
   bool all_uv = true;
   const std::string file_where = where + " (" + name + ")";
   std::size_t instances = 0;
+  bool first_primitive = true;
   // Walks the node tree of the default scene, applying each node's transform.
   std::function<void(int, const Eigen::Affine3d&, int)> visit = [&](int index, const Eigen::Affine3d& parent,
                                                                     int depth) {
@@ -272,6 +393,8 @@ Mesh ParseGltf(std::string_view data, bool binary, const std::filesystem::path& 
       for (const tinygltf::Primitive& primitive : model.meshes[node.mesh].primitives) {
         if (primitive.mode != TINYGLTF_MODE_TRIANGLES && primitive.mode != -1)
           continue;  // points and lines carry no surface
+        MergeBaseColour(mesh, GltfBaseColour(model, primitive.material, base_dir, file_where), first_primitive);
+        first_primitive = false;
         const auto position = primitive.attributes.find("POSITION");
         if (position == primitive.attributes.end())
           ThrowUserError(file_where, "meshes", "a primitive without POSITION");
@@ -398,7 +521,7 @@ Mesh ParseMesh(std::string_view data, const std::string& format, const std::file
                const std::string& name, const std::string& group, const std::string& where) {
   Mesh mesh;
   if (format == ".obj")
-    mesh = ParseObj(data, name, group, where);
+    mesh = ParseObj(data, base_dir, name, group, where);
   else if (format == ".gltf" || format == ".glb")
     mesh = ParseGltf(data, format == ".glb", base_dir, name, group, where);
   else

@@ -13,6 +13,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include "phos/render/albedo_texture.h"
 #include "phos/render/dss.h"
 #include "phos/render/subsurface.h"
 #include "phos/render/transport_quality.h"
@@ -210,6 +211,7 @@ class Tracer {
       for (int b = 0; b < nb_; ++b) sky_L_[b] = static_cast<float>(sky_level_ * scene_.environment->L_per_band[b]);
     }
     if (options.transport == Transport::kPath && solver_) CopyGlowByTexel();
+    textures_ = geometry.albedo_textures();
     for (const Object& object : scene_.objects) {
       Bands a(nb_);
       for (int b = 0; b < nb_; ++b) a[b] = static_cast<float>(object.albedo[b]);
@@ -293,6 +295,35 @@ class Tracer {
   // Converted to float bands once per frame, not at every hit.
   const Bands& Albedo(int object) const { return albedo_[object]; }
 
+  // A camera ray's footprint (pbrt's ray differentials): the directions
+  // through the next pixel right and down. Zero: none, a point lookup (the
+  // path tracer's bounces, the dss surfels).
+  struct RayDifferential {
+    Vec3f dx = Vec3f::Zero(), dy = Vec3f::Zero();
+  };
+  // Whether any object is textured: only then do camera rays carry differentials.
+  bool textured() const { return textures_ != nullptr; }
+
+  // The albedo at a hit: the object's constant bands, or a textured object's
+  // texture filtered over the footprint of the ray from `origin`, written to
+  // `texture_albedo`. Untextured objects skip the lookup and cost what they did.
+  const Bands& AlbedoAt(const Hit& hit, const Vec3f& origin, const RayDifferential& differential,
+                        Bands& texture_albedo) const {
+    if (!textures_ || !textures_->textured(hit.object)) return albedo_[hit.object];
+    texture_albedo.resize(nb_);
+    textures_->Albedo(geometry_, hit, OffsetOnHitPlane(hit, origin, differential.dx),
+                      OffsetOnHitPlane(hit, origin, differential.dy), texture_albedo.data());
+    return texture_albedo;
+  }
+  // Where the ray from origin along `direction` meets the hit's plane, less
+  // the hit; zero for no direction or a ray along the plane.
+  static Vec3f OffsetOnHitPlane(const Hit& hit, const Vec3f& origin, const Vec3f& direction) {
+    const float along = hit.normal.dot(direction);
+    if (direction.isZero() || std::abs(along) < 1e-8f) return Vec3f::Zero();
+    const float t = hit.normal.dot(hit.position - origin) / along;
+    return origin + t * direction - hit.position;
+  }
+
   // The media along a camera ray up to its hit: adds their radiance to L and
   // returns the transmittance the surface behind them is seen through.
   float Media(const Vec3f& origin, const Vec3f& direction, const Hit& hit, float jitter, Bands& L) const {
@@ -300,7 +331,8 @@ class Tracer {
     return media_->March(origin, direction, hit ? hit.distance : 1e30f, jitter, L.data());
   }
 
-  Bands Direct(const Vec3f& origin, const Vec3f& direction, float jitter, std::uint64_t& rays) const {
+  Bands Direct(const Vec3f& origin, const Vec3f& direction, const RayDifferential& differential, float jitter,
+               std::uint64_t& rays) const {
     Bands L = Bands::Zero(nb_);
     ++rays;
     const Hit hit = geometry_.Intersect(origin, direction);
@@ -314,14 +346,18 @@ class Tracer {
     Bands E;
     DirectIrradiance(hit.position, hit.front ? hit.normal : Vec3f(-hit.normal), E, rays,
                      options_.transport != Transport::kDss);
-    L += Albedo(hit.object) * E / kPiF;  // Lambertian reflection (Eq. 8.2's reflected term)
+    Bands texture_albedo;
+    L += AlbedoAt(hit, origin, differential, texture_albedo) * E / kPiF;  // Lambertian reflection (Eq. 8.2's reflected term)
     return Lm + T * L;
   }
 
   // A path of the path tracer, one per pixel sample in flight.
   struct PathLane {
     Vec3f origin, direction;
+    RayDifferential differential;  // the camera ray's; bounces have none
     Bands L, beta;
+    const Bands* albedo = nullptr;  // at this bounce's hit: the object's, or texture_albedo
+    Bands texture_albedo;
     float bsdf_pdf = 0;  // solid-angle pdf of the direction that led here (0: camera ray)
     SplitMix64* random = nullptr;
     // This bounce: the hit, the shading normal, the next ray's origin and the
@@ -333,9 +369,10 @@ class Tracer {
     GlowTexel glow_here;
     bool scatters = false;
     const EmitterDistribution::Entry* emitter = nullptr;  // the glowing triangle to sample
-    void Start(const Vec3f& camera, const Vec3f& d, SplitMix64& stream, int nb) {
+    void Start(const Vec3f& camera, const Vec3f& d, const RayDifferential& footprint, SplitMix64& stream, int nb) {
       origin = camera;
       direction = d;
+      differential = footprint;
       L = Bands::Zero(nb);
       beta = Bands::Ones(nb);
       bsdf_pdf = 0;
@@ -393,7 +430,7 @@ class Tracer {
       for (std::size_t k = 0; k < shadowed.size(); ++k) {
         if (blocked[k]) continue;
         PathLane& lane = lanes[shadowed[k]];
-        const Bands& albedo = Albedo(lane.hit.object);
+        const Bands& albedo = *lane.albedo;
         for (std::size_t c = 0; c < lane.glow_there.bands->size(); ++c) {
           const int b = (*lane.glow_there.bands)[c];
           lane.L[b] += lane.beta[b] * albedo[b] * lane.glow_there.Lp[c] * lane.emitter_scale;
@@ -410,7 +447,7 @@ class Tracer {
           unit *= light.pose.kind == Light::Kind::kPoint
                       ? media_->Transmittance(lane.hit.position, light.pose.at)
                       : media_->TransmittanceToInfinity(lane.hit.position, -light.pose.at);
-        lane.L += lane.beta * Albedo(lane.hit.object) * light.E * (unit * kInvPiF);
+        lane.L += lane.beta * *lane.albedo * light.E * (unit * kInvPiF);
       }
       live.clear();
       for (int i : scattering)
@@ -448,7 +485,10 @@ class Tracer {
       return false;
     }
     lane.glow_here = GlowAt(hit);
-    lane.scatters = Albedo(hit.object).maxCoeff() > 0;
+    // Textures are filtered over the camera ray's footprint; bounces look up
+    // a point (zero derivatives: their footprint is the BSDF's, not a pixel's).
+    lane.albedo = &AlbedoAt(hit, lane.origin, depth == 0 ? lane.differential : RayDifferential{}, lane.texture_albedo);
+    lane.scatters = lane.albedo->maxCoeff() > 0;
     lane.emitter = nullptr;
     if (lane.scatters && !emitters_.empty()) {
       lane.emitter = &emitters_.Pick(random.Next());
@@ -524,7 +564,7 @@ class Tracer {
     lane.direction = SampleCosine(lane.n_s, random);
     lane.bsdf_pdf = lane.n_s.dot(lane.direction) * kInvPiF;
     lane.origin = lane.origin_s;
-    lane.beta *= Albedo(lane.hit.object);
+    lane.beta *= *lane.albedo;
     if (depth >= 3) {  // Russian roulette keeps the estimate unbiased
       const float survive = std::min(1.0f, lane.beta.maxCoeff());
       if (random.UniformFloat() >= survive) return false;
@@ -569,6 +609,7 @@ class Tracer {
   EmitterDistribution emitters_;
   std::vector<LitLight> lights_;
   std::vector<Bands> albedo_;  // per object
+  const AlbedoTextures* textures_ = nullptr;
   float sky_level_ = 0;        // the sky's level now (0: none)
   Bands sky_L_;                // its band radiance times the level
  public:
@@ -624,6 +665,16 @@ Image RenderBands(const SceneGeometry& geometry, const CoupledSolver* solver, co
     return SplitMix64((std::uint64_t(options.seed) << 40) ^ options.frame * 0x9E3779B97F4A7C15ull ^
                       (std::uint64_t(y) * std::uint64_t(width) + x) * 0x2545F4914F6CDD1Dull);
   };
+  // The rays through the next pixel right and down, for filtering textures;
+  // none when nothing is textured (no cost there).
+  auto differential = [&](float px, float py) {
+    Tracer::RayDifferential d;
+    if (tracer.textured()) {
+      d.dx = camera.Direction(px + 1, py);
+      d.dy = camera.Direction(px, py + 1);
+    }
+    return d;
+  };
   tbb::parallel_for(0, height, [&](int y) {
     std::uint64_t rays = 0;
     if (options.transport == Transport::kPath) {
@@ -647,7 +698,7 @@ Image RenderBands(const SceneGeometry& geometry, const CoupledSolver* solver, co
             SplitMix64& random = streams[x];
             const float jx = spp == 1 ? 0.5f : random.UniformFloat(), jy = spp == 1 ? 0.5f : random.UniformFloat();
             lanes[k].Start(camera.origin(), camera.Direction(static_cast<float>(x) + jx, static_cast<float>(y) + jy),
-                           random, nb);
+                           differential(static_cast<float>(x) + jx, static_cast<float>(y) + jy), random, nb);
           }
           tracer.TracePaths(lanes, rays);
           for (int k = 0; k < count; ++k) sums[x0 + k] += lanes[k].L;
@@ -663,8 +714,9 @@ Image RenderBands(const SceneGeometry& geometry, const CoupledSolver* solver, co
         Bands sum = Bands::Zero(nb);
         for (int s = 0; s < spp; ++s) {
           const float jx = spp == 1 ? 0.5f : random.UniformFloat(), jy = spp == 1 ? 0.5f : random.UniformFloat();
-          const Vec3f direction = camera.Direction(static_cast<float>(x) + jx, static_cast<float>(y) + jy);
-          sum += tracer.Direct(camera.origin(), direction, spp == 1 ? PixelJitter(x, y) : random.UniformFloat(), rays);
+          const float px = static_cast<float>(x) + jx, py = static_cast<float>(y) + jy;
+          sum += tracer.Direct(camera.origin(), camera.Direction(px, py), differential(px, py),
+                               spp == 1 ? PixelJitter(x, y) : random.UniformFloat(), rays);
         }
         sum /= static_cast<float>(spp);
         std::copy(sum.data(), sum.data() + nb, image.at(x, y));
@@ -694,12 +746,13 @@ Image RenderBands(const SceneGeometry& geometry, const CoupledSolver* solver, co
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, surfels.size()),
                       [&](const tbb::blocked_range<std::size_t>& range) {
                         std::uint64_t rays = 0;
-                        Bands E;
+                        Bands E, texture_albedo;
                         for (std::size_t i = range.begin(); i != range.end(); ++i) {
                           const Surfel& s = surfels[i];
-                          // The front side sends: what it reflects of the lights, and its glow.
+                          // The front side sends: what it reflects of the lights, and its glow
+                          // (a textured surfel's albedo at its centre: a point lookup).
                           tracer.DirectIrradiance(s.position, s.normal, E, rays);
-                          Bands B = tracer.Albedo(s.object) * E;
+                          Bands B = tracer.AlbedoAt(FrontHit(s), s.position, {}, texture_albedo) * E;
                           Bands Le;
                           if (tracer.Emission(FrontHit(s), Le)) B += kPiF * Le;
                           std::copy(B.data(), B.data() + nb, &radiosity[i * nb]);
@@ -735,10 +788,18 @@ Image RenderBands(const SceneGeometry& geometry, const CoupledSolver* solver, co
     IntervalMap intervals;
     if (media) intervals = BuildIntervalMap(*media, g, camera, options.interval_layers);
     tbb::parallel_for(0, height, [&](int y) {
+      Bands texture_albedo;
       for (int x = 0; x < width; ++x) {
         const std::size_t p = static_cast<std::size_t>(y) * width + x;
         if (g.object[p] < 0) continue;
-        const Bands albedo = tracer.Albedo(g.object[p]);
+        Hit hit;  // the G-buffer's pixel, as the direct pass found it
+        hit.object = g.object[p];
+        hit.triangle = g.triangle[p];
+        hit.b1 = g.b1[p];
+        hit.b2 = g.b2[p];
+        hit.position = g.position[p];
+        hit.normal = g.normal[p];
+        const Bands& albedo = tracer.AlbedoAt(hit, camera.origin(), differential(x + 0.5f, y + 0.5f), texture_albedo);
         const float T = media ? intervals.T_end[p] : 1.0f;
         float* out = image.at(x, y);
         for (int b = 0; b < nb; ++b) out[b] += T * albedo[b] * indirect.irradiance[p * nb + b] / kPiF;

@@ -1,4 +1,5 @@
 #include "phos/render/scene.h"
+#include "phos/render/spectral_upsampling.h"
 
 #include <algorithm>
 #include <cmath>
@@ -112,6 +113,19 @@ bool ReadBool(const JsonField& object, std::string_view key, bool fallback) {
   if (!field) return fallback;
   if (!field->value().is_boolean()) field->Fail("expected true or false, got " + DescribeJson(field->value()));
   return field->value().get<bool>();
+}
+
+// The albedo from the mesh's material (Mesh::base_colour): its linear RGB
+// factor upsampled to the bands (spectral_upsampling.h), and its texture, if
+// any, looked up at each hit through the mesh's UV map.
+void ReadBaseColour(const JsonField& o, const Mesh& mesh, const SpectralGrid& bands, Object& object) {
+  const BaseColour& colour = *mesh.base_colour;
+  object.albedo = RgbToBands(bands).Albedo({colour.factor[0], colour.factor[1], colour.factor[2]});
+  if (colour.texture.empty()) return;
+  if (!mesh.has_uvs())
+    o["mesh"].Fail("the mesh (" + mesh.source + ") has an albedo texture (" + colour.field +
+                   ") but no UV map (TEXCOORD_0 or vt on every corner)");
+  object.albedo_texture = colour;
 }
 
 std::vector<double> ReadAlbedo(const JsonField& field, int band_count) {
@@ -470,7 +484,14 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
             Dipole::From(sss.sigma_a_per_m[b], sss.sigma_s_prime_per_m[b], sss.eta).TotalReflectance());
       object.subsurface = sss;
     } else if (o.Has("albedo")) {
+      // The scene's own word wins over the mesh file's material: an explicit
+      // override, and scenes written before textures render as they did.
       object.albedo = ReadAlbedo(o["albedo"], nb);
+    } else if (object.mesh->base_colour) {
+      ReadBaseColour(o, *object.mesh, scene.bands, object);
+    } else if (!object.mesh->base_colours_differ.empty()) {
+      o.Fail("missing 'albedo': the mesh (" + object.mesh->source + ") has no single base colour, " +
+             object.mesh->base_colours_differ + "; give 'albedo' or pick one part with 'group'");
     } else if (object.phosphor && object.phosphor->albedo) {
       object.albedo = *object.phosphor->albedo;
     } else {

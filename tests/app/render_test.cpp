@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 
 #include <nlohmann/json.hpp>
 
@@ -351,6 +352,34 @@ TEST(RenderCommand, BadExposuresAreOneLineAndExitTwo) {
   EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + CornellWithExposure(dir, "auto", "auto") + out + " --frames 0:1"),
                                  "auto.json: camera.exposure: \"auto\" meters every frame after dark"));
   EXPECT_FALSE(std::filesystem::exists(dir / "frame-0000.exr"));
+}
+
+}  // namespace
+}  // namespace phos::testing
+
+namespace phos::testing {
+namespace {
+
+// The textured-plane fixture's glTF with its image replaced by `image_uri`.
+std::string TexturedPlaneScene(const phos::testing::TempDir& dir, const std::string& image_uri) {
+  std::string gltf = phos::testing::ReadText(phos::testing::Fixture("scenes/textured/plane.gltf"));
+  const std::string uri = "\"uri\": \"checker.png\"";
+  gltf.replace(gltf.find(uri), uri.size(), "\"uri\": \"" + image_uri + "\"");
+  std::ofstream(dir / "plane.gltf") << gltf;
+  std::ofstream(dir / "scene.json") << R"({"schema": "phos.scene/1", "time": {"start_s": 0, "end_s": 1, "fps": 1},
+    "camera": {"position": [0, 2, 0], "look_at": [0, 0, 0], "up": [0, 0, 1], "width": 8, "height": 8},
+    "objects": [{"name": "plane", "mesh": "plane.gltf"}], "lights": []})";
+  return (dir / "scene.json").string();
+}
+
+TEST(RenderCommand, ABadTextureIsOneLineAndExitTwo) {
+  phos::testing::TempDir dir;
+  const std::string out = " --out " + (dir / "out").string();
+  EXPECT_TRUE(phos::testing::IsOneLineUserError(RunPhos("render " + TexturedPlaneScene(dir, "gone.png") + out),
+                                                "images[0].uri: texture file"));
+  std::ofstream(dir / "notes.png") << "these are not pixels\n";
+  EXPECT_TRUE(phos::testing::IsOneLineUserError(RunPhos("render " + TexturedPlaneScene(dir, "notes.png") + out),
+                                                "baseColorTexture: texture file"));
 }
 
 }  // namespace

@@ -97,6 +97,9 @@ struct GBuffer {
   std::vector<Vec3f> position, normal;
   std::vector<float> depth;
   std::vector<int> object;
+  // Where on the object (RenderGBuffer only): for looking up a texture.
+  std::vector<int> triangle;
+  std::vector<float> b1, b2;
 };
 GBuffer RenderGBuffer(const SceneGeometry& geometry, const Scene& scene, double t_s);
 

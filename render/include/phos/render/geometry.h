@@ -55,6 +55,8 @@ inline int SubTriangleIndex(int m, float b1, float b2) {
 // Barycentric centre (b1, b2) of sub-triangle `index` (the inverse of SubTriangleIndex).
 void SubTriangleCenter(int m, int index, float& b1, float& b2);
 
+class AlbedoTextures;
+
 struct Hit {
   int object = -1;
   int triangle = -1;
@@ -112,6 +114,10 @@ class SceneGeometry {
   // Installs a recorder of every ray cast (nullptr removes it). Not while
   // rays are being cast.
   void SetRayRecorder(RayRecorder* recorder) { recorder_ = recorder; }
+  // The objects' albedo textures (albedo_texture.h), opened with the
+  // geometry so that a bad file is refused before any frame; null when no
+  // object is textured.
+  const AlbedoTextures* albedo_textures() const { return albedo_textures_.get(); }
   RTCSceneTy* embree_scene() const;
 
  private:
@@ -127,6 +133,7 @@ class SceneGeometry {
   std::vector<std::vector<Vec3f>> front_normal_;  // per object, per triangle
   std::vector<std::vector<float>> area_;          // per object, per triangle, m^2
   RayRecorder* recorder_ = nullptr;
+  std::unique_ptr<AlbedoTextures> albedo_textures_;
   double time_s_ = 0;
   std::uint64_t version_ = 0;
   float ray_epsilon_ = 1e-4f, diagonal_ = 1.0f;

@@ -43,6 +43,19 @@ inline constexpr std::size_t kMaxMeshVertices = std::size_t{1} << 24;   // per m
 inline constexpr std::size_t kMaxMeshTriangles = std::size_t{1} << 24;  // per mesh file
 inline constexpr std::size_t kMaxGltfInstances = std::size_t{1} << 16;  // node visits of a glTF scene graph (65536)
 
+// The base colour a mesh file declares (glTF pbrMetallicRoughness
+// baseColorFactor and baseColorTexture, OBJ/MTL Kd and map_Kd): a linear RGB
+// factor, times the texture's sRGB-decoded texel when there is one.
+struct BaseColour {
+  Eigen::Vector3f factor = Eigen::Vector3f::Ones();  // linear RGB in [0, 1]
+  std::filesystem::path texture;                      // empty: none
+  std::string field;                                  // where the file says so, for messages
+  bool v_up = false;  // OBJ: v = 0 is the image's bottom row; glTF: its top row
+  bool operator==(const BaseColour& other) const {
+    return factor == other.factor && texture == other.texture && v_up == other.v_up;
+  }
+};
+
 // A triangle mesh in object space.
 struct Mesh {
   std::vector<Eigen::Vector3f> positions;
@@ -51,6 +64,10 @@ struct Mesh {
   std::vector<Eigen::Vector2f> uvs;
   std::vector<Eigen::Vector3i> uv_triangles;
   std::string source;  // file it came from, or the built-in shape
+  // The base colour of the mesh's material, when the file gives one; a mesh
+  // whose triangles have different ones keeps none and says so.
+  std::optional<BaseColour> base_colour;
+  std::string base_colours_differ;  // non-empty: why no single base colour was kept
   bool has_uvs() const { return !uv_triangles.empty() && uv_triangles.size() == triangles.size(); }
 };
 
@@ -89,6 +106,11 @@ struct Object {
   std::shared_ptr<const Mesh> mesh;
   RigidMotion motion;
   std::vector<double> albedo;                // per band, diffuse reflectance in [0, 1]
+  // An albedo that varies across the surface (Sec. 8.5: "parameters per
+  // material or, if spatial variation is desired, in textures"): the mesh's
+  // base colour texture, looked up at each hit through its UV map. `albedo`
+  // then holds the factor alone. Unset: the albedo is `albedo` everywhere.
+  std::optional<BaseColour> albedo_texture;
   std::shared_ptr<const Material> phosphor;  // null: not phosphorescent (carries no state)
   std::string phosphor_path;
   bool unknown_ke_as_zero = false;  // the scene's explicit assumption, never phos's guess
@@ -237,9 +259,11 @@ Mesh MakeSphere(double radius, int subdivisions, bool inward);  // icosphere
 // Loads OBJ (tinyobjloader) or glTF 2.0 (.gltf/.glb, tinygltf), triangulated,
 // with node transforms applied (glTF). A non-empty `group` keeps only the OBJ
 // group (o/g) or glTF mesh of that name. Problems are UserErrors naming
-// `where`, one line each. The file and a glTF's external buffers are read as
-// regular files of at most kMaxInputFileBytes; glTF images are not decoded
-// (phos uses none), and no OBJ .mtl file is read (phos uses no OBJ materials).
+// `where`, one line each. The file, a glTF's external buffers and an OBJ's
+// .mtl are read as regular files of at most kMaxInputFileBytes; the base
+// colour (Mesh::base_colour) comes from the glTF material or the MTL's Kd
+// and map_Kd, its texture checked to be a regular file but not decoded here
+// (albedo_texture.h reads it when rendering).
 Mesh LoadMesh(const std::filesystem::path& path, const std::string& group, const std::string& where);
 // The same from the file's bytes in memory (the fuzz harnesses): `format` is
 // ".obj", ".gltf" or ".glb", `base_dir` where a glTF's external buffers are.

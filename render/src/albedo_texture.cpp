@@ -1,0 +1,87 @@
+#include "phos/render/albedo_texture.h"
+
+#include <OpenImageIO/texture.h>
+
+#include "phos/util/error.h"
+
+namespace phos::render {
+
+AlbedoTextures::AlbedoTextures(const Scene& scene)
+    : scene_(scene), to_bands_(scene.bands), handles_(scene.objects.size(), nullptr), srgb_(scene.objects.size(), 0) {
+  system_ = OIIO::TextureSystem::create(/*shared=*/false);
+  // PNG and JPEG files are neither tiled nor mip-mapped: the cache builds the
+  // levels on first use, so a file from any exporter is filtered, not aliased.
+  system_->attribute("automip", 1);
+  system_->attribute("gray_to_rgb", 1);
+  for (std::size_t o = 0; o < scene.objects.size(); ++o) {
+    const auto& texture = scene.objects[o].albedo_texture;
+    if (!texture) continue;
+    const std::string where = scene.source + ": objects[" + std::to_string(o) + "] '" + scene.objects[o].name +
+                              "': " + scene.objects[o].mesh->source;
+    OIIO::TextureSystem::TextureHandle* handle = system_->get_texture_handle(OIIO::ustring(texture->texture.string()));
+    OIIO::ImageSpec spec;
+    if (!handle || !system_->get_imagespec(handle, nullptr, 0, spec)) {
+      std::string error = system_->geterror();
+      for (char& c : error)
+        if (c == '\n' || c == '\r') c = ' ';
+      ThrowUserError(where, texture->field,
+                     "texture file '" + texture->texture.string() + "' is not an image OpenImageIO can read" +
+                         (error.empty() ? "" : ": " + error));
+    }
+    handles_[o] = handle;
+    // glTF says a base colour texture is sRGB-encoded; 8- and 16-bit images
+    // are taken as such, float ones (EXR) as linear.
+    srgb_[o] = !spec.format.is_floating_point();
+  }
+}
+
+AlbedoTextures::~AlbedoTextures() { OIIO::TextureSystem::destroy(system_); }
+
+Eigen::Vector2f UvAt(const SceneGeometry& geometry, const Hit& hit, const Vec3f& p) {
+  const Vec3f v0 = geometry.Vertex(hit.object, hit.triangle, 0);
+  const Vec3f e1 = geometry.Vertex(hit.object, hit.triangle, 1) - v0;
+  const Vec3f e2 = geometry.Vertex(hit.object, hit.triangle, 2) - v0;
+  const Vec3f w = p - v0;
+  const float d11 = e1.dot(e1), d12 = e1.dot(e2), d22 = e2.dot(e2), dw1 = w.dot(e1), dw2 = w.dot(e2);
+  const float det = d11 * d22 - d12 * d12;
+  const float b1 = det != 0 ? (d22 * dw1 - d12 * dw2) / det : 0.0f;
+  const float b2 = det != 0 ? (d11 * dw2 - d12 * dw1) / det : 0.0f;
+  const Mesh& mesh = *geometry.scene().objects[hit.object].mesh;
+  const Eigen::Vector3i& t = mesh.uv_triangles[hit.triangle];
+  return (1 - b1 - b2) * mesh.uvs[t[0]] + b1 * mesh.uvs[t[1]] + b2 * mesh.uvs[t[2]];
+}
+
+void AlbedoTextures::Albedo(const SceneGeometry& geometry, const Hit& hit, const Vec3f& dp_dx, const Vec3f& dp_dy,
+                            float* bands) const {
+  const Mesh& mesh = *scene_.objects[hit.object].mesh;
+  const BaseColour& colour = *scene_.objects[hit.object].albedo_texture;
+  const Eigen::Vector3i& t = mesh.uv_triangles[hit.triangle];
+  const Eigen::Vector2f uv = (1 - hit.b1 - hit.b2) * mesh.uvs[t[0]] + hit.b1 * mesh.uvs[t[1]] + hit.b2 * mesh.uvs[t[2]];
+  Eigen::Vector2f duv_dx = Eigen::Vector2f::Zero(), duv_dy = Eigen::Vector2f::Zero();
+  if (!dp_dx.isZero()) duv_dx = UvAt(geometry, hit, hit.position + dp_dx) - uv;
+  if (!dp_dy.isZero()) duv_dy = UvAt(geometry, hit, hit.position + dp_dy) - uv;
+  // OpenImageIO's t runs down the image from its top row, as glTF's v; an
+  // OBJ's v runs up from the bottom row.
+  const float flip = colour.v_up ? -1.0f : 1.0f;
+  OIIO::TextureOpt options;
+  options.swrap = options.twrap = OIIO::TextureOpt::WrapPeriodic;  // glTF's default sampler repeats
+  // Bilinear within a level, anisotropic across levels: OpenImageIO's
+  // default bicubic within a level took 2.9x the untextured frame
+  // (bench_render, BM_TexturedDirectFrame), and at the mip levels a pixel's
+  // footprint selects, bicubic adds little.
+  options.interpmode = OIIO::TextureOpt::InterpBilinear;
+  options.mipmode = OIIO::TextureOpt::MipModeTrilinear;
+  float rgb[3] = {0, 0, 0};
+  auto* handle = static_cast<OIIO::TextureSystem::TextureHandle*>(handles_[hit.object]);
+  system_->texture(handle, system_->get_perthread_info(), options, uv.x(), colour.v_up ? 1 - uv.y() : uv.y(),
+                   duv_dx.x(), flip * duv_dx.y(), duv_dy.x(), flip * duv_dy.y(), 3, rgb);
+  for (int c = 0; c < 3; ++c) {
+    // Decoded after the filter: OpenImageIO 2.4's TextureSystem has no
+    // colour transform (docs/render.md, "Textures", says what that costs).
+    const float linear = srgb_[hit.object] ? SrgbToLinear(rgb[c]) : rgb[c];
+    rgb[c] = colour.factor[c] * linear;
+  }
+  to_bands_.Albedo(rgb, bands);
+}
+
+}  // namespace phos::render

@@ -1,0 +1,229 @@
+// Albedo textures (issue 14 item 1) against closed forms:
+//  - the spectral upsampling: white is 1 in every band, every band lies
+//    between the smallest and largest of r, g, b;
+//  - the textured-plane fixture (a 2 x 2 checker of known sRGB colours,
+//    scripts/make_textured_fixture.py) under a point light: each quadrant's
+//    centre is albedo(u, v) E / pi in the direct, path and dss transports,
+//    and an OBJ/MTL map_Kd of the same checker (v up) renders the same;
+//  - bad input names the file and the field.
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <fstream>
+#include <functional>
+#include <random>
+
+#include "phos/render/albedo_texture.h"
+#include "phos/render/geometry.h"
+#include "phos/render/renderer.h"
+#include "phos/render/spectral_upsampling.h"
+#include "phos/util/error.h"
+#include "render/scene_util.h"
+#include "test_util.h"
+
+namespace phos::render {
+namespace {
+
+using phos::testing::Fixture;
+using phos::testing::TempDir;
+
+TEST(SpectralUpsampling, WhiteIsOneInEveryBandAndGreyItself) {
+  for (const SpectralGrid& grid : {SpectralGrid::Paper(), SpectralGrid::Uniform(360, 830, 470)}) {
+    const RgbToBands to_bands(grid);
+    const std::vector<double> white = to_bands.Albedo({1, 1, 1});
+    for (double v : white) EXPECT_EQ(v, 1.0);
+    for (double v : to_bands.Albedo({0.3, 0.3, 0.3})) EXPECT_FLOAT_EQ(v, 0.3f);
+    for (double v : to_bands.Albedo({0, 0, 0})) EXPECT_EQ(v, 0.0);
+  }
+}
+
+TEST(SpectralUpsampling, EveryBandLiesBetweenTheSmallestAndLargestPrimary) {
+  const RgbToBands to_bands(SpectralGrid::Uniform(380, 780, 40));
+  std::mt19937 random(3);
+  std::uniform_real_distribution<double> unit(0, 1);
+  for (int i = 0; i < 1000; ++i) {
+    const std::array<double, 3> rgb = {unit(random), unit(random), unit(random)};
+    const double lo = std::min({rgb[0], rgb[1], rgb[2]}), hi = std::max({rgb[0], rgb[1], rgb[2]});
+    for (double v : to_bands.Albedo(rgb)) {
+      EXPECT_GE(v, lo - 1e-6);
+      EXPECT_LE(v, hi + 1e-6);
+    }
+  }
+  // Out of range input is clamped, never out of [0, 1].
+  for (double v : to_bands.Albedo({2, -1, 0.5})) {
+    EXPECT_GE(v, 0.0);
+    EXPECT_LE(v, 1.0);
+  }
+  // Red is long waves, blue short: the basis follows the primaries.
+  const std::vector<double> red = to_bands.Albedo({1, 0, 0}), blue = to_bands.Albedo({0, 0, 1});
+  EXPECT_GT(red.back(), 0.9);
+  EXPECT_LT(red.front(), 0.2);  // sRGB's red matching function has a violet lobe
+  EXPECT_GT(blue.front(), 0.8);
+  EXPECT_LT(blue.back(), 0.1);
+}
+
+// The fixture's quadrant colours (scripts/make_textured_fixture.py), by
+// (u < 0.5 ? 0 : 1, v < 0.5 ? 0 : 1) with glTF's v = 0 at the image's top.
+std::array<float, 3> QuadrantSrgb(int u_half, int v_half) {
+  static const int colours[2][2][3] = {{{230, 60, 40}, {40, 180, 70}}, {{50, 80, 220}, {250, 250, 250}}};
+  const int* c = colours[v_half][u_half];
+  return {c[0] / 255.0f, c[1] / 255.0f, c[2] / 255.0f};
+}
+
+// albedo E / pi at the pixel seeing the centre of each quadrant of the
+// plane, E from the point light (1 m above the plane's centre), for every band.
+void ExpectQuadrantsAreAlbedoTimesEOverPi(const Scene& scene, const Image& image, const char* what) {
+  const CameraRays camera(scene, 0);
+  const RgbToBands to_bands(scene.bands);
+  const int nb = scene.bands.band_count();
+  int checked = 0;
+  for (int u_half = 0; u_half < 2; ++u_half)
+    for (int v_half = 0; v_half < 2; ++v_half) {
+      // u = x + 0.5, v = z + 0.5 on the plane.
+      const Vec3f centre(u_half ? 0.25f : -0.25f, 0, v_half ? 0.25f : -0.25f);
+      float px, py, depth;
+      ASSERT_TRUE(camera.Project(centre, &px, &py, &depth));
+      const int x = static_cast<int>(px), y = static_cast<int>(py);
+      // Where the pixel's centre ray meets the plane, and its irradiance.
+      const Vec3f d = camera.Direction(x + 0.5f, y + 0.5f);
+      const Vec3f p = camera.origin() + d * (-camera.origin().y() / d.y());
+      ASSERT_LT((p - centre).norm(), 0.05f);  // well inside the quadrant (0.25 m from its edges)
+      const Vec3f to_light = Vec3f(0, 1, 0) - p;
+      const double unit = 1.0 / to_light.norm() / to_light.squaredNorm();  // cos / d^2, cos = 1 / d
+      const std::array<float, 3> srgb = QuadrantSrgb(u_half, v_half);
+      const float linear[3] = {SrgbToLinear(srgb[0]), SrgbToLinear(srgb[1]), SrgbToLinear(srgb[2])};
+      std::vector<float> albedo(nb);
+      to_bands.Albedo(linear, albedo.data());
+      for (int b = 0; b < nb; ++b) {
+        const double expected = albedo[b] * scene.lights[0].E_per_band[b] * unit / M_PI;
+        EXPECT_NEAR(image.at(x, y)[b], expected, 1e-4 * expected + 1e-9)
+            << what << ", quadrant " << u_half << v_half << ", band " << b;
+      }
+      ++checked;
+    }
+  EXPECT_EQ(checked, 4);
+}
+
+Scene TexturedPlane() {
+  Scene scene = LoadScene(Fixture("scenes/textured-plane.json"));
+  scene.camera.width = 160;  // texels magnified: a pixel covers under half a texel
+  scene.camera.height = 120;
+  return scene;
+}
+
+TEST(AlbedoTexture, TheFixtureIsATexturedPlaneWithItsFactor) {
+  const Scene scene = TexturedPlane();
+  ASSERT_TRUE(scene.objects[0].albedo_texture);
+  EXPECT_EQ(scene.objects[0].albedo_texture->texture.filename(), "checker.png");
+  for (double v : scene.objects[0].albedo) EXPECT_EQ(v, 1.0);  // baseColorFactor [1, 1, 1, 1]
+}
+
+TEST(AlbedoTexture, TexturedPlaneUnderAPointLightIsAlbedoTimesEOverPiInEveryTransport) {
+  const Scene scene = TexturedPlane();
+  SceneGeometry geometry(scene);
+  ASSERT_NE(geometry.albedo_textures(), nullptr);
+  for (Transport transport : {Transport::kDirect, Transport::kPath, Transport::kDss}) {
+    FrameOptions options = DefaultFrameOptions(scene, transport);
+    options.spp = 1;  // centred: the path tracer's camera ray is the direct one, and nothing bounces back
+    options.direct_spp = 1;
+    ExpectQuadrantsAreAlbedoTimesEOverPi(scene, RenderBands(geometry, nullptr, options), TransportName(transport));
+  }
+}
+
+TEST(AlbedoTexture, ObjMapKdWithVUpRendersAsTheGltf) {
+  TempDir dir;
+  std::filesystem::copy_file(Fixture("scenes/textured/checker.png"), dir / "checker.png");
+  // The glTF's quad, its v turned up (OBJ's v = 0 is the image's bottom row).
+  std::ofstream(dir / "plane.obj") << "mtllib plane.mtl\n"
+                                      "v -0.5 0 -0.5\nv 0.5 0 -0.5\nv 0.5 0 0.5\nv -0.5 0 0.5\n"
+                                      "vt 0 1\nvt 1 1\nvt 1 0\nvt 0 0\n"
+                                      "usemtl checker\nf 1/1 3/3 2/2\nf 1/1 4/4 3/3\n";
+  std::ofstream(dir / "plane.mtl") << "newmtl checker\nKd 1 1 1\nmap_Kd checker.png\n";
+  Scene gltf = TexturedPlane();
+  Scene obj = gltf;
+  obj.objects[0].mesh = std::make_shared<Mesh>(LoadMesh(dir / "plane.obj", "", "test"));
+  ASSERT_TRUE(obj.objects[0].mesh->base_colour);
+  obj.objects[0].albedo_texture = obj.objects[0].mesh->base_colour;
+  EXPECT_TRUE(obj.objects[0].albedo_texture->v_up);
+  SceneGeometry gltf_geometry(gltf), obj_geometry(obj);
+  const FrameOptions options = DefaultFrameOptions(gltf, Transport::kDirect);
+  const Image a = RenderBands(gltf_geometry, nullptr, options), b = RenderBands(obj_geometry, nullptr, options);
+  ExpectQuadrantsAreAlbedoTimesEOverPi(obj, b, "obj");
+  double largest = 0;
+  for (std::size_t i = 0; i < a.pixels.size(); ++i) largest = std::max<double>(largest, std::abs(a.pixels[i] - b.pixels[i]));
+  EXPECT_LT(largest, 1e-5);
+}
+
+TEST(AlbedoTexture, TheScenesAlbedoOverridesTheMeshsBaseColour) {
+  TempDir dir;
+  std::filesystem::copy_file(Fixture("scenes/textured/checker.png"), dir / "checker.png");
+  std::filesystem::copy_file(Fixture("scenes/textured/plane.gltf"), dir / "plane.gltf");
+  std::ofstream(dir / "scene.json") << R"({"schema": "phos.scene/1", "time": {"start_s": 0, "end_s": 1, "fps": 1},
+    "camera": {"position": [0, 2, 0], "look_at": [0, 0, 0], "up": [0, 0, 1]},
+    "objects": [{"mesh": "plane.gltf", "albedo": 0.4}], "lights": []})";
+  const Scene scene = LoadScene(dir / "scene.json");
+  EXPECT_FALSE(scene.objects[0].albedo_texture);
+  for (double v : scene.objects[0].albedo) EXPECT_EQ(v, 0.4);
+}
+
+// A copy of the fixture's glTF whose image is `image` (a file in dir, or none).
+std::filesystem::path GltfScene(const TempDir& dir, const std::string& image_uri) {
+  std::string gltf = phos::testing::ReadText(Fixture("scenes/textured/plane.gltf"));
+  const std::string uri = "\"uri\": \"checker.png\"";
+  gltf.replace(gltf.find(uri), uri.size(), "\"uri\": \"" + image_uri + "\"");
+  std::ofstream(dir / "plane.gltf") << gltf;
+  std::ofstream(dir / "scene.json") << R"({"schema": "phos.scene/1", "time": {"start_s": 0, "end_s": 1, "fps": 1},
+    "camera": {"position": [0, 2, 0], "look_at": [0, 0, 0], "up": [0, 0, 1]},
+    "objects": [{"name": "plane", "mesh": "plane.gltf"}], "lights": []})";
+  return dir / "scene.json";
+}
+
+std::string UserErrorOf(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const UserError& e) {
+    return e.what();
+  }
+  return "(no error)";
+}
+
+TEST(AlbedoTexture, AMissingTextureNamesTheFileAndTheField) {
+  TempDir dir;
+  const std::string message = UserErrorOf([&] { LoadScene(GltfScene(dir, "gone.png")); });
+  EXPECT_NE(message.find("plane.gltf"), std::string::npos) << message;
+  EXPECT_NE(message.find("images[0].uri"), std::string::npos) << message;
+  EXPECT_NE(message.find("gone.png' does not exist"), std::string::npos) << message;
+  EXPECT_EQ(message.find('\n'), std::string::npos) << message;
+}
+
+TEST(AlbedoTexture, ATextureThatIsNotAnImageNamesTheFileAndTheField) {
+  TempDir dir;
+  std::ofstream(dir / "notes.png") << "these are not pixels\n";
+  const Scene scene = LoadScene(GltfScene(dir, "notes.png"));  // a regular file: read when rendering starts
+  const std::string message = UserErrorOf([&] { SceneGeometry geometry(scene); });
+  EXPECT_NE(message.find("plane.gltf"), std::string::npos) << message;
+  EXPECT_NE(message.find("baseColorTexture"), std::string::npos) << message;
+  EXPECT_NE(message.find("notes.png' is not an image"), std::string::npos) << message;
+  EXPECT_EQ(message.find('\n'), std::string::npos) << message;
+}
+
+TEST(AlbedoTexture, EmbeddedImagesAndMeshesWithoutUvsAreRefused) {
+  TempDir dir;
+  const std::string embedded = UserErrorOf([&] { LoadScene(GltfScene(dir, "data:image/png;base64,AAAA")); });
+  EXPECT_NE(embedded.find("images[0].uri: only images in their own files"), std::string::npos) << embedded;
+  std::filesystem::copy_file(Fixture("scenes/textured/checker.png"), dir / "checker.png");
+  std::ofstream(dir / "plane.obj") << "mtllib plane.mtl\nv 0 0 0\nv 1 0 0\nv 0 0 1\nusemtl m\nf 1 3 2\n";
+  std::ofstream(dir / "plane.mtl") << "newmtl m\nmap_Kd checker.png\n";
+  std::ofstream(dir / "obj.json") << R"({"schema": "phos.scene/1", "time": {"start_s": 0, "end_s": 1, "fps": 1},
+    "camera": {"position": [0, 2, 0], "look_at": [0, 0, 0], "up": [0, 0, 1]},
+    "objects": [{"mesh": "plane.obj"}], "lights": []})";
+  const std::string no_uvs = UserErrorOf([&] { LoadScene(dir / "obj.json"); });
+  EXPECT_NE(no_uvs.find("newmtl m: map_Kd) but no UV map"), std::string::npos) << no_uvs;
+  std::ofstream(dir / "plane.mtl", std::ios::trunc) << "newmtl m\nmap_Kd missing.png\n";
+  const std::string missing = UserErrorOf([&] { LoadScene(dir / "obj.json"); });
+  EXPECT_NE(missing.find("plane.mtl): newmtl m: map_Kd: texture file"), std::string::npos) << missing;
+}
+
+}  // namespace
+}  // namespace phos::render
