@@ -8,7 +8,11 @@ namespace phos::render {
 
 AlbedoTextures::AlbedoTextures(const Scene& scene)
     : scene_(scene), to_bands_(scene.bands), handles_(scene.objects.size(), nullptr), srgb_(scene.objects.size(), 0) {
-  system_ = OIIO::TextureSystem::create(/*shared=*/false);
+  // The process's shared TextureSystem, never destroyed: OpenImageIO 2.4's
+  // TextureSystem::destroy of a private one deletes it through the wrong
+  // type (AddressSanitizer: new-delete-type-mismatch). A file re-read by a
+  // later geometry is invalidated below, so an edited texture is seen.
+  system_ = OIIO::TextureSystem::create(/*shared=*/true);
   // PNG and JPEG files are neither tiled nor mip-mapped: the cache builds the
   // levels on first use, so a file from any exporter is filtered, not aliased.
   system_->attribute("automip", 1);
@@ -18,7 +22,9 @@ AlbedoTextures::AlbedoTextures(const Scene& scene)
     if (!texture) continue;
     const std::string where = scene.source + ": objects[" + std::to_string(o) + "] '" + scene.objects[o].name +
                               "': " + scene.objects[o].mesh->source;
-    OIIO::TextureSystem::TextureHandle* handle = system_->get_texture_handle(OIIO::ustring(texture->texture.string()));
+    const OIIO::ustring file(texture->texture.string());
+    system_->invalidate(file);
+    OIIO::TextureSystem::TextureHandle* handle = system_->get_texture_handle(file);
     OIIO::ImageSpec spec;
     if (!handle || !system_->get_imagespec(handle, nullptr, 0, spec)) {
       std::string error = system_->geterror();
@@ -35,7 +41,7 @@ AlbedoTextures::AlbedoTextures(const Scene& scene)
   }
 }
 
-AlbedoTextures::~AlbedoTextures() { OIIO::TextureSystem::destroy(system_); }
+AlbedoTextures::~AlbedoTextures() = default;
 
 Eigen::Vector2f UvAt(const SceneGeometry& geometry, const Hit& hit, const Vec3f& p) {
   const Vec3f v0 = geometry.Vertex(hit.object, hit.triangle, 0);
