@@ -12,6 +12,11 @@
 //     phosphorescence over one without; counter `ratio`.
 //   BM_FrameAfterLightsOut: a frame an hour after lights-out over one a second
 //     after; counter `ratio` (the goal: within 20% of 1).
+//   BM_TexturedDirectFrame: a 640 x 480 direct frame of the textured-plane
+//     fixture (fixtures/scenes/textured-plane.json, its albedo a glTF
+//     baseColorTexture through OpenImageIO's TextureSystem) over the same
+//     scene untextured (the texture's factor as a constant albedo); counter
+//     `ratio` (issue 14: at most 1.5).
 //   BM_PathAgainstBareEmbree: a path-traced frame over bare rtcIntersect1 /
 //     rtcOccluded1 calls on the very rays that frame cast (recorded, then
 //     replayed in the same order); counter `ratio` (issue 17: at most 1.5).
@@ -293,6 +298,33 @@ void BM_PhosphorescenceOverhead(benchmark::State& state) {
   state.counters["ratio"] = best_with / best_without;
 }
 BENCHMARK(BM_PhosphorescenceOverhead)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(3.0);
+
+// The textured-plane fixture at its own 640 x 480, textured and untextured
+// (the same scene with the texture dropped: its factor, 1, as the albedo).
+// Alternated; best of each side.
+void BM_TexturedDirectFrame(benchmark::State& state) {
+  const Scene textured = LoadScene(PHOS_FIXTURES_DIR "/scenes/textured-plane.json");
+  Scene untextured = textured;
+  for (Object& object : untextured.objects) object.albedo_texture.reset();
+  const SceneGeometry textured_geometry(textured), untextured_geometry(untextured);
+  const FrameOptions options = DefaultFrameOptions(textured, Transport::kDirect);
+  RenderBands(textured_geometry, nullptr, options);  // the texture's first read and its mip levels: once per run
+  double best_textured = 1e9, best_untextured = 1e9;
+  for (auto _ : state) {
+    double start = Now();
+    Image a = RenderBands(textured_geometry, nullptr, options);
+    best_textured = std::min(best_textured, Now() - start);
+    start = Now();
+    Image b = RenderBands(untextured_geometry, nullptr, options);
+    best_untextured = std::min(best_untextured, Now() - start);
+    benchmark::DoNotOptimize(a.pixels.data());
+    benchmark::DoNotOptimize(b.pixels.data());
+  }
+  state.counters["textured_ms"] = best_textured * 1e3;
+  state.counters["untextured_ms"] = best_untextured * 1e3;
+  state.counters["ratio"] = best_textured / best_untextured;
+}
+BENCHMARK(BM_TexturedDirectFrame)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(3.0);
 
 // A frame (coupled step + direct render) 1 s and 3600 s after lights-out, each
 // from a freshly charged state: both are one closed-form jump. Alternated.

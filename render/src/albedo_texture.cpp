@@ -71,10 +71,10 @@ void AlbedoTextures::Albedo(const SceneGeometry& geometry, const Hit& hit, const
   const float flip = colour.v_up ? -1.0f : 1.0f;
   OIIO::TextureOpt options;
   options.swrap = options.twrap = OIIO::TextureOpt::WrapPeriodic;  // glTF's default sampler repeats
-  // Bilinear within a level, anisotropic across levels: OpenImageIO's
-  // default bicubic within a level took 2.9x the untextured frame
-  // (bench_render, BM_TexturedDirectFrame), and at the mip levels a pixel's
-  // footprint selects, bicubic adds little.
+  // Trilinear across levels, bilinear within one: OpenImageIO's defaults
+  // (smart bicubic, anisotropic) took 2.9x the untextured frame and
+  // bilinear-anisotropic 2.4x, trilinear 1.9x (bench_render,
+  // BM_TexturedDirectFrame); docs/render.md says what it blurs.
   options.interpmode = OIIO::TextureOpt::InterpBilinear;
   options.mipmode = OIIO::TextureOpt::MipModeTrilinear;
   float rgb[3] = {0, 0, 0};
