@@ -43,19 +43,34 @@ AlbedoTextures::AlbedoTextures(const Scene& scene)
 
 AlbedoTextures::~AlbedoTextures() = default;
 
-Eigen::Vector2f UvAt(const SceneGeometry& geometry, const Hit& hit, const Vec3f& p) {
+namespace {
+
+// The UV offsets of the points hit + dp_dx and hit + dp_dy of the hit's
+// plane (the footprint), through their barycentric offsets in the hit's
+// world-space triangle: one solve of its 2 x 2 normal equations for both.
+void UvFootprint(const SceneGeometry& geometry, const Hit& hit, const Mesh& mesh, const Vec3f& dp_dx,
+                 const Vec3f& dp_dy, Eigen::Vector2f& duv_dx, Eigen::Vector2f& duv_dy) {
   const Vec3f v0 = geometry.Vertex(hit.object, hit.triangle, 0);
   const Vec3f e1 = geometry.Vertex(hit.object, hit.triangle, 1) - v0;
   const Vec3f e2 = geometry.Vertex(hit.object, hit.triangle, 2) - v0;
-  const Vec3f w = p - v0;
-  const float d11 = e1.dot(e1), d12 = e1.dot(e2), d22 = e2.dot(e2), dw1 = w.dot(e1), dw2 = w.dot(e2);
+  const float d11 = e1.dot(e1), d12 = e1.dot(e2), d22 = e2.dot(e2);
   const float det = d11 * d22 - d12 * d12;
-  const float b1 = det != 0 ? (d22 * dw1 - d12 * dw2) / det : 0.0f;
-  const float b2 = det != 0 ? (d11 * dw2 - d12 * dw1) / det : 0.0f;
-  const Mesh& mesh = *geometry.scene().objects[hit.object].mesh;
+  if (!(det > 0)) {  // a degenerate triangle: a point lookup
+    duv_dx.setZero();
+    duv_dy.setZero();
+    return;
+  }
   const Eigen::Vector3i& t = mesh.uv_triangles[hit.triangle];
-  return (1 - b1 - b2) * mesh.uvs[t[0]] + b1 * mesh.uvs[t[1]] + b2 * mesh.uvs[t[2]];
+  const Eigen::Vector2f uv1 = mesh.uvs[t[1]] - mesh.uvs[t[0]], uv2 = mesh.uvs[t[2]] - mesh.uvs[t[0]];
+  auto offset = [&](const Vec3f& dp) -> Eigen::Vector2f {
+    const float p1 = dp.dot(e1), p2 = dp.dot(e2);
+    return (d22 * p1 - d12 * p2) / det * uv1 + (d11 * p2 - d12 * p1) / det * uv2;
+  };
+  duv_dx = offset(dp_dx);
+  duv_dy = offset(dp_dy);
 }
+
+}  // namespace
 
 void AlbedoTextures::Albedo(const SceneGeometry& geometry, const Hit& hit, const Vec3f& dp_dx, const Vec3f& dp_dy,
                             float* bands) const {
@@ -64,8 +79,7 @@ void AlbedoTextures::Albedo(const SceneGeometry& geometry, const Hit& hit, const
   const Eigen::Vector3i& t = mesh.uv_triangles[hit.triangle];
   const Eigen::Vector2f uv = (1 - hit.b1 - hit.b2) * mesh.uvs[t[0]] + hit.b1 * mesh.uvs[t[1]] + hit.b2 * mesh.uvs[t[2]];
   Eigen::Vector2f duv_dx = Eigen::Vector2f::Zero(), duv_dy = Eigen::Vector2f::Zero();
-  if (!dp_dx.isZero()) duv_dx = UvAt(geometry, hit, hit.position + dp_dx) - uv;
-  if (!dp_dy.isZero()) duv_dy = UvAt(geometry, hit, hit.position + dp_dy) - uv;
+  if (!dp_dx.isZero() || !dp_dy.isZero()) UvFootprint(geometry, hit, mesh, dp_dx, dp_dy, duv_dx, duv_dy);
   // OpenImageIO's t runs down the image from its top row, as glTF's v; an
   // OBJ's v runs up from the bottom row.
   const float flip = colour.v_up ? -1.0f : 1.0f;

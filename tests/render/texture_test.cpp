@@ -155,6 +155,40 @@ TEST(AlbedoTexture, ObjMapKdWithVUpRendersAsTheGltf) {
   EXPECT_LT(largest, 1e-5);
 }
 
+// The footprint reaches the filter: a checker of single black and white
+// texels (a binary PPM, which OpenImageIO reads), seen so small that a pixel
+// covers about six texels a side, must come out grey, the filtered mean (0.5
+// encoded, 0.214 linear, since the decode follows the filter); a point
+// lookup would give 0 or 1 per pixel.
+TEST(AlbedoTexture, APixelCoveringManyTexelsSeesTheirFilteredMean) {
+  TempDir dir;
+  {
+    std::ofstream ppm(dir / "fine.ppm", std::ios::binary);
+    ppm << "P6\n64 64\n255\n";
+    for (int y = 0; y < 64; ++y)
+      for (int x = 0; x < 64; ++x)
+        for (int c = 0; c < 3; ++c) ppm.put(static_cast<char>((x + y) % 2 ? 255 : 0));
+  }
+  Scene scene = TexturedPlane();
+  scene.camera.width = 16;
+  scene.camera.height = 12;
+  BaseColour fine = *scene.objects[0].albedo_texture;
+  fine.texture = dir / "fine.ppm";
+  scene.objects[0].albedo_texture = fine;
+  SceneGeometry geometry(scene);
+  const Image image = RenderBands(geometry, nullptr, DefaultFrameOptions(scene, Transport::kDirect));
+  const CameraRays camera(scene, 0);
+  for (int y = 4; y < 8; ++y)
+    for (int x = 6; x < 10; ++x) {
+      const Vec3f d = camera.Direction(x + 0.5f, y + 0.5f);
+      const Vec3f p = camera.origin() + d * (-camera.origin().y() / d.y());
+      const Vec3f to_light = Vec3f(0, 1, 0) - p;
+      const double unit = 1.0 / to_light.norm() / to_light.squaredNorm();
+      const double albedo = image.at(x, y)[4] / (scene.lights[0].E_per_band[4] * unit / M_PI);
+      EXPECT_NEAR(albedo, SrgbToLinear(0.5f), 0.05) << x << "," << y;
+    }
+}
+
 TEST(AlbedoTexture, TheScenesAlbedoOverridesTheMeshsBaseColour) {
   TempDir dir;
   std::filesystem::copy_file(Fixture("scenes/textured/checker.png"), dir / "checker.png");

@@ -49,8 +49,4 @@ class AlbedoTextures {
   std::vector<char> srgb_;          // per object: its texels are sRGB-encoded
 };
 
-// The texture coordinates of the point p of the hit's plane, through the
-// barycentric weights of p in the hit's world-space triangle.
-Eigen::Vector2f UvAt(const SceneGeometry& geometry, const Hit& hit, const Vec3f& p);
-
 }  // namespace phos::render

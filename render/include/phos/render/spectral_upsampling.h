@@ -30,8 +30,6 @@ class RgbToBands {
   // Linear RGB in [0, 1] (clamped) to albedo per band, written to bands[0, band_count).
   void Albedo(const float rgb[3], float* bands) const;
   std::vector<double> Albedo(const std::array<double, 3>& rgb) const;
-  // Each primary's share of band b (sums to 1 over the three).
-  std::array<float, 3> Basis(int band) const { return {red_[band], 1 - red_[band] - blue_[band], blue_[band]}; }
 
  private:
   std::vector<float> red_, blue_;  // per band; green is the rest
