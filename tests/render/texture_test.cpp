@@ -222,6 +222,31 @@ std::string UserErrorOf(const std::function<void()>& f) {
   return "(no error)";
 }
 
+// An MTL Kd alone is a constant albedo (no lookup); parts with different
+// materials give no single base colour, which the scene must settle.
+TEST(AlbedoTexture, KdAloneIsAConstantAlbedoAndDifferingPartsNeedTheScenesWord) {
+  TempDir dir;
+  std::ofstream(dir / "two.obj") << "mtllib two.mtl\nv 0 0 0\nv 1 0 0\nv 0 0 1\nv 1 0 1\n"
+                                    "usemtl grey\nf 1 3 2\nusemtl red\nf 2 3 4\n";
+  std::ofstream(dir / "two.mtl") << "newmtl grey\nKd 0.5 0.5 0.5\nnewmtl red\nKd 0.8 0.1 0.1\n";
+  auto scene_json = [&](const std::string& object) {
+    std::ofstream(dir / "scene.json", std::ios::trunc)
+        << R"({"schema": "phos.scene/1", "time": {"start_s": 0, "end_s": 1, "fps": 1},
+    "camera": {"position": [0, 2, 0], "look_at": [0, 0, 0], "up": [0, 0, 1]}, "objects": [)" + object +
+               R"(], "lights": []})";
+    return dir / "scene.json";
+  };
+  const std::string differ = UserErrorOf([&] { LoadScene(scene_json(R"({"mesh": "two.obj"})")); });
+  EXPECT_NE(differ.find("no single base colour"), std::string::npos) << differ;
+  EXPECT_NE(differ.find("newmtl grey"), std::string::npos) << differ;
+  const Scene given = LoadScene(scene_json(R"({"mesh": "two.obj", "albedo": 0.3})"));
+  for (double v : given.objects[0].albedo) EXPECT_EQ(v, 0.3);
+  std::ofstream(dir / "two.mtl", std::ios::trunc) << "newmtl grey\nKd 0.5 0.5 0.5\nnewmtl red\nKd 0.5 0.5 0.5\n";
+  const Scene grey = LoadScene(scene_json(R"({"mesh": "two.obj"})"));
+  EXPECT_FALSE(grey.objects[0].albedo_texture);
+  for (double v : grey.objects[0].albedo) EXPECT_FLOAT_EQ(v, 0.5f);
+}
+
 TEST(AlbedoTexture, AMissingTextureNamesTheFileAndTheField) {
   TempDir dir;
   const std::string message = UserErrorOf([&] { LoadScene(GltfScene(dir, "gone.png")); });
