@@ -27,9 +27,8 @@ AlbedoTextures::AlbedoTextures(const Scene& scene)
     OIIO::TextureSystem::TextureHandle* handle = system_->get_texture_handle(file);
     OIIO::ImageSpec spec;
     if (!handle || !system_->get_imagespec(handle, nullptr, 0, spec)) {
-      std::string error = system_->geterror();
-      for (char& c : error)
-        if (c == '\n' || c == '\r') c = ' ';
+      // OpenImageIO's message may hold newlines: ThrowUserError escapes them (one line).
+      const std::string error = system_->geterror();
       ThrowUserError(where, texture->field,
                      "texture file '" + texture->texture.string() + "' is not an image OpenImageIO can read" +
                          (error.empty() ? "" : ": " + error));
