@@ -178,6 +178,68 @@ LightSchedule ReadSchedule(const JsonField& f) {
 using MaterialCache = std::map<std::string, std::shared_ptr<const Material>>;
 
 // "phosphor": a material file on the scene's band grid (loaded once per file).
+// One entry of "lights": light `index` of the scene (its default name).
+Light ReadLight(const JsonField& l, std::size_t index, const SpectralGrid& bands) {
+  l.RejectUnknownKeys({"name", "type", "position", "direction", "intensity", "spectrum", "schedule", "path", "normal",
+                       "thickness_m"});
+  Light light;
+  light.name = l.Has("name") ? l["name"].NonEmptyString() : "light " + std::to_string(index);
+  const std::string type = l["type"].String();
+  auto read_place = [&] {  // a position, or a path of positions
+    if (l.Has("path")) {
+      const JsonField path = l["path"];
+      for (std::size_t k = 0; k < path.ArraySize(); ++k) {
+        const JsonField key = path.At(k);
+        key.RejectUnknownKeys({"t_s", "position"});
+        RigidKey rigid;
+        rigid.t_s = ReadTime(key["t_s"]);
+        rigid.translate = ReadVec3(key["position"]);
+        light.motion.keys.push_back(rigid);
+      }
+      if (light.motion.keys.empty()) path.Fail("expected at least one keyframe");
+      RequireIncreasingTimes(path, light.motion.keys);
+      if (l.Has("position")) l["position"].Fail("give either 'position' or 'path', not both");
+    } else {
+      light.position = ReadVec3(l["position"]);
+    }
+  };
+  auto read_direction = [&] {
+    light.direction = ReadVec3(l["direction"]);
+    if (light.direction.norm() == 0) l["direction"].Fail("must not be zero");
+    light.direction.normalize();
+  };
+  if (type == "point") {
+    light.kind = Light::Kind::kPoint;
+    read_place();
+  } else if (type == "directional") {
+    light.kind = Light::Kind::kDirectional;
+    read_direction();
+  } else if (type == "sheet") {
+    light.kind = Light::Kind::kSheet;
+    read_direction();
+    read_place();
+    light.sheet_normal = ReadVec3(l["normal"]);
+    if (light.sheet_normal.norm() == 0) l["normal"].Fail("must not be zero");
+    light.sheet_normal.normalize();
+    light.sheet_thickness_m = ReadLength(l["thickness_m"], 1e-9);
+  } else {
+    l["type"].Fail("unknown light type '" + type + "' (point, directional, sheet)");
+  }
+  if (type != "sheet")
+    for (const char* key : {"normal", "thickness_m"})
+      if (l.Has(key)) l[key].Fail(std::string("only a sheet light has '").append(key).append("'"));
+  light.intensity = l["intensity"].NumberInRange(0, kMaxIrradiance);
+  light.E_per_band = ReadSpectrum(l["spectrum"], bands);
+  for (double& e : light.E_per_band) {
+    e *= light.intensity;
+    if (!(e <= kMaxIrradiance))
+      l["intensity"].Fail("gives an irradiance of " + FormatDouble(e) + " in a band, more than the limit of " +
+                          FormatDouble(kMaxIrradiance));
+  }
+  if (auto f = l.Optional("schedule")) light.schedule = ReadSchedule(*f);
+  return light;
+}
+
 void ReadPhosphor(const JsonField& o, const std::filesystem::path& base_dir, const SpectralGrid& bands,
                   MaterialCache& materials, std::shared_ptr<const Material>& phosphor, std::string& path) {
   if (!o.Has("phosphor")) return;
@@ -517,67 +579,7 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
 
   // Lights.
   const JsonField lights = root["lights"];
-  for (std::size_t i = 0; i < lights.ArraySize(); ++i) {
-    const JsonField l = lights.At(i);
-    l.RejectUnknownKeys({"name", "type", "position", "direction", "intensity", "spectrum", "schedule", "path", "normal",
-                         "thickness_m"});
-    Light light;
-    light.name = l.Has("name") ? l["name"].NonEmptyString() : "light " + std::to_string(i);
-    const std::string type = l["type"].String();
-    auto read_place = [&] {  // a position, or a path of positions
-      if (l.Has("path")) {
-        const JsonField path = l["path"];
-        for (std::size_t k = 0; k < path.ArraySize(); ++k) {
-          const JsonField key = path.At(k);
-          key.RejectUnknownKeys({"t_s", "position"});
-          RigidKey rigid;
-          rigid.t_s = ReadTime(key["t_s"]);
-          rigid.translate = ReadVec3(key["position"]);
-          light.motion.keys.push_back(rigid);
-        }
-        if (light.motion.keys.empty()) path.Fail("expected at least one keyframe");
-        RequireIncreasingTimes(path, light.motion.keys);
-        if (l.Has("position")) l["position"].Fail("give either 'position' or 'path', not both");
-      } else {
-        light.position = ReadVec3(l["position"]);
-      }
-    };
-    auto read_direction = [&] {
-      light.direction = ReadVec3(l["direction"]);
-      if (light.direction.norm() == 0) l["direction"].Fail("must not be zero");
-      light.direction.normalize();
-    };
-    if (type == "point") {
-      light.kind = Light::Kind::kPoint;
-      read_place();
-    } else if (type == "directional") {
-      light.kind = Light::Kind::kDirectional;
-      read_direction();
-    } else if (type == "sheet") {
-      light.kind = Light::Kind::kSheet;
-      read_direction();
-      read_place();
-      light.sheet_normal = ReadVec3(l["normal"]);
-      if (light.sheet_normal.norm() == 0) l["normal"].Fail("must not be zero");
-      light.sheet_normal.normalize();
-      light.sheet_thickness_m = ReadLength(l["thickness_m"], 1e-9);
-    } else {
-      l["type"].Fail("unknown light type '" + type + "' (point, directional, sheet)");
-    }
-    if (type != "sheet")
-      for (const char* key : {"normal", "thickness_m"})
-        if (l.Has(key)) l[key].Fail(std::string("only a sheet light has '").append(key).append("'"));
-    light.intensity = l["intensity"].NumberInRange(0, kMaxIrradiance);
-    light.E_per_band = ReadSpectrum(l["spectrum"], scene.bands);
-    for (double& e : light.E_per_band) {
-      e *= light.intensity;
-      if (!(e <= kMaxIrradiance))
-        l["intensity"].Fail("gives an irradiance of " + FormatDouble(e) + " in a band, more than the limit of " +
-                            FormatDouble(kMaxIrradiance));
-    }
-    if (auto f = l.Optional("schedule")) light.schedule = ReadSchedule(*f);
-    scene.lights.push_back(std::move(light));
-  }
+  for (std::size_t i = 0; i < lights.ArraySize(); ++i) scene.lights.push_back(ReadLight(lights.At(i), i, scene.bands));
   // The sky.
   if (auto f = root.Optional("environment")) {
     f->RejectUnknownKeys({"spectrum", "radiance", "gradient", "schedule"});
