@@ -1,6 +1,7 @@
 #include "phos/render/geometry.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <limits>
 
@@ -229,6 +230,24 @@ Vec3f SceneGeometry::Point(int object, int triangle, float b1, float b2) const {
 LightPose PoseAt(const Light& light, double t_s) {
   LightPose pose;
   pose.kind = light.kind;
+  if (light.area()) {
+    pose.at = light.PositionAt(t_s).cast<float>();
+    pose.normal = light.normal.normalized().cast<float>();
+    pose.samples = light.samples;
+    if (light.kind == Light::Kind::kQuad) {
+      // u x v = tangent x (normal x tangent) = normal: counter-clockwise from the front.
+      const Vec3 tangent = light.tangent.normalized();
+      pose.u = (0.5 * light.width_m * tangent).cast<float>();
+      pose.v = (0.5 * light.height_m * light.normal.normalized().cross(tangent)).cast<float>();
+      pose.area_m2 = static_cast<float>(light.width_m * light.height_m);
+    } else {
+      const Vec3 axis = light.normal.normalized().unitOrthogonal();
+      pose.u = (light.radius_m * axis).cast<float>();
+      pose.v = (light.radius_m * light.normal.normalized().cross(axis)).cast<float>();
+      pose.area_m2 = static_cast<float>(kPi * light.radius_m * light.radius_m);
+    }
+    return pose;
+  }
   if (light.kind == Light::Kind::kPoint) {
     pose.at = light.PositionAt(t_s).cast<float>();
     return pose;
@@ -242,9 +261,115 @@ LightPose PoseAt(const Light& light, double t_s) {
   return pose;
 }
 
-LightRay RayToLight(const SceneGeometry& geometry, const LightPose& light, const Vec3f& p, const Vec3f& n) {
+Vec3f LightPose::SamplePoint(float u1, float u2) const {
+  const float x = 2 * u1 - 1, y = 2 * u2 - 1;
+  if (kind == Light::Kind::kQuad) return at + x * u + y * v;
+  // Shirley and Chiu 1997's concentric map of the square onto the disk.
+  if (x == 0 && y == 0) return at;
+  float r, phi;
+  if (std::abs(x) > std::abs(y)) {
+    r = x;
+    phi = kPiF / 4 * (y / x);
+  } else {
+    r = y;
+    phi = kPiF / 2 - kPiF / 4 * (x / y);
+  }
+  return at + r * std::cos(phi) * u + r * std::sin(phi) * v;
+}
+
+namespace {
+
+// The light's outline as a convex polygon, counter-clockwise seen from its
+// front: a quad's corners, or a disk as a regular polygon of the disk's area
+// (its circumradius R sqrt(2 pi / (n sin(2 pi / n))), 1.0011 R for n = 48).
+constexpr int kDiskSides = 48;
+int AreaLightOutline(const LightPose& light, Vec3f* corners) {
+  if (light.kind == Light::Kind::kQuad) {
+    corners[0] = light.at - light.u - light.v;
+    corners[1] = light.at + light.u - light.v;
+    corners[2] = light.at + light.u + light.v;
+    corners[3] = light.at - light.u + light.v;
+    return 4;
+  }
+  struct Ring {
+    float cos[kDiskSides], sin[kDiskSides];
+    Ring() {
+      const double step = 2 * kPi / kDiskSides, scale = std::sqrt(step / std::sin(step));
+      for (int i = 0; i < kDiskSides; ++i) {
+        cos[i] = static_cast<float>(scale * std::cos(i * step));
+        sin[i] = static_cast<float>(scale * std::sin(i * step));
+      }
+    }
+  };
+  static const Ring ring;
+  for (int i = 0; i < kDiskSides; ++i) corners[i] = light.at + ring.cos[i] * light.u + ring.sin[i] * light.v;
+  return kDiskSides;
+}
+
+}  // namespace
+
+float AreaLightUnoccluded(const LightPose& light, const Vec3f& p, const Vec3f& n) {
+  if (!(light.normal.dot(p - light.at) > 0)) return 0.0f;  // behind the light, or in its plane
+  Vec3f corners[kDiskSides];
+  const int count = AreaLightOutline(light, corners);
+  // Clip to p's upper hemisphere, n . x >= 0 (Sutherland and Hodgman): only
+  // what lies above the horizon shines on p. A convex polygon and one plane
+  // add at most one vertex.
+  Vec3f clipped[kDiskSides + 1];
+  int kept = 0;
+  for (int i = 0; i < count; ++i) {
+    const Vec3f a = corners[i] - p, b = corners[(i + 1) % count] - p;
+    const float da = n.dot(a), db = n.dot(b);
+    if (da >= 0) clipped[kept++] = a;
+    if ((da >= 0) != (db >= 0)) clipped[kept++] = a + (da / (da - db)) * (b - a);
+  }
+  if (kept < 3) return 0.0f;
+  // Lambert: sum of the edges' angles times n . (unit normal of the plane through p and the edge).
+  float sum = 0;
+  for (int i = 0; i < kept; ++i) {
+    const Vec3f a = clipped[i].normalized(), b = clipped[(i + 1) % kept].normalized();
+    const Vec3f cross = a.cross(b);
+    const float sine = cross.norm();
+    if (!(sine > 0)) continue;
+    sum += std::atan2(sine, a.dot(b)) * n.dot(cross) / sine;
+  }
+  return 0.5f * std::abs(sum);
+}
+
+float HitAreaLight(const LightPose& light, const Vec3f& origin, const Vec3f& direction, float t_far) {
+  const float facing = light.normal.dot(direction);
+  if (!(facing < 0)) return -1.0f;  // parallel, or arriving at its back
+  const float t = light.normal.dot(light.at - origin) / facing;
+  if (!(t > 0 && t < t_far)) return -1.0f;
+  const Vec3f q = origin + t * direction - light.at;
+  const float x = q.dot(light.u) / light.u.squaredNorm(), y = q.dot(light.v) / light.v.squaredNorm();
+  const bool inside = light.kind == Light::Kind::kQuad ? std::abs(x) <= 1 && std::abs(y) <= 1 : x * x + y * y <= 1;
+  return inside ? t : -1.0f;
+}
+
+std::uint64_t PointSeed(const Vec3f& p) {
+  return (std::uint64_t(std::bit_cast<std::uint32_t>(p.x())) * 73856093u) ^
+         (std::uint64_t(std::bit_cast<std::uint32_t>(p.y())) * 19349663u) ^
+         (std::uint64_t(std::bit_cast<std::uint32_t>(p.z())) * 83492791u);
+}
+
+LightRay RayToLight(const SceneGeometry& geometry, const LightPose& light, const Vec3f& p, const Vec3f& n, float u1,
+                    float u2) {
   LightRay ray;
   ray.origin = p + geometry.ray_epsilon() * n;
+  if (light.area()) {
+    const Vec3f d = light.SamplePoint(u1, u2) - p;
+    const float distance2 = d.squaredNorm(), distance = std::sqrt(distance2);
+    if (!(distance > 0)) return ray;
+    const Vec3f w = d / distance;
+    const float cosine = n.dot(w), cos_light = -light.normal.dot(w);
+    if (!(cosine > 0 && cos_light > 0)) return ray;
+    ray.direction = w;
+    ray.t_far = distance * (1 - 1e-4f) - geometry.ray_epsilon();
+    ray.unit = cosine * cos_light * light.area_m2 / distance2;
+    ray.area_pdf = distance2 / (cos_light * light.area_m2);
+    return ray;
+  }
   if (light.kind == Light::Kind::kPoint) {
     const Vec3f d = light.at - p;
     const float distance2 = d.squaredNorm(), distance = std::sqrt(distance2);
@@ -265,8 +390,36 @@ LightRay RayToLight(const SceneGeometry& geometry, const LightPose& light, const
   return ray;
 }
 
+namespace {
+
+// The ratio estimator of UnitIrradiance for an area light (geometry.h).
+float UnitAreaIrradiance(const SceneGeometry& geometry, const LightPose& light, const Vec3f& p, const Vec3f& n,
+                         std::uint64_t* rays) {
+  const float unshadowed = AreaLightUnoccluded(light, p, n);
+  if (!(unshadowed > 0)) return 0.0f;
+  const int side = std::max(1, static_cast<int>(std::lround(std::sqrt(static_cast<double>(light.samples)))));
+  SplitMix64 random(PointSeed(p) * 0x9E3779B97F4A7C15ull + 0xD1B54A32D192ED03ull);
+  float weight = 0, visible = 0;
+  for (int i = 0; i < side; ++i)
+    for (int j = 0; j < side; ++j) {
+      const float u1 = (static_cast<float>(i) + random.UniformFloat()) / static_cast<float>(side);
+      const float u2 = (static_cast<float>(j) + random.UniformFloat()) / static_cast<float>(side);
+      const LightRay ray = RayToLight(geometry, light, p, n, u1, u2);
+      if (!(ray.unit > 0)) continue;
+      weight += ray.unit;
+      if (rays) ++*rays;
+      if (!geometry.Occluded(ray.origin, ray.direction, ray.t_far)) visible += ray.unit;
+    }
+  // No stratum above the horizon: the sliver that is has no sample to say
+  // whether it is seen, and is left dark.
+  return weight > 0 ? unshadowed * (visible / weight) : 0.0f;
+}
+
+}  // namespace
+
 float UnitIrradiance(const SceneGeometry& geometry, const LightPose& light, const Vec3f& p, const Vec3f& n,
                      std::uint64_t* rays) {
+  if (light.area()) return UnitAreaIrradiance(geometry, light, p, n, rays);
   const LightRay ray = RayToLight(geometry, light, p, n);
   if (ray.unit == 0) return 0.0f;
   if (rays) ++*rays;

@@ -35,6 +35,13 @@ constexpr int kMaxBands = 64;
 // shows noise, not banding.
 float PixelJitter(int x, int y) { return InterleavedGradientNoise(x, y); }
 
+// Veach's power heuristic (beta = 2): the weight of a sample drawn with
+// solid-angle pdf p_this when the other strategy would draw it with p_other.
+float PowerHeuristic(float p_this, float p_other) {
+  const float a = p_this * p_this, b = p_other * p_other;
+  return a + b > 0 ? a / (a + b) : 0.0f;
+}
+
 // Radiance or throughput per band, without allocation.
 using Bands = Eigen::Array<float, Eigen::Dynamic, 1, 0, kMaxBands, 1>;
 
@@ -225,6 +232,7 @@ class Tracer {
       lit.E = Bands(nb_);
       for (int b = 0; b < nb_; ++b) lit.E[b] = static_cast<float>(level * light.E_per_band[b]);
       lights_.push_back(lit);
+      if (lit.pose.area()) area_lights_.push_back(lit);
     }
   }
 
@@ -277,18 +285,32 @@ class Tracer {
   void DirectIrradiance(const Vec3f& p, const Vec3f& n_s, Bands& E, std::uint64_t& rays, bool sky = true) const {
     E.setZero(nb_);
     if (sky && sky_level_ > 0) {
-      const std::uint64_t seed = (std::uint64_t(std::bit_cast<std::uint32_t>(p.x())) * 73856093u) ^
-                                 (std::uint64_t(std::bit_cast<std::uint32_t>(p.y())) * 19349663u) ^
-                                 (std::uint64_t(std::bit_cast<std::uint32_t>(p.z())) * 83492791u);
-      E += sky_L_ * UnitSkyIrradiance(geometry_, *scene_.environment, p, n_s, options_.sky_rays, seed, &rays);
+      E += sky_L_ * UnitSkyIrradiance(geometry_, *scene_.environment, p, n_s, options_.sky_rays, PointSeed(p), &rays);
     }
     for (const LitLight& light : lights_) {
       float unit = UnitIrradiance(geometry_, light.pose, p, n_s, &rays);
-      // Media between the point and the light shadow it (a cloud on the floor).
-      if (unit > 0 && media_)
-        unit *= light.pose.kind == Light::Kind::kPoint ? media_->Transmittance(p, light.pose.at)
-                                                       : media_->TransmittanceToInfinity(p, -light.pose.at);
+      // Media between the point and the light shadow it (a cloud on the floor;
+      // scenes with media have no area lights, see scene.cpp).
+      if (unit > 0 && media_) unit *= Transmittance(light.pose, p);
       if (unit > 0) E += light.E * unit;
+    }
+  }
+
+  // The media's transmittance from p to a light.
+  float Transmittance(const LightPose& pose, const Vec3f& p) const {
+    return pose.kind == Light::Kind::kPoint || pose.area() ? media_->Transmittance(p, pose.at)
+                                                           : media_->TransmittanceToInfinity(p, -pose.at);
+  }
+
+  // L += the radiance of the area lights whose front a ray crosses before
+  // t_far (they have no body: what lies behind shows through), each times
+  // `weight(light, distance)`.
+  template <typename Weight>
+  void AddAreaLightsSeen(const Vec3f& origin, const Vec3f& direction, float t_far, const Bands& beta, Bands& L,
+                         Weight&& weight) const {
+    for (const LitLight& light : area_lights_) {
+      const float t = HitAreaLight(light.pose, origin, direction, t_far);
+      if (t > 0) L += beta * light.E * weight(light.pose, direction, t);
     }
   }
 
@@ -338,6 +360,8 @@ class Tracer {
     const Hit hit = geometry_.Intersect(origin, direction);
     Bands Lm = Bands::Zero(nb_);
     const float T = Media(origin, direction, hit, jitter, Lm);
+    AddAreaLightsSeen(origin, direction, hit ? hit.distance : 1e30f, Bands::Ones(nb_), Lm,
+                      [](const LightPose&, const Vec3f&, float) { return 1.0f; });
     if (!hit) return sky_level_ > 0 ? Bands(Lm + T * sky_L_ * scene_.environment->Shape(direction.y())) : Lm;
     AddEmission(hit, L);
     // A translucent object under dss: its reflection comes from the dipole
@@ -443,10 +467,7 @@ class Tracer {
         PathLane& lane = lanes[shadow.lane];
         const LitLight& light = lights_[shadow.light];
         float unit = shadow.ray.unit;
-        if (media_)
-          unit *= light.pose.kind == Light::Kind::kPoint
-                      ? media_->Transmittance(lane.hit.position, light.pose.at)
-                      : media_->TransmittanceToInfinity(lane.hit.position, -light.pose.at);
+        if (media_) unit *= Transmittance(light.pose, lane.hit.position);
         lane.L += lane.beta * *lane.albedo * light.E * (unit * kInvPiF);
       }
       live.clear();
@@ -478,6 +499,16 @@ class Tracer {
       lane.beta *= Media(lane.origin, lane.direction, hit, random.UniformFloat(), Lm);
       lane.L += Lm;
     }
+    // The area lights this ray crosses: seen by the camera, or found by a
+    // bounce and weighted against their next-event estimation (power
+    // heuristic, p_light = d^2 / (cos_light A)).
+    if (!area_lights_.empty())
+      AddAreaLightsSeen(lane.origin, lane.direction, hit ? hit.distance : 1e30f, lane.beta, lane.L,
+                        [&](const LightPose& pose, const Vec3f& direction, float t) {
+                          if (depth == 0) return 1.0f;
+                          const float p_light = t * t / (-pose.normal.dot(direction) * pose.area_m2);
+                          return PowerHeuristic(lane.bsdf_pdf, p_light);
+                        });
     if (!hit) {
       // The sky, found by the camera ray or a bounce (cosine sampling; no
       // light sampling for it, so no weight).
@@ -532,11 +563,20 @@ class Tracer {
         lane.emitter_scale = p_bsdf * area_term * cos_l / (area_term * area_term + p_bsdf * p_bsdf * cos_l * cos_l);
       }
     }
-    // Next-event estimation for the lights (delta: no MIS), when any is on:
-    // their shadow rays are cast with the batch's (TracePaths).
+    // Next-event estimation for the lights, when any is on: their shadow
+    // rays are cast with the batch's (TracePaths). A delta light has no MIS;
+    // an area light's point is weighted against the BSDF's finding it.
     if (scatters)
       for (std::size_t l = 0; l < lights_.size(); ++l) {
-        const LightRay ray = RayToLight(geometry_, lights_[l].pose, hit.position, n_s);
+        const LightPose& pose = lights_[l].pose;
+        LightRay ray;
+        if (pose.area()) {
+          const float u1 = random.UniformFloat();
+          ray = RayToLight(geometry_, pose, hit.position, n_s, u1, random.UniformFloat());
+          ray.unit *= PowerHeuristic(ray.area_pdf, n_s.dot(ray.direction) * kInvPiF);
+        } else {
+          ray = RayToLight(geometry_, pose, hit.position, n_s);
+        }
         if (ray.unit > 0) light_rays.push_back({lane_index, static_cast<int>(l), ray});
       }
     // Emission found by the BSDF sample, weighted against light sampling.
@@ -608,6 +648,7 @@ class Tracer {
   int nb_;
   EmitterDistribution emitters_;
   std::vector<LitLight> lights_;
+  std::vector<LitLight> area_lights_;  // those of lights_ that camera rays and bounces can meet
   std::vector<Bands> albedo_;  // per object
   const AlbedoTextures* textures_ = nullptr;
   float sky_level_ = 0;        // the sky's level now (0: none)

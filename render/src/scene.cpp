@@ -181,7 +181,7 @@ using MaterialCache = std::map<std::string, std::shared_ptr<const Material>>;
 // One entry of "lights": light `index` of the scene (its default name).
 Light ReadLight(const JsonField& l, std::size_t index, const SpectralGrid& bands) {
   l.RejectUnknownKeys({"name", "type", "position", "direction", "intensity", "spectrum", "schedule", "path", "normal",
-                       "thickness_m"});
+                       "thickness_m", "size_m", "tangent", "radius_m", "samples"});
   Light light;
   light.name = l.Has("name") ? l["name"].NonEmptyString() : "light " + std::to_string(index);
   const std::string type = l["type"].String();
@@ -222,19 +222,50 @@ Light ReadLight(const JsonField& l, std::size_t index, const SpectralGrid& bands
     if (light.sheet_normal.norm() == 0) l["normal"].Fail("must not be zero");
     light.sheet_normal.normalize();
     light.sheet_thickness_m = ReadLength(l["thickness_m"], 1e-9);
+  } else if (type == "quad" || type == "disk") {
+    light.kind = type == "quad" ? Light::Kind::kQuad : Light::Kind::kDisk;
+    read_place();
+    light.normal = ReadVec3(l["normal"]);
+    if (light.normal.norm() == 0) l["normal"].Fail("must not be zero");
+    light.normal.normalize();
+    if (light.kind == Light::Kind::kQuad) {
+      const JsonField size = l["size_m"];
+      if (size.ArraySize() != 2) size.Fail("expected [width, height] in metres");
+      light.width_m = ReadLength(size.At(0), 1e-6);
+      light.height_m = ReadLength(size.At(1), 1e-6);
+      // The width's direction: given, or the x axis (z if the light faces
+      // along x), made perpendicular to the normal.
+      Vec3 tangent = l.Has("tangent") ? ReadVec3(l["tangent"])
+                                      : (std::abs(light.normal.x()) < 0.9 ? Vec3(1, 0, 0) : Vec3(0, 0, 1));
+      tangent -= tangent.dot(light.normal) * light.normal;
+      if (tangent.norm() < 1e-6 * (1 + tangent.norm()))
+        l["tangent"].Fail("must not be parallel to 'normal'");
+      light.tangent = tangent.normalized();
+    } else {
+      light.radius_m = ReadLength(l["radius_m"], 1e-6);
+    }
+    if (auto f = l.Optional("samples")) light.samples = f->Integer(1, 1024);
   } else {
-    l["type"].Fail("unknown light type '" + type + "' (point, directional, sheet)");
+    l["type"].Fail("unknown light type '" + type + "' (point, directional, sheet, quad, disk)");
   }
-  if (type != "sheet")
-    for (const char* key : {"normal", "thickness_m"})
-      if (l.Has(key)) l[key].Fail(std::string("only a sheet light has '").append(key).append("'"));
+  auto only = [&](const char* key, const char* owners) {
+    if (l.Has(key)) l[key].Fail(std::string("only ").append(owners).append(" light has '").append(key).append("'"));
+  };
+  if (type != "sheet") only("thickness_m", "a sheet");
+  if (type != "sheet" && !light.area()) only("normal", "a sheet, quad or disk");
+  if (type != "quad") {
+    only("size_m", "a quad");
+    only("tangent", "a quad");
+  }
+  if (type != "disk") only("radius_m", "a disk");
+  if (!light.area()) only("samples", "a quad or disk");
   light.intensity = l["intensity"].NumberInRange(0, kMaxIrradiance);
   light.E_per_band = ReadSpectrum(l["spectrum"], bands);
   for (double& e : light.E_per_band) {
     e *= light.intensity;
     if (!(e <= kMaxIrradiance))
-      l["intensity"].Fail("gives an irradiance of " + FormatDouble(e) + " in a band, more than the limit of " +
-                          FormatDouble(kMaxIrradiance));
+      l["intensity"].Fail(std::string("gives ").append(light.area() ? "a radiance" : "an irradiance") + " of " +
+                          FormatDouble(e) + " in a band, more than the limit of " + FormatDouble(kMaxIrradiance));
   }
   if (auto f = l.Optional("schedule")) light.schedule = ReadSchedule(*f);
   return light;
@@ -631,6 +662,10 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
         f.Fail("missing 'albedo' (the single-scattering albedo: a number or one value per band)");
       if (auto g = f.Optional("g")) v.g = g->NumberInRange(-0.99, 0.99);
       ReadPhosphorPolicy(f, v.phosphor != nullptr, v.unknown_ke_as_zero, v.initial);
+      for (const Light& light : scene.lights)
+        if (light.area())
+          f.Fail("media are lit by point, directional and sheet lights only; '" + light.name +
+                 "' is an area light");
       scene.volumes.push_back(std::move(v));
     }
   }

@@ -152,6 +152,16 @@ struct LightPose {
   // Sheet: the slab |sheet_normal . p - sheet_offset| <= sheet_half_m.
   Vec3f sheet_normal = Vec3f::Zero();
   float sheet_offset = 0, sheet_half_m = 0;
+  // Area lights: `at` is the centre; the emitting side's unit normal; a
+  // quad's half edges (width along u, height along v) or a disk's radius
+  // along two unit axes u and v; its area; shadow rays per shaded point.
+  Vec3f normal = Vec3f::Zero(), u = Vec3f::Zero(), v = Vec3f::Zero();
+  float area_m2 = 0;
+  int samples = 1;
+  bool area() const { return kind == Light::Kind::kQuad || kind == Light::Kind::kDisk; }
+  // The point of the light at (u1, u2) in [0, 1)^2, uniform in area
+  // (a disk by Shirley and Chiu's concentric map).
+  Vec3f SamplePoint(float u1, float u2) const;
   float SheetMask(const Vec3f& p) const {
     return kind != Light::Kind::kSheet || std::fabs(sheet_normal.dot(p) - sheet_offset) <= sheet_half_m ? 1.0f : 0.0f;
   }
@@ -167,7 +177,7 @@ struct LightPose {
   }
   bool operator==(const LightPose& o) const {
     return kind == o.kind && at == o.at && sheet_normal == o.sheet_normal && sheet_offset == o.sheet_offset &&
-           sheet_half_m == o.sheet_half_m;
+           sheet_half_m == o.sheet_half_m && normal == o.normal && u == o.u && v == o.v && samples == o.samples;
   }
 };
 LightPose PoseAt(const Light& light, double t_s);
@@ -182,13 +192,41 @@ LightPose PoseAt(const Light& light, double t_s);
 // UnitIrradiance in two steps, for callers that cast their shadow rays in
 // batches (the path tracer): the ray, and what the point receives if nothing
 // blocks it (unit = 0: nothing to test, the light does not reach it).
+//
+// An area light is sampled: RayToLight goes to its point at (u1, u2), with
+// unit = cos cos_light A / d^2 (the area estimator per unit radiance, which
+// the path tracer averages), and area_pdf = d^2 / (cos_light A), the
+// solid-angle pdf of that direction (its MIS weight). UnitIrradiance shades
+// a point by Heitz et al. 2018's ratio estimator ("Combining analytic direct
+// illumination and stochastic shadows"): the unshadowed irradiance in
+// closed form (AreaLightUnoccluded) times the visible fraction of
+// light.samples stratified shadow rays, each weighted by its share of that
+// irradiance. Unshadowed it is exact; a penumbra is soft and, at a given
+// point, the same at every call (the strata's jitter is seeded by the point).
 struct LightRay {
   Vec3f origin = Vec3f::Zero(), direction = Vec3f::Zero();
   float t_far = 0, unit = 0;
+  float area_pdf = 0;  // area lights only
 };
-LightRay RayToLight(const SceneGeometry& geometry, const LightPose& light, const Vec3f& p, const Vec3f& n);
+LightRay RayToLight(const SceneGeometry& geometry, const LightPose& light, const Vec3f& p, const Vec3f& n,
+                    float u1 = 0.5f, float u2 = 0.5f);
 float UnitIrradiance(const SceneGeometry& geometry, const LightPose& light, const Vec3f& p, const Vec3f& n,
                      std::uint64_t* rays = nullptr);
+// An area light's irradiance at p (unit normal n) per unit radiance with
+// nothing in the way: Lambert's formula for a polygon (Arvo 1995, "Applications
+// of irradiance tensors"), E = 1/2 sum_i theta_i n . g_i over the edges of the
+// light clipped to p's upper hemisphere, theta_i the angle an edge subtends
+// and g_i the unit normal of the plane through p and that edge. A disk is a
+// regular 48-gon of the disk's area. 0 where p lies behind the light.
+float AreaLightUnoccluded(const LightPose& light, const Vec3f& p, const Vec3f& n);
+// Where a ray from origin along unit `direction` crosses an area light's
+// emitting side before t_far: its distance, or a negative number.
+float HitAreaLight(const LightPose& light, const Vec3f& origin, const Vec3f& direction, float t_far);
+
+// A seed for the random numbers of the point p, from its coordinates' bits:
+// a point shaded twice (a texel at each step, a pixel in each frame) draws
+// the same numbers, so its noise holds still.
+std::uint64_t PointSeed(const Vec3f& p);
 
 // The sky's irradiance at p (normal n) per unit of its band radiance, by
 // `rays` cosine-distributed shadow rays, stratified on a sqrt(rays) grid

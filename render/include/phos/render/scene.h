@@ -147,9 +147,17 @@ struct Light {
   // kSheet: a laser sheet (Fig. 8.17): a directional beam travelling along
   // `direction`, confined to the slab of sheet_thickness_m about the plane
   // with normal sheet_normal through PositionAt(t); a `path` sweeps it.
-  enum class Kind { kPoint, kDirectional, kSheet } kind = Kind::kPoint;
+  // kQuad, kDisk: an area light, a flat Lambertian emitter of radiance
+  // E_per_band (per steradian) on the side `normal` faces, centred at
+  // PositionAt(t): a quad of width_m along `tangent` by height_m along
+  // normal x tangent, or a disk of radius_m. It has no body: it casts no
+  // shadow, and only the camera and the path tracer's bounces see it.
+  enum class Kind { kPoint, kDirectional, kSheet, kQuad, kDisk } kind = Kind::kPoint;
   std::string name;
-  std::vector<double> E_per_band;  // spectrum * intensity integrated over the scene's bands
+  // Band integrals of spectrum * intensity: a point light's intensity
+  // (irradiance * m^2), a directional or sheet light's irradiance, an area
+  // light's radiance (irradiance / sr: a wide light close by gives pi times it).
+  std::vector<double> E_per_band;
   double intensity = 1.0;
   LightSchedule schedule;
   RigidMotion motion;               // a point light moves with the translation of its keys
@@ -157,6 +165,14 @@ struct Light {
   Vec3 direction = Vec3(0, -1, 0);  // directional, sheet: the direction light travels
   Vec3 sheet_normal = Vec3(1, 0, 0);
   double sheet_thickness_m = 0;
+  // Area lights.
+  Vec3 normal = Vec3(0, -1, 0);   // unit: the side that emits
+  Vec3 tangent = Vec3(1, 0, 0);   // quad: unit, perpendicular to normal, along its width
+  double width_m = 0, height_m = 0, radius_m = 0;
+  // Shadow rays per shaded point (texel or pixel) for its soft shadow,
+  // stratified over the light (geometry.h, UnitIrradiance).
+  int samples = 16;
+  bool area() const { return kind == Kind::kQuad || kind == Kind::kDisk; }
   Vec3 PositionAt(double t_s) const { return motion.At(t_s) * position; }
   Vec3 DirectionAt(double t_s) const { return (motion.At(t_s).linear() * direction).normalized(); }
 };
