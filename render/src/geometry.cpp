@@ -248,8 +248,13 @@ LightPose PoseAt(const Light& light, double t_s) {
     }
     return pose;
   }
-  if (light.kind == Light::Kind::kPoint) {
+  if (light.positional()) {
     pose.at = light.PositionAt(t_s).cast<float>();
+    if (light.kind == Light::Kind::kSpot) {
+      pose.spot_axis = light.DirectionAt(t_s).cast<float>();
+      pose.cos_inner = static_cast<float>(std::cos(light.inner_cone_deg * kPi / 180));
+      pose.cos_outer = static_cast<float>(std::cos(light.outer_cone_deg * kPi / 180));
+    }
     return pose;
   }
   pose.at = light.DirectionAt(t_s).cast<float>();
@@ -370,14 +375,16 @@ LightRay RayToLight(const SceneGeometry& geometry, const LightPose& light, const
     ray.area_pdf = distance2 / (cos_light * light.area_m2);
     return ray;
   }
-  if (light.kind == Light::Kind::kPoint) {
+  if (light.positional()) {
     const Vec3f d = light.at - p;
     const float distance2 = d.squaredNorm(), distance = std::sqrt(distance2);
     const float cosine = distance > 0 ? n.dot(d) / distance : 0.0f;
     if (!(cosine > 0)) return ray;  // behind the surface: only its front charges and reflects
     ray.direction = d / distance;
+    const float falloff = light.SpotFalloff(-ray.direction);
+    if (!(falloff > 0)) return ray;  // outside a spot's cone
     ray.t_far = distance * (1 - 1e-4f) - geometry.ray_epsilon();
-    ray.unit = cosine / distance2;
+    ray.unit = falloff * cosine / distance2;
     return ray;
   }
   if (light.SheetMask(p) == 0) return ray;

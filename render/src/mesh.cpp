@@ -352,8 +352,14 @@ std::optional<BaseColour> GltfBaseColour(const tinygltf::Model& model, int index
   return colour;
 }
 
-Mesh ParseGltf(std::string_view data, bool binary, const std::filesystem::path& base_dir, const std::string& name,
-               const std::string& group, const std::string& where) {
+// The extensions phos reads: a file that requires any other is refused,
+// since it would be drawn wrong (glTF 2.0 spec, 3.12: a loader must not load
+// an asset whose required extension it does not support).
+constexpr const char* kSupportedGltfExtensions[] = {"KHR_lights_punctual"};
+
+// The glTF's model through tinygltf, with its limits checked.
+tinygltf::Model ReadGltfModel(std::string_view data, bool binary, const std::filesystem::path& base_dir,
+                              const std::string& name, const std::string& where) {
   if (data.size() > kMaxInputFileBytes)
     ThrowUserError(where, "",
                    "glTF '" + name + "' is more than the limit of " + std::to_string(kMaxInputFileBytes) + " bytes");
@@ -368,14 +374,20 @@ Mesh ParseGltf(std::string_view data, bool binary, const std::filesystem::path& 
                          : loader.LoadASCIIFromString(&model, &error, &warning, data.data(),
                                                       static_cast<unsigned int>(data.size()), base_dir.string());
   if (!ok) ThrowUserError(where, "", "cannot read glTF '" + name + "': " + OneLine(error));
-  Mesh mesh;
-  mesh.source = name + (group.empty() ? "" : "#" + group);
-  bool found = group.empty();
-  bool all_uv = true;
-  const std::string file_where = where + " (" + name + ")";
+  for (const std::string& extension : model.extensionsRequired)
+    if (std::find(std::begin(kSupportedGltfExtensions), std::end(kSupportedGltfExtensions), extension) ==
+        std::end(kSupportedGltfExtensions))
+      ThrowUserError(where + " (" + name + ")", "extensionsRequired",
+                     "the file requires the extension '" + extension +
+                         "', which phos does not read (it reads KHR_lights_punctual)");
+  return model;
+}
+
+// Calls f(node, world transform) for every node instance of the default
+// scene (or of every root node when there is no scene), parents first.
+void VisitGltfNodes(const tinygltf::Model& model, const std::string& file_where,
+                    const std::function<void(const tinygltf::Node&, const Eigen::Affine3d&)>& f) {
   std::size_t instances = 0;
-  bool first_primitive = true;
-  // Walks the node tree of the default scene, applying each node's transform.
   std::function<void(int, const Eigen::Affine3d&, int)> visit = [&](int index, const Eigen::Affine3d& parent,
                                                                     int depth) {
     if (index < 0 || index >= static_cast<int>(model.nodes.size()) || depth > 64)
@@ -387,6 +399,30 @@ Mesh ParseGltf(std::string_view data, bool binary, const std::filesystem::path& 
           "the node graph has more than the limit of " + std::to_string(kMaxGltfInstances) + " node instances");
     const tinygltf::Node& node = model.nodes[index];
     const Eigen::Affine3d transform = parent * NodeTransform(node);
+    f(node, transform);
+    for (int child : node.children) visit(child, transform, depth + 1);
+  };
+  if (!model.scenes.empty()) {
+    const int scene = model.defaultScene >= 0 ? model.defaultScene : 0;
+    if (scene >= static_cast<int>(model.scenes.size()))
+      ThrowUserError(file_where, "scene", "the default scene " + std::to_string(scene) + " does not exist");
+    for (int node : model.scenes[scene].nodes) visit(node, Eigen::Affine3d::Identity(), 0);
+  } else {
+    for (std::size_t node = 0; node < model.nodes.size(); ++node)
+      visit(static_cast<int>(node), Eigen::Affine3d::Identity(), 0);
+  }
+}
+
+Mesh ParseGltf(std::string_view data, bool binary, const std::filesystem::path& base_dir, const std::string& name,
+               const std::string& group, const std::string& where) {
+  const tinygltf::Model model = ReadGltfModel(data, binary, base_dir, name, where);
+  Mesh mesh;
+  mesh.source = name + (group.empty() ? "" : "#" + group);
+  bool found = group.empty();
+  bool all_uv = true;
+  const std::string file_where = where + " (" + name + ")";
+  bool first_primitive = true;
+  VisitGltfNodes(model, file_where, [&](const tinygltf::Node& node, const Eigen::Affine3d& transform) {
     if (node.mesh >= 0 && node.mesh < static_cast<int>(model.meshes.size()) &&
         (group.empty() || model.meshes[node.mesh].name == group)) {
       found = true;
@@ -437,17 +473,7 @@ Mesh ParseGltf(std::string_view data, bool binary, const std::filesystem::path& 
           }
       }
     }
-    for (int child : node.children) visit(child, transform, depth + 1);
-  };
-  if (!model.scenes.empty()) {
-    const int scene = model.defaultScene >= 0 ? model.defaultScene : 0;
-    if (scene >= static_cast<int>(model.scenes.size()))
-      ThrowUserError(file_where, "scene", "the default scene " + std::to_string(scene) + " does not exist");
-    for (int node : model.scenes[scene].nodes) visit(node, Eigen::Affine3d::Identity(), 0);
-  } else {
-    for (std::size_t node = 0; node < model.nodes.size(); ++node)
-      visit(static_cast<int>(node), Eigen::Affine3d::Identity(), 0);
-  }
+  });
   if (!found) ThrowUserError(where, "", "glTF '" + name + "' has no mesh named '" + group + "'");
   if (!all_uv || mesh.uv_triangles.size() != mesh.triangles.size()) {  // a partial UV map is no map
     mesh.uvs.clear();
@@ -536,6 +562,70 @@ Mesh ParseMesh(std::string_view data, const std::string& format, const std::file
   for (const Eigen::Vector2f& uv : mesh.uvs)
     if (!uv.allFinite()) ThrowUserError(where, "", "mesh '" + name + "' has a texture coordinate that is not finite");
   return mesh;
+}
+
+std::vector<PunctualLight> ParseGltfLights(std::string_view data, bool binary, const std::filesystem::path& base_dir,
+                                           const std::string& name, const std::string& where) {
+  const tinygltf::Model model = ReadGltfModel(data, binary, base_dir, name, where);
+  const std::string file_where = where + " (" + name + ")";
+  std::vector<PunctualLight> lights;
+  VisitGltfNodes(model, file_where, [&](const tinygltf::Node& node, const Eigen::Affine3d& transform) {
+    const auto extension = node.extensions.find("KHR_lights_punctual");
+    if (extension == node.extensions.end() || !extension->second.Has("light")) return;
+    const tinygltf::Value& index_value = extension->second.Get("light");
+    const int index = index_value.IsInt() ? index_value.GetNumberAsInt() : -1;
+    if (index < 0 || index >= static_cast<int>(model.lights.size()))
+      ThrowUserError(file_where, "nodes", "a KHR_lights_punctual light index out of range");
+    const tinygltf::Light& source = model.lights[index];
+    PunctualLight punctual;
+    Light& light = punctual.light;
+    light.name = source.name.empty() ? name + " light " + std::to_string(lights.size()) : source.name;
+    // A light shines down its node's -z axis from its node's origin.
+    light.position = transform * Vec3::Zero();
+    light.direction = (transform.linear() * Vec3(0, 0, -1)).normalized();
+    if (!light.position.allFinite() || !light.direction.allFinite() ||
+        light.position.cwiseAbs().maxCoeff() > kMaxCoordinate_m)
+      ThrowUserError(file_where, "lights", "light '" + light.name + "' has no finite place or direction");
+    if (source.type == "point") {
+      light.kind = Light::Kind::kPoint;
+    } else if (source.type == "directional") {
+      light.kind = Light::Kind::kDirectional;
+    } else if (source.type == "spot") {
+      light.kind = Light::Kind::kSpot;
+      const double inner = source.spot.innerConeAngle, outer = source.spot.outerConeAngle;
+      if (!(inner >= 0 && inner < outer && outer <= kPi / 2))
+        ThrowUserError(file_where, "lights",
+                       "spot '" + light.name + "' needs 0 <= innerConeAngle < outerConeAngle <= pi / 2");
+      light.inner_cone_deg = inner * 180 / kPi;
+      light.outer_cone_deg = outer * 180 / kPi;
+    } else {
+      ThrowUserError(file_where, "lights", "light '" + light.name + "' has an unknown type '" + source.type + "'");
+    }
+    if (!(source.intensity >= 0 && source.intensity <= kMaxIrradiance))
+      ThrowUserError(file_where, "lights", "light '" + light.name + "' has an intensity outside [0, " +
+                                               FormatDouble(kMaxIrradiance) + "]");
+    light.intensity = source.intensity;
+    if (source.color.size() == 3) punctual.colour = Eigen::Vector3d(source.color[0], source.color[1], source.color[2]);
+    if (!(punctual.colour.array() >= 0).all() || !(punctual.colour.array() <= 1).all())
+      ThrowUserError(file_where, "lights", "light '" + light.name + "' has a color outside [0, 1]");
+    lights.push_back(std::move(punctual));
+  });
+  return lights;
+}
+
+std::vector<PunctualLight> LoadGltfLights(const std::filesystem::path& path, const std::string& where) {
+  std::string extension = path.extension().string();
+  std::transform(extension.begin(), extension.end(), extension.begin(),
+                 [](unsigned char c) { return std::tolower(c); });
+  if (extension != ".gltf" && extension != ".glb")
+    ThrowUserError(where, "", "lights come from glTF files only (.gltf, .glb), not '" + path.string() + "'");
+  std::string data;
+  try {
+    data = ReadFileText(path);
+  } catch (const UserError& e) {
+    ThrowUserError(where, "", std::string("glTF ") + e.what());
+  }
+  return ParseGltfLights(data, extension == ".glb", path.parent_path(), path.string(), where);
 }
 
 Mesh LoadMesh(const std::filesystem::path& path, const std::string& group, const std::string& where) {

@@ -298,8 +298,8 @@ class Tracer {
 
   // The media's transmittance from p to a light.
   float Transmittance(const LightPose& pose, const Vec3f& p) const {
-    return pose.kind == Light::Kind::kPoint || pose.area() ? media_->Transmittance(p, pose.at)
-                                                           : media_->TransmittanceToInfinity(p, -pose.at);
+    return pose.positional() || pose.area() ? media_->Transmittance(p, pose.at)
+                                            : media_->TransmittanceToInfinity(p, -pose.at);
   }
 
   // L += the radiance of the area lights whose front a ray crosses before

@@ -178,12 +178,27 @@ LightSchedule ReadSchedule(const JsonField& f) {
 using MaterialCache = std::map<std::string, std::shared_ptr<const Material>>;
 
 // "phosphor": a material file on the scene's band grid (loaded once per file).
+// E_per_band *= factor, band by band, within the limit (`field` is named if not).
+void ScaleSpectrum(const JsonField& field, Light& light, const std::vector<double>& factor) {
+  for (std::size_t b = 0; b < light.E_per_band.size(); ++b) {
+    double& e = light.E_per_band[b];
+    e *= factor[b];
+    if (!(e <= kMaxIrradiance))
+      field.Fail(std::string("gives ").append(light.area() ? "a radiance" : "an irradiance") + " of " +
+                 FormatDouble(e) + " in a band, more than the limit of " + FormatDouble(kMaxIrradiance));
+  }
+}
+
 // One entry of "lights": light `index` of the scene (its default name).
 Light ReadLight(const JsonField& l, std::size_t index, const SpectralGrid& bands) {
   l.RejectUnknownKeys({"name", "type", "position", "direction", "intensity", "spectrum", "schedule", "path", "normal",
-                       "thickness_m", "size_m", "tangent", "radius_m", "samples"});
+                       "thickness_m", "size_m", "tangent", "radius_m", "samples", "inner_cone_deg",
+                       "outer_cone_deg"});
   Light light;
   light.name = l.Has("name") ? l["name"].NonEmptyString() : "light " + std::to_string(index);
+  auto only = [&](const char* key, const char* owners) {
+    if (l.Has(key)) l[key].Fail(std::string("only ").append(owners).append(" light has '").append(key).append("'"));
+  };
   const std::string type = l["type"].String();
   auto read_place = [&] {  // a position, or a path of positions
     if (l.Has("path")) {
@@ -214,6 +229,16 @@ Light ReadLight(const JsonField& l, std::size_t index, const SpectralGrid& bands
   } else if (type == "directional") {
     light.kind = Light::Kind::kDirectional;
     read_direction();
+  } else if (type == "spot") {
+    light.kind = Light::Kind::kSpot;
+    read_place();
+    read_direction();
+    if (auto f = l.Optional("inner_cone_deg")) light.inner_cone_deg = f->NumberInRange(0, 89.9);
+    if (auto f = l.Optional("outer_cone_deg")) light.outer_cone_deg = f->NumberInRange(0.1, 90);
+    if (!(light.inner_cone_deg < light.outer_cone_deg))
+      l[l.Has("outer_cone_deg") ? "outer_cone_deg" : "inner_cone_deg"].Fail(
+          "the outer cone (" + FormatDouble(light.outer_cone_deg) + " deg) must be wider than the inner (" +
+          FormatDouble(light.inner_cone_deg) + " deg)");
   } else if (type == "sheet") {
     light.kind = Light::Kind::kSheet;
     read_direction();
@@ -246,11 +271,12 @@ Light ReadLight(const JsonField& l, std::size_t index, const SpectralGrid& bands
     }
     if (auto f = l.Optional("samples")) light.samples = f->Integer(1, 1024);
   } else {
-    l["type"].Fail("unknown light type '" + type + "' (point, directional, sheet, quad, disk)");
+    l["type"].Fail("unknown light type '" + type + "' (point, spot, directional, sheet, quad, disk, gltf)");
   }
-  auto only = [&](const char* key, const char* owners) {
-    if (l.Has(key)) l[key].Fail(std::string("only ").append(owners).append(" light has '").append(key).append("'"));
-  };
+  if (type != "spot") {
+    only("inner_cone_deg", "a spot");
+    only("outer_cone_deg", "a spot");
+  }
   if (type != "sheet") only("thickness_m", "a sheet");
   if (type != "sheet" && !light.area()) only("normal", "a sheet, quad or disk");
   if (type != "quad") {
@@ -261,14 +287,38 @@ Light ReadLight(const JsonField& l, std::size_t index, const SpectralGrid& bands
   if (!light.area()) only("samples", "a quad or disk");
   light.intensity = l["intensity"].NumberInRange(0, kMaxIrradiance);
   light.E_per_band = ReadSpectrum(l["spectrum"], bands);
-  for (double& e : light.E_per_band) {
-    e *= light.intensity;
-    if (!(e <= kMaxIrradiance))
-      l["intensity"].Fail(std::string("gives ").append(light.area() ? "a radiance" : "an irradiance") + " of " +
-                          FormatDouble(e) + " in a band, more than the limit of " + FormatDouble(kMaxIrradiance));
-  }
+  ScaleSpectrum(l["intensity"], light, std::vector<double>(light.E_per_band.size(), light.intensity));
   if (auto f = l.Optional("schedule")) light.schedule = ReadSchedule(*f);
   return light;
+}
+
+// {"type": "gltf", "file": ..., "spectrum": ..., "intensity_scale": s,
+// "schedule": ...}: the KHR_lights_punctual lights of a glTF file, each with
+// the entry's spectrum, times its glTF intensity times s, times its glTF
+// colour upsampled to the bands (render/spectral_upsampling.h).
+std::vector<Light> ReadGltfLights(const JsonField& l, const SpectralGrid& bands,
+                                  const std::filesystem::path& base_dir) {
+  l.RejectUnknownKeys({"type", "file", "spectrum", "intensity_scale", "schedule"});
+  const std::filesystem::path file = base_dir / l["file"].NonEmptyString();
+  std::vector<PunctualLight> punctual = LoadGltfLights(file, l["file"].source() + ": " + l["file"].path());
+  if (punctual.empty()) l["file"].Fail("'" + file.string() + "' has no KHR_lights_punctual light in its scene");
+  const double scale = l.Has("intensity_scale") ? l["intensity_scale"].NumberInRange(0, kMaxIrradiance) : 1.0;
+  const std::vector<double> spectrum = ReadSpectrum(l["spectrum"], bands);
+  LightSchedule schedule;
+  if (auto f = l.Optional("schedule")) schedule = ReadSchedule(*f);
+  const RgbToBands upsample(bands);
+  std::vector<Light> lights;
+  for (PunctualLight& p : punctual) {
+    Light light = std::move(p.light);
+    const std::vector<double> colour = upsample.Albedo({p.colour[0], p.colour[1], p.colour[2]});
+    std::vector<double> factor(colour.size());
+    for (std::size_t b = 0; b < colour.size(); ++b) factor[b] = light.intensity * scale * colour[b];
+    light.E_per_band = spectrum;
+    ScaleSpectrum(l["intensity_scale"], light, factor);
+    light.schedule = schedule;
+    lights.push_back(std::move(light));
+  }
+  return lights;
 }
 
 void ReadPhosphor(const JsonField& o, const std::filesystem::path& base_dir, const SpectralGrid& bands,
@@ -610,7 +660,15 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
 
   // Lights.
   const JsonField lights = root["lights"];
-  for (std::size_t i = 0; i < lights.ArraySize(); ++i) scene.lights.push_back(ReadLight(lights.At(i), i, scene.bands));
+  for (std::size_t i = 0; i < lights.ArraySize(); ++i) {
+    const JsonField l = lights.At(i);
+    if (l.Has("type") && l["type"].String() == "gltf") {
+      for (Light& light : ReadGltfLights(l, scene.bands, base_dir)) scene.lights.push_back(std::move(light));
+      if (scene.lights.size() > 4096) l.Fail("more than the limit of 4096 lights");
+    } else {
+      scene.lights.push_back(ReadLight(l, i, scene.bands));
+    }
+  }
   // The sky.
   if (auto f = root.Optional("environment")) {
     f->RejectUnknownKeys({"spectrum", "radiance", "gradient", "schedule"});

@@ -200,13 +200,14 @@ void VolumeMedia::UpdateLight(int vi, int l, const LightPose& pose) {
                       for (std::size_t j = r.begin(); j != r.end(); ++j) {
                         if (!needs[j]) continue;
                         const Vec3f p = grid.VoxelCentre(j);
-                        if (pose.kind == Light::Kind::kPoint) {
+                        if (pose.positional()) {
                           const Vec3f d = pose.at - p;
                           const float distance2 = d.squaredNorm(), distance = std::sqrt(distance2);
                           if (!(distance > 0)) continue;
                           const Vec3f w = d / distance;
-                          if (geometry_.Occluded(p, w, distance * (1 - 1e-4f))) continue;
-                          cache.unit[j] = std::exp(-MediaOpticalDepth(p, w, distance)) / distance2;
+                          const float falloff = pose.SpotFalloff(-w);
+                          if (!(falloff > 0) || geometry_.Occluded(p, w, distance * (1 - 1e-4f))) continue;
+                          cache.unit[j] = falloff * std::exp(-MediaOpticalDepth(p, w, distance)) / distance2;
                         } else {
                           const Vec3f w = -pose.at;
                           if (geometry_.Occluded(p, w, 1e30f)) continue;
@@ -266,7 +267,7 @@ float VolumeMedia::March(const Vec3f& origin, const Vec3f& direction, float t_ma
         const LightPose& pose = poses_[l];
         const float unit = grid.Sample(caches[l].unit.data(), p) * pose.SheetMask(p);
         if (!(unit > 0)) continue;
-        const Vec3f travel = pose.kind == Light::Kind::kPoint ? Vec3f((p - pose.at).normalized()) : pose.at;
+        const Vec3f travel = pose.positional() ? Vec3f((p - pose.at).normalized()) : pose.at;
         const float phase = HenyeyGreenstein(travel.dot(-direction), static_cast<float>(v.g));
         const Light& light = scene_.lights[l];
         for (int b = 0; b < nb_; ++b)

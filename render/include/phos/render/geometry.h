@@ -159,6 +159,19 @@ struct LightPose {
   float area_m2 = 0;
   int samples = 1;
   bool area() const { return kind == Light::Kind::kQuad || kind == Light::Kind::kDisk; }
+  bool positional() const { return kind == Light::Kind::kPoint || kind == Light::Kind::kSpot; }
+  // Spot: the axis and the cone (KHR_lights_punctual's falloff: the square of
+  // the cosine to the axis mapped linearly from cos_outer (0) to cos_inner (1)).
+  Vec3f spot_axis = Vec3f::Zero();
+  float cos_inner = 1, cos_outer = 0;
+  // The spot's share of its intensity toward unit direction w (from the
+  // light); 1 for every other light.
+  float SpotFalloff(const Vec3f& w) const {
+    if (kind != Light::Kind::kSpot) return 1.0f;
+    const float scale = 1.0f / std::max(1e-3f, cos_inner - cos_outer);
+    const float a = std::clamp((spot_axis.dot(w) - cos_outer) * scale, 0.0f, 1.0f);
+    return a * a;
+  }
   // The point of the light at (u1, u2) in [0, 1)^2, uniform in area
   // (a disk by Shirley and Chiu's concentric map).
   Vec3f SamplePoint(float u1, float u2) const;
@@ -177,7 +190,8 @@ struct LightPose {
   }
   bool operator==(const LightPose& o) const {
     return kind == o.kind && at == o.at && sheet_normal == o.sheet_normal && sheet_offset == o.sheet_offset &&
-           sheet_half_m == o.sheet_half_m && normal == o.normal && u == o.u && v == o.v && samples == o.samples;
+           sheet_half_m == o.sheet_half_m && normal == o.normal && u == o.u && v == o.v && samples == o.samples &&
+           spot_axis == o.spot_axis && cos_inner == o.cos_inner && cos_outer == o.cos_outer;
   }
 };
 LightPose PoseAt(const Light& light, double t_s);

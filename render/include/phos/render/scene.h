@@ -152,9 +152,12 @@ struct Light {
   // PositionAt(t): a quad of width_m along `tangent` by height_m along
   // normal x tangent, or a disk of radius_m. It has no body: it casts no
   // shadow, and only the camera and the path tracer's bounces see it.
-  enum class Kind { kPoint, kDirectional, kSheet, kQuad, kDisk } kind = Kind::kPoint;
+  // kSpot: a point light shining along `direction` within a cone, its
+  // intensity falling off between inner_cone_deg and outer_cone_deg as
+  // glTF's KHR_lights_punctual spot does.
+  enum class Kind { kPoint, kDirectional, kSheet, kQuad, kDisk, kSpot } kind = Kind::kPoint;
   std::string name;
-  // Band integrals of spectrum * intensity: a point light's intensity
+  // Band integrals of spectrum * intensity: a point or spot light's intensity
   // (irradiance * m^2), a directional or sheet light's irradiance, an area
   // light's radiance (irradiance / sr: a wide light close by gives pi times it).
   std::vector<double> E_per_band;
@@ -162,7 +165,8 @@ struct Light {
   LightSchedule schedule;
   RigidMotion motion;               // a point light moves with the translation of its keys
   Vec3 position = Vec3::Zero();     // point: object space of `motion`
-  Vec3 direction = Vec3(0, -1, 0);  // directional, sheet: the direction light travels
+  Vec3 direction = Vec3(0, -1, 0);  // directional, sheet: the direction light travels; spot: its axis
+  double inner_cone_deg = 0, outer_cone_deg = 45;  // spot: half-angles from the axis, inner < outer <= 90
   Vec3 sheet_normal = Vec3(1, 0, 0);
   double sheet_thickness_m = 0;
   // Area lights.
@@ -173,6 +177,8 @@ struct Light {
   // stratified over the light (geometry.h, UnitIrradiance).
   int samples = 16;
   bool area() const { return kind == Kind::kQuad || kind == Kind::kDisk; }
+  // At a position, its irradiance falling with the square of the distance.
+  bool positional() const { return kind == Kind::kPoint || kind == Kind::kSpot; }
   Vec3 PositionAt(double t_s) const { return motion.At(t_s) * position; }
   Vec3 DirectionAt(double t_s) const { return (motion.At(t_s).linear() * direction).normalized(); }
 };
@@ -285,5 +291,20 @@ Mesh LoadMesh(const std::filesystem::path& path, const std::string& group, const
 // ".obj", ".gltf" or ".glb", `base_dir` where a glTF's external buffers are.
 Mesh ParseMesh(std::string_view data, const std::string& format, const std::filesystem::path& base_dir,
                const std::string& name, const std::string& group, const std::string& where);
+
+// The lights of a glTF 2.0 file's KHR_lights_punctual extension, placed by
+// their nodes (position: the node's origin; direction: its -z axis): point,
+// spot (cone angles from innerConeAngle and outerConeAngle) and directional,
+// with glTF's intensity (candela, or lux for directional) in `intensity`
+// and E_per_band empty: the scene gives the spectrum and the scale to its
+// irradiance units. `range` is not used (phos's lights fall off with the
+// square of the distance to infinity). Problems are UserErrors naming `where`.
+struct PunctualLight {
+  Light light;
+  Eigen::Vector3d colour = Eigen::Vector3d::Ones();  // linear RGB in [0, 1]
+};
+std::vector<PunctualLight> LoadGltfLights(const std::filesystem::path& path, const std::string& where);
+std::vector<PunctualLight> ParseGltfLights(std::string_view data, bool binary, const std::filesystem::path& base_dir,
+                                           const std::string& name, const std::string& where);
 
 }  // namespace phos::render
