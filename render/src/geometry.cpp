@@ -44,6 +44,10 @@ SceneGeometry::SceneGeometry(const Scene& scene) : scene_(scene), embree_(std::m
   corners_.resize(scene.objects.size());
   front_normal_.resize(scene.objects.size());
   area_.resize(scene.objects.size());
+  area_cdf_.resize(scene.objects.size());
+  emissive_.assign(scene.objects.size(), false);
+  for (const Light& light : scene.lights)
+    if (light.kind == Light::Kind::kMesh) emissive_[light.emitter_object] = true;
   time_s_ = scene.start_s;
   for (std::size_t o = 0; o < scene.objects.size(); ++o) {
     const Mesh& mesh = *scene.objects[o].mesh;
@@ -104,6 +108,26 @@ void SceneGeometry::Upload(int object) {
     front_normal_[object][t] = length > 0 ? Vec3f(n / length) : Vec3f(0, 0, 1);
     area_[object][t] = 0.5f * length;
   }
+  if (emissive_[object]) {
+    std::vector<float>& cdf = area_cdf_[object];
+    cdf.resize(triangles);
+    float sum = 0;
+    for (std::size_t t = 0; t < triangles; ++t) cdf[t] = sum += area_[object][t];
+  }
+}
+
+Vec3f SceneGeometry::SampleEmitter(int object, float u1, float u2, int* triangle) const {
+  const std::vector<float>& cdf = area_cdf_[object];
+  const float target = u1 * cdf.back();
+  const std::size_t t =
+      std::min<std::size_t>(std::upper_bound(cdf.begin(), cdf.end(), target) - cdf.begin(), cdf.size() - 1);
+  // u1 reused within the chosen triangle's share of the sum.
+  const float before = t > 0 ? cdf[t - 1] : 0.0f, share = cdf[t] - before;
+  const float v1 = share > 0 ? std::clamp((target - before) / share, 0.0f, 1.0f) : 0.5f;
+  const float r = std::sqrt(v1), b1 = 1 - r, b2 = u2 * r;  // uniform on the triangle
+  *triangle = static_cast<int>(t);
+  const std::array<Vec3f, 3>& v = corners_[object][t];
+  return v[0] + b1 * (v[1] - v[0]) + b2 * (v[2] - v[0]);
 }
 
 RTCSceneTy* SceneGeometry::embree_scene() const { return embree_->scene; }
@@ -230,6 +254,11 @@ Vec3f SceneGeometry::Point(int object, int triangle, float b1, float b2) const {
 LightPose PoseAt(const Light& light, double t_s) {
   LightPose pose;
   pose.kind = light.kind;
+  if (light.kind == Light::Kind::kMesh) {
+    pose.object = light.emitter_object;
+    pose.samples = light.samples;
+    return pose;
+  }
   if (light.area()) {
     pose.at = light.PositionAt(t_s).cast<float>();
     pose.normal = light.normal.normalized().cast<float>();
@@ -311,12 +340,9 @@ int AreaLightOutline(const LightPose& light, Vec3f* corners) {
   return kDiskSides;
 }
 
-}  // namespace
-
-float AreaLightUnoccluded(const LightPose& light, const Vec3f& p, const Vec3f& n) {
-  if (!(light.normal.dot(p - light.at) > 0)) return 0.0f;  // behind the light, or in its plane
-  Vec3f corners[kDiskSides];
-  const int count = AreaLightOutline(light, corners);
+// Lambert's formula for a convex polygon of `count` <= kDiskSides corners
+// whose front p lies in front of (geometry.h).
+float PolygonIrradiance(const Vec3f* corners, int count, const Vec3f& p, const Vec3f& n) {
   // Clip to p's upper hemisphere, n . x >= 0 (Sutherland and Hodgman): only
   // what lies above the horizon shines on p. A convex polygon and one plane
   // add at most one vertex.
@@ -341,6 +367,28 @@ float AreaLightUnoccluded(const LightPose& light, const Vec3f& p, const Vec3f& n
   return 0.5f * std::abs(sum);
 }
 
+}  // namespace
+
+float AreaLightUnoccluded(const LightPose& light, const Vec3f& p, const Vec3f& n) {
+  if (!(light.normal.dot(p - light.at) > 0)) return 0.0f;  // behind the light, or in its plane
+  Vec3f corners[kDiskSides];
+  const int count = AreaLightOutline(light, corners);
+  return PolygonIrradiance(corners, count, p, n);
+}
+
+float AreaLightUnoccluded(const SceneGeometry& geometry, const LightPose& light, const Vec3f& p, const Vec3f& n) {
+  if (light.kind != Light::Kind::kMesh) return AreaLightUnoccluded(light, p, n);
+  float sum = 0;
+  for (int t = 0; t < geometry.triangle_count(light.object); ++t) {
+    const Vec3f corners[3] = {geometry.Vertex(light.object, t, 0), geometry.Vertex(light.object, t, 1),
+                              geometry.Vertex(light.object, t, 2)};
+    if (!(geometry.FrontNormal(light.object, t).dot(p - corners[0]) > 0) || !(geometry.Area(light.object, t) > 0))
+      continue;  // p is behind this triangle's emitting front
+    sum += PolygonIrradiance(corners, 3, p, n);
+  }
+  return sum;
+}
+
 float HitAreaLight(const LightPose& light, const Vec3f& origin, const Vec3f& direction, float t_far) {
   const float facing = light.normal.dot(direction);
   if (!(facing < 0)) return -1.0f;  // parallel, or arriving at its back
@@ -363,16 +411,35 @@ LightRay RayToLight(const SceneGeometry& geometry, const LightPose& light, const
   LightRay ray;
   ray.origin = p + geometry.ray_epsilon() * n;
   if (light.area()) {
-    const Vec3f d = light.SamplePoint(u1, u2) - p;
+    Vec3f q, normal;
+    float area;
+    if (light.kind == Light::Kind::kMesh) {
+      int triangle;
+      q = geometry.SampleEmitter(light.object, u1, u2, &triangle);
+      normal = geometry.FrontNormal(light.object, triangle);
+      area = geometry.EmitterArea(light.object);
+    } else {
+      q = light.SamplePoint(u1, u2);
+      normal = light.normal;
+      area = light.area_m2;
+    }
+    const Vec3f d = q - p;
     const float distance2 = d.squaredNorm(), distance = std::sqrt(distance2);
     if (!(distance > 0)) return ray;
     const Vec3f w = d / distance;
-    const float cosine = n.dot(w), cos_light = -light.normal.dot(w);
+    const float cosine = n.dot(w), cos_light = -normal.dot(w);
     if (!(cosine > 0 && cos_light > 0)) return ray;
-    ray.direction = w;
-    ray.t_far = distance * (1 - 1e-4f) - geometry.ray_epsilon();
-    ray.unit = cosine * cos_light * light.area_m2 / distance2;
-    ray.area_pdf = distance2 / (cos_light * light.area_m2);
+    // From the ray's origin (off the surface) to the light's point itself,
+    // stopping short of it: the same direction from p, lifted off the
+    // surface, would end inside an emissive mesh's body when it grazes the
+    // face it samples (2% of a ball's light lost so).
+    const Vec3f from_origin = q - ray.origin;
+    const float length = from_origin.norm();
+    if (!(length > 0)) return ray;
+    ray.direction = from_origin / length;
+    ray.t_far = length * (1 - 1e-4f);
+    ray.unit = cosine * cos_light * area / distance2;
+    ray.area_pdf = distance2 / (cos_light * area);
     return ray;
   }
   if (light.positional()) {
@@ -402,7 +469,7 @@ namespace {
 // The ratio estimator of UnitIrradiance for an area light (geometry.h).
 float UnitAreaIrradiance(const SceneGeometry& geometry, const LightPose& light, const Vec3f& p, const Vec3f& n,
                          std::uint64_t* rays) {
-  const float unshadowed = AreaLightUnoccluded(light, p, n);
+  const float unshadowed = AreaLightUnoccluded(geometry, light, p, n);
   if (!(unshadowed > 0)) return 0.0f;
   const int side = std::max(1, static_cast<int>(std::lround(std::sqrt(static_cast<double>(light.samples)))));
   SplitMix64 random(PointSeed(p) * 0x9E3779B97F4A7C15ull + 0xD1B54A32D192ED03ull);

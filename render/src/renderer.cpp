@@ -232,7 +232,11 @@ class Tracer {
       lit.E = Bands(nb_);
       for (int b = 0; b < nb_; ++b) lit.E[b] = static_cast<float>(level * light.E_per_band[b]);
       lights_.push_back(lit);
-      if (lit.pose.area()) area_lights_.push_back(lit);
+      if (lit.pose.bodiless()) area_lights_.push_back(lit);
+      if (light.kind == Light::Kind::kMesh) {
+        if (emitter_of_object_.empty()) emitter_of_object_.assign(scene_.objects.size(), -1);
+        emitter_of_object_[light.emitter_object] = static_cast<int>(lights_.size() - 1);
+      }
     }
   }
 
@@ -314,6 +318,13 @@ class Tracer {
     }
   }
 
+  // The radiance of the emissive object whose front a hit is on, or null.
+  const Bands* EmitterAt(const Hit& hit) const {
+    if (emitter_of_object_.empty() || !hit.front) return nullptr;
+    const int l = emitter_of_object_[hit.object];
+    return l >= 0 ? &lights_[l].E : nullptr;
+  }
+
   // Converted to float bands once per frame, not at every hit.
   const Bands& Albedo(int object) const { return albedo_[object]; }
 
@@ -364,6 +375,7 @@ class Tracer {
                       [](const LightPose&, const Vec3f&, float) { return 1.0f; });
     if (!hit) return sky_level_ > 0 ? Bands(Lm + T * sky_L_ * scene_.environment->Shape(direction.y())) : Lm;
     AddEmission(hit, L);
+    if (const Bands* Le = EmitterAt(hit)) L += *Le;
     // A translucent object under dss: its reflection comes from the dipole
     // splat instead (RenderBands).
     if (options_.transport == Transport::kDss && scene_.objects[hit.object].subsurface) return Lm + T * L;
@@ -509,6 +521,16 @@ class Tracer {
                           const float p_light = t * t / (-pose.normal.dot(direction) * pose.area_m2);
                           return PowerHeuristic(lane.bsdf_pdf, p_light);
                         });
+    // An emissive object's front, likewise.
+    if (const Bands* Le = hit ? EmitterAt(hit) : nullptr) {
+      float weight = 1;
+      if (depth > 0) {
+        const float cos_light = -hit.normal.dot(lane.direction);
+        const float p_light = hit.distance * hit.distance / (cos_light * geometry_.EmitterArea(hit.object));
+        weight = PowerHeuristic(lane.bsdf_pdf, p_light);
+      }
+      lane.L += lane.beta * *Le * weight;
+    }
     if (!hit) {
       // The sky, found by the camera ray or a bounce (cosine sampling; no
       // light sampling for it, so no weight).
@@ -648,7 +670,8 @@ class Tracer {
   int nb_;
   EmitterDistribution emitters_;
   std::vector<LitLight> lights_;
-  std::vector<LitLight> area_lights_;  // those of lights_ that camera rays and bounces can meet
+  std::vector<LitLight> area_lights_;  // the quads and disks of lights_, which rays meet by HitAreaLight
+  std::vector<int> emitter_of_object_;  // per object: its emissive light in lights_, or -1 (empty: none)
   std::vector<Bands> albedo_;  // per object
   const AlbedoTextures* textures_ = nullptr;
   float sky_level_ = 0;        // the sky's level now (0: none)

@@ -292,6 +292,22 @@ Light ReadLight(const JsonField& l, std::size_t index, const SpectralGrid& bands
   return light;
 }
 
+// An object's "emission": {"intensity": radiance, "spectrum", "schedule",
+// "samples"}: the front of each of its triangles is an area light.
+Light ReadEmission(const JsonField& f, const std::string& object_name, std::size_t object, const SpectralGrid& bands) {
+  f.RejectUnknownKeys({"intensity", "spectrum", "schedule", "samples"});
+  Light light;
+  light.kind = Light::Kind::kMesh;
+  light.name = object_name;
+  light.emitter_object = static_cast<int>(object);
+  light.intensity = f["intensity"].NumberInRange(0, kMaxIrradiance);
+  light.E_per_band = ReadSpectrum(f["spectrum"], bands);
+  ScaleSpectrum(f["intensity"], light, std::vector<double>(light.E_per_band.size(), light.intensity));
+  if (auto s = f.Optional("schedule")) light.schedule = ReadSchedule(*s);
+  if (auto s = f.Optional("samples")) light.samples = s->Integer(1, 1024);
+  return light;
+}
+
 // {"type": "gltf", "file": ..., "spectrum": ..., "intensity_scale": s,
 // "schedule": ...}: the KHR_lights_punctual lights of a glTF file, each with
 // the entry's spectrum, times its glTF intensity times s, times its glTF
@@ -590,7 +606,7 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
     const JsonField o = objects.At(i);
     o.RejectUnknownKeys({"name", "mesh", "group", "shape", "albedo", "phosphor", "unknown_ke", "initial",
                          "texel_size_m", "texels", "uv_resolution", "transform", "animation", "subsurface",
-                         "two_sided"});
+                         "two_sided", "emission"});
     Object object;
     object.name = o.Has("name") ? o["name"].NonEmptyString() : "object " + std::to_string(i);
     if (o.Has("mesh") == o.Has("shape")) o.Fail("give exactly one of 'mesh' (a file) or 'shape'");
@@ -655,6 +671,7 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
         f->Fail("the mesh has no UV map (" + object.mesh->source + "); use \"auto\"");
     }
     if (auto f = o.Optional("uv_resolution")) object.uv_resolution = f->Integer(1, 16384);
+    if (auto f = o.Optional("emission")) scene.lights.push_back(ReadEmission(*f, object.name, i, scene.bands));
     scene.objects.push_back(std::move(object));
   }
 

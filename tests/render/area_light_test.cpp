@@ -283,6 +283,94 @@ TEST(AreaLight, TheCameraSeesItsFrontOnlyAndPathAgreesWithDirect) {
   EXPECT_EQ(RenderBands(away, nullptr, FrameOptions{}).at(12, 12)[3], 0.0f);
 }
 
+// A glowing ball (an emissive icosphere of radius R, radiance L) over a
+// grey floor, seen from above: the floor is lit as by a point light of
+// intensity pi R^2 L at its centre (a Lambertian sphere), while the
+// ball's own body blocks the rays to its far side.
+Scene EmissiveBallOverAFloor(int pixels) {
+  Scene scene = EmptyScene(pixels, pixels);
+  scene.camera.keys = {{0, Vec3(0, 0.5, 0.001), Vec3(0, 0, 0)}};
+  scene.camera.fov_deg = 90;
+  scene.objects.push_back(MakeObject("floor", MakeQuad(6, 6), 0.5));
+  Object ball = MakeObject("ball", MakeSphere(0.2, 3, false), 0.0);
+  ball.motion.keys = {{0, Vec3(0.3, 1.0, 0), Eigen::Quaterniond::Identity(), 1.0}};
+  scene.objects.push_back(ball);
+  Light emission;
+  emission.name = "ball";
+  emission.kind = Light::Kind::kMesh;
+  emission.emitter_object = 1;
+  emission.E_per_band.assign(8, 3.0);
+  scene.lights.push_back(emission);
+  return scene;
+}
+
+TEST(AreaLight, AnEmissiveBallLightsTheFloorAsAPointOfIntensityPiR2L) {
+  const Scene scene = EmissiveBallOverAFloor(16);
+  SceneGeometry geometry(scene);
+  const LightPose pose = PoseAt(scene.lights[0], 0);
+  // The icosphere's polyhedron is a little smaller than the sphere: its
+  // irradiance, summed triangle by triangle, within 1% of the sphere's
+  // (0.5% measured).
+  for (double x : {0.3, 0.0, -0.5, 1.0, 2.0}) {
+    const Vec3f p(float(x), 0, 0.1f);
+    const Eigen::Vector3d d = Vec3(0.3, 1.0, 0) - p.cast<double>();
+    const double expected = M_PI * 0.2 * 0.2 * (d.y() / d.norm()) / d.squaredNorm();
+    EXPECT_NEAR(AreaLightUnoccluded(geometry, pose, p, Vec3f(0, 1, 0)), expected, 0.01 * expected) << x;
+    // Nothing but the ball's own body between: the ratio estimator's shadow
+    // rays (lifted off the floor, grazing the ball's silhouette) all arrive.
+    const float unshadowed = AreaLightUnoccluded(geometry, pose, p, Vec3f(0, 1, 0));
+    EXPECT_NEAR(UnitIrradiance(geometry, pose, p, Vec3f(0, 1, 0)), unshadowed, 1e-6 * unshadowed) << x;
+  }
+  // At the ball's centre, behind every face: nothing.
+  EXPECT_EQ(AreaLightUnoccluded(geometry, pose, Vec3f(0.3f, 1.0f, 0), Vec3f(0, 1, 0)), 0.0f);
+}
+
+TEST(AreaLight, AnEmissiveBallIsSeenAndThePathTracerAgreesWithDirect) {
+  const Scene scene = EmissiveBallOverAFloor(32);
+  SceneGeometry geometry(scene);
+  const Image d = RenderBands(geometry, nullptr, FrameOptions{});
+  FrameOptions path;
+  path.transport = Transport::kPath;
+  path.spp = 64;
+  path.max_depth = 2;  // the floor's bounce that finds the ball (nothing else reflects back)
+  const Image pt = RenderBands(geometry, nullptr, path);
+  // Floor pixels: direct's rho E / pi against the path tracer's, in 4 x 4 blocks.
+  for (int by = 0; by < 32; by += 4)
+    for (int bx = 0; bx < 32; bx += 4) {
+      double sd = 0, sp = 0, sp2 = 0;
+      for (int y = by; y < by + 4; ++y)
+        for (int x = bx; x < bx + 4; ++x) {
+          sd += d.at(x, y)[3];
+          sp += pt.at(x, y)[3];
+          sp2 += double(pt.at(x, y)[3]) * pt.at(x, y)[3];
+        }
+      sd /= 16;
+      sp /= 16;
+      const double se = std::sqrt(std::max(0.0, sp2 / 16 - sp * sp) / 16);
+      EXPECT_NEAR(sp, sd, 4 * se + 0.02 * sd + 1e-6) << "block " << bx << "," << by;
+    }
+}
+
+TEST(AreaLight, AnEmissiveObjectShowsItsRadianceOnItsFrontOnly) {
+  Scene scene = EmptyScene(16, 16);
+  scene.camera.keys = {{0, Vec3(0, 0, 0), Vec3(0, 1, 0.001)}};
+  Object panel = MakeObject("panel", MakeQuad(4, 4), 0.0);  // normal +y: its front faces away from the camera
+  panel.motion.keys = {{0, Vec3(0, 1, 0), Eigen::Quaterniond::Identity(), 1.0}};
+  scene.objects.push_back(panel);
+  Light emission;
+  emission.kind = Light::Kind::kMesh;
+  emission.emitter_object = 0;
+  emission.E_per_band.assign(8, 2.0);
+  scene.lights.push_back(emission);
+  {
+    SceneGeometry geometry(scene);
+    EXPECT_EQ(RenderBands(geometry, nullptr, FrameOptions{}).at(8, 8)[3], 0.0f);
+  }
+  scene.objects[0].motion.keys[0].rotate = Eigen::AngleAxisd(M_PI, Vec3::UnitX());  // now facing the camera
+  SceneGeometry geometry(scene);
+  EXPECT_FLOAT_EQ(RenderBands(geometry, nullptr, FrameOptions{}).at(8, 8)[3], 2.0f);
+}
+
 TEST(AreaLight, ScenesDeclareThemWithUnitsAndBadOnesAreOneLine) {
   // The Cornell fixture, its lights replaced.
   auto scene_with = [](nlohmann::json light) {
@@ -333,6 +421,23 @@ TEST(AreaLight, ScenesDeclareThemWithUnitsAndBadOnesAreOneLine) {
   EXPECT_NE(message(samples_on_point).find("samples"), std::string::npos) << message(samples_on_point);
   for (const std::string& m : {message(parallel), message(one_size), message(radius_on_quad)})
     EXPECT_EQ(m.find('\n'), std::string::npos) << m;
+  // An object's emission is a light of its own, named after it.
+  nlohmann::json emissive = ReadJsonFile(phos::testing::Fixture("scenes/cornell-phosphor.json"));
+  emissive["objects"][0]["emission"] = {{"intensity", 5}, {"spectrum", {{"type", "white_led"}}}, {"samples", 9}};
+  const Scene with_emission = SceneFromJson(emissive, phos::testing::Fixture("scenes"), "cornell-phosphor.json");
+  const Light& glow = with_emission.lights[0];
+  EXPECT_EQ(glow.kind, Light::Kind::kMesh);
+  EXPECT_EQ(glow.emitter_object, 0);
+  EXPECT_EQ(glow.name, with_emission.objects[0].name);
+  EXPECT_EQ(glow.samples, 9);
+  emissive["objects"][0]["emission"]["radiance"] = 1;
+  std::string unknown = "accepted";
+  try {
+    SceneFromJson(emissive, phos::testing::Fixture("scenes"), "cornell-phosphor.json");
+  } catch (const UserError& e) {
+    unknown = e.what();
+  }
+  EXPECT_NE(unknown.find("radiance"), std::string::npos) << unknown;
   // Media are lit by the other kinds only, and say so.
   nlohmann::json media = ReadJsonFile(phos::testing::Fixture("scenes/dust-sheets.json"));
   media["lights"][0] = base;

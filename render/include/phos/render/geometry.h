@@ -107,6 +107,10 @@ class SceneGeometry {
   // Upload, since every ray hit asks for them.
   const Vec3f& FrontNormal(int object, int triangle) const { return front_normal_[object][triangle]; }
   float Area(int object, int triangle) const { return area_[object][triangle]; }
+  // An emissive object's (Light::Kind::kMesh): its area and a point on it,
+  // uniform in area, at (u1, u2) in [0, 1)^2, with the triangle it lies on.
+  float EmitterArea(int object) const { return area_cdf_[object].empty() ? 0.0f : area_cdf_[object].back(); }
+  Vec3f SampleEmitter(int object, float u1, float u2, int* triangle) const;
   // A distance to step off a surface before casting a ray from it.
   float ray_epsilon() const { return ray_epsilon_; }
   float diagonal_m() const { return diagonal_; }
@@ -132,6 +136,8 @@ class SceneGeometry {
   std::vector<std::vector<std::array<Vec3f, 3>>> corners_;
   std::vector<std::vector<Vec3f>> front_normal_;  // per object, per triangle
   std::vector<std::vector<float>> area_;          // per object, per triangle, m^2
+  std::vector<std::vector<float>> area_cdf_;      // emissive objects: running sums of area_; others empty
+  std::vector<bool> emissive_;                    // per object: some Light::Kind::kMesh light is it
   RayRecorder* recorder_ = nullptr;
   std::unique_ptr<AlbedoTextures> albedo_textures_;
   double time_s_ = 0;
@@ -158,7 +164,10 @@ struct LightPose {
   Vec3f normal = Vec3f::Zero(), u = Vec3f::Zero(), v = Vec3f::Zero();
   float area_m2 = 0;
   int samples = 1;
-  bool area() const { return kind == Light::Kind::kQuad || kind == Light::Kind::kDisk; }
+  int object = -1;  // kMesh: the emissive object
+  bool area() const { return kind == Light::Kind::kQuad || kind == Light::Kind::kDisk || kind == Light::Kind::kMesh; }
+  // A quad or disk: a light without a body, found by HitAreaLight, not by Embree.
+  bool bodiless() const { return kind == Light::Kind::kQuad || kind == Light::Kind::kDisk; }
   bool positional() const { return kind == Light::Kind::kPoint || kind == Light::Kind::kSpot; }
   // Spot: the axis and the cone (KHR_lights_punctual's falloff: the square of
   // the cosine to the axis mapped linearly from cos_outer (0) to cos_inner (1)).
@@ -172,7 +181,7 @@ struct LightPose {
     const float a = std::clamp((spot_axis.dot(w) - cos_outer) * scale, 0.0f, 1.0f);
     return a * a;
   }
-  // The point of the light at (u1, u2) in [0, 1)^2, uniform in area
+  // The point of a quad or disk at (u1, u2) in [0, 1)^2, uniform in area
   // (a disk by Shirley and Chiu's concentric map).
   Vec3f SamplePoint(float u1, float u2) const;
   float SheetMask(const Vec3f& p) const {
@@ -191,7 +200,7 @@ struct LightPose {
   bool operator==(const LightPose& o) const {
     return kind == o.kind && at == o.at && sheet_normal == o.sheet_normal && sheet_offset == o.sheet_offset &&
            sheet_half_m == o.sheet_half_m && normal == o.normal && u == o.u && v == o.v && samples == o.samples &&
-           spot_axis == o.spot_axis && cos_inner == o.cos_inner && cos_outer == o.cos_outer;
+           spot_axis == o.spot_axis && cos_inner == o.cos_inner && cos_outer == o.cos_outer && object == o.object;
   }
 };
 LightPose PoseAt(const Light& light, double t_s);
@@ -232,6 +241,9 @@ float UnitIrradiance(const SceneGeometry& geometry, const LightPose& light, cons
 // light clipped to p's upper hemisphere, theta_i the angle an edge subtends
 // and g_i the unit normal of the plane through p and that edge. A disk is a
 // regular 48-gon of the disk's area. 0 where p lies behind the light.
+// An emissive mesh is the sum over its triangles whose front p is in front of.
+float AreaLightUnoccluded(const SceneGeometry& geometry, const LightPose& light, const Vec3f& p, const Vec3f& n);
+// A quad's or disk's (no geometry needed).
 float AreaLightUnoccluded(const LightPose& light, const Vec3f& p, const Vec3f& n);
 // Where a ray from origin along unit `direction` crosses an area light's
 // emitting side before t_far: its distance, or a negative number.

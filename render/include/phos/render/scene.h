@@ -155,7 +155,10 @@ struct Light {
   // kSpot: a point light shining along `direction` within a cone, its
   // intensity falling off between inner_cone_deg and outer_cone_deg as
   // glTF's KHR_lights_punctual spot does.
-  enum class Kind { kPoint, kDirectional, kSheet, kQuad, kDisk, kSpot } kind = Kind::kPoint;
+  // kMesh: an emissive object (Object::emission): the front of every
+  // triangle of object `emitter_object` emits radiance E_per_band. Unlike a
+  // quad or disk it has a body: the object shadows and is hit as any other.
+  enum class Kind { kPoint, kDirectional, kSheet, kQuad, kDisk, kSpot, kMesh } kind = Kind::kPoint;
   std::string name;
   // Band integrals of spectrum * intensity: a point or spot light's intensity
   // (irradiance * m^2), a directional or sheet light's irradiance, an area
@@ -176,7 +179,8 @@ struct Light {
   // Shadow rays per shaded point (texel or pixel) for its soft shadow,
   // stratified over the light (geometry.h, UnitIrradiance).
   int samples = 16;
-  bool area() const { return kind == Kind::kQuad || kind == Kind::kDisk; }
+  int emitter_object = -1;  // kMesh: index into Scene::objects
+  bool area() const { return kind == Kind::kQuad || kind == Kind::kDisk || kind == Kind::kMesh; }
   // At a position, its irradiance falling with the square of the distance.
   bool positional() const { return kind == Kind::kPoint || kind == Kind::kSpot; }
   Vec3 PositionAt(double t_s) const { return motion.At(t_s) * position; }
