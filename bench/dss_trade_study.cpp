@@ -135,7 +135,8 @@ std::vector<float> MediumGlow(const Scene& scene, const SceneGeometry& geometry,
     const int slot = solver.atlas().SlotOf(hit.object);
     if (slot < 0) return;
     const std::size_t texel = solver.atlas().TexelOf(slot, hit.triangle, hit.b1, hit.b2);
-    for (int b : solver.emission_bands(slot)) L[b] = solver.Lp(slot, b, texel);
+    if (texel == TexelAtlas::kNoTexel) return;
+    for (int b : solver.emission_bands(slot)) L[b] = solver.atlas().Coverage(slot, texel) * solver.Lp(slot, b, texel);
   };
   if (directions == 0) {
     const std::vector<Surfel> all = Surfelize(geometry, camera.origin(), static_cast<float>(scene.camera.fov_deg), {});

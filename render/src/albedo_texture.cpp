@@ -1,10 +1,43 @@
 #include "phos/render/albedo_texture.h"
 
+#include <algorithm>
+
 #include <OpenImageIO/texture.h>
 
 #include "phos/util/error.h"
 
 namespace phos::render {
+
+std::vector<float> SampleMaskGrid(const std::filesystem::path& file, bool v_up, int resolution,
+                                  const std::string& where) {
+  // The process's shared TextureSystem, as AlbedoTextures (see there).
+  OIIO::TextureSystem* system = OIIO::TextureSystem::create(/*shared=*/true);
+  const OIIO::ustring name(file.string());
+  system->invalidate(name);
+  OIIO::TextureSystem::TextureHandle* handle = system->get_texture_handle(name);
+  OIIO::ImageSpec spec;
+  if (!handle || !system->get_imagespec(handle, nullptr, 0, spec)) {
+    const std::string error = system->geterror();
+    ThrowUserError(where, "phosphor_mask",
+                   "mask file '" + file.string() + "' is not an image OpenImageIO can read" +
+                       (error.empty() ? "" : ": " + error));
+  }
+  OIIO::TextureOpt options;
+  options.swrap = options.twrap = OIIO::TextureOpt::WrapClamp;
+  options.interpmode = OIIO::TextureOpt::InterpClosest;
+  options.mipmode = OIIO::TextureOpt::MipModeNoMIP;
+  std::vector<float> coverage(std::size_t(resolution) * resolution);
+  OIIO::TextureSystem::Perthread* thread = system->get_perthread_info();
+  for (int y = 0; y < resolution; ++y)
+    for (int x = 0; x < resolution; ++x) {
+      const float s = (static_cast<float>(x) + 0.5f) / static_cast<float>(resolution);
+      const float v = (static_cast<float>(y) + 0.5f) / static_cast<float>(resolution);
+      float value = 0;
+      system->texture(handle, thread, options, s, v_up ? 1 - v : v, 0, 0, 0, 0, 1, &value);
+      coverage[std::size_t(y) * resolution + x] = std::clamp(value, 0.0f, 1.0f);
+    }
+  return coverage;
+}
 
 AlbedoTextures::AlbedoTextures(const Scene& scene)
     : scene_(scene), to_bands_(scene.bands), handles_(scene.objects.size(), nullptr), srgb_(scene.objects.size(), 0) {

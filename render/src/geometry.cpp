@@ -655,13 +655,27 @@ void TexelAtlas::BuildUv(ObjectTexels& texels, const Object& object, const Scene
         anchor[cell] = {static_cast<std::uint32_t>(t), l1 / sum, l2 / sum};
       }
   }
+  // Model only what the scene requires: a mask's bare cells get no state.
+  std::vector<float> mask;
+  if (object.phosphor_mask)
+    mask = SampleMaskGrid(*object.phosphor_mask, mesh.v_up, R,
+                          geometry.scene().source + ": objects[" + std::to_string(o) + "] '" + object.name + "'");
   texels.uv_index.assign(std::size_t(R) * R, -1);
   for (std::size_t cell = 0; cell < best.size(); ++cell) {
     if (best[cell] == -1e30f) continue;
+    if (!mask.empty() && !(mask[cell] > 0)) {
+      texels.uv_index[cell] = kMaskedOut;
+      ++texels.masked_out;
+      continue;
+    }
     texels.uv_index[cell] = static_cast<std::int32_t>(texels.anchors.size());
     texels.anchors.push_back(anchor[cell]);
+    if (!mask.empty()) texels.coverage.push_back(mask[cell]);
   }
   texels.count = texels.anchors.size();
+  if (object.phosphor_mask && texels.count == 0)
+    ThrowUserError(geometry.scene().source, "objects[" + std::to_string(o) + "].phosphor_mask",
+                   "the mask '" + object.phosphor_mask->string() + "' is 0 wherever the mesh's UV map lies");
 }
 
 std::size_t TexelAtlas::UvTexelOf(const ObjectTexels& o, int triangle, float b1, float b2) {
@@ -671,6 +685,7 @@ std::size_t TexelAtlas::UvTexelOf(const ObjectTexels& o, int triangle, float b1,
   const int x = std::clamp(static_cast<int>(uv.x()), 0, R - 1), y = std::clamp(static_cast<int>(uv.y()), 0, R - 1);
   const std::int32_t texel = o.uv_index[std::size_t(y) * R + x];
   if (texel >= 0) return static_cast<std::size_t>(texel);
+  if (texel == kMaskedOut) return kNoTexel;
   // Rounding at a chart's border: the nearest stored neighbour.
   for (int dy = -1; dy <= 1; ++dy)
     for (int dx = -1; dx <= 1; ++dx) {
@@ -678,7 +693,7 @@ std::size_t TexelAtlas::UvTexelOf(const ObjectTexels& o, int triangle, float b1,
       if (o.uv_index[std::size_t(yy) * R + xx] >= 0)
         return static_cast<std::size_t>(o.uv_index[std::size_t(yy) * R + xx]);
     }
-  return 0;
+  return o.masked() ? kNoTexel : 0;
 }
 
 std::size_t TexelAtlas::total_texels() const {

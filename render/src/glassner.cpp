@@ -60,7 +60,8 @@ Image EmittedRadianceOurs(const SceneGeometry& geometry, const CoupledSolver& so
   return ForEachPixel(geometry, [&](const Hit& hit, float* out, std::uint64_t) {
     const int slot = solver.atlas().SlotOf(hit.object);
     const std::size_t texel = solver.atlas().TexelOf(slot, hit.triangle, hit.b1, hit.b2);
-    for (int b = 0; b < nb; ++b) out[b] = solver.Lp(slot, b, texel);
+    if (texel == TexelAtlas::kNoTexel) return;
+    for (int b = 0; b < nb; ++b) out[b] = solver.atlas().Coverage(slot, texel) * solver.Lp(slot, b, texel);
   });
 }
 

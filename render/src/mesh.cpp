@@ -143,6 +143,7 @@ Mesh ParseObj(std::string_view text, const std::filesystem::path& base_dir, cons
     ThrowUserError(where, "", "cannot read OBJ '" + name + "': " + OneLine(reader.Error()));
   Mesh mesh;
   mesh.source = name + (group.empty() ? "" : "#" + group);
+  mesh.v_up = true;
   const std::vector<tinyobj::real_t>& v = reader.GetAttrib().vertices;
   CheckCounts(v.size() / 3, 0, where, name);
   for (std::size_t i = 0; i + 2 < v.size(); i += 3) mesh.positions.emplace_back(v[i], v[i + 1], v[i + 2]);

@@ -251,7 +251,9 @@ class Tracer {
     const int slot = solver_->atlas().SlotOf(hit.object);
     if (slot < 0) return;
     const std::size_t texel = solver_->atlas().TexelOf(slot, hit.triangle, hit.b1, hit.b2);
-    for (int b : solver_->emission_bands(slot)) L[b] += solver_->Lp(slot, b, texel);
+    if (texel == TexelAtlas::kNoTexel) return;  // bare of its mask's paint
+    const float coverage = solver_->atlas().Coverage(slot, texel);
+    for (int b : solver_->emission_bands(slot)) L[b] += coverage * solver_->Lp(slot, b, texel);
   }
 
   // The texel-major glow of a hit on a phosphor's glowing side (path
@@ -269,7 +271,7 @@ class Tracer {
   }
   GlowTexel GlowAt(int slot, std::size_t texel) const {
     const GlowByTexel& glow = glow_by_texel_[slot];
-    if (glow.bands.empty()) return {};
+    if (glow.bands.empty() || texel == TexelAtlas::kNoTexel) return {};
     const float* Lp = &glow.Lp[texel * glow.bands.size()];
     __builtin_prefetch(Lp);
     return {&glow.bands, Lp};
@@ -658,7 +660,8 @@ class Tracer {
       const std::size_t n = atlas.objects()[s].count, nb = glow.bands.size();
       glow.Lp.resize(n * nb);
       for (std::size_t i = 0; i < nb; ++i)
-        for (std::size_t k = 0; k < n; ++k) glow.Lp[k * nb + i] = solver_->Lp(slot, glow.bands[i], k);
+        for (std::size_t k = 0; k < n; ++k)  // a masked texel glows by the share its paint covers
+          glow.Lp[k * nb + i] = atlas.Coverage(slot, k) * solver_->Lp(slot, glow.bands[i], k);
     }
   }
   std::vector<GlowByTexel> glow_by_texel_;  // per slot; path transport only

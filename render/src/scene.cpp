@@ -606,7 +606,7 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
     const JsonField o = objects.At(i);
     o.RejectUnknownKeys({"name", "mesh", "group", "shape", "albedo", "phosphor", "unknown_ke", "initial",
                          "texel_size_m", "texels", "uv_resolution", "transform", "animation", "subsurface",
-                         "two_sided", "emission"});
+                         "two_sided", "emission", "phosphor_mask"});
     Object object;
     object.name = o.Has("name") ? o["name"].NonEmptyString() : "object " + std::to_string(i);
     if (o.Has("mesh") == o.Has("shape")) o.Fail("give exactly one of 'mesh' (a file) or 'shape'");
@@ -671,6 +671,18 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
         f->Fail("the mesh has no UV map (" + object.mesh->source + "); use \"auto\"");
     }
     if (auto f = o.Optional("uv_resolution")) object.uv_resolution = f->Integer(1, 16384);
+    if (auto f = o.Optional("phosphor_mask")) {
+      if (!object.phosphor) f->Fail("only a phosphor has a mask (give 'phosphor')");
+      if (!object.mesh->has_uvs())
+        f->Fail("the mask lies on the mesh's UV map, and the mesh (" + object.mesh->source + ") has none");
+      if (object.texels == "auto") f->Fail("a masked phosphor's texels are its UV map's: use \"texels\": \"uv\"");
+      const std::filesystem::path file = base_dir / f->NonEmptyString();
+      std::error_code ec;
+      if (!std::filesystem::is_regular_file(file, ec))
+        f->Fail("mask file '" + file.string() + "' does not exist or is not a regular file");
+      object.phosphor_mask = file;
+      object.texels = "uv";
+    }
     if (auto f = o.Optional("emission")) scene.lights.push_back(ReadEmission(*f, object.name, i, scene.bands));
     scene.objects.push_back(std::move(object));
   }

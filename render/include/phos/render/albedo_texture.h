@@ -49,4 +49,14 @@ class AlbedoTextures {
   std::vector<char> srgb_;          // per object: its texels are sRGB-encoded
 };
 
+// A phosphor mask (Object::phosphor_mask) at the centres of a resolution x
+// resolution grid over UV space, [y * resolution + x] with row y at v in
+// [y, y + 1) / resolution: its first channel, as stored (not sRGB-decoded),
+// by OpenImageIO's TextureSystem at the nearest texel of the finest level
+// (the atlas's texels are the lookups' footprint). v_up: the mesh's v = 0
+// is the image's bottom row (OBJ). A file that is not an image is a
+// UserError naming `where`.
+std::vector<float> SampleMaskGrid(const std::filesystem::path& file, bool v_up, int resolution,
+                                  const std::string& where);
+
 }  // namespace phos::render

@@ -300,14 +300,27 @@ class TexelAtlas {
     std::vector<TexelAnchor> anchors;         // per texel
     std::vector<Eigen::Vector2f> uv_corners;  // [3 * triangle + corner], in texels
     const Mesh* mesh = nullptr;
+    // A masked phosphor (Object::phosphor_mask): per texel, the share the
+    // phosphor covers, in (0, 1]; the texels the mask leaves bare have no
+    // index (uv_index kMaskedOut) and are counted here. Empty: unmasked.
+    std::vector<float> coverage;
+    std::size_t masked_out = 0;
     bool uv() const { return uv_resolution > 0; }
+    bool masked() const { return !coverage.empty(); }
   };
+  // What TexelOf gives where a mask leaves the surface bare: no texel, no glow.
+  static constexpr std::size_t kNoTexel = ~std::size_t{0};
+  // The share of texel k of slot s the phosphor covers (1 when unmasked).
+  float Coverage(int slot, std::size_t texel) const {
+    const ObjectTexels& o = objects_[slot];
+    return o.coverage.empty() ? 1.0f : o.coverage[texel];
+  }
   // Index into objects() of a phosphorescent object, or -1.
   int SlotOf(int object) const { return slot_[object]; }
   const std::vector<ObjectTexels>& objects() const { return objects_; }
   std::size_t total_texels() const;
 
-  // Texel of a hit on object slot s.
+  // Texel of a hit on object slot s; kNoTexel where its mask leaves it bare.
   std::size_t TexelOf(int slot, int triangle, float b1, float b2) const {
     const ObjectTexels& o = objects_[slot];
     if (!o.uv()) return o.first[triangle] + static_cast<std::size_t>(SubTriangleIndex(o.m[triangle], b1, b2));
@@ -347,6 +360,7 @@ class TexelAtlas {
 
  private:
   static constexpr std::size_t kUvChunk = 4096;
+  static constexpr std::int32_t kMaskedOut = -2;  // uv_index of a cell the mask leaves bare (-1: no triangle)
   static std::size_t UvTexelOf(const ObjectTexels& o, int triangle, float b1, float b2);
   void BuildUv(ObjectTexels& texels, const Object& object, const SceneGeometry& geometry, double texel_size_m);
   std::vector<int> slot_;

@@ -68,6 +68,7 @@ struct Mesh {
   // whose triangles have different ones keeps none and says so.
   std::optional<BaseColour> base_colour;
   std::string base_colours_differ;  // non-empty: why no single base colour was kept
+  bool v_up = false;  // OBJ: v = 0 is an image's bottom row; glTF and built-in shapes: its top row
   bool has_uvs() const { return !uv_triangles.empty() && uv_triangles.size() == triangles.size(); }
 };
 
@@ -112,6 +113,11 @@ struct Object {
   // then holds the factor alone. Unset: the albedo is `albedo` everywhere.
   std::optional<BaseColour> albedo_texture;
   std::shared_ptr<const Material> phosphor;  // null: not phosphorescent (carries no state)
+  // Glow paint on a base (a watch's hands, a sign's letters): the first
+  // channel of this image over the mesh's UV map, in [0, 1], is the share
+  // of each texel the phosphor covers. Texels where it is 0 carry no state
+  // and glow not at all; the others glow by their share. Unset: everywhere.
+  std::optional<std::filesystem::path> phosphor_mask;
   std::string phosphor_path;
   bool unknown_ke_as_zero = false;  // the scene's explicit assumption, never phos's guess
   InitialState initial;
