@@ -86,12 +86,20 @@ rm -rf "$OUT/translucent-shadow"
 rm -rf "$OUT/dusk-sign"
 "$PHOS" render fixtures/scenes/dusk-sign.json --out "$OUT/dusk-sign" --times 30,45,55,62,90 --transport dss \
   --contact-sheet "$OUT/dusk-sign.png" $VIEWS
+# An EXIT sign whose letters only are glow paint (a mask over a textured
+# board, from a glTF file with its own spot light), under a ceiling panel
+# (an area light) until 20 s; fixtures/scenes/glow-sign.json is made by
+# scripts/make_sign_fixture.py.
+rm -rf "$OUT/glow-sign"
+"$PHOS" render fixtures/scenes/glow-sign.json --out "$OUT/glow-sign" --times 10,21,25,35,50 \
+  --contact-sheet "$OUT/glow-sign.png" $VIEWS
 
 # The gallery: every fixture scene on one page, with its description, its
 # contact sheet and its night-vision frames.
 python3 scripts/gallery.py "$OUT" still-life:still-life:direct cornell:cornell-phosphor:path \
   cornell-dss:cornell-phosphor:dss light-trail:light-trail:direct dust-sheets:dust-sheets:direct \
-  glowing-liquid:glowing-liquid:direct translucent-shadow:translucent-shadow:dss dusk-sign:dusk-sign:dss
+  glowing-liquid:glowing-liquid:direct translucent-shadow:translucent-shadow:dss dusk-sign:dusk-sign:dss \
+  glow-sign:glow-sign:direct
 
 echo "phos demo: simulated 11 Table 8.1 presets (60 s charge, 300 s dark, exact integrator)"
 echo "  curves (CSV: t,r_1,L_1..L_8):  $OUT/<material>.csv"
@@ -100,5 +108,5 @@ echo "  a captured sample (4 protocols): $OUT/capture-orange/{lvf-calibration,sp
 echo "    what it captured: $OUT/capture-orange/decay-frames.png (contact sheet), decay-curve.svg, excitation-curves.svg"
 echo "  the material fitted from it:  $OUT/fitted/orange.json, report $OUT/fitted/orange-report.html"
 echo "  rendered scenes (contact sheets): $OUT/still-life.png, $OUT/cornell.png, $OUT/cornell-dss.png, $OUT/light-trail.png,"
-echo "    $OUT/dust-sheets.png, $OUT/glowing-liquid.png, $OUT/translucent-shadow.png, $OUT/dusk-sign.png; all on one page: $OUT/gallery.html"
+echo "    $OUT/dust-sheets.png, $OUT/glowing-liquid.png, $OUT/translucent-shadow.png, $OUT/dusk-sign.png, $OUT/glow-sign.png; all on one page: $OUT/gallery.html"
 echo "    frames (EXR data, PNG, night-vision PNG): $OUT/still-life/, $OUT/cornell/, $OUT/light-trail/, ..."
