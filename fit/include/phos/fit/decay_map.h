@@ -11,9 +11,11 @@
 // least-squares problem per channel (A_c clamped at 0), solved in closed
 // form from weighted sums. The sums that depend on k are, for a block of
 // pixels, products of the block's weights with the grid's basis (one matrix
-// product for every grid rate); the best grid rate is refined by the vertex
-// of a parabola through it and its neighbours, then exact Newton steps on
-// log k (analytic derivatives of the basis and of the projected cost). A
+// product for every grid rate); the best grid rate is refined by the minimum
+// of a cubic through it and three neighbours (or the vertex of a parabola
+// through two), then exact Newton steps on log k (analytic derivatives of
+// the basis and of the projected cost; the exponentials in FMAs, one per
+// frame plus one per distinct exposure). A
 // frame integrates the glow over its exposure e, so the basis is
 // exp(-k t) sinh(k e / 2) / (k e / 2) at the exposure's middle, exact for
 // any exposure. Rows run in parallel (TBB).
