@@ -353,6 +353,23 @@ std::optional<BaseColour> GltfBaseColour(const tinygltf::Model& model, int index
   return colour;
 }
 
+// A glTF material's metallic-roughness factors as a Gloss, when they make it
+// glossy (metallic > 0 or roughness < 1); a rough dielectric (metallic 0,
+// roughness 1, which glTF's spec draws nearly as a Lambertian surface) stays
+// Lambertian. The metallicRoughnessTexture is not read.
+std::optional<Gloss> GltfGloss(const tinygltf::Model& model, int index, const std::string& where) {
+  if (index < 0 || index >= static_cast<int>(model.materials.size())) return std::nullopt;
+  const tinygltf::PbrMetallicRoughness& pbr = model.materials[index].pbrMetallicRoughness;
+  const std::string field = "materials[" + std::to_string(index) + "].pbrMetallicRoughness";
+  if (!(pbr.metallicFactor >= 0 && pbr.metallicFactor <= 1))
+    ThrowUserError(where, field + ".metallicFactor", "expected a value in [0, 1]");
+  if (!(pbr.roughnessFactor >= 0 && pbr.roughnessFactor <= 1))
+    ThrowUserError(where, field + ".roughnessFactor", "expected a value in [0, 1]");
+  if (pbr.metallicFactor == 0 && pbr.roughnessFactor == 1) return std::nullopt;
+  return Gloss{static_cast<float>(pbr.metallicFactor),
+               std::max(kMinRoughness, static_cast<float>(pbr.roughnessFactor))};
+}
+
 // The extensions phos reads: a file that requires any other is refused,
 // since it would be drawn wrong (glTF 2.0 spec, 3.12: a loader must not load
 // an asset whose required extension it does not support).
@@ -431,6 +448,7 @@ Mesh ParseGltf(std::string_view data, bool binary, const std::filesystem::path& 
         if (primitive.mode != TINYGLTF_MODE_TRIANGLES && primitive.mode != -1)
           continue;  // points and lines carry no surface
         MergeBaseColour(mesh, GltfBaseColour(model, primitive.material, base_dir, file_where), first_primitive);
+        if (first_primitive) mesh.gloss = GltfGloss(model, primitive.material, file_where);
         first_primitive = false;
         const auto position = primitive.attributes.find("POSITION");
         if (position == primitive.attributes.end())

@@ -14,6 +14,7 @@
 #include <tbb/parallel_for.h>
 
 #include "phos/render/albedo_texture.h"
+#include "phos/render/bsdf.h"
 #include "phos/render/dss.h"
 #include "phos/render/subsurface.h"
 #include "phos/render/transport_quality.h"
@@ -327,6 +328,47 @@ class Tracer {
     return l >= 0 ? &lights_[l].E : nullptr;
   }
 
+  // An object's gloss, or null for a Lambertian one.
+  const Gloss* GlossAt(int object) const {
+    const auto& gloss = scene_.objects[object].gloss;
+    return gloss ? &*gloss : nullptr;
+  }
+
+  // A glossy surface's reflection in direct transport (docs/render.md,
+  // "Glossy surfaces"): the delta lights (point, spot, directional, sheet)
+  // through the whole BSDF toward each; area lights and the sky by their
+  // irradiance times the directional albedo over pi (a uniform sky's
+  // reflection exactly; an area light's as if it were spread over the sky).
+  Bands GlossyReflection(const Gloss& gloss, const Bands& albedo, const Vec3f& p, const Vec3f& n_s, const Vec3f& wo,
+                         std::uint64_t& rays) const {
+    const GlossyBsdf bsdf(gloss, albedo.data(), nb_);
+    Bands L = Bands::Zero(nb_), f(nb_), rho(nb_), E_diffuse = Bands::Zero(nb_);
+    bool spread = sky_level_ > 0 && options_.transport != Transport::kDss;
+    if (spread)
+      E_diffuse += sky_L_ * UnitSkyIrradiance(geometry_, *scene_.environment, p, n_s, options_.sky_rays, PointSeed(p), &rays);
+    for (const LitLight& light : lights_) {
+      if (light.pose.area()) {
+        const float unit = UnitIrradiance(geometry_, light.pose, p, n_s, &rays);
+        if (unit > 0) E_diffuse += light.E * unit;
+        spread = spread || unit > 0;
+        continue;
+      }
+      const LightRay ray = RayToLight(geometry_, light.pose, p, n_s);
+      if (!(ray.unit > 0)) continue;
+      ++rays;
+      if (geometry_.Occluded(ray.origin, ray.direction, ray.t_far)) continue;
+      float unit = ray.unit;
+      if (media_) unit *= Transmittance(light.pose, p);
+      bsdf.Eval(n_s, wo, ray.direction, f.data());
+      L += f * light.E * unit;
+    }
+    if (spread) {
+      bsdf.DirectionalAlbedo(n_s.dot(wo), rho.data());
+      L += rho * E_diffuse / kPiF;
+    }
+    return L;
+  }
+
   // Converted to float bands once per frame, not at every hit.
   const Bands& Albedo(int object) const { return albedo_[object]; }
 
@@ -382,10 +424,15 @@ class Tracer {
     // splat instead (RenderBands).
     if (options_.transport == Transport::kDss && scene_.objects[hit.object].subsurface) return Lm + T * L;
     Bands E;
-    DirectIrradiance(hit.position, hit.front ? hit.normal : Vec3f(-hit.normal), E, rays,
-                     options_.transport != Transport::kDss);
+    const Vec3f n_s = hit.front ? hit.normal : Vec3f(-hit.normal);
     Bands texture_albedo;
-    L += AlbedoAt(hit, origin, differential, texture_albedo) * E / kPiF;  // Lambertian reflection (Eq. 8.2's reflected term)
+    const Bands& albedo = AlbedoAt(hit, origin, differential, texture_albedo);
+    if (const Gloss* gloss = GlossAt(hit.object)) {
+      L += GlossyReflection(*gloss, albedo, hit.position, n_s, -direction, rays);
+      return Lm + T * L;
+    }
+    DirectIrradiance(hit.position, n_s, E, rays, options_.transport != Transport::kDss);
+    L += albedo * E / kPiF;  // Lambertian reflection (Eq. 8.2's reflected term)
     return Lm + T * L;
   }
 
@@ -403,6 +450,8 @@ class Tracer {
     Hit hit;
     Vec3f n_s, origin_s, wi;
     float emitter_distance = 0, emitter_scale = 0;
+    const Gloss* gloss = nullptr;  // a glossy hit's; null: Lambertian
+    Bands glow_f_cos;              // glossy: f cos toward the glowing point (emitter_scale then w / p_light)
     GlowTexel glow_there;
     GlowTexel glow_here;
     bool scatters = false;
@@ -468,7 +517,7 @@ class Tracer {
       for (std::size_t k = 0; k < shadowed.size(); ++k) {
         if (blocked[k]) continue;
         PathLane& lane = lanes[shadowed[k]];
-        const Bands& albedo = *lane.albedo;
+        const Bands& albedo = lane.gloss ? lane.glow_f_cos : *lane.albedo;  // glossy: f cos, else albedo (pi folded in)
         for (std::size_t c = 0; c < lane.glow_there.bands->size(); ++c) {
           const int b = (*lane.glow_there.bands)[c];
           lane.L[b] += lane.beta[b] * albedo[b] * lane.glow_there.Lp[c] * lane.emitter_scale;
@@ -482,7 +531,13 @@ class Tracer {
         const LitLight& light = lights_[shadow.light];
         float unit = shadow.ray.unit;
         if (media_) unit *= Transmittance(light.pose, lane.hit.position);
-        lane.L += lane.beta * *lane.albedo * light.E * (unit * kInvPiF);
+        if (lane.gloss) {
+          Bands f(nb_);
+          GlossyBsdf(*lane.gloss, lane.albedo->data(), nb_).Eval(lane.n_s, -lane.direction, shadow.ray.direction, f.data());
+          lane.L += lane.beta * f * light.E * unit;
+        } else {
+          lane.L += lane.beta * *lane.albedo * light.E * (unit * kInvPiF);
+        }
       }
       live.clear();
       for (int i : scattering)
@@ -543,7 +598,8 @@ class Tracer {
     // Textures are filtered over the camera ray's footprint; bounces look up
     // a point (zero derivatives: their footprint is the BSDF's, not a pixel's).
     lane.albedo = &AlbedoAt(hit, lane.origin, depth == 0 ? lane.differential : RayDifferential{}, lane.texture_albedo);
-    lane.scatters = lane.albedo->maxCoeff() > 0;
+    lane.gloss = GlossAt(hit.object);
+    lane.scatters = lane.gloss || lane.albedo->maxCoeff() > 0;  // a glossy coat reflects on black too
     lane.emitter = nullptr;
     if (lane.scatters && !emitters_.empty()) {
       lane.emitter = &emitters_.Pick(random.Next());
@@ -583,8 +639,18 @@ class Tracer {
         // (a: the area pdf) and p_bsdf = cos_s / pi, the weight over
         // p_light is a d^2 cos_l / ((a d^2)^2 + p_bsdf^2 cos_l^2): one division.
         const float area_term = entry.area_pdf * distance2;
-        const float p_bsdf = cos_s * kInvPiF;
-        lane.emitter_scale = p_bsdf * area_term * cos_l / (area_term * area_term + p_bsdf * p_bsdf * cos_l * cos_l);
+        if (lane.gloss) {  // f cos kept per band; emitter_scale the weight over p_light
+          const GlossyBsdf bsdf(*lane.gloss, lane.albedo->data(), nb_);
+          const Vec3f wo = -lane.direction;
+          const float p_bsdf = bsdf.Pdf(n_s, wo, lane.wi);
+          lane.glow_f_cos.resize(nb_);
+          bsdf.Eval(n_s, wo, lane.wi, lane.glow_f_cos.data());
+          lane.glow_f_cos *= cos_s;
+          lane.emitter_scale = area_term * cos_l / (area_term * area_term + p_bsdf * p_bsdf * cos_l * cos_l);
+        } else {
+          const float p_bsdf = cos_s * kInvPiF;
+          lane.emitter_scale = p_bsdf * area_term * cos_l / (area_term * area_term + p_bsdf * p_bsdf * cos_l * cos_l);
+        }
       }
     }
     // Next-event estimation for the lights, when any is on: their shadow
@@ -597,7 +663,11 @@ class Tracer {
         if (pose.area()) {
           const float u1 = random.UniformFloat();
           ray = RayToLight(geometry_, pose, hit.position, n_s, u1, random.UniformFloat());
-          ray.unit *= PowerHeuristic(ray.area_pdf, n_s.dot(ray.direction) * kInvPiF);
+          const float p_bsdf = !(ray.unit > 0) ? 0.0f
+                               : lane.gloss ? GlossyBsdf(*lane.gloss, lane.albedo->data(), nb_)
+                                                  .Pdf(n_s, -lane.direction, ray.direction)
+                                            : n_s.dot(ray.direction) * kInvPiF;
+          ray.unit *= PowerHeuristic(ray.area_pdf, p_bsdf);
         } else {
           ray = RayToLight(geometry_, pose, hit.position, n_s);
         }
@@ -625,10 +695,26 @@ class Tracer {
   // albedo), then Russian roulette from the fourth bounce. False: it ends.
   bool ContinuePath(PathLane& lane, int depth) const {
     SplitMix64& random = *lane.random;
-    lane.direction = SampleCosine(lane.n_s, random);
-    lane.bsdf_pdf = lane.n_s.dot(lane.direction) * kInvPiF;
-    lane.origin = lane.origin_s;
-    lane.beta *= *lane.albedo;
+    if (lane.gloss) {
+      // The glossy BSDF's own sampling: beta *= f cos / pdf.
+      const GlossyBsdf bsdf(*lane.gloss, lane.albedo->data(), nb_);
+      const Vec3f wo = -lane.direction;
+      const float u0 = random.UniformFloat(), u1 = random.UniformFloat(), u2 = random.UniformFloat();
+      Vec3f wi;
+      float pdf;
+      if (!bsdf.Sample(lane.n_s, wo, u0, u1, u2, &wi, &pdf)) return false;
+      Bands f(nb_);
+      bsdf.Eval(lane.n_s, wo, wi, f.data());
+      lane.beta *= f * (lane.n_s.dot(wi) / pdf);
+      lane.direction = wi;
+      lane.bsdf_pdf = pdf;
+      lane.origin = lane.origin_s;
+    } else {
+      lane.direction = SampleCosine(lane.n_s, random);
+      lane.bsdf_pdf = lane.n_s.dot(lane.direction) * kInvPiF;
+      lane.origin = lane.origin_s;
+      lane.beta *= *lane.albedo;
+    }
     if (depth >= 3) {  // Russian roulette keeps the estimate unbiased
       const float survive = std::min(1.0f, lane.beta.maxCoeff());
       if (random.UniformFloat() >= survive) return false;

@@ -606,7 +606,7 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
     const JsonField o = objects.At(i);
     o.RejectUnknownKeys({"name", "mesh", "group", "shape", "albedo", "phosphor", "unknown_ke", "initial",
                          "texel_size_m", "texels", "uv_resolution", "transform", "animation", "subsurface",
-                         "two_sided", "emission", "phosphor_mask"});
+                         "two_sided", "emission", "phosphor_mask", "metallic", "roughness"});
     Object object;
     object.name = o.Has("name") ? o["name"].NonEmptyString() : "object " + std::to_string(i);
     if (o.Has("mesh") == o.Has("shape")) o.Fail("give exactly one of 'mesh' (a file) or 'shape'");
@@ -671,6 +671,16 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
         f->Fail("the mesh has no UV map (" + object.mesh->source + "); use \"auto\"");
     }
     if (auto f = o.Optional("uv_resolution")) object.uv_resolution = f->Integer(1, 16384);
+    // Gloss: the scene's factors over the mesh's glTF material's.
+    object.gloss = object.mesh->gloss;
+    if (o.Has("metallic") || o.Has("roughness")) {
+      Gloss gloss = object.gloss.value_or(Gloss{});
+      if (auto f = o.Optional("metallic")) gloss.metallic = static_cast<float>(f->NumberInRange(0, 1));
+      if (auto f = o.Optional("roughness")) gloss.roughness = static_cast<float>(f->NumberInRange(kMinRoughness, 1));
+      object.gloss = gloss;
+    }
+    if (object.gloss && object.subsurface)
+      o["subsurface"].Fail("a translucent object is not glossy too (drop 'metallic' and 'roughness')");
     if (auto f = o.Optional("phosphor_mask")) {
       if (!object.phosphor) f->Fail("only a phosphor has a mask (give 'phosphor')");
       if (!object.mesh->has_uvs())

@@ -43,6 +43,14 @@ inline constexpr std::size_t kMaxMeshVertices = std::size_t{1} << 24;   // per m
 inline constexpr std::size_t kMaxMeshTriangles = std::size_t{1} << 24;  // per mesh file
 inline constexpr std::size_t kMaxGltfInstances = std::size_t{1} << 16;  // node visits of a glTF scene graph (65536)
 
+// An object's glossiness (render/bsdf.h): metallic in [0, 1], roughness in
+// [0.02, 1] (glTF's pbrMetallicRoughness factors).
+struct Gloss {
+  float metallic = 0.0f;
+  float roughness = 1.0f;
+};
+inline constexpr float kMinRoughness = 0.02f;
+
 // The base colour a mesh file declares (glTF pbrMetallicRoughness
 // baseColorFactor and baseColorTexture, OBJ/MTL Kd and map_Kd): a linear RGB
 // factor, times the texture's sRGB-decoded texel when there is one.
@@ -69,6 +77,7 @@ struct Mesh {
   std::optional<BaseColour> base_colour;
   std::string base_colours_differ;  // non-empty: why no single base colour was kept
   bool v_up = false;  // OBJ: v = 0 is an image's bottom row; glTF and built-in shapes: its top row
+  std::optional<Gloss> gloss;  // glTF: its first material's metallic-roughness, when glossy
   bool has_uvs() const { return !uv_triangles.empty() && uv_triangles.size() == triangles.size(); }
 };
 
@@ -126,6 +135,9 @@ struct Object {
   // glows from both. false: the front face only (Sec. 8.3.4's layer on one
   // side), the side the triangles' counter-clockwise winding faces.
   bool two_sided = false;
+  // Glossy (glTF metallic-roughness, render/bsdf.h): a GGX lobe over the
+  // diffuse base. Unset: Lambertian, as before.
+  std::optional<Gloss> gloss;
   double texel_size_m = 0.0;  // edge of the automatic atlas's texels (0: scene default)
   // Texels: "auto" (per-triangle atlas), "uv" (the mesh's UV map) or "" (the
   // UV map when the mesh has one, else auto). uv_resolution: texels per UV
