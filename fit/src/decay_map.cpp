@@ -226,8 +226,9 @@ FrameTimes MakeFrameTimes(const DecayMapInput& in) {
 // below 1e-17 relatively), times 2^n put into the exponent bits. Below
 // e^-708 it gives 0 (std::exp: subnormals down to e^-745), above e^709 it
 // stops at e^709 (std::exp: inf). Eigen's exp of doubles, which divides,
-// took 2.5 times as long, and this is most of a Newton step's time.
-typedef std::int64_t Int4 __attribute__((vector_size(32)));
+// took about 1.5 times as long (the exponentials of a Newton step: 210 ns
+// against 140 ns on the 2.3 GHz host), and they are most of a step's time.
+typedef std::uint64_t Bits4 __attribute__((vector_size(32)));  // unsigned: the shift below wraps, no UB
 
 inline Double4 Exp4(Double4 x) {
   const Double4 lo = Double4{} - 708.0, hi = Double4{} + 709.0, shift = Double4{} + 0x1.8p52;
@@ -248,7 +249,7 @@ inline Double4 Exp4(Double4 x) {
   p = p * r + 0.5;
   p = p * r + 1.0;
   p = p * r + 1.0;
-  Int4 bits;
+  Bits4 bits;
   std::memcpy(&bits, &shifted, sizeof bits);
   bits = (bits + 1023) << 52;  // 2^n: n + 1023 is in [1, 2046]
   Double4 scale;
