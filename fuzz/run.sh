@@ -26,7 +26,7 @@ seeds() {  # the seed files of a target
     material) ls fixtures/materials/*.json ;;
     scene) ls fixtures/scenes/*.json ;;
     obj) ls fixtures/scenes/meshes/*.obj ;;
-    gltf) ls fixtures/scenes/meshes/*.gltf ;;
+    gltf) ls fixtures/scenes/meshes/*.gltf fixtures/scenes/*/*.gltf ;;
     constraints) ls fixtures/constraints/*.json ;;
     lab) ls fuzz/seeds/lab/* ;;
     curve_csv) ls fixtures/curves/*.csv fixtures/curves/*.dat fixtures/curves/*.txt fixtures/cameras/*.csv ;;
