@@ -23,6 +23,9 @@ std::vector<Surfel> Surfelize(const SceneGeometry& geometry, const Vec3f& eye, f
       const float area = geometry.Area(o, t);
       if (!(area > 0)) continue;
       const Vec3f n = geometry.FrontNormal(o, t);
+      // A two-sided sheet (Object::two_sided) sends from both faces: a twin
+      // surfel facing the other way at each place.
+      const bool twin = geometry.scene().objects[o].two_sided;
       const float d = ((a + b + c) / 3.0f - eye).norm();
       const float r_star = std::max(1e-6f, options.s * tan_half * (d + options.d_near_m));
       const float target_area = kPiF * r_star * r_star;
@@ -31,6 +34,7 @@ std::vector<Surfel> Surfelize(const SceneGeometry& geometry, const Vec3f& eye, f
         if (Hash01(options.seed, static_cast<std::uint64_t>(o), static_cast<std::uint64_t>(t)) >= area / target_area)
           continue;
         surfels.push_back({(a + b + c) / 3.0f, n, target_area, o, t, 1.0f / 3, 1.0f / 3});
+        if (twin) surfels.push_back({(a + b + c) / 3.0f, -n, target_area, o, t, 1.0f / 3, 1.0f / 3});
         continue;
       }
       const float edge = std::max({(b - a).norm(), (c - b).norm(), (a - c).norm()});
@@ -39,6 +43,7 @@ std::vector<Surfel> Surfelize(const SceneGeometry& geometry, const Vec3f& eye, f
         float b1 = 0, b2 = 0;
         SubTriangleCenter(m, k, b1, b2);
         surfels.push_back({geometry.Point(o, t, b1, b2), n, area / static_cast<float>(m * m), o, t, b1, b2});
+        if (twin) surfels.push_back({geometry.Point(o, t, b1, b2), -n, area / static_cast<float>(m * m), o, t, b1, b2});
       }
     }
   }

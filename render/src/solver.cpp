@@ -119,6 +119,7 @@ void CoupledSolver::BuildGlowPatches() {
   glow_.centre.resize(glow_.count);
   glow_.normal.resize(glow_.count);
   glow_.area.resize(glow_.count);
+  glow_.two_sided.resize(glow_.count);
   // Sample points of each source patch: the centres of its 4 children one level finer.
   std::vector<std::array<Vec3f, 4>> points(glow_.count);
   std::size_t base = 0;
@@ -146,6 +147,7 @@ void CoupledSolver::BuildGlowPatches() {
         glow_.centre[base + k] = geometry_.Point(g.object, t, b1, b2);
         glow_.normal[base + k] = geometry_.FrontNormal(g.object, t);
         glow_.area[base + k] = area;
+        glow_.two_sided[base + k] = scene_.objects[g.object].two_sided;
       }
       for (int k = 0; k < 4 * ms * ms; ++k) {
         float b1, b2;
@@ -156,7 +158,9 @@ void CoupledSolver::BuildGlowPatches() {
       base += static_cast<std::size_t>(ms) * ms;
     }
   }
-  // Transfer: irradiance at receiver j per unit radiance of source k (front sides only).
+  // Transfer: irradiance at receiver j per unit radiance of source k, from
+  // the source's glowing side to the receiver's charged side: the front, or
+  // either face of a two-sided sheet (Object::two_sided).
   const std::size_t n = glow_.count;
   glow_.transfer.assign(n * n, 0.0f);
   const float epsilon = geometry_.ray_epsilon();
@@ -171,9 +175,12 @@ void CoupledSolver::BuildGlowPatches() {
         const float distance2 = d.squaredNorm(), distance = std::sqrt(distance2);
         if (!(distance > 0)) continue;
         d /= distance;
-        const float cos_x = nx.dot(d), cos_y = -glow_.normal[k].dot(d);
+        float cos_x = nx.dot(d), cos_y = -glow_.normal[k].dot(d);
+        const float side = cos_x < 0 ? -1.0f : 1.0f;  // the receiver's face toward the source
+        if (glow_.two_sided[j]) cos_x = std::abs(cos_x);
+        if (glow_.two_sided[k]) cos_y = std::abs(cos_y);
         if (cos_x <= 0 || cos_y <= 0) continue;
-        if (geometry_.Occluded(x + epsilon * nx, d, distance - 2 * epsilon)) continue;
+        if (geometry_.Occluded(x + side * epsilon * nx, d, distance - 2 * epsilon)) continue;
         sum += cos_x * cos_y / distance2;
       }
       glow_.transfer[j * n + k] = sum * glow_.area[k] / 4;

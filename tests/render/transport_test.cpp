@@ -157,6 +157,54 @@ TEST(Transport, ATwoSidedSheetGlowsAndLightsFromItsBackAsOthersFromTheirFront) {
   EXPECT_LT(floor_light(away_path, away), 0.05 * lit_by_front);  // the floor sees the dark back only
 }
 
+// Deep screen space: a two-sided sheet's back sends its glow to the floor as
+// the front-facing sheet's front does (a twin surfel per surfel); a
+// one-sided sheet facing away sends nothing there.
+TEST(Transport, DeepScreenSpaceBouncesATwoSidedSheetsGlowFromItsBack) {
+  const Image front = GlowingDiskOverAFloor(true, false, Transport::kDss);
+  const Image back = GlowingDiskOverAFloor(false, true, Transport::kDss);
+  const Image away = GlowingDiskOverAFloor(false, false, Transport::kDss);
+  const Image front_direct = GlowingDiskOverAFloor(true, false, Transport::kDirect);
+  auto bounce = [&](const Image& dss) {
+    double sum = 0;
+    for (std::size_t p = 0; p < dss.pixels.size() / 8; ++p) sum += dss.pixels[p * 8 + 3] - front_direct.pixels[p * 8 + 3];
+    return sum;
+  };
+  ASSERT_GT(bounce(front), 0);
+  EXPECT_NEAR(bounce(back), bounce(front), 1e-3 * bounce(front));
+  EXPECT_LT(bounce(away), 0.05 * bounce(front));
+}
+
+// Glow on glow (phosphor_irradiance): a glowing disk over a phosphor floor;
+// the floor turned over (its front facing down, away from the disk)
+// receives nothing, unless it is two-sided: then as much as facing up.
+double FloorGlowIrradiance(bool floor_faces_up, bool floor_two_sided) {
+  Scene scene = EmptyScene(8, 8);
+  scene.settings.phosphor_irradiance = true;
+  scene.texel_size_m = 0.25;
+  render::Mesh floor = MakeQuad(2, 2);
+  if (!floor_faces_up)
+    for (auto& triangle : floor.triangles) std::swap(triangle[1], triangle[2]);
+  scene.objects.push_back(
+      MakeObject("floor", floor, 0.5, UniformPhosphor(0.2, std::vector<double>(8, 0.1), {0, 0, 1, 2, 1, 0, 0, 0})));
+  scene.objects[0].two_sided = floor_two_sided;
+  scene.objects.push_back(MakeObject("disk", phos::testing::DiskFacingDown(0.5f, 1.0f, 24), 0.5,
+                                     UniformPhosphor(0.2, std::vector<double>(8, 0.1), {0, 0, 1, 2, 1, 0, 0, 0})));
+  scene.objects[1].initial = {InitialState::Kind::kUniform, 0.5};
+  SceneGeometry geometry(scene);
+  CoupledSolver solver(scene, geometry);
+  double sum = 0;
+  for (std::size_t k = 0; k < solver.atlas().objects()[0].count; ++k) sum += solver.TexelGlowIrradiance(0, k)[3];
+  return sum;
+}
+
+TEST(Transport, GlowOnGlowChargesATwoSidedSheetFromItsBack) {
+  const double up = FloorGlowIrradiance(true, false);
+  ASSERT_GT(up, 0);
+  EXPECT_EQ(FloorGlowIrradiance(false, false), 0.0);
+  EXPECT_NEAR(FloorGlowIrradiance(false, true), up, 1e-4 * up);
+}
+
 // Compares with a stored reference in blocks; writes the difference on failure.
 void ExpectMatchesReference(const Image& image, const std::string& name, double block_tolerance) {
   const std::filesystem::path reference_path = Fixture("render/" + name + ".exr");

@@ -154,6 +154,7 @@ class CoupledSolver {
   struct GlowPatches {
     std::vector<Eigen::Vector3f> centre, normal;
     std::vector<float> area;
+    std::vector<std::uint8_t> two_sided;  // per patch: its object glows from and receives on both faces
     std::vector<float> transfer;      // [receiver * count + source]
     std::vector<int> emission_bands;  // bands any phosphor emits
     std::vector<float> Lp, E;         // per patch per band (scratch)
