@@ -490,8 +490,8 @@ struct BlockWork {
   Array one_state_cost;  // per pixel of the block: the one-state fit's cost (two states compare with it)
   // Two states: sums of the pair grid, the pairs' costs, a pixel's two bases.
   Matrix pair_sums, pair_value_sums, pair_cost;
-  Array b1, d1, b2, d2;  // exp(-k s), exp(-k (s + e)) of the two rates
-  Matrix pair_products, pair_weighted, pair_values;
+  Array b1, d1, b2, d2;  // per distinct exposure, E and D (EvaluateBasisAndSlope) of the two rates
+  Matrix pair_products;   // m x 4: a pixel's two bases and their slopes
 };
 
 // Pixel p of the block's sums (C channels), channel by channel, into px (sized for them and the frames).
@@ -630,13 +630,58 @@ struct PairChannelFit {
   return best;
 }
 
-// ProjectPair's cost for n pixel-channels at one pair of rates. (GCC leaves
-// this loop scalar, as it did ProjectedCosts's: see there.)
+// ProjectPair's cost of four pixel-channels, the same arithmetic in GCC's
+// vector extensions (GCC leaves the scalar loop over ProjectPair scalar,
+// as it did ProjectedCosts's: see there).
+template <bool kBackground>
+inline Double4 PairCost4(Double4 s11, Double4 s12, Double4 s22, Double4 s1c, Double4 s2c, Double4 scc, Double4 r1,
+                         Double4 r2, Double4 rc, Double4 yy) {
+  using Mask4 = decltype(s11 < s11);
+  const Double4 zero{};
+  Double4 best;
+  auto take = [&best](Mask4 ok, Double4 cost) { best = ok & (cost < best) ? cost : best; };
+  if (kBackground) {
+    best = zero + std::numeric_limits<double>::infinity();
+    const Double4 c11 = s22 * scc - s2c * s2c, c12 = s1c * s2c - s12 * scc, c13 = s12 * s2c - s22 * s1c,
+                  c22 = s11 * scc - s1c * s1c, c23 = s12 * s1c - s11 * s2c, c33 = s11 * s22 - s12 * s12;
+    const Double4 det = s11 * c11 + s12 * c12 + s1c * c13, inverse = 1 / det;
+    const Double4 x1 = (c11 * r1 + c12 * r2 + c13 * rc) * inverse, x2 = (c12 * r1 + c22 * r2 + c23 * rc) * inverse,
+                  x3 = (c13 * r1 + c23 * r2 + c33 * rc) * inverse;
+    take((det > 1e-9 * s11 * s22 * scc) & (x1 > zero) & (x2 > zero), yy - x1 * r1 - x2 * r2 - x3 * rc);
+    const Double4 d1 = s11 * scc - s1c * s1c, i1 = 1 / d1;
+    const Double4 a1 = (r1 * scc - s1c * rc) * i1, b1 = (s11 * rc - s1c * r1) * i1;
+    take((d1 > 1e-12 * s11 * scc) & (a1 > zero), yy - a1 * r1 - b1 * rc);
+    const Double4 d2 = s22 * scc - s2c * s2c, i2 = 1 / d2;
+    const Double4 a2 = (r2 * scc - s2c * rc) * i2, b2 = (s22 * rc - s2c * r2) * i2;
+    take((d2 > 1e-12 * s22 * scc) & (a2 > zero), yy - a2 * r2 - b2 * rc);
+    const Double4 floor = zero + 1e-300, b0 = rc / (scc < floor ? floor : scc);  // std::max(scc, 1e-300)
+    take(zero == zero, yy - b0 * rc);
+  } else {
+    best = yy;
+    const Double4 det = s11 * s22 - s12 * s12, inverse = 1 / det;
+    const Double4 x1 = (r1 * s22 - s12 * r2) * inverse, x2 = (s11 * r2 - s12 * r1) * inverse;
+    take((det > 1e-9 * s11 * s22) & (x1 > zero) & (x2 > zero), yy - x1 * r1 - x2 * r2);
+    const Double4 a1 = r1 / s11, a2 = r2 / s22;
+    take((s11 > zero) & (a1 > zero), yy - a1 * r1);
+    take((s22 > zero) & (a2 > zero), yy - a2 * r2);
+  }
+  return best;
+}
+
+// ProjectPair's cost for n pixel-channels at one pair of rates, four at a
+// time (PairCost4), the rest one by one.
 template <bool kBackground>
 void PairCostsOf(int n, const double* s11, const double* s12, const double* s22, const double* s1c,
                  const double* s2c, const double* scc, const double* r1, const double* r2, const double* rc,
                  const double* yy, double* __restrict__ cost) {
-  for (int j = 0; j < n; ++j)
+  int j = 0;
+  for (; j + 4 <= n; j += 4) {
+    const Double4 c = PairCost4<kBackground>(Load4(s11 + j), Load4(s12 + j), Load4(s22 + j), Load4(s1c + j),
+                                             Load4(s2c + j), Load4(scc + j), Load4(r1 + j), Load4(r2 + j),
+                                             Load4(rc + j), Load4(yy + j));
+    std::memcpy(cost + j, &c, sizeof c);
+  }
+  for (; j < n; ++j)
     cost[j] = ProjectPair({s11[j], s12[j], s22[j], s1c[j], s2c[j], scc[j], r1[j], r2[j], rc[j], yy[j]}, kBackground).cost;
 }
 void PairCosts(int n, const double* s11, const double* s12, const double* s22, const double* s1c, const double* s2c,
@@ -693,63 +738,132 @@ struct PairFit {
   double a1[8] = {}, a2[8] = {}, background[8] = {};
 };
 
-void EvaluateBasisAndSlope(double u, const FrameTimes& f, Array& P, Array& Q, double* b, double* b_u) {
-  const double k = std::exp(u);
-  const int m = static_cast<int>(f.s.size());
-  P = (-k * f.s).exp();
-  Q = (-k * f.s_plus_e).exp();
-  for (int j = 0; j < m; ++j) {
-    b[j] = (P[j] - Q[j]) / (k * f.e[j]);
-    b_u[j] = -k * f.s[j] * b[j] + Q[j] - b[j];
+// A rate's basis b and its slope b_u (as EvaluateBasis: P = exp(-k s)
+// times the exposure's E = exp(-k e) and (1 - E) / (k e), held in E and D
+// per distinct exposure, the frames four at a time in Exp4), into b and b_u.
+void EvaluateBasisAndSlope(double u, const FrameTimes& f, Array& E, Array& D, double* b, double* b_u) {
+  const double k = std::exp(u), inverse_k = 1 / k;
+  const int m = static_cast<int>(f.s.size()), exposures = static_cast<int>(f.exposures.size());
+  E.resize(exposures);
+  D.resize(exposures);
+  int d = 0;
+  for (; d + 4 <= exposures; d += 4) {
+    const Double4 e = Exp4(-k * Load4(&f.exposures[d])), q = (1 - e) * (inverse_k * Load4(&f.inverse_exposures[d]));
+    std::memcpy(&E[d], &e, sizeof e);
+    std::memcpy(&D[d], &q, sizeof q);
+  }
+  for (; d < exposures; ++d) {
+    E[d] = std::exp(-k * f.exposures[d]);
+    D[d] = (1 - E[d]) * (inverse_k * f.inverse_exposures[d]);
+  }
+  const int* of = f.exposure_of.data();
+  int j = 0;
+  for (; j + 4 <= m; j += 4) {
+    const Double4 s = Load4(&f.s[j]), P = Exp4(-k * s);
+    const Double4 v = P * Double4{D[of[j]], D[of[j + 1]], D[of[j + 2]], D[of[j + 3]]};
+    const Double4 Q = P * Double4{E[of[j]], E[of[j + 1]], E[of[j + 2]], E[of[j + 3]]};
+    const Double4 v_u = -k * s * v + Q - v;
+    std::memcpy(b + j, &v, sizeof v);
+    std::memcpy(b_u + j, &v_u, sizeof v_u);
+  }
+  for (; j < m; ++j) {
+    const double P = std::exp(-k * f.s[j]), Q = P * E[of[j]];
+    b[j] = P * D[of[j]];
+    b_u[j] = -k * f.s[j] * b[j] + Q - b[j];
   }
 }
 
-// The columns of `products` (m x 14): b1, b2, b1_u, b2_u, then the products
-// whose weighted sums the Gram, the gradient and the Hessian need; one
-// product with a pixel's weights (C x m) gives every channel's sums at once.
+// The weighted sums a channel needs: sum w v for v in b1, b2, b1_u, b2_u
+// and the products the Gram, the gradient and the Hessian need (S, indexed
+// by PairColumn), and sum w y v for the first four (R); one pass over the
+// frames, four at a time, the rest one by one.
 enum PairColumn { kB1, kB2, kD1, kD2, kB1B1, kB1B2, kB2B2, kB1D1, kB2D1, kB1D2, kB2D2, kD1D1, kD2D2, kD1D2, kPairColumns };
+
+struct PairSums {
+  double S[kPairColumns], R[4];
+};
+
+PairSums SumPairChannel(int m, const double* w, const double* wy, const double* b1, const double* b2,
+                        const double* d1, const double* d2) {
+  Double4 s[kPairColumns] = {}, r[4] = {};
+  int j = 0;
+  for (; j + 4 <= m; j += 4) {
+    const Double4 pw = Load4(w + j), pwy = Load4(wy + j), v1 = Load4(b1 + j), v2 = Load4(b2 + j),
+                  u1 = Load4(d1 + j), u2 = Load4(d2 + j);
+    const Double4 w1 = pw * v1, w2 = pw * v2, wu1 = pw * u1, wu2 = pw * u2;
+    s[kB1] += w1;
+    s[kB2] += w2;
+    s[kD1] += wu1;
+    s[kD2] += wu2;
+    s[kB1B1] += w1 * v1;
+    s[kB1B2] += w1 * v2;
+    s[kB2B2] += w2 * v2;
+    s[kB1D1] += w1 * u1;
+    s[kB2D1] += w2 * u1;
+    s[kB1D2] += w1 * u2;
+    s[kB2D2] += w2 * u2;
+    s[kD1D1] += wu1 * u1;
+    s[kD2D2] += wu2 * u2;
+    s[kD1D2] += wu1 * u2;
+    r[kB1] += pwy * v1;
+    r[kB2] += pwy * v2;
+    r[kD1] += pwy * u1;
+    r[kD2] += pwy * u2;
+  }
+  PairSums out;
+  for (int i = 0; i < kPairColumns; ++i) out.S[i] = Sum4(s[i]);
+  for (int i = 0; i < 4; ++i) out.R[i] = Sum4(r[i]);
+  for (; j < m; ++j) {
+    const double w1 = w[j] * b1[j], w2 = w[j] * b2[j], wu1 = w[j] * d1[j], wu2 = w[j] * d2[j];
+    out.S[kB1] += w1;
+    out.S[kB2] += w2;
+    out.S[kD1] += wu1;
+    out.S[kD2] += wu2;
+    out.S[kB1B1] += w1 * b1[j];
+    out.S[kB1B2] += w1 * b2[j];
+    out.S[kB2B2] += w2 * b2[j];
+    out.S[kB1D1] += w1 * d1[j];
+    out.S[kB2D1] += w2 * d1[j];
+    out.S[kB1D2] += w1 * d2[j];
+    out.S[kB2D2] += w2 * d2[j];
+    out.S[kD1D1] += wu1 * d1[j];
+    out.S[kD2D2] += wu2 * d2[j];
+    out.S[kD1D2] += wu1 * d2[j];
+    out.R[kB1] += wy[j] * b1[j];
+    out.R[kB2] += wy[j] * b2[j];
+    out.R[kD1] += wy[j] * d1[j];
+    out.R[kD2] += wy[j] * d2[j];
+  }
+  return out;
+}
 
 PairFit EvaluatePair(double u1, double u2, const PixelData& px, const FrameTimes& f, bool background,
                      BlockWork& work) {
   const int m = px.m;
-  Matrix& V = work.pair_products;
-  V.resize(m, kPairColumns);
+  Matrix& V = work.pair_products;  // m x 4: b1, b2, b1_u, b2_u
+  V.resize(m, 4);
   EvaluateBasisAndSlope(u1, f, work.b1, work.d1, &V(0, kB1), &V(0, kD1));
   EvaluateBasisAndSlope(u2, f, work.b2, work.d2, &V(0, kB2), &V(0, kD2));
-  const auto b1 = V.col(kB1).array(), b2 = V.col(kB2).array(), d1 = V.col(kD1).array(), d2 = V.col(kD2).array();
-  V.col(kB1B1).array() = b1 * b1;
-  V.col(kB1B2).array() = b1 * b2;
-  V.col(kB2B2).array() = b2 * b2;
-  V.col(kB1D1).array() = b1 * d1;
-  V.col(kB2D1).array() = b2 * d1;
-  V.col(kB1D2).array() = b1 * d2;
-  V.col(kB2D2).array() = b2 * d2;
-  V.col(kD1D1).array() = d1 * d1;
-  V.col(kD2D2).array() = d2 * d2;
-  V.col(kD1D2).array() = d1 * d2;
-  Matrix& S = work.pair_weighted;  // C x 14: sum w v
-  Matrix& R = work.pair_values;    // C x 4: sum w y v
-  S.noalias() = px.w.transpose().lazyProduct(V);
-  R.noalias() = px.wy.transpose().lazyProduct(V.leftCols(4));
   PairFit fit;
   fit.u1 = u1;
   fit.u2 = u2;
   fit.cost = 0;
   for (int c = 0; c < px.channels; ++c) {
-    const PairGram gram{S(c, kB1B1), S(c, kB1B2), S(c, kB2B2), S(c, kB1), S(c, kB2),
-                        px.S11[c],   R(c, kB1),   R(c, kB2),   px.S1y[c], px.Syy[c]};
+    const PairSums sums = SumPairChannel(m, &px.w(0, c), &px.wy(0, c), &V(0, kB1), &V(0, kB2), &V(0, kD1), &V(0, kD2));
+    const double *S = sums.S, *R = sums.R;
+    const PairGram gram{S[kB1B1], S[kB1B2], S[kB2B2], S[kB1], S[kB2], px.S11[c], R[kB1], R[kB2], px.S1y[c], px.Syy[c]};
     const PairChannelFit cf = ProjectPair(gram, background);
     fit.a1[c] = cf.a1;
     fit.a2[c] = cf.a2;
     fit.background[c] = cf.background;
     fit.cost += cf.cost;
     if (!(cf.a1 > 0) && !(cf.a2 > 0)) continue;
-    const double wd1 = S(c, kD1), wd2 = S(c, kD2);
-    const double b1d1 = S(c, kB1D1), b2d1 = S(c, kB2D1), b1d2 = S(c, kB1D2), b2d2 = S(c, kB2D2);
+    const double wd1 = S[kD1], wd2 = S[kD2];
+    const double b1d1 = S[kB1D1], b2d1 = S[kB2D1], b1d2 = S[kB1D2], b2d2 = S[kB2D2];
     const double B = cf.background;
     // sum w r b_i_u, r the residual
-    const double rd1 = R(c, kD1) - cf.a1 * b1d1 - cf.a2 * b2d1 - B * wd1;
-    const double rd2 = R(c, kD2) - cf.a1 * b1d2 - cf.a2 * b2d2 - B * wd2;
+    const double rd1 = R[kD1] - cf.a1 * b1d1 - cf.a2 * b2d1 - B * wd1;
+    const double rd2 = R[kD2] - cf.a1 * b1d2 - cf.a2 * b2d2 - B * wd2;
     fit.g[0] += -2 * cf.a1 * rd1;
     fit.g[1] += -2 * cf.a2 * rd2;
     const bool on[3] = {cf.a1 > 0, cf.a2 > 0, background};
@@ -765,9 +879,9 @@ PairFit EvaluatePair(double u1, double u2, const PixelData& px, const FrameTimes
         PhiJ.row(i).setZero();
       }
     const Eigen::Matrix2d projected = PhiJ.transpose() * M.inverse() * PhiJ;
-    fit.H[0][0] += 2 * (cf.a1 * cf.a1 * S(c, kD1D1) - projected(0, 0));
-    fit.H[0][1] += 2 * (cf.a1 * cf.a2 * S(c, kD1D2) - projected(0, 1));
-    fit.H[1][1] += 2 * (cf.a2 * cf.a2 * S(c, kD2D2) - projected(1, 1));
+    fit.H[0][0] += 2 * (cf.a1 * cf.a1 * S[kD1D1] - projected(0, 0));
+    fit.H[0][1] += 2 * (cf.a1 * cf.a2 * S[kD1D2] - projected(0, 1));
+    fit.H[1][1] += 2 * (cf.a2 * cf.a2 * S[kD2D2] - projected(1, 1));
   }
   fit.H[1][0] = fit.H[0][1];
   return fit;
