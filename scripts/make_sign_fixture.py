@@ -17,15 +17,14 @@ fixtures/scenes/glow-sign.json: the plate on a wall (phosphor: the green
 Table 8.1 preset, painted where the mask says), a ceiling panel (a quad
 area light) and the glTF's spot, both on until 20 s; then a minute of dark.
 
-Standard library only (zlib and struct write the PNGs). Rerun after changing
+Standard library only (scripts/fixture_gltf.py writes the PNGs and the buffer). Rerun after changing
 it: python3 scripts/make_sign_fixture.py
 """
-import base64
 import json
 import math
 import pathlib
-import struct
-import zlib
+
+from fixture_gltf import png, quad_buffer
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 OUT = ROOT / "fixtures" / "scenes" / "glow-sign"
@@ -38,16 +37,6 @@ FONT = {  # 5 x 7, rows from the top
     "T": ["#####", "..#..", "..#..", "..#..", "..#..", "..#..", "..#.."],
     ">": ["#....", ".#...", "..#..", "...#.", "..#..", ".#...", "#...."],
 }
-
-
-def png(width, height, channels, rows):
-    def chunk(kind, data):
-        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
-    raw = b"".join(b"\x00" + bytes(row) for row in rows)
-    colour_type = {1: 0, 3: 2}[channels]  # grey or RGB, 8 bits
-    header = struct.pack(">IIBBBBB", width, height, 8, colour_type, 0, 0, 0)
-    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", zlib.compress(raw, 9)) +
-            chunk(b"IEND", b""))
 
 
 def board_rows(size=128, border=6):
@@ -90,9 +79,6 @@ def sign_gltf():
     positions = [(x0, y1, PLATE_Z), (x1, y1, PLATE_Z), (x1, y0, PLATE_Z), (x0, y0, PLATE_Z)]
     uvs = [(0, 0), (1, 0), (1, 1), (0, 1)]  # v down from the top edge, as the image's rows
     indices = [0, 2, 1, 0, 3, 2]  # counter-clockwise seen from +z
-    data = b"".join(struct.pack("<3f", *p) for p in positions)
-    data += b"".join(struct.pack("<2f", *uv) for uv in uvs)
-    data += struct.pack("<6H", *indices)
     # The lamp at (0, y1 + 0.35, 0.45), aimed at the plate's centre: a node's
     # light shines down its -z axis, so rotate -z onto the aim (about x).
     lamp = (0.0, y1 + 0.35, 0.45)
@@ -116,16 +102,7 @@ def sign_gltf():
             "metallicFactor": 0, "roughnessFactor": 0.8}}],
         "textures": [{"source": 0}],
         "images": [{"uri": "board.png"}],
-        "buffers": [{"byteLength": len(data),
-                     "uri": "data:application/octet-stream;base64," + base64.b64encode(data).decode()}],
-        "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 48},
-                        {"buffer": 0, "byteOffset": 48, "byteLength": 32},
-                        {"buffer": 0, "byteOffset": 80, "byteLength": 12}],
-        "accessors": [
-            {"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3",
-             "min": [x0, y0, PLATE_Z], "max": [x1, y1, PLATE_Z]},
-            {"bufferView": 1, "componentType": 5126, "count": 4, "type": "VEC2"},
-            {"bufferView": 2, "componentType": 5123, "count": 6, "type": "SCALAR"}],
+        **quad_buffer(positions, uvs, indices),
     }
 
 
@@ -162,7 +139,7 @@ def scene():
 
 def main():
     OUT.mkdir(parents=True, exist_ok=True)
-    (OUT / "board.png").write_bytes(png(128, 128, 3, board_rows()))
+    (OUT / "board.png").write_bytes(png(128, 128, 3, board_rows(), srgb=True))
     (OUT / "mask.png").write_bytes(png(256, 256, 1, mask_rows()))
     (OUT / "sign.gltf").write_text(json.dumps(sign_gltf(), indent=1) + "\n")
     (OUT.parent / "glow-sign.json").write_text(json.dumps(scene(), indent=2) + "\n")

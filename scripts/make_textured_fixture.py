@@ -10,30 +10,19 @@ fixtures/scenes/textured-plane.json: the plane under a point light, seen from
 above. tests/render/texture_test.cpp checks albedo(u, v) E / pi at each
 quadrant's centre, bench_render times it against the plane untextured.
 
-Standard library only (zlib and struct write the PNG). Rerun after changing
+Standard library only (scripts/fixture_gltf.py writes the PNG and the buffer). Rerun after changing
 it: python3 scripts/make_textured_fixture.py
 """
-import base64
 import json
 import pathlib
-import struct
-import zlib
+
+from fixture_gltf import png, quad_buffer
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 OUT = ROOT / "fixtures" / "scenes" / "textured"
 SIZE = 64
 # (row half, column half) -> sRGB 8-bit colour: top-left, top-right, bottom-left, bottom-right.
 QUADRANTS = {(0, 0): (230, 60, 40), (0, 1): (40, 180, 70), (1, 0): (50, 80, 220), (1, 1): (250, 250, 250)}
-
-
-def png(width, height, rgb_rows):
-    def chunk(kind, data):
-        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
-    raw = b"".join(b"\x00" + bytes(v for pixel in row for v in pixel) for row in rgb_rows)
-    header = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)  # 8-bit RGB, no interlace
-    # sRGB chunk (rendering intent 0): the texels are sRGB-encoded, as glTF says.
-    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"sRGB", b"\x00") +
-            chunk(b"IDAT", zlib.compress(raw, 9)) + chunk(b"IEND", b""))
 
 
 def checker_rows():
@@ -45,9 +34,6 @@ def plane_gltf(image_name):
     positions = [(-0.5, 0, -0.5), (0.5, 0, -0.5), (0.5, 0, 0.5), (-0.5, 0, 0.5)]
     uvs = [(x + 0.5, z + 0.5) for x, _, z in positions]
     indices = [0, 2, 1, 0, 3, 2]  # counter-clockwise seen from +y
-    data = b"".join(struct.pack("<3f", *p) for p in positions)
-    data += b"".join(struct.pack("<2f", *uv) for uv in uvs)
-    data += struct.pack("<6H", *indices)
     return {
         "asset": {"version": "2.0", "generator": "phos scripts/make_textured_fixture.py"},
         "scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0, "name": "plane"}],
@@ -58,16 +44,7 @@ def plane_gltf(image_name):
             "metallicFactor": 0, "roughnessFactor": 1}}],
         "textures": [{"source": 0}],
         "images": [{"uri": image_name}],
-        "buffers": [{"byteLength": len(data),
-                     "uri": "data:application/octet-stream;base64," + base64.b64encode(data).decode()}],
-        "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 48},
-                        {"buffer": 0, "byteOffset": 48, "byteLength": 32},
-                        {"buffer": 0, "byteOffset": 80, "byteLength": 12}],
-        "accessors": [
-            {"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3",
-             "min": [-0.5, 0, -0.5], "max": [0.5, 0, 0.5]},
-            {"bufferView": 1, "componentType": 5126, "count": 4, "type": "VEC2"},
-            {"bufferView": 2, "componentType": 5123, "count": 6, "type": "SCALAR"}],
+        **quad_buffer(positions, uvs, indices),
     }
 
 
@@ -92,7 +69,8 @@ def scene():
 
 def main():
     OUT.mkdir(parents=True, exist_ok=True)
-    (OUT / "checker.png").write_bytes(png(SIZE, SIZE, checker_rows()))
+    rows = [[v for pixel in row for v in pixel] for row in checker_rows()]
+    (OUT / "checker.png").write_bytes(png(SIZE, SIZE, 3, rows, srgb=True))
     (OUT / "plane.gltf").write_text(json.dumps(plane_gltf("checker.png"), indent=1) + "\n")
     (OUT.parent / "textured-plane.json").write_text(json.dumps(scene(), indent=2) + "\n")
 
