@@ -60,7 +60,7 @@ Vec3f View(float mu) { return Vec3f(std::sqrt(1 - mu * mu), 0, mu); }
 // TheSamplerDrawsWithThePdfItStates checks against the quadrature where the
 // quadrature's grid resolves the lobe; below roughness 0.3 or at grazing
 // views it does not, and only the sampler's estimate is used.
-std::vector<double> Sampled(const GlossyBsdf& bsdf, const Vec3f& wo, int nb, int n = 200000) {
+std::vector<double> Sampled(const GlossyBsdf& bsdf, const Vec3f& wo, int nb, int n = 80000) {
   std::mt19937 random(17);
   std::uniform_real_distribution<float> u(0.0f, 1.0f);
   std::vector<double> sum(nb, 0.0);
@@ -126,7 +126,7 @@ TEST(GlossyBsdf, TheSamplerDrawsWithThePdfItStates) {
       const GlossyBsdf bsdf({metallic, roughness}, colour.data(), 2);
       const Vec3f wo = View(0.6f);
       const std::vector<double> integral = Quadrature(bsdf, wo, 2);
-      const int n = 400000;
+      const int n = 150000;
       std::vector<double> sum(2, 0.0);
       std::vector<float> f(2);
       for (int k = 0; k < n; ++k) {
