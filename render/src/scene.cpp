@@ -27,6 +27,13 @@ Vec3 ReadVec3(const JsonField& field) {
           field.At(2).NumberInRange(-kMaxCoordinate_m, kMaxCoordinate_m)};
 }
 
+// A direction: a vector that is not zero, normalized.
+Vec3 ReadDirection(const JsonField& field) {
+  const Vec3 v = ReadVec3(field);
+  if (v.norm() == 0) field.Fail("must not be zero");
+  return v.normalized();
+}
+
 double ReadLength(const JsonField& field, double lower) { return field.NumberInRange(lower, kMaxCoordinate_m); }
 
 // A time of the scene: in [-kMaxTime_s, kMaxTime_s].
@@ -219,9 +226,7 @@ Light ReadLight(const JsonField& l, std::size_t index, const SpectralGrid& bands
     }
   };
   auto read_direction = [&] {
-    light.direction = ReadVec3(l["direction"]);
-    if (light.direction.norm() == 0) l["direction"].Fail("must not be zero");
-    light.direction.normalize();
+    light.direction = ReadDirection(l["direction"]);
   };
   if (type == "point") {
     light.kind = Light::Kind::kPoint;
@@ -243,16 +248,12 @@ Light ReadLight(const JsonField& l, std::size_t index, const SpectralGrid& bands
     light.kind = Light::Kind::kSheet;
     read_direction();
     read_place();
-    light.sheet_normal = ReadVec3(l["normal"]);
-    if (light.sheet_normal.norm() == 0) l["normal"].Fail("must not be zero");
-    light.sheet_normal.normalize();
+    light.sheet_normal = ReadDirection(l["normal"]);
     light.sheet_thickness_m = ReadLength(l["thickness_m"], 1e-9);
   } else if (type == "quad" || type == "disk") {
     light.kind = type == "quad" ? Light::Kind::kQuad : Light::Kind::kDisk;
     read_place();
-    light.normal = ReadVec3(l["normal"]);
-    if (light.normal.norm() == 0) l["normal"].Fail("must not be zero");
-    light.normal.normalize();
+    light.normal = ReadDirection(l["normal"]);
     if (light.kind == Light::Kind::kQuad) {
       const JsonField size = l["size_m"];
       if (size.ArraySize() != 2) size.Fail("expected [width, height] in metres");
