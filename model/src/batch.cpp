@@ -64,9 +64,9 @@ EIGEN_STRONG_INLINE Packet<Real> ExpNonPositive(const Packet<Real>& x) {
 
 // One packet of one state; returns k = a + kr for the stability check.
 template <typename Real, Integrator kIntegrator>
-EIGEN_STRONG_INLINE Packet<Real> StepPacket(Packet<Real>& r, const Packet<Real>& a, Real kr, Real h) {
+EIGEN_STRONG_INLINE Packet<Real> StepPacket(Packet<Real>& r, const Packet<Real>& a, const Packet<Real>& kr, Real h) {
   using P = Packet<Real>;
-  const P k = ei::padd(a, ei::pset1<P>(kr));
+  const P k = ei::padd(a, kr);
   const P one = ei::pset1<P>(Real(1)), zero = ei::pzero(k);
   if constexpr (kIntegrator == Integrator::kExact) {
     // r(t+h) = r e^{-kh} + r_inf (1 - e^{-kh}), r_inf = a / k (Eq. 8.1, exact)
@@ -122,14 +122,19 @@ Real StepScalar(Real r, Real a, Real kr, Real h) {
     return Rk4Step(r, a, kr, h);
 }
 
-// Points [j0, j1) of a batch with kStates states. Returns max k (1/s).
-template <typename Real, Integrator kIntegrator, int kStates>
+// Points [j0, j1) of a batch with kStates states; kPerPoint: each point has
+// its own kr and emission scale (BatchCoefficients::per_point). Returns max k (1/s).
+template <typename Real, Integrator kIntegrator, int kStates, bool kPerPoint>
 Real AdvanceRange(const BatchCoefficients<Real>& c, const Real* E, std::size_t E_stride, Real h, StateBatch<Real>& s,
                   Real* Lp, std::size_t Lp_stride, std::size_t j0, std::size_t j1) {
   using P = Packet<Real>;
   constexpr int W = kPacketSize<Real>;
   const std::size_t n = s.n;
   Real* r_base = s.r.data();
+  const Real* kr_base = kPerPoint ? c.kr_per_point.data() : nullptr;
+  const Real* scale_base = kPerPoint ? c.emission_scale.data() : nullptr;
+  P kr_uniform[kStates];
+  for (int i = 0; i < kStates; ++i) kr_uniform[i] = ei::pset1<P>(c.kr[i]);
   P k_max = ei::pzero(P());
   std::size_t j = j0;
   for (; j + W <= j1; j += W) {
@@ -142,33 +147,48 @@ Real AdvanceRange(const BatchCoefficients<Real>& c, const Real* E, std::size_t E
     P r[kStates];
     for (int i = 0; i < kStates; ++i) {
       r[i] = ei::ploadu<P>(r_base + i * n + j);
-      k_max = ei::pmax(k_max, StepPacket<Real, kIntegrator>(r[i], a[i], c.kr[i], h));
+      const P kr = kPerPoint ? ei::ploadu<P>(kr_base + i * n + j) : kr_uniform[i];
+      k_max = ei::pmax(k_max, StepPacket<Real, kIntegrator>(r[i], a[i], kr, h));
       ei::pstoreu(r_base + i * n + j, r[i]);
     }
-    if (Lp != nullptr)
+    if (Lp != nullptr) {
+      // What each state emits per unit of emission[b, i]: r, or r times the point's scale.
+      P w[kStates];
+      for (int i = 0; i < kStates; ++i) w[i] = kPerPoint ? ei::pmul(ei::ploadu<P>(scale_base + i * n + j), r[i]) : r[i];
       for (int b = 0; b < c.n_em; ++b) {  // Eq. 8.2
-        P L = ei::pmul(ei::pset1<P>(c.emission[b * kStates]), r[0]);
-        for (int i = 1; i < kStates; ++i) L = ei::pmadd(ei::pset1<P>(c.emission[b * kStates + i]), r[i], L);
+        P L = ei::pmul(ei::pset1<P>(c.emission[b * kStates]), w[0]);
+        for (int i = 1; i < kStates; ++i) L = ei::pmadd(ei::pset1<P>(c.emission[b * kStates + i]), w[i], L);
         ei::pstoreu(Lp + b * Lp_stride + j, L);
       }
+    }
   }
   Real k_tail = 0;
   for (; j < j1; ++j) {  // the last few points, one at a time
     for (int i = 0; i < kStates; ++i) {
       Real a = 0;
       for (int b = 0; b < c.n_exc; ++b) a += c.ke[i * c.n_exc + b] * E[b * E_stride + j];
+      const Real kr = kPerPoint ? kr_base[i * n + j] : c.kr[i];
       Real& r = r_base[i * n + j];
-      r = StepScalar<Real, kIntegrator>(r, a, c.kr[i], h);
-      k_tail = std::max(k_tail, a + c.kr[i]);
+      r = StepScalar<Real, kIntegrator>(r, a, kr, h);
+      k_tail = std::max(k_tail, a + kr);
     }
     if (Lp != nullptr)
       for (int b = 0; b < c.n_em; ++b) {
         Real L = 0;
-        for (int i = 0; i < kStates; ++i) L += c.emission[b * kStates + i] * r_base[i * n + j];
+        for (int i = 0; i < kStates; ++i)
+          L += c.emission[b * kStates + i] * (kPerPoint ? scale_base[i * n + j] : Real(1)) * r_base[i * n + j];
         Lp[b * Lp_stride + j] = L;
       }
   }
   return std::max(k_tail, ei::predux_max(k_max));
+}
+
+// Per-point parameters, when given, are one per state and point of the batch.
+template <typename Real>
+void CheckPerPoint(const BatchCoefficients<Real>& c, const StateBatch<Real>& s) {
+  if (!c.per_point()) return;
+  PHOS_CHECK(c.kr_per_point.size() == static_cast<std::size_t>(c.nc) * s.n);
+  PHOS_CHECK(c.emission_scale.size() == c.kr_per_point.size());
 }
 
 // Runs body(j0, j1) -> double over the chunks [j0, j1), in parallel for large batches;
@@ -224,9 +244,11 @@ Real AdvanceAll(const BatchCoefficients<Real>& c, const Real* E, std::size_t E_s
                 Real* Lp, std::size_t Lp_stride) {
   // The state count is a template argument so that a[] and r[] stay in registers.
   auto run = [&](auto states) {
+    constexpr int kStates = decltype(states)::value;
     return ForEachChunk(s.n, [&](std::size_t j0, std::size_t j1) {
       return static_cast<double>(
-          AdvanceRange<Real, kIntegrator, decltype(states)::value>(c, E, E_stride, h, s, Lp, Lp_stride, j0, j1));
+          c.per_point() ? AdvanceRange<Real, kIntegrator, kStates, true>(c, E, E_stride, h, s, Lp, Lp_stride, j0, j1)
+                        : AdvanceRange<Real, kIntegrator, kStates, false>(c, E, E_stride, h, s, Lp, Lp_stride, j0, j1));
     });
   };
   switch (c.nc) {
@@ -243,6 +265,7 @@ template <typename Real>
 BatchStepInfo AdvanceBatch(Integrator integrator, const BatchCoefficients<Real>& c, const Real* E, std::size_t E_stride,
                            Real h_s, StateBatch<Real>& s, Real* Lp, std::size_t Lp_stride) {
   PHOS_CHECK(s.nc == c.nc);
+  CheckPerPoint(c, s);
   // An empty batch (a phosphorescent medium with no voxel of density > 0)
   // has nothing to advance, and its empty E may well be null.
   PHOS_CHECK(c.n_exc == 0 || s.n == 0 || E != nullptr);
@@ -269,14 +292,38 @@ void EmitRange(const BatchCoefficients<Real>& c, const StateBatch<Real>& s, Real
                std::size_t j0, std::size_t j1) {
   for (int b = 0; b < c.n_em; ++b) {
     Real* __restrict out = Lp + b * Lp_stride;
-    const Real e0 = c.emission[b * c.nc];
-    const Real* __restrict r0 = s.state(0);
-    for (std::size_t j = j0; j < j1; ++j) out[j] = e0 * r0[j];
-    for (int i = 1; i < c.nc; ++i) {
+    for (int i = 0; i < c.nc; ++i) {
       const Real e = c.emission[b * c.nc + i];
       const Real* __restrict r = s.state(i);
-      for (std::size_t j = j0; j < j1; ++j) out[j] += e * r[j];
+      if (c.per_point()) {
+        const Real* __restrict scale = c.emission_scale.data() + static_cast<std::size_t>(i) * s.n;
+        if (i == 0)
+          for (std::size_t j = j0; j < j1; ++j) out[j] = e * scale[j] * r[j];
+        else
+          for (std::size_t j = j0; j < j1; ++j) out[j] += e * scale[j] * r[j];
+      } else if (i == 0) {
+        for (std::size_t j = j0; j < j1; ++j) out[j] = e * r[j];
+      } else {
+        for (std::size_t j = j0; j < j1; ++j) out[j] += e * r[j];
+      }
     }
+  }
+}
+
+// r *= e^{-kr h} with each point's own kr, a packet at a time.
+template <typename Real>
+void DecayRangePerPoint(const BatchCoefficients<Real>& c, Real h, StateBatch<Real>& s, std::size_t j0,
+                        std::size_t j1) {
+  using P = Packet<Real>;
+  constexpr int W = kPacketSize<Real>;
+  const P minus_h = ei::pset1<P>(-h);
+  for (int i = 0; i < c.nc; ++i) {
+    Real* __restrict r = s.state(i);
+    const Real* __restrict kr = c.kr_per_point.data() + static_cast<std::size_t>(i) * s.n;
+    std::size_t j = j0;
+    for (; j + W <= j1; j += W)
+      ei::pstoreu(r + j, ei::pmul(ei::ploadu<P>(r + j), ExpNonPositive<Real>(ei::pmul(ei::ploadu<P>(kr + j), minus_h))));
+    for (; j < j1; ++j) r[j] *= std::exp(-kr[j] * h);
   }
 }
 
@@ -288,13 +335,18 @@ void DecayBatch(const BatchCoefficients<Real>& c, Real h_s, StateBatch<Real>& s,
   // In the dark a = 0, so e^{-kr h} is one number per state: a multiply per
   // point, exact for any h (the closed-form jump across dark intervals). The
   // emission of the chunk is written while its states are still in L1.
+  // A mapped batch (per_point) takes one exp per point and state instead.
+  CheckPerPoint(c, s);
   Real decay[kMaxStates];
   for (int i = 0; i < c.nc; ++i) decay[i] = std::exp(-c.kr[i] * h_s);
   ForEachChunk(s.n, [&](std::size_t j0, std::size_t j1) {
-    for (int i = 0; i < c.nc; ++i) {
-      Real* __restrict r = s.state(i);
-      for (std::size_t j = j0; j < j1; ++j) r[j] *= decay[i];
-    }
+    if (c.per_point())
+      DecayRangePerPoint(c, h_s, s, j0, j1);
+    else
+      for (int i = 0; i < c.nc; ++i) {
+        Real* __restrict r = s.state(i);
+        for (std::size_t j = j0; j < j1; ++j) r[j] *= decay[i];
+      }
     if (Lp) EmitRange(c, s, Lp, Lp_stride, j0, j1);
     return 0.0;
   });
@@ -303,6 +355,7 @@ void DecayBatch(const BatchCoefficients<Real>& c, Real h_s, StateBatch<Real>& s,
 template <typename Real>
 void EmitBatch(const BatchCoefficients<Real>& c, const StateBatch<Real>& s, Real* Lp, std::size_t Lp_stride) {
   PHOS_CHECK(s.nc == c.nc);
+  CheckPerPoint(c, s);
   ForEachChunk(s.n, [&](std::size_t j0, std::size_t j1) {
     EmitRange(c, s, Lp, Lp_stride, j0, j1);
     return 0.0;

@@ -138,4 +138,104 @@ TEST(Batch, FloatAgreesWithDouble) {
 }
 
 }  // namespace
+
+// A phosphor map's batch (BatchCoefficients::per_point): every point decays at
+// its own kr and emits by its own scale, exactly as the scalar steps of that
+// point's material would, in every integrator, lit and dark, over a count
+// that is not a multiple of the packet width.
+BatchCoefficients<double> WithRandomMap(BatchCoefficients<double> c, std::size_t n, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> log_kr(std::log(1e-4), std::log(50.0)), scale(0.0, 3.0);
+  for (int i = 0; i < c.nc; ++i)
+    for (std::size_t j = 0; j < n; ++j) {
+      c.kr_per_point.push_back(std::exp(log_kr(rng)));
+      c.emission_scale.push_back(scale(rng));
+    }
+  return c;
+}
+
+TEST(Batch, PerPointParametersMatchTheScalarStepsOfEachPoint) {
+  Material m = TwoStateMaterial();
+  const std::size_t n = 1003;
+  auto c = WithRandomMap(BatchCoefficients<double>::Compile(m, {0, 1, 2}, {2, 3}, "m"), n, 7);
+  for (Integrator integrator : {Integrator::kExact, Integrator::kEuler, Integrator::kRk4}) {
+    Scene scene = RandomScene(n, 8);
+    StateBatch<double> before = scene.s;
+    std::vector<double> Lp(2 * n);
+    const double h = integrator == Integrator::kExact ? 30.0 : 0.01;
+    BatchStepInfo info = AdvanceBatch<double>(integrator, c, scene.E.data(), n, h, scene.s, Lp.data(), n);
+    double max_hk = 0;
+    for (std::size_t j = 0; j < n; ++j) {
+      std::vector<double> E8(8, 0.0);
+      for (int b = 0; b < 3; ++b) E8[b] = scene.E[b * n + j];
+      std::vector<double> a = ExcitationRates(m, E8, "m");
+      double L2 = 0, L3 = 0;
+      for (int i = 0; i < 2; ++i) {
+        const double r0 = before.state(i)[j], kr = c.kr_per_point[i * n + j];
+        max_hk = std::max(max_hk, h * (a[i] + kr));
+        const double r = integrator == Integrator::kExact   ? ExactStep(r0, a[i], kr, h)
+                         : integrator == Integrator::kEuler ? EulerStep(r0, a[i], kr, h)
+                                                            : Rk4Step(r0, a[i], kr, h);
+        EXPECT_TRUE(testing::RelativelyNear(scene.s.state(i)[j], r, 1e-13)) << j;
+        const double scale = c.emission_scale[i * n + j];
+        L2 += m.states[i].Lambda[2] * m.states[i].kr * scale * r;
+        L3 += m.states[i].Lambda[3] * m.states[i].kr * scale * r;
+      }
+      EXPECT_TRUE(testing::RelativelyNear(Lp[j], L2, 1e-13));
+      EXPECT_TRUE(testing::RelativelyNear(Lp[n + j], L3, 1e-13));
+    }
+    if (integrator != Integrator::kExact) {
+      EXPECT_NEAR(info.max_hk, max_hk, 1e-12 * max_hk);
+    }
+  }
+  // In the dark each point jumps by its own e^{-kr h}, and Lp follows.
+  Scene scene = RandomScene(n, 9);
+  StateBatch<double> before = scene.s;
+  std::vector<double> Lp(2 * n), Lp_emit(2 * n);
+  DecayBatch<double>(c, 600.0, scene.s, Lp.data(), n);
+  EmitBatch<double>(c, scene.s, Lp_emit.data(), n);
+  for (std::size_t j = 0; j < n; ++j) {
+    double L3 = 0;
+    for (int i = 0; i < 2; ++i) {
+      const double kr = c.kr_per_point[i * n + j];
+      EXPECT_TRUE(testing::RelativelyNear(
+          scene.s.state(i)[j], before.state(i)[j] * std::exp(-static_cast<long double>(kr) * 600), 1e-13));
+      L3 += m.states[i].Lambda[3] * m.states[i].kr * c.emission_scale[i * n + j] * scene.s.state(i)[j];
+    }
+    EXPECT_TRUE(testing::RelativelyNear(Lp[n + j], L3, 1e-13));
+    EXPECT_EQ(Lp[n + j], Lp_emit[n + j]);
+  }
+}
+
+TEST(Batch, AUniformMapGivesTheUniformMaterialsBits) {
+  // kr_per_point = kr and scale 1 everywhere: the same states and Lp, bit for bit.
+  Material m = TwoStateMaterial();
+  const std::size_t n = 777;
+  auto uniform = BatchCoefficients<float>::Compile(m, {0, 1, 2}, {2, 3}, "m");
+  auto mapped = uniform;
+  for (int i = 0; i < 2; ++i)
+    for (std::size_t j = 0; j < n; ++j) {
+      mapped.kr_per_point.push_back(uniform.kr[i]);
+      mapped.emission_scale.push_back(1.0f);
+    }
+  Scene scene = RandomScene(n, 10);
+  std::vector<float> E(scene.E.begin(), scene.E.end());
+  StateBatch<float> a(2, n), b(2, n);
+  std::copy(scene.s.r.begin(), scene.s.r.end(), a.r.begin());
+  b.r = a.r;
+  std::vector<float> La(2 * n), Lb(2 * n);
+  for (int step = 0; step < 5; ++step) {
+    AdvanceBatch<float>(Integrator::kExact, uniform, E.data(), n, 0.7f, a, La.data(), n);
+    AdvanceBatch<float>(Integrator::kExact, mapped, E.data(), n, 0.7f, b, Lb.data(), n);
+  }
+  EXPECT_EQ(a.r, b.r);
+  EXPECT_EQ(La, Lb);
+  // In the dark the uniform batch takes one exp per state, the mapped one a
+  // packet exp per point: the same to float rounding.
+  DecayBatch<float>(uniform, 5.0f, a, La.data(), n);
+  DecayBatch<float>(mapped, 5.0f, b, Lb.data(), n);
+  for (std::size_t k = 0; k < a.r.size(); ++k) EXPECT_TRUE(testing::RelativelyNear(b.r[k], a.r[k], 3e-7)) << k;
+  for (std::size_t k = 0; k < La.size(); ++k) EXPECT_TRUE(testing::RelativelyNear(Lb[k], La[k], 3e-7)) << k;
+}
+
 }  // namespace phos

@@ -26,6 +26,14 @@ struct BatchCoefficients {
   std::vector<Real> kr;        // [nc]
   std::vector<Real> ke;        // [nc * n_exc], state-major
   std::vector<Real> emission;  // [n_em * nc]: Lambda_i[b] * kr_i (Eq. 8.2)
+  // Parameters that vary from point to point (a phosphor map over a surface,
+  // Sec. 8.5: "if spatial variation is desired, in textures"). Empty: every
+  // point has kr and emission above. Otherwise, for the n points of the
+  // batch, state-major: point j's state i decays at kr_per_point[i * n + j]
+  // instead of kr[i], and emits emission[b * nc + i] * emission_scale[i * n + j].
+  // Only mapped objects carry them: a uniform material pays nothing.
+  std::vector<Real> kr_per_point, emission_scale;
+  bool per_point() const { return !kr_per_point.empty(); }
 
   // excitation_bands / emission_bands index the material's grid. A band in
   // excitation_bands whose ke is unknown is a UserError (naming `where`).
