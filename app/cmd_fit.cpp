@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <functional>
 #include <regex>
 #include <optional>
 #include <set>
@@ -35,9 +36,11 @@
 namespace phos::app {
 namespace {
 
-// Writes a float image with named channels (EXR) or 8-bit grey (PNG), whole or not at all.
+// Writes a float image with named channels (EXR) or 8-bit grey (PNG), whole or not at all;
+// `annotate` adds header attributes.
 void WriteFloatImage(const std::filesystem::path& path, int width, int height, const std::vector<std::string>& names,
-                     const std::vector<float>& pixels) {
+                     const std::vector<float>& pixels,
+                     const std::function<void(OIIO::ImageSpec&)>& annotate = {}) {
   WriteAtomically(path, [&](const std::filesystem::path& temporary) {
     auto out = OIIO::ImageOutput::create(temporary.string());
     if (!out) ThrowUserError(path.string(), "", "no writer: " + OIIO::geterror());
@@ -46,6 +49,7 @@ void WriteFloatImage(const std::filesystem::path& path, int width, int height, c
                          png ? OIIO::TypeDesc::UINT8 : OIIO::TypeDesc::FLOAT);
     spec.channelnames = names;
     if (!png) spec.attribute("compression", "zip");
+    if (annotate) annotate(spec);
     if (!out->open(temporary.string(), spec) || !out->write_image(OIIO::TypeDesc::FLOAT, pixels.data()) ||
         !out->close())
       ThrowUserError(path.string(), "", "could not write (disk full?): " + out->geterror());
@@ -217,8 +221,45 @@ std::string MapInputs(const MapArgs& args, int tiles) {
 // The session's frames as a map's input, only the rows of tile `index` of
 // `count` (rows [H index / count, H (index + 1) / count)): a tile holds only
 // its rows in memory. The whole map is tile 0 of 1.
+// How the session charged the sample before the decay (its settings and the
+// lab's calibrated band irradiance of the charge light): a renderer that
+// takes the map as a phosphor needs it to tell a texel's level from its
+// charge (docs/formats.md, "phos:charge_s"). Empty irradiance: not recorded.
+struct MapCharge {
+  float charge_s = 0;
+  std::vector<float> band_irradiance;
+
+  void Annotate(OIIO::ImageSpec& spec) const {
+    if (band_irradiance.empty()) return;
+    spec.attribute("phos:charge_s", charge_s);
+    spec.attribute("phos:charge_band_irradiance",
+                   OIIO::TypeDesc(OIIO::TypeDesc::FLOAT, static_cast<int>(band_irradiance.size())),
+                   band_irradiance.data());
+  }
+  static MapCharge FromSpec(const OIIO::ImageSpec& spec) {
+    MapCharge charge;
+    const OIIO::ParamValue* irradiance = spec.find_attribute("phos:charge_band_irradiance");
+    if (!irradiance || irradiance->type().basetype != OIIO::TypeDesc::FLOAT) return charge;
+    const float* values = static_cast<const float*>(irradiance->data());
+    charge.band_irradiance.assign(values, values + irradiance->type().numelements());
+    charge.charge_s = spec.get_float_attribute("phos:charge_s", 0.0f);
+    return charge;
+  }
+  static MapCharge FromSession(const SessionRecord& session) {
+    MapCharge charge;
+    const std::string light = session.settings.value("charge_light", "");
+    const nlohmann::json irradiance =
+        session.devices.value("light_band_irradiance", nlohmann::json::object()).value(light, nlohmann::json());
+    if (light.empty() || !irradiance.is_array()) return charge;
+    for (const auto& value : irradiance) charge.band_irradiance.push_back(value.get<float>());
+    charge.charge_s = session.settings.value("charge_s", 0.0f);
+    return charge;
+  }
+};
+
 struct MapFrames {
   DecayMapInput input;
+  MapCharge charge;
   std::vector<std::string> channel_names;
   int clipped = 0;
   int full_height = 0;
@@ -228,7 +269,8 @@ struct MapFrames {
 MapFrames ReadMapFrames(const MapArgs& args, int index, int count) {
   namespace fs = std::filesystem;
   const fs::path dir = args.session;
-  const std::string protocol = ReadSessionRecord(dir).protocol;
+  const SessionRecord session = ReadSessionRecord(dir);
+  const std::string& protocol = session.protocol;
   if (protocol != "decay")
     ThrowUserError(dir.string(), "", "is a '" + protocol + "' session; a decay map needs a decay session");
   // Typed records, every frame checked against its size and checksum first:
@@ -239,6 +281,7 @@ MapFrames ReadMapFrames(const MapArgs& args, int index, int count) {
     std::printf("phos fit map: %s: torn last line left out ('phos capture resume' repairs it)\n",
                 (dir / "frames.jsonl").string().c_str());
   MapFrames out;
+  out.charge = MapCharge::FromSession(session);
   DecayMapInput& input = out.input;
   ProgressBar reading("reading frames", records.frames.size());
   for (const FrameRecord& line : records.frames) {
@@ -286,11 +329,12 @@ struct MapImage {
   std::size_t frames = 0;
   int clipped = 0;
   double seconds = 0;
+  MapCharge charge;
 };
 
 MapImage MapImageOf(const DecayMap& map, const MapFrames& frames) {
   MapImage image{map.width, map.height, {"kr"}, {}, map.no_decay, map.one_state, frames.input.frames.size(),
-                 frames.clipped, map.seconds};
+                 frames.clipped, map.seconds, frames.charge};
   const bool two_states = !map.kr2.empty();
   const int C = map.channels, nch = 2 + 2 * C + (two_states ? 1 + C : 0);
   for (int c = 0; c < C; ++c) image.names.push_back("amplitude." + frames.channel_names[c]);
@@ -332,7 +376,8 @@ void WriteMapOutputs(const MapArgs& args, const MapImage& map, const std::string
   fs::create_directories(args.out, ec);
   if (ec) ThrowUserError(args.out, "", "cannot create the output folder: " + ec.message());
   const fs::path exr = fs::path(args.out) / "decay-map.exr";
-  WriteFloatImage(exr, map.width, map.height, map.names, map.pixels);
+  WriteFloatImage(exr, map.width, map.height, map.names, map.pixels,
+                  [&](OIIO::ImageSpec& spec) { map.charge.Annotate(spec); });
   // A look at kr: grey from the 1st to the 99th percentile.
   std::vector<float> finite;
   for (float k : kr)
@@ -425,6 +470,7 @@ void RunFitMapTile(const MapArgs& args) {
     spec.attribute("phos:frames", static_cast<int>(tile.frames));
     spec.attribute("phos:clipped_frames", tile.clipped);
     spec.attribute("phos:seconds", static_cast<float>(tile.seconds));
+    tile.charge.Annotate(spec);
     if (!out->open(temporary.string(), spec) || !out->write_image(OIIO::TypeDesc::FLOAT, tile.pixels.data()) ||
         !out->close())
       ThrowUserError(exr.string(), "", "could not write (disk full?): " + out->geterror());
@@ -477,6 +523,7 @@ void RunFitMapMerge(const MapArgs& args) {
       map.names = spec.channelnames;
       map.frames = static_cast<std::size_t>(spec.get_int_attribute("phos:frames", 0));
       map.clipped = spec.get_int_attribute("phos:clipped_frames", 0);
+      map.charge = MapCharge::FromSpec(spec);
       map.pixels.resize(static_cast<std::size_t>(map.width) * map.height * map.names.size());
     }
     if (spec.width != map.width || spec.channelnames != map.names || first_row < 0 ||
