@@ -1,5 +1,7 @@
 #include "phos/render/geometry.h"
 
+#include "phos/render/phosphor_map.h"
+
 #include <algorithm>
 #include <bit>
 #include <cmath>
@@ -660,10 +662,18 @@ void TexelAtlas::BuildUv(ObjectTexels& texels, const Object& object, const Scene
   if (object.phosphor_mask)
     mask = SampleMaskGrid(*object.phosphor_mask, mesh.v_up, R,
                           geometry.scene().source + ": objects[" + std::to_string(o) + "] '" + object.name + "'");
+  // A map's pixels without a decay are bare too: the measured sample did not glow there.
+  const PhosphorMap* map = object.phosphor_map.get();
+  auto map_pixel = [&](std::size_t cell) {
+    const float u = (static_cast<float>(cell % R) + 0.5f) / static_cast<float>(R);
+    const float v = (static_cast<float>(cell / R) + 0.5f) / static_cast<float>(R);
+    return map->PixelAt(u, v, mesh.v_up);
+  };
   texels.uv_index.assign(std::size_t(R) * R, -1);
   for (std::size_t cell = 0; cell < best.size(); ++cell) {
     if (best[cell] == -1e30f) continue;
-    if (!mask.empty() && !(mask[cell] > 0)) {
+    const std::size_t pixel = map ? map_pixel(cell) : 0;
+    if ((!mask.empty() && !(mask[cell] > 0)) || (map && !map->Decays(pixel))) {
       texels.uv_index[cell] = kMaskedOut;
       ++texels.masked_out;
       continue;
@@ -671,11 +681,15 @@ void TexelAtlas::BuildUv(ObjectTexels& texels, const Object& object, const Scene
     texels.uv_index[cell] = static_cast<std::int32_t>(texels.anchors.size());
     texels.anchors.push_back(anchor[cell]);
     if (!mask.empty()) texels.coverage.push_back(mask[cell]);
+    if (map) texels.map_pixel.push_back(static_cast<std::uint32_t>(pixel));
   }
   texels.count = texels.anchors.size();
   if (object.phosphor_mask && texels.count == 0)
     ThrowUserError(geometry.scene().source, "objects[" + std::to_string(o) + "].phosphor_mask",
                    "the mask '" + object.phosphor_mask->string() + "' is 0 wherever the mesh's UV map lies");
+  if (map && texels.count == 0)
+    ThrowUserError(geometry.scene().source, "objects[" + std::to_string(o) + "].phosphor_map",
+                   "the map '" + map->file.string() + "' has no pixel with a decay wherever the mesh's UV map lies");
 }
 
 std::size_t TexelAtlas::UvTexelOf(const ObjectTexels& o, int triangle, float b1, float b2) {
@@ -693,7 +707,7 @@ std::size_t TexelAtlas::UvTexelOf(const ObjectTexels& o, int triangle, float b1,
       if (o.uv_index[std::size_t(yy) * R + xx] >= 0)
         return static_cast<std::size_t>(o.uv_index[std::size_t(yy) * R + xx]);
     }
-  return o.masked() ? kNoTexel : 0;
+  return o.masked() || !o.map_pixel.empty() ? kNoTexel : 0;
 }
 
 std::size_t TexelAtlas::total_texels() const {

@@ -18,6 +18,11 @@ void RequireStatic(const Scene& scene) {
   for (const Object& o : scene.objects)
     if (o.motion.Moves())
       ThrowUserError(scene.source, "objects", "the comparison needs static objects ('" + o.name + "' moves)");
+  for (const Object& o : scene.objects)
+    if (o.phosphor_map || o.phosphor_mask)
+      ThrowUserError(scene.source, "objects",
+                     "the comparison takes one material over each whole object ('" + o.name + "' has a " +
+                         (o.phosphor_map ? "phosphor_map" : "phosphor_mask") + ")");
   for (const Light& l : scene.lights)
     if (l.motion.Moves())
       ThrowUserError(scene.source, "lights", "the comparison needs static lights ('" + l.name + "' moves)");

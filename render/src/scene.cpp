@@ -1,4 +1,6 @@
 #include "phos/render/scene.h"
+
+#include "phos/render/phosphor_map.h"
 #include "phos/render/spectral_upsampling.h"
 
 #include <algorithm>
@@ -350,6 +352,34 @@ void ReadPhosphor(const JsonField& o, const std::filesystem::path& base_dir, con
   path = file.string();
 }
 
+// "phosphor_map": a decay map of `phos fit map` over the mesh's UV map
+// (phosphor_map.h): one texel per map pixel along its longer side unless
+// "uv_resolution" says fewer.
+void ReadPhosphorMapField(const JsonField& f, const std::filesystem::path& base_dir, Object& object) {
+  if (!object.phosphor) f.Fail("a map gives a phosphor's rates and levels per texel: give the material ('phosphor')");
+  if (!object.mesh->has_uvs())
+    f.Fail("the map lies on the mesh's UV map, and the mesh (" + object.mesh->source + ") has none");
+  if (object.texels == "auto") f.Fail("a mapped phosphor's texels are its UV map's: use \"texels\": \"uv\"");
+  const std::filesystem::path file = base_dir / f.NonEmptyString();
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(file, ec))
+    f.Fail("map file '" + file.string() + "' does not exist or is not a regular file");
+  auto map = std::make_shared<PhosphorMap>(ReadPhosphorMap(file, f.source(), f.path()));
+  const int nc = object.phosphor->state_count();
+  if (map->states != nc)
+    f.Fail("the map '" + file.string() + "' has " + std::to_string(map->states) + " state(s)" +
+           (map->states == 2 ? " (kr2)" : "") + " and the material '" + object.phosphor->name + "' " +
+           std::to_string(nc) + ": fit both with the same number (phos fit map --states)");
+  const int finest = std::max(map->width, map->height);
+  if (object.uv_resolution > finest)
+    f.Fail("uv_resolution " + std::to_string(object.uv_resolution) + " is finer than the map's " +
+           std::to_string(map->width) + " x " + std::to_string(map->height) +
+           " pixels: texels would repeat its pixels (leave it out for one texel per pixel)");
+  if (object.uv_resolution == 0) object.uv_resolution = finest;
+  object.phosphor_map = std::move(map);
+  object.texels = "uv";
+}
+
 // "unknown_ke" and "initial", which only a phosphor may have.
 void ReadPhosphorPolicy(const JsonField& o, bool is_phosphor, bool& unknown_ke_as_zero, InitialState& initial) {
   if (auto f = o.Optional("unknown_ke")) {
@@ -607,7 +637,7 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
     const JsonField o = objects.At(i);
     o.RejectUnknownKeys({"name", "mesh", "group", "shape", "albedo", "phosphor", "unknown_ke", "initial",
                          "texel_size_m", "texels", "uv_resolution", "transform", "animation", "subsurface",
-                         "two_sided", "emission", "phosphor_mask", "metallic", "roughness"});
+                         "two_sided", "emission", "phosphor_mask", "phosphor_map", "metallic", "roughness"});
     Object object;
     object.name = o.Has("name") ? o["name"].NonEmptyString() : "object " + std::to_string(i);
     if (o.Has("mesh") == o.Has("shape")) o.Fail("give exactly one of 'mesh' (a file) or 'shape'");
@@ -694,6 +724,7 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
       object.phosphor_mask = file;
       object.texels = "uv";
     }
+    if (auto f = o.Optional("phosphor_map")) ReadPhosphorMapField(*f, base_dir, object);
     if (auto f = o.Optional("emission")) scene.lights.push_back(ReadEmission(*f, object.name, i, scene.bands));
     scene.objects.push_back(std::move(object));
   }

@@ -1,5 +1,7 @@
 #include "phos/render/solver.h"
 
+#include "phos/render/phosphor_map.h"
+
 #include <algorithm>
 #include <cmath>
 #include <array>
@@ -83,6 +85,7 @@ CoupledSolver::CoupledSolver(const Scene& scene, SceneGeometry& geometry)
     }
     g.coefficients = BatchCoefficients<float>::Compile(material, g.excitation_bands, g.emission_bands,
                                                        where + " lit by the scene's lights");
+    if (object.phosphor_map) ApplyPhosphorMap(*object.phosphor_map, material, texels.map_pixel, g.coefficients, where);
     g.states = StateBatch<float>(material.state_count(), texels.count, 0.0f);
     g.Lp.assign(g.emission_bands.size() * texels.count, 0.0f);
     g.E.assign(g.excitation_bands.size() * texels.count, 0.0f);
@@ -239,7 +242,8 @@ void CoupledSolver::InitialStates() {
         for (int i = 0; i < c.nc; ++i) {
           double a = 0;
           for (int b = 0; b < c.n_exc; ++b) a += double(c.ke[i * c.n_exc + b]) * g.E[b * n + j];
-          g.states.state(i)[j] = a > 0 ? static_cast<float>(a / (a + c.kr[i])) : 0.0f;
+          const double kr = c.per_point() ? c.kr_per_point[i * n + j] : c.kr[i];
+          g.states.state(i)[j] = a > 0 ? static_cast<float>(a / (a + kr)) : 0.0f;
         }
       });
     }

@@ -1,9 +1,12 @@
-// Phosphor masks (glow paint on a base): a mask's bare texels carry no
-// state, and the painted ones glow by their share of paint, in the direct
-// and the path transports. The mask is a PNG written here with a random
-// pattern of bare, partly and fully painted cells, one per texel of a quad
-// whose UV map spans it; the counts and the glow are worked out from the
-// pattern, not from phos.
+// Phosphors that vary across a surface.
+// Masks (glow paint on a base): a mask's bare texels carry no state, and the
+// painted ones glow by their share of paint, in the direct and the path
+// transports. The mask is a PNG written here with a random pattern of bare,
+// partly and fully painted cells, one per texel of a quad whose UV map spans
+// it; the counts and the glow are worked out from the pattern, not from phos.
+// Maps (a `phos fit map` EXR as the phosphor): each texel decays at its
+// pixel's rate and glows by its pixel's amplitude over the map's median; the
+// map is written here at random, the expectations worked out from it.
 
 #include <gtest/gtest.h>
 
@@ -11,10 +14,13 @@
 #include <fstream>
 #include <random>
 
+#include <OpenImageIO/imagebuf.h>
+
 #include <OpenImageIO/imageio.h>
 #include <nlohmann/json.hpp>
 
 #include "phos/render/geometry.h"
+#include "phos/render/phosphor_map.h"
 #include "phos/render/renderer.h"
 #include "phos/render/scene.h"
 #include "phos/render/solver.h"
@@ -186,6 +192,200 @@ TEST(PhosphorMask, BadMasksAreOneLine) {
               j["objects"].back()["phosphor_mask"] = "not-an-image.png";
             }).find("not an image"),
             std::string::npos);
+}
+
+
+// A random decay map of kCells^2 pixels as `phos fit map` writes it: kr,
+// amplitude.R/G/B, background.R/G/B, rms, and with two states kr2 and
+// amplitude2.R/G/B. About 20% of the pixels have no decay (kr NaN), one has
+// a finite kr but no amplitude, and with two states a third keep one state
+// (kr2 NaN, amplitude2 0).
+struct RandomMap {
+  std::filesystem::path exr;
+  int states = 1;
+  std::vector<float> kr[2], amplitude[2];  // per pixel, the image's rows from the top; amplitude: sum over channels
+  int no_decay = 0;
+};
+
+RandomMap WriteRandomMap(const std::filesystem::path& dir, int states, unsigned seed, bool tile = false) {
+  RandomMap map;
+  map.states = states;
+  map.exr = dir / ("map-" + std::to_string(states) + (tile ? "-tile" : "") + ".exr");
+  std::vector<std::string> names = {"kr", "amplitude.R", "amplitude.G", "amplitude.B", "background.R",
+                                    "background.G", "background.B", "rms"};
+  if (states == 2) names.insert(names.end(), {"kr2", "amplitude2.R", "amplitude2.G", "amplitude2.B"});
+  const int nch = static_cast<int>(names.size()), n = kCells * kCells;
+  std::mt19937 random(seed);
+  std::uniform_real_distribution<float> uniform;
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  std::vector<float> pixels(static_cast<std::size_t>(n) * nch, 0.0f);
+  for (int i = 0; i < 2; ++i) {
+    map.kr[i].assign(n, nan);
+    map.amplitude[i].assign(n, 0.0f);
+  }
+  for (int p = 0; p < n; ++p) {
+    float* px = &pixels[static_cast<std::size_t>(p) * nch];
+    const bool decays = uniform(random) >= 0.2f;
+    px[0] = decays ? std::exp(std::log(0.01f) + uniform(random) * std::log(100.0f)) : nan;  // 0.01 to 1 /s
+    for (int c = 0; c < 3; ++c) px[1 + c] = decays ? 50 + 400 * uniform(random) : 0.0f;
+    if (p == 7) {  // a finite rate with nothing emitted: no decay either
+      px[0] = 0.1f;
+      px[1] = px[2] = px[3] = 0;
+    }
+    px[7] = 1;
+    if (decays && p != 7) {
+      map.kr[0][p] = px[0];
+      map.amplitude[0][p] = px[1] + px[2] + px[3];
+    } else {
+      ++map.no_decay;
+    }
+    if (states == 2) {
+      const bool two = decays && p != 7 && uniform(random) >= 0.3f;
+      px[8] = two ? px[0] * (2 + 20 * uniform(random)) : nan;
+      for (int c = 0; c < 3; ++c) px[9 + c] = two ? 100 * uniform(random) : 0.0f;
+      if (two) {
+        map.kr[1][p] = px[8];
+        map.amplitude[1][p] = px[9] + px[10] + px[11];
+      }
+    }
+  }
+  OIIO::ImageSpec spec(kCells, kCells, nch, OIIO::TypeDesc::FLOAT);
+  spec.channelnames = names;
+  if (tile) spec.attribute("phos:first_row", 0);
+  auto out = OIIO::ImageOutput::create(map.exr.string());
+  EXPECT_TRUE(out->open(map.exr.string(), spec));
+  EXPECT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, pixels.data()));
+  out->close();
+  return map;
+}
+
+float MedianOf(std::vector<float> values) {
+  std::vector<float> finite;
+  for (float v : values)
+    if (v > 0) finite.push_back(v);
+  std::sort(finite.begin(), finite.end());
+  return finite[finite.size() / 2];
+}
+
+TEST(PhosphorMap, EachTexelDecaysAtItsPixelsRateAndGlowsByItsAmplitude) {
+  const MaskedQuad quad = WriteMaskedQuad("map_glow");
+  for (int states : {1, 2}) {
+    SCOPED_TRACE(states);
+    const RandomMap map = WriteRandomMap(quad.dir, states, 11 + states);
+    // The material: Lambda_i kr_i gives the level, its kr are replaced by the map's.
+    auto material = phos::testing::UniformPhosphor(0.2, std::vector<double>(8, 0.1), {0, 0, 1, 2, 1, 0, 0, 0});
+    if (states == 2) {
+      ExcitedState fast = material->states[0];
+      fast.kr = 3.0;  // listed first: states are matched by rate, not by order
+      fast.Lambda = {0, 0, 0.5, 0.25, 0, 0, 0, 0};
+      material->states.insert(material->states.begin(), fast);
+    }
+    const double r0 = 0.5, t = 2.5;
+    Scene scene = EmptyScene(64, 64);
+    scene.camera.keys = {{0, Vec3(0.5, 2, 0.501), Vec3(0.5, 0, 0.5)}};
+    scene.camera.fov_deg = 24;
+    Object object = MakeObject("sample", LoadMesh(quad.obj, "", "test"), 0.5, material);
+    object.phosphor_map = std::make_shared<PhosphorMap>(ReadPhosphorMap(map.exr, "test", "phosphor_map"));
+    object.texels = "uv";
+    object.uv_resolution = kCells;
+    object.initial = {InitialState::Kind::kUniform, r0};
+    scene.objects.push_back(object);
+    SceneGeometry geometry(scene);
+    CoupledSolver solver(scene, geometry);
+    const TexelAtlas::ObjectTexels& texels = solver.atlas().objects()[0];
+    // Model only what the scene requires: pixels without a decay carry no state.
+    EXPECT_GT(map.no_decay, 20);
+    EXPECT_EQ(texels.masked_out, static_cast<std::size_t>(map.no_decay));
+    EXPECT_EQ(texels.count, static_cast<std::size_t>(kCells * kCells - map.no_decay));
+    solver.AdvanceTo(t);  // no light: each state decays at its texel's rate
+
+    const float median[2] = {MedianOf(map.amplitude[0]), states == 2 ? MedianOf(map.amplitude[1]) : 1.0f};
+    const ExcitedState& slow = material->states[states == 2 ? 1 : 0];
+    auto expected_Lp3 = [&](int pixel) {
+      if (!(map.kr[0][pixel] > 0)) return 0.0;
+      double L = slow.Lambda[3] * slow.kr * map.amplitude[0][pixel] / median[0] * r0 * std::exp(-map.kr[0][pixel] * t);
+      if (states == 2 && map.kr[1][pixel] > 0) {
+        const ExcitedState& fast = material->states[0];
+        L += fast.Lambda[3] * fast.kr * map.amplitude[1][pixel] / median[1] * r0 * std::exp(-map.kr[1][pixel] * t);
+      }
+      return L;
+    };
+    FrameOptions direct;
+    FrameOptions path;
+    path.transport = Transport::kPath;
+    path.spp = 2;
+    const Image d = RenderBands(geometry, &solver, direct);
+    const Image p = RenderBands(geometry, &solver, path);
+    const CameraRays camera(scene, t);
+    const Mesh& mesh = *scene.objects[0].mesh;
+    int dark = 0, glowing = 0;
+    for (int y = 0; y < 64; ++y)
+      for (int x = 0; x < 64; ++x) {
+        const Hit hit = geometry.Intersect(camera.origin(), camera.Direction(x + 0.5f, y + 0.5f));
+        ASSERT_TRUE(hit);
+        const Eigen::Vector3i& tri = mesh.uv_triangles[hit.triangle];
+        const Eigen::Vector2f uv =
+            (1 - hit.b1 - hit.b2) * mesh.uvs[tri[0]] + hit.b1 * mesh.uvs[tri[1]] + hit.b2 * mesh.uvs[tri[2]];
+        const Eigen::Vector2f in_cell = uv * kCells - (uv * kCells).array().floor().matrix();
+        if ((in_cell.array() < 0.25f).any() || (in_cell.array() > 0.75f).any()) continue;
+        // The OBJ's v runs up from the image's bottom row.
+        const int column = std::clamp(static_cast<int>(uv.x() * kCells), 0, kCells - 1);
+        const int row = kCells - 1 - std::clamp(static_cast<int>(uv.y() * kCells), 0, kCells - 1);
+        const double expected = expected_Lp3(row * kCells + column);
+        ASSERT_NEAR(d.at(x, y)[3], expected, 1e-6 + 2e-6 * expected) << x << "," << y;
+        ASSERT_NEAR(p.at(x, y)[3], expected, 1e-6 + 2e-6 * expected) << x << "," << y;
+        (expected == 0 ? dark : glowing)++;
+      }
+    EXPECT_GT(dark, 100);
+    EXPECT_GT(glowing, 400);
+  }
+}
+
+TEST(PhosphorMap, BadMapsAreOneLine) {
+  const MaskedQuad quad = WriteMaskedQuad("map_bad");
+  WriteRandomMap(quad.dir, 1, 3);
+  WriteRandomMap(quad.dir, 2, 4);
+  WriteRandomMap(quad.dir, 1, 5, /*tile=*/true);
+  const std::filesystem::path material = phos::testing::Fixture("materials/green.json");
+  auto error = [&](const std::function<void(nlohmann::json&)>& edit) {
+    nlohmann::json scene = {{"schema", "phos.scene/1"},
+                            {"name", "mapped"},
+                            {"camera", {{"position", {0.5, 2, 0.5}}, {"look_at", {0.5, 0, 0.5}}, {"width", 8}, {"height", 8}}},
+                            {"time", {{"start_s", 0}, {"end_s", 1}, {"fps", 1}}},
+                            {"lights", nlohmann::json::array()},
+                            {"objects",
+                             {{{"name", "sample"},
+                               {"mesh", quad.obj.string()},
+                               {"albedo", 0.5},
+                               {"phosphor", material.string()},
+                               {"phosphor_map", "map-1.exr"}}}}};
+    edit(scene["objects"][0]);
+    try {
+      const Scene loaded = SceneFromJson(scene, quad.dir, "mapped.json");
+      SceneGeometry geometry(loaded);
+      CoupledSolver solver(loaded, geometry);
+      EXPECT_EQ(solver.atlas().objects()[0].uv_resolution, loaded.objects[0].uv_resolution);
+    } catch (const UserError& e) {
+      EXPECT_EQ(std::string(e.what()).find('\n'), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("phosphor_map"), std::string::npos) << e.what();
+      return std::string(e.what());
+    }
+    return std::string("accepted");
+  };
+  auto fails_with = [&](const std::function<void(nlohmann::json&)>& edit, const std::string& part) {
+    const std::string message = error(edit);
+    EXPECT_NE(message.find(part), std::string::npos) << message;
+  };
+  EXPECT_EQ(error([](nlohmann::json&) {}), "accepted");
+  fails_with([](nlohmann::json& o) { o["phosphor_map"] = "missing.exr"; }, "missing.exr");
+  fails_with([](nlohmann::json& o) { o["phosphor_map"] = "mask.png"; }, "no 'kr'");
+  fails_with([](nlohmann::json& o) { o["phosphor_map"] = "map-1-tile.exr"; }, "--merge");
+  fails_with([](nlohmann::json& o) { o["phosphor_map"] = "map-2.exr"; }, "2 state(s) (kr2)");
+  fails_with([](nlohmann::json& o) { o["uv_resolution"] = kCells + 1; }, "finer than the map's 16 x 16");
+  fails_with([](nlohmann::json& o) { o.erase("phosphor"); }, "give the material");
+  fails_with([](nlohmann::json& o) { o["texels"] = "auto"; }, "\"uv\"");
+  std::ofstream(quad.dir / "not-an-image.exr") << "text";
+  fails_with([](nlohmann::json& o) { o["phosphor_map"] = "not-an-image.exr"; }, "not an image");
 }
 
 }  // namespace

@@ -304,7 +304,10 @@ class TexelAtlas {
     // phosphor covers, in (0, 1]; the texels the mask leaves bare have no
     // index (uv_index kMaskedOut) and are counted here. Empty: unmasked.
     std::vector<float> coverage;
-    std::size_t masked_out = 0;
+    std::size_t masked_out = 0;  // bare texels of a mask, and texels over a map's pixels without a decay
+    // A mapped phosphor (Object::phosphor_map): per texel, the map's pixel
+    // under its centre. Empty: unmapped.
+    std::vector<std::uint32_t> map_pixel;
     bool uv() const { return uv_resolution > 0; }
     bool masked() const { return !coverage.empty(); }
   };

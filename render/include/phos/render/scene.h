@@ -25,6 +25,8 @@
 
 namespace phos::render {
 
+struct PhosphorMap;  // phosphor_map.h
+
 using Vec3 = Eigen::Vector3d;
 
 // Limits of what a scene and its meshes may hold, checked at load time and
@@ -127,6 +129,11 @@ struct Object {
   // of each texel the phosphor covers. Texels where it is 0 carry no state
   // and glow not at all; the others glow by their share. Unset: everywhere.
   std::optional<std::filesystem::path> phosphor_mask;
+  // A phosphor measured across a surface (phosphor_map.h): per texel, the
+  // map's rates, and its amplitudes as a share of the material's level.
+  // Pixels without a decay carry no state, as a mask's bare texels. Null:
+  // the material everywhere.
+  std::shared_ptr<const PhosphorMap> phosphor_map;
   std::string phosphor_path;
   bool unknown_ke_as_zero = false;  // the scene's explicit assumption, never phos's guess
   InitialState initial;
