@@ -93,13 +93,20 @@ rm -rf "$OUT/dusk-sign"
 rm -rf "$OUT/glow-sign"
 "$PHOS" render fixtures/scenes/glow-sign.json --out "$OUT/glow-sign" --times 10,21,25,35,50 \
   --contact-sheet "$OUT/glow-sign.png" $VIEWS
+# A tile wearing what the simulated lab measured of it (phos fit map): a
+# spot of a faster, brighter paint in green glow paint, charged by a desk
+# lamp until 20 s; fixtures/scenes/measured-tile.json is made by
+# scripts/make_map_fixture.py.
+rm -rf "$OUT/measured-tile"
+"$PHOS" render fixtures/scenes/measured-tile.json --out "$OUT/measured-tile" --times 10,21,25,30,40 \
+  --contact-sheet "$OUT/measured-tile.png" $VIEWS
 
 # The gallery: every fixture scene on one page, with its description, its
 # contact sheet and its night-vision frames.
 python3 scripts/gallery.py "$OUT" still-life:still-life:direct cornell:cornell-phosphor:path \
   cornell-dss:cornell-phosphor:dss light-trail:light-trail:direct dust-sheets:dust-sheets:direct \
   glowing-liquid:glowing-liquid:direct translucent-shadow:translucent-shadow:dss dusk-sign:dusk-sign:dss \
-  glow-sign:glow-sign:direct
+  glow-sign:glow-sign:direct measured-tile:measured-tile:direct
 
 echo "phos demo: simulated 11 Table 8.1 presets (60 s charge, 300 s dark, exact integrator)"
 echo "  curves (CSV: t,r_1,L_1..L_8):  $OUT/<material>.csv"
@@ -108,5 +115,6 @@ echo "  a captured sample (4 protocols): $OUT/capture-orange/{lvf-calibration,sp
 echo "    what it captured: $OUT/capture-orange/decay-frames.png (contact sheet), decay-curve.svg, excitation-curves.svg"
 echo "  the material fitted from it:  $OUT/fitted/orange.json, report $OUT/fitted/orange-report.html"
 echo "  rendered scenes (contact sheets): $OUT/still-life.png, $OUT/cornell.png, $OUT/cornell-dss.png, $OUT/light-trail.png,"
-echo "    $OUT/dust-sheets.png, $OUT/glowing-liquid.png, $OUT/translucent-shadow.png, $OUT/dusk-sign.png, $OUT/glow-sign.png; all on one page: $OUT/gallery.html"
+echo "    $OUT/dust-sheets.png, $OUT/glowing-liquid.png, $OUT/translucent-shadow.png, $OUT/dusk-sign.png,"
+echo "    $OUT/glow-sign.png, $OUT/measured-tile.png; all on one page: $OUT/gallery.html"
 echo "    frames (EXR data, PNG, night-vision PNG): $OUT/still-life/, $OUT/cornell/, $OUT/light-trail/, ..."
