@@ -681,9 +681,7 @@ int main(int argc, char** argv) {
         std::vector<float> M(g.object.size(), 0.0f);
         for (std::size_t p = 0; p < M.size(); ++p)
           if (g.object[p] == wax)
-            M[p] =
-                irradiance(g.position[p], g.normal[p]) * static_cast<float>(dipoles[wax].AnnulusIntegral(0, near[p])) +
-                r.irradiance[p];
+            M[p] = dipoles[wax].Exitance(irradiance(g.position[p], g.normal[p]), near[p], r.irradiance[p]);
         *seconds = Seconds(t0);
         return M;
       };

@@ -995,10 +995,7 @@ Image RenderBands(const SceneGeometry& geometry, const CoupledSolver* solver, co
           tracer.DirectIrradiance(g.position[p], g.normal[p], E, rays);
           const Dipole* d = &dipoles[static_cast<std::size_t>(g.object[p]) * nb];
           float* out = image.at(x, y);
-          for (int b = 0; b < nb; ++b)
-            out[b] += T *
-                      (E[b] * static_cast<float>(d[b].AnnulusIntegral(0, near[p])) + exitance.irradiance[p * nb + b]) /
-                      kPiF;
+          for (int b = 0; b < nb; ++b) out[b] += T * d[b].Exitance(E[b], near[p], exitance.irradiance[p * nb + b]) / kPiF;
         }
         total_rays += rays;
       });

@@ -68,6 +68,13 @@ struct Dipole {
   // peak, one on a surfel would count it with its neighbours' overlap). The
   // near field is instead E(x) AnnulusIntegral(0, near_m) with the receiver's
   // own irradiance, and the surfels carry only what lies beyond.
+  // The exitance of a translucent receiver: its own irradiance E_here
+  // through the near field (the disk of near_m about it, in closed form)
+  // plus what the surfels beyond carried to it (`gathered`, from a splat or
+  // an exact gather of SurfelKernel).
+  float Exitance(float E_here, float near_m, float gathered) const {
+    return E_here * static_cast<float>(AnnulusIntegral(0, near_m)) + gathered;
+  }
   float SurfelKernel(float r_f, float area, float near_m = 0) const {
     const double r = r_f, rho = std::sqrt(area / kPi), lo = near_m;
     if (r + rho <= lo) return 0.0f;
