@@ -676,6 +676,7 @@ void TexelAtlas::BuildUv(ObjectTexels& texels, const Object& object, const Scene
     if ((!mask.empty() && !(mask[cell] > 0)) || (map && !map->Decays(pixel))) {
       texels.uv_index[cell] = kMaskedOut;
       ++texels.masked_out;
+      texels.bare_anchors.push_back(anchor[cell]);
       continue;
     }
     texels.uv_index[cell] = static_cast<std::int32_t>(texels.anchors.size());

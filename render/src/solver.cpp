@@ -122,6 +122,7 @@ void CoupledSolver::BuildGlowPatches() {
   glow_.centre.resize(glow_.count);
   glow_.normal.resize(glow_.count);
   glow_.area.resize(glow_.count);
+  glow_.cells.assign(glow_.count, 0.0f);
   glow_.two_sided.resize(glow_.count);
   // Sample points of each source patch: the centres of its 4 children one level finer.
   std::vector<std::array<Vec3f, 4>> points(glow_.count);
@@ -136,10 +137,15 @@ void CoupledSolver::BuildGlowPatches() {
       triangle_base[t] = running;
       running += std::size_t(std::min<int>(texels.m[t], ms_cap)) * std::min<int>(texels.m[t], ms_cap);
     }
+    auto patch_of = [&](int t, float b1, float b2) {
+      return triangle_base[t] + SubTriangleIndex(std::min<int>(texels.m[t], ms_cap), b1, b2);
+    };
     atlas_.ForEachTexel(static_cast<int>(slot), [&](std::size_t k, int t, float b1, float b2) {
-      g.texel_patch[k] =
-          static_cast<std::uint32_t>(triangle_base[t] + SubTriangleIndex(std::min<int>(texels.m[t], ms_cap), b1, b2));
+      g.texel_patch[k] = static_cast<std::uint32_t>(patch_of(t, b1, b2));
     });
+    for (std::uint32_t patch : g.texel_patch) glow_.cells[patch] += 1;
+    for (const TexelAnchor& bare : texels.bare_anchors)
+      glow_.cells[patch_of(static_cast<int>(bare.triangle), bare.b1, bare.b2)] += 1;
     for (int t = 0; t < geometry_.triangle_count(g.object); ++t) {
       const int m = texels.m[t], ms = std::min(m, ms_cap);
       const float area = geometry_.Area(g.object, t) / static_cast<float>(ms * ms);
@@ -198,24 +204,27 @@ void CoupledSolver::BuildGlowPatches() {
 bool CoupledSolver::GatherGlow() {
   if (glow_.geometry_version != geometry_.version()) BuildGlowPatches();
   const std::size_t n = glow_.count, nbg = glow_.emission_bands.size();
-  // Mean Lp of each patch, band-major.
+  // Mean Lp of each patch over its cells, each texel by the share of paint
+  // it has (a bare cell: none), band-major.
   std::fill(glow_.Lp.begin(), glow_.Lp.end(), 0.0f);
-  std::vector<float> texels_in(n, 0.0f);
   for (std::size_t slot = 0; slot < groups_.size(); ++slot) {
     const Group& g = groups_[slot];
-    for (std::size_t j = 0; j < g.states.n; ++j) texels_in[g.texel_patch[j]] += 1;
+    const TexelAtlas::ObjectTexels& texels = atlas_.objects()[slot];
     for (std::size_t bi = 0; bi < nbg; ++bi) {
       const int e = g.emission_index[glow_.emission_bands[bi]];
       if (e < 0) continue;
       const float* Lp = g.Lp.data() + static_cast<std::size_t>(e) * g.states.n;
       float* out = glow_.Lp.data() + bi * n;
-      for (std::size_t j = 0; j < g.states.n; ++j) out[g.texel_patch[j]] += Lp[j];
+      if (texels.masked())
+        for (std::size_t j = 0; j < g.states.n; ++j) out[g.texel_patch[j]] += texels.coverage[j] * Lp[j];
+      else
+        for (std::size_t j = 0; j < g.states.n; ++j) out[g.texel_patch[j]] += Lp[j];
     }
   }
   bool any = false;
   for (std::size_t bi = 0; bi < nbg; ++bi)
     for (std::size_t k = 0; k < n; ++k) {
-      glow_.Lp[bi * n + k] /= std::max(texels_in[k], 1.0f);
+      glow_.Lp[bi * n + k] /= std::max(glow_.cells[k], 1.0f);
       any = any || glow_.Lp[bi * n + k] > 0;
     }
   if (!any) return false;

@@ -12,6 +12,8 @@
 
 #include <filesystem>
 #include <fstream>
+#include <functional>
+#include <optional>
 #include <random>
 
 #include <OpenImageIO/imagebuf.h>
@@ -194,6 +196,60 @@ TEST(PhosphorMask, BadMasksAreOneLine) {
             std::string::npos);
 }
 
+
+// Glow on glow (phosphor_irradiance): a masked phosphor lights another by
+// the paint it has, not as if painted whole. Over the same quad, a uniform
+// half coverage (every cell 128 of 255) puts 128/255 of the unmasked quad's
+// glow on a small phosphor above its middle, and paint on the left 7 of 16
+// columns puts what the integral of cos cos / d^2 over those columns says.
+// The old patch mean (over the painted texels only, whole) gave all of it
+// for the first and the left half's share (8 columns) for the second.
+void WriteMaskPng(const std::filesystem::path& png, const std::function<std::uint8_t(int, int)>& value) {
+  std::vector<std::uint8_t> pixels;
+  for (int row = 0; row < kCells; ++row)
+    for (int column = 0; column < kCells; ++column) pixels.push_back(value(row, column));
+  auto out = OIIO::ImageOutput::create(png.string());
+  OIIO::ImageSpec spec(kCells, kCells, 1, OIIO::TypeDesc::UINT8);
+  ASSERT_TRUE(out && out->open(png.string(), spec) && out->write_image(OIIO::TypeDesc::UINT8, pixels.data()));
+  out->close();
+}
+
+TEST(PhosphorMask, AMaskedPhosphorLightsOthersByItsShareOfPaint) {
+  const MaskedQuad quad = WriteMaskedQuad("mask_glow_on_glow");
+  WriteMaskPng(quad.dir / "half.png", [](int, int) { return std::uint8_t{128}; });
+  WriteMaskPng(quad.dir / "left.png", [](int, int column) { return std::uint8_t(column < 7 ? 255 : 0); });
+  auto glow_on_receiver = [&](const std::optional<std::filesystem::path>& mask) {
+    Scene scene = MaskedScene(quad, 0.2, 0.5);
+    scene.settings.phosphor_irradiance = true;
+    scene.objects[0].phosphor_mask = mask;
+    Mesh receiver = phos::testing::DiskFacingDown(0.05f, 0.8f, 12);
+    for (Eigen::Vector3f& p : receiver.positions) p += Eigen::Vector3f(0.5f, 0, 0.5f);
+    Object disk = MakeObject("receiver", receiver, 0.5, scene.objects[0].phosphor);
+    disk.texels = "auto";
+    scene.objects.push_back(disk);
+    SceneGeometry geometry(scene);
+    CoupledSolver solver(scene, geometry);
+    double E = 0;
+    const std::size_t n = solver.atlas().objects()[1].count;
+    for (std::size_t k = 0; k < n; ++k) E += solver.TexelGlowIrradiance(1, k)[3];
+    return E / static_cast<double>(n);
+  };
+  const double whole = glow_on_receiver(std::nullopt);
+  ASSERT_GT(whole, 0.0);
+  EXPECT_NEAR(glow_on_receiver(quad.dir / "half.png") / whole, 128.0 / 255.0, 1e-4);
+  // The receiver's middle, (0.5, 0.8, 0.5) facing down, sees the quad's
+  // point (x, 0, z) with cos cos / d^2 = 0.8^2 / d^4: summed over x < 7/16 and over all.
+  double left = 0, all = 0;
+  constexpr int kSteps = 800;
+  for (int i = 0; i < kSteps; ++i)
+    for (int k = 0; k < kSteps; ++k) {
+      const double x = (i + 0.5) / kSteps, z = (k + 0.5) / kSteps;
+      const double d2 = (x - 0.5) * (x - 0.5) + 0.64 + (z - 0.5) * (z - 0.5);
+      all += 0.64 / (d2 * d2);
+      if (x < 7.0 / 16) left += 0.64 / (d2 * d2);
+    }
+  EXPECT_NEAR(glow_on_receiver(quad.dir / "left.png") / whole, left / all, 0.01);
+}
 
 // A random decay map of kCells^2 pixels as `phos fit map` writes it: kr,
 // amplitude.R/G/B, background.R/G/B, rms, and with two states kr2 and

@@ -308,6 +308,9 @@ class TexelAtlas {
     // A mapped phosphor (Object::phosphor_map): per texel, the map's pixel
     // under its centre. Empty: unmapped.
     std::vector<std::uint32_t> map_pixel;
+    // Where the bare texels lie (masks and maps): the glow patches
+    // (phosphor_irradiance) count them, so that a patch glows by its share of paint.
+    std::vector<TexelAnchor> bare_anchors;
     bool uv() const { return uv_resolution > 0; }
     bool masked() const { return !coverage.empty(); }
   };

@@ -154,6 +154,9 @@ class CoupledSolver {
   struct GlowPatches {
     std::vector<Eigen::Vector3f> centre, normal;
     std::vector<float> area;
+    // Texel cells per patch, bare ones (a mask's, a map's) included: a
+    // patch's Lp is the mean over its cells of coverage x Lp.
+    std::vector<float> cells;
     std::vector<std::uint8_t> two_sided;  // per patch: its object glows from and receives on both faces
     std::vector<float> transfer;      // [receiver * count + source]
     std::vector<int> emission_bands;  // bands any phosphor emits
