@@ -80,18 +80,44 @@ float MaskAt(const MaskedQuad& quad, float u, float v) {
   return quad.pixels[row * kCells + column] / 255.0f;
 }
 
-Scene MaskedScene(const MaskedQuad& quad, double kr, double r0) {
+// The quad with `material` in states r0 over its kCells^2 UV texels, seen
+// from above by a 64 x 64 camera that sees only it.
+Scene QuadScene(const MaskedQuad& quad, std::shared_ptr<const Material> material, double r0) {
   Scene scene = EmptyScene(64, 64);
   scene.camera.keys = {{0, Vec3(0.5, 2, 0.501), Vec3(0.5, 0, 0.5)}};
-  scene.camera.fov_deg = 24;  // sees only the quad
-  Object object = MakeObject("sign", LoadMesh(quad.obj, "", "test"), 0.5,
-                             UniformPhosphor(kr, std::vector<double>(8, 0.1), {0, 0, 1, 2, 1, 0, 0, 0}));
-  object.phosphor_mask = quad.png;
+  scene.camera.fov_deg = 24;
+  Object object = MakeObject("sign", LoadMesh(quad.obj, "", "test"), 0.5, std::move(material));
   object.texels = "uv";
   object.uv_resolution = kCells;
   object.initial = {InitialState::Kind::kUniform, r0};
   scene.objects.push_back(object);
   return scene;
+}
+
+Scene MaskedScene(const MaskedQuad& quad, double kr, double r0) {
+  Scene scene = QuadScene(quad, UniformPhosphor(kr, std::vector<double>(8, 0.1), {0, 0, 1, 2, 1, 0, 0, 0}), r0);
+  scene.objects[0].phosphor_mask = quad.png;
+  return scene;
+}
+
+// Calls f(x, y, uv) for each pixel of QuadScene's view at time t whose ray
+// meets the quad well inside one cell: a pixel whose footprint could
+// straddle two cells is left out.
+template <typename F>
+void ForEachPixelInsideACell(const Scene& scene, const SceneGeometry& geometry, double t, F&& f) {
+  const CameraRays camera(scene, t);
+  const Mesh& mesh = *scene.objects[0].mesh;
+  for (int y = 0; y < 64; ++y)
+    for (int x = 0; x < 64; ++x) {
+      const Hit hit = geometry.Intersect(camera.origin(), camera.Direction(x + 0.5f, y + 0.5f));
+      ASSERT_TRUE(hit);
+      const Eigen::Vector3i& tri = mesh.uv_triangles[hit.triangle];
+      const Eigen::Vector2f uv =
+          (1 - hit.b1 - hit.b2) * mesh.uvs[tri[0]] + hit.b1 * mesh.uvs[tri[1]] + hit.b2 * mesh.uvs[tri[2]];
+      const Eigen::Vector2f in_cell = uv * kCells - (uv * kCells).array().floor().matrix();
+      if ((in_cell.array() < 0.25f).any() || (in_cell.array() > 0.75f).any()) continue;
+      f(x, y, uv);
+    }
 }
 
 TEST(PhosphorMask, BareTexelsCarryNoStateAndPaintedOnesGlowByTheirShare) {
@@ -112,24 +138,13 @@ TEST(PhosphorMask, BareTexelsCarryNoStateAndPaintedOnesGlowByTheirShare) {
   path.spp = 4;
   const Image d = RenderBands(geometry, &solver, direct);
   const Image p = RenderBands(geometry, &solver, path);
-  const CameraRays camera(scene, 0);
-  const Mesh& mesh = *scene.objects[0].mesh;
   int checked_bare = 0, checked_painted = 0;
-  for (int y = 0; y < 64; ++y)
-    for (int x = 0; x < 64; ++x) {
-      const Hit hit = geometry.Intersect(camera.origin(), camera.Direction(x + 0.5f, y + 0.5f));
-      ASSERT_TRUE(hit);
-      const Eigen::Vector3i& t = mesh.uv_triangles[hit.triangle];
-      const Eigen::Vector2f uv =
-          (1 - hit.b1 - hit.b2) * mesh.uvs[t[0]] + hit.b1 * mesh.uvs[t[1]] + hit.b2 * mesh.uvs[t[2]];
-      // Pixels whose footprint could straddle two cells are left out.
-      const Eigen::Vector2f in_cell = uv * kCells - (uv * kCells).array().floor().matrix();
-      if ((in_cell.array() < 0.25f).any() || (in_cell.array() > 0.75f).any()) continue;
-      const double expected = MaskAt(quad, uv.x(), uv.y()) * Lp3;
-      ASSERT_NEAR(d.at(x, y)[3], expected, 1e-5) << x << "," << y;
-      ASSERT_NEAR(p.at(x, y)[3], expected, 1e-5) << x << "," << y;
-      (expected == 0 ? checked_bare : checked_painted)++;
-    }
+  ForEachPixelInsideACell(scene, geometry, 0, [&](int x, int y, const Eigen::Vector2f& uv) {
+    const double expected = MaskAt(quad, uv.x(), uv.y()) * Lp3;
+    ASSERT_NEAR(d.at(x, y)[3], expected, 1e-5) << x << "," << y;
+    ASSERT_NEAR(p.at(x, y)[3], expected, 1e-5) << x << "," << y;
+    (expected == 0 ? checked_bare : checked_painted)++;
+  });
   EXPECT_GT(checked_bare, 100);
   EXPECT_GT(checked_painted, 100);
 }
@@ -337,15 +352,8 @@ TEST(PhosphorMap, EachTexelDecaysAtItsPixelsRateAndGlowsByItsAmplitude) {
       material->states.insert(material->states.begin(), fast);
     }
     const double r0 = 0.5, t = 2.5;
-    Scene scene = EmptyScene(64, 64);
-    scene.camera.keys = {{0, Vec3(0.5, 2, 0.501), Vec3(0.5, 0, 0.5)}};
-    scene.camera.fov_deg = 24;
-    Object object = MakeObject("sample", LoadMesh(quad.obj, "", "test"), 0.5, material);
-    object.phosphor_map = std::make_shared<PhosphorMap>(ReadPhosphorMap(map.exr, "test", "phosphor_map"));
-    object.texels = "uv";
-    object.uv_resolution = kCells;
-    object.initial = {InitialState::Kind::kUniform, r0};
-    scene.objects.push_back(object);
+    Scene scene = QuadScene(quad, material, r0);
+    scene.objects[0].phosphor_map = std::make_shared<PhosphorMap>(ReadPhosphorMap(map.exr, "test", "phosphor_map"));
     SceneGeometry geometry(scene);
     CoupledSolver solver(scene, geometry);
     const TexelAtlas::ObjectTexels& texels = solver.atlas().objects()[0];
@@ -372,26 +380,16 @@ TEST(PhosphorMap, EachTexelDecaysAtItsPixelsRateAndGlowsByItsAmplitude) {
     path.spp = 2;
     const Image d = RenderBands(geometry, &solver, direct);
     const Image p = RenderBands(geometry, &solver, path);
-    const CameraRays camera(scene, t);
-    const Mesh& mesh = *scene.objects[0].mesh;
     int dark = 0, glowing = 0;
-    for (int y = 0; y < 64; ++y)
-      for (int x = 0; x < 64; ++x) {
-        const Hit hit = geometry.Intersect(camera.origin(), camera.Direction(x + 0.5f, y + 0.5f));
-        ASSERT_TRUE(hit);
-        const Eigen::Vector3i& tri = mesh.uv_triangles[hit.triangle];
-        const Eigen::Vector2f uv =
-            (1 - hit.b1 - hit.b2) * mesh.uvs[tri[0]] + hit.b1 * mesh.uvs[tri[1]] + hit.b2 * mesh.uvs[tri[2]];
-        const Eigen::Vector2f in_cell = uv * kCells - (uv * kCells).array().floor().matrix();
-        if ((in_cell.array() < 0.25f).any() || (in_cell.array() > 0.75f).any()) continue;
-        // The OBJ's v runs up from the image's bottom row.
-        const int column = std::clamp(static_cast<int>(uv.x() * kCells), 0, kCells - 1);
-        const int row = kCells - 1 - std::clamp(static_cast<int>(uv.y() * kCells), 0, kCells - 1);
-        const double expected = expected_Lp3(row * kCells + column);
-        ASSERT_NEAR(d.at(x, y)[3], expected, 1e-6 + 2e-6 * expected) << x << "," << y;
-        ASSERT_NEAR(p.at(x, y)[3], expected, 1e-6 + 2e-6 * expected) << x << "," << y;
-        (expected == 0 ? dark : glowing)++;
-      }
+    ForEachPixelInsideACell(scene, geometry, t, [&](int x, int y, const Eigen::Vector2f& uv) {
+      // The OBJ's v runs up from the image's bottom row.
+      const int column = std::clamp(static_cast<int>(uv.x() * kCells), 0, kCells - 1);
+      const int row = kCells - 1 - std::clamp(static_cast<int>(uv.y() * kCells), 0, kCells - 1);
+      const double expected = expected_Lp3(row * kCells + column);
+      ASSERT_NEAR(d.at(x, y)[3], expected, 1e-6 + 2e-6 * expected) << x << "," << y;
+      ASSERT_NEAR(p.at(x, y)[3], expected, 1e-6 + 2e-6 * expected) << x << "," << y;
+      (expected == 0 ? dark : glowing)++;
+    });
     EXPECT_GT(dark, 100);
     EXPECT_GT(glowing, 400);
   }
