@@ -20,6 +20,17 @@ def png(width, height, channels, rows, srgb=False):
             chunk(b"IDAT", zlib.compress(raw, 9)) + chunk(b"IEND", b""))
 
 
+def wall_quad_buffer(width, height, centre_y, z):
+    """quad_buffer of a width x height rectangle in the plane z, centred on
+    x = 0 at height centre_y, facing +z (counter-clockwise seen from there),
+    u along +x and v down from its top edge (glTF's v = 0 is an image's top
+    row)."""
+    x0, x1 = -width / 2, width / 2
+    y0, y1 = centre_y - height / 2, centre_y + height / 2
+    positions = [(x0, y1, z), (x1, y1, z), (x1, y0, z), (x0, y0, z)]
+    return quad_buffer(positions, [(0, 0), (1, 0), (1, 1), (0, 1)], [0, 2, 1, 0, 3, 2])
+
+
 def quad_buffer(positions, uvs, indices):
     """The glTF fields of a four-corner mesh with TEXCOORD_0 and 16-bit
     indices in one embedded buffer: accessor 0 POSITION, 1 TEXCOORD_0,

@@ -34,7 +34,7 @@ import subprocess
 import sys
 import tempfile
 
-from fixture_gltf import quad_buffer
+from fixture_gltf import wall_quad_buffer
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 OUT = ROOT / "fixtures" / "scenes" / "measured-tile"
@@ -64,17 +64,12 @@ def measure(phos, spot, work):
 
 
 def tile_gltf():
-    x0, x1 = -TILE / 2, TILE / 2
-    y0, y1 = TILE_Y - TILE / 2, TILE_Y + TILE / 2
-    positions = [(x0, y1, TILE_Z), (x1, y1, TILE_Z), (x1, y0, TILE_Z), (x0, y0, TILE_Z)]
-    uvs = [(0, 0), (1, 0), (1, 1), (0, 1)]  # v down from the top edge, as the map's rows
-    indices = [0, 2, 1, 0, 3, 2]  # counter-clockwise seen from +z
     return {
         "asset": {"version": "2.0", "generator": "phos scripts/make_map_fixture.py"},
         "scene": 0, "scenes": [{"nodes": [0]}],
         "nodes": [{"mesh": 0, "name": "tile"}],
         "meshes": [{"name": "tile", "primitives": [{"attributes": {"POSITION": 0, "TEXCOORD_0": 1}, "indices": 2}]}],
-        **quad_buffer(positions, uvs, indices),
+        **wall_quad_buffer(TILE, TILE, TILE_Y, TILE_Z),  # v down, as the map's rows
     }
 
 

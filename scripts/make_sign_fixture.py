@@ -24,7 +24,7 @@ import json
 import math
 import pathlib
 
-from fixture_gltf import png, quad_buffer
+from fixture_gltf import png, wall_quad_buffer
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 OUT = ROOT / "fixtures" / "scenes" / "glow-sign"
@@ -74,11 +74,7 @@ def mask_rows(size=256, cell_w=6, cell_h=14, text="EXIT >"):
 
 
 def sign_gltf():
-    x0, x1 = -PLATE_W / 2, PLATE_W / 2
-    y0, y1 = PLATE_Y - PLATE_H / 2, PLATE_Y + PLATE_H / 2
-    positions = [(x0, y1, PLATE_Z), (x1, y1, PLATE_Z), (x1, y0, PLATE_Z), (x0, y0, PLATE_Z)]
-    uvs = [(0, 0), (1, 0), (1, 1), (0, 1)]  # v down from the top edge, as the image's rows
-    indices = [0, 2, 1, 0, 3, 2]  # counter-clockwise seen from +z
+    y1 = PLATE_Y + PLATE_H / 2
     # The lamp at (0, y1 + 0.35, 0.45), aimed at the plate's centre: a node's
     # light shines down its -z axis, so rotate -z onto the aim (about x).
     lamp = (0.0, y1 + 0.35, 0.45)
@@ -102,7 +98,7 @@ def sign_gltf():
             "metallicFactor": 0, "roughnessFactor": 0.8}}],
         "textures": [{"source": 0}],
         "images": [{"uri": "board.png"}],
-        **quad_buffer(positions, uvs, indices),
+        **wall_quad_buffer(PLATE_W, PLATE_H, PLATE_Y, PLATE_Z),
     }
 
 
