@@ -11,6 +11,7 @@
 #include <OpenImageIO/imagebufalgo.h>
 #include <OpenImageIO/imageio.h>
 #include <tbb/blocked_range.h>
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
 #include "phos/render/albedo_texture.h"
@@ -467,6 +468,24 @@ class Tracer {
     }
   };
 
+  // A lane's shadow ray toward one of the lights (next-event estimation).
+  struct LightShadowRay {
+    int lane, light;
+    LightRay ray;
+  };
+  // A thread's lanes and the lists of one bounce, kept from row to row: a
+  // lane is 1.4 KB (four Bands of kMaxBands), and allocating and zeroing 256
+  // of them for every row was 2.5% of a path-traced frame (perf, bench_render
+  // --benchmark_filter=PathFrameDark1spp).
+  struct Wavefront {
+    std::vector<PathLane> lanes;
+    std::vector<int> live, scattering, shadowed;
+    std::vector<LightShadowRay> light_rays;
+    std::vector<SceneGeometry::RayQuery> queries;
+    std::vector<Hit> hits;
+    std::vector<char> blocked;
+  };
+
   // Traces every lane's path to its end, all lanes a bounce at a time (a
   // wavefront, as in Laine, Karras and Aila 2013, "Megakernels Considered
   // Harmful"): the closest hits of every live path, then their shading, then
@@ -476,12 +495,16 @@ class Tracer {
   // time of bare Embree calls on its own rays (bench_render,
   // BM_PathAgainstBareEmbree). Each lane draws from its own stream in the
   // order a lone path would, so the result is the same as path by path.
-  void TracePaths(std::vector<PathLane>& lanes, std::uint64_t& rays) const {
-    std::vector<int> live(lanes.size()), scattering, shadowed;
-    std::vector<LightShadowRay> light_rays;
-    std::vector<SceneGeometry::RayQuery> queries;
-    std::vector<Hit> hits;
-    std::vector<char> blocked;
+  void TracePaths(Wavefront& wave, std::uint64_t& rays) const {
+    std::vector<PathLane>& lanes = wave.lanes;
+    std::vector<int>& live = wave.live;
+    std::vector<int>& scattering = wave.scattering;
+    std::vector<int>& shadowed = wave.shadowed;
+    std::vector<LightShadowRay>& light_rays = wave.light_rays;
+    std::vector<SceneGeometry::RayQuery>& queries = wave.queries;
+    std::vector<Hit>& hits = wave.hits;
+    std::vector<char>& blocked = wave.blocked;
+    live.resize(lanes.size());
     for (std::size_t i = 0; i < lanes.size(); ++i) live[i] = static_cast<int>(i);
     for (int depth = 0; depth < options_.max_depth && !live.empty(); ++depth) {
       queries.clear();
@@ -549,10 +572,6 @@ class Tracer {
   // found there (MIS-weighted against light sampling), next-event estimation
   // of the lights, and the point on a glowing triangle its shadow ray will
   // test. False: the path ends here (a miss, or a surface that reflects nothing).
-  struct LightShadowRay {
-    int lane, light;
-    LightRay ray;
-  };
   // The first half of a vertex, for every live lane before any finishes:
   // what needs no memory beyond the hit (the media of a camera ray, the sky
   // on a miss), and the addresses of what does (the glow here, the glowing
@@ -828,19 +847,29 @@ Image RenderBands(const SceneGeometry& geometry, const CoupledSolver* solver, co
     }
     return d;
   };
+  // Path transport: each thread's row state, allocated once per frame.
+  struct PathRow {
+    std::vector<SplitMix64> streams;
+    std::vector<Bands> sums;
+    Tracer::Wavefront wave;
+  };
+  tbb::enumerable_thread_specific<PathRow> path_rows;
   tbb::parallel_for(0, height, [&](int y) {
     std::uint64_t rays = 0;
     if (options.transport == Transport::kPath) {
-      // A row's pixels trace their s-th samples together (Tracer::TracePaths).
-      std::vector<SplitMix64> streams;
-      streams.reserve(width);
+      // A row's pixels trace their s-th samples together (Tracer::TracePaths),
+      // in the thread's wavefront.
+      PathRow& row = path_rows.local();
+      std::vector<SplitMix64>& streams = row.streams;
+      streams.clear();
       for (int x = 0; x < width; ++x) streams.push_back(pixel_stream(x, y));
-      std::vector<Bands> sums(width, Bands::Zero(nb));
+      std::vector<Bands>& sums = row.sums;
+      sums.assign(width, Bands::Zero(nb));
       // Pixels of a row in groups of 256: enough rays per stream call for
       // Embree to fill its packets (64 measured slower), few enough lanes for
       // the L2 cache (a whole row of 512 measured slower).
       constexpr int kLanes = 256;
-      std::vector<Tracer::PathLane> lanes;
+      std::vector<Tracer::PathLane>& lanes = row.wave.lanes;
       for (int x0 = 0; x0 < width; x0 += kLanes) {
         const int count = std::min(kLanes, width - x0);
         lanes.resize(count);
@@ -853,7 +882,7 @@ Image RenderBands(const SceneGeometry& geometry, const CoupledSolver* solver, co
             lanes[k].Start(camera.origin(), camera.Direction(static_cast<float>(x) + jx, static_cast<float>(y) + jy),
                            differential(static_cast<float>(x) + jx, static_cast<float>(y) + jy), random, nb);
           }
-          tracer.TracePaths(lanes, rays);
+          tracer.TracePaths(row.wave, rays);
           for (int k = 0; k < count; ++k) sums[x0 + k] += lanes[k].L;
         }
       }
