@@ -134,7 +134,9 @@ void ApplyPhosphorMap(const PhosphorMap& map, const Material& material, const st
     const double k = a[i] + kr;
     return a[i] / k * -std::expm1(-k * map.charge_s);
   };
-  c.kr_per_point.assign(static_cast<std::size_t>(c.nc) * n, 0.0f);
+  // Until the map says otherwise: the material's rates, and no glow.
+  c.kr_per_point.resize(static_cast<std::size_t>(c.nc) * n);
+  for (int i = 0; i < c.nc; ++i) std::fill_n(c.kr_per_point.begin() + static_cast<std::ptrdiff_t>(i * n), n, c.kr[i]);
   c.emission_scale.assign(c.kr_per_point.size(), 0.0f);
   for (int k = 0; k < c.nc; ++k) {
     const int i = order[k];
@@ -154,10 +156,9 @@ void ApplyPhosphorMap(const PhosphorMap& map, const Material& material, const st
     const double median = *middle;
     for (std::size_t j = 0; j < n; ++j) {
       const float kr = map.kr_per_s[k * P + pixels[j]];
-      const bool decays = kr == kr;  // not NaN
-      c.kr_per_point[i * n + j] = decays ? kr : c.kr[i];
-      c.emission_scale[i * n + j] =
-          decays ? static_cast<float>(map.amplitude_dn_per_s[k * P + pixels[j]] / level(i, kr) / median) : 0.0f;
+      if (kr != kr) continue;  // NaN: this state does not decay here
+      c.kr_per_point[i * n + j] = kr;
+      c.emission_scale[i * n + j] = static_cast<float>(map.amplitude_dn_per_s[k * P + pixels[j]] / level(i, kr) / median);
     }
   }
 }

@@ -362,6 +362,18 @@ TEST(PhosphorMap, EachTexelDecaysAtItsPixelsRateAndGlowsByItsAmplitude) {
     EXPECT_EQ(texels.masked_out, static_cast<std::size_t>(map.no_decay));
     EXPECT_EQ(texels.count, static_cast<std::size_t>(kCells * kCells - map.no_decay));
     solver.AdvanceTo(t);  // no light: each state decays at its texel's rate
+    if (states == 2) {
+      // Over a pixel where one state sufficed, the fast state keeps the
+      // material's rate (3 /s) and glows not at all.
+      int checked = 0;
+      for (std::size_t k = 0; k < texels.count; ++k) {
+        const std::uint32_t pixel = texels.map_pixel[k];
+        if (map.kr[1][pixel] > 0) continue;
+        EXPECT_NEAR(solver.State(0, 0, k), r0 * std::exp(-3.0 * t), 1e-6);
+        ++checked;
+      }
+      EXPECT_GT(checked, 20);
+    }
 
     const float median[2] = {MedianOf(map.amplitude[0]), states == 2 ? MedianOf(map.amplitude[1]) : 1.0f};
     const ExcitedState& slow = material->states[states == 2 ? 1 : 0];
