@@ -218,9 +218,6 @@ std::string MapInputs(const MapArgs& args, int tiles) {
          (args.states == 1 ? "" : " states=" + std::to_string(args.states));
 }
 
-// The session's frames as a map's input, only the rows of tile `index` of
-// `count` (rows [H index / count, H (index + 1) / count)): a tile holds only
-// its rows in memory. The whole map is tile 0 of 1.
 // How the session charged the sample before the decay (its settings and the
 // lab's calibrated band irradiance of the charge light): a renderer that
 // takes the map as a phosphor needs it to tell a texel's level from its
@@ -246,17 +243,31 @@ struct MapCharge {
     return charge;
   }
   static MapCharge FromSession(const SessionRecord& session) {
-    MapCharge charge;
-    const std::string light = session.settings.value("charge_light", "");
+    // Anything but what phos writes (a hand-edited record: other types, a
+    // charge of no length, a negative irradiance) is no
+    // recorded charge, not an error of the map: the renderer then takes the
+    // map as charged to r = 1, as docs/render.md says.
+    auto field = [](const nlohmann::json& object, const char* key) {
+      return object.is_object() && object.contains(key) ? object[key] : nlohmann::json();
+    };
+    const nlohmann::json light = field(session.settings, "charge_light"), charge_s = field(session.settings, "charge_s");
+    if (!light.is_string() || !charge_s.is_number() || !(charge_s.get<double>() > 0)) return {};
     const nlohmann::json irradiance =
-        session.devices.value("light_band_irradiance", nlohmann::json::object()).value(light, nlohmann::json());
-    if (light.empty() || !irradiance.is_array()) return charge;
-    for (const auto& value : irradiance) charge.band_irradiance.push_back(value.get<float>());
-    charge.charge_s = session.settings.value("charge_s", 0.0f);
+        field(field(session.devices, "light_band_irradiance"), light.get<std::string>().c_str());
+    if (!irradiance.is_array() || irradiance.empty()) return {};
+    MapCharge charge;
+    for (const auto& value : irradiance) {
+      if (!value.is_number() || !(value.get<double>() >= 0)) return {};
+      charge.band_irradiance.push_back(value.get<float>());
+    }
+    charge.charge_s = charge_s.get<float>();
     return charge;
   }
 };
 
+// The session's frames as a map's input, only the rows of tile `index` of
+// `count` (rows [H index / count, H (index + 1) / count)): a tile holds only
+// its rows in memory. The whole map is tile 0 of 1.
 struct MapFrames {
   DecayMapInput input;
   MapCharge charge;
