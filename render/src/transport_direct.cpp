@@ -1,0 +1,83 @@
+// Direct transport (renderer.h): per pixel, camera rays shaded by the lights
+// (shadow rays) and the phosphors' own glow Lp (Eq. 8.2); no interreflection.
+#include "transport.h"
+
+#include <algorithm>
+
+#include "phos/util/math.h"
+#include "phos/util/random.h"
+
+namespace phos::render {
+
+Bands ShadeCameraRay(const Shading& shading, const Vec3f& origin, const Vec3f& direction,
+                     const RayDifferential& differential, float jitter, std::uint64_t& rays) {
+  const int nb = shading.band_count();
+  const Scene& scene = shading.scene();
+  const bool dss = shading.options().transport == Transport::kDss;
+  Bands L = Bands::Zero(nb);
+  ++rays;
+  const Hit hit = shading.geometry().Intersect(origin, direction);
+  Bands Lm = Bands::Zero(nb);
+  const float T = shading.Media(origin, direction, hit, jitter, Lm);
+  shading.AddAreaLightsSeen(origin, direction, hit ? hit.distance : 1e30f, Bands::Ones(nb), Lm,
+                            [](const LightPose&, const Vec3f&, float) { return 1.0f; });
+  if (!hit)
+    return shading.sky_level() > 0 ? Bands(Lm + T * shading.sky_L() * scene.environment->Shape(direction.y())) : Lm;
+  shading.AddEmission(hit, L);
+  if (const Bands* Le = shading.EmitterAt(hit)) L += *Le;
+  // A translucent object under dss: its reflection comes from the dipole
+  // splat instead (transport_dss.cpp).
+  if (dss && scene.objects[hit.object].subsurface) return Lm + T * L;
+  Bands E;
+  const Vec3f n_s = hit.front ? hit.normal : Vec3f(-hit.normal);
+  Bands texture_albedo;
+  const Bands& albedo = shading.AlbedoAt(hit, origin, differential, texture_albedo);
+  if (const Gloss* gloss = shading.GlossAt(hit.object)) {
+    L += shading.GlossyReflection(*gloss, albedo, hit.position, n_s, -direction, rays);
+    return Lm + T * L;
+  }
+  shading.DirectIrradiance(hit.position, n_s, E, rays, !dss);
+  L += albedo * E / kPiF;  // Lambertian reflection (Eq. 8.2's reflected term)
+  return Lm + T * L;
+}
+
+namespace {
+
+// A fixed per-pixel offset of the media's step grid: one sample per pixel
+// shows noise, not banding.
+float PixelJitter(int x, int y) { return InterleavedGradientNoise(x, y); }
+
+class DirectTransport final : public FrameTransport {
+ public:
+  DirectTransport(const Shading& shading, const CameraRays& camera) : shading_(shading), camera_(camera) {}
+
+  // direct_spp samples per pixel: one at the centre, or jittered.
+  void RenderRow(int y, Image& image, std::uint64_t& rays) override {
+    const int nb = shading_.band_count(), spp = shading_.options().direct_spp;
+    for (int x = 0; x < image.width; ++x) {
+      SplitMix64 random = PixelStream(shading_.options(), image.width, x, y);
+      Bands sum = Bands::Zero(nb);
+      for (int s = 0; s < spp; ++s) {
+        const float jx = spp == 1 ? 0.5f : random.UniformFloat(), jy = spp == 1 ? 0.5f : random.UniformFloat();
+        const float px = static_cast<float>(x) + jx, py = static_cast<float>(y) + jy;
+        sum += ShadeCameraRay(shading_, camera_.origin(), camera_.Direction(px, py),
+                              CameraDifferential(shading_, camera_, px, py),
+                              spp == 1 ? PixelJitter(x, y) : random.UniformFloat(), rays);
+      }
+      sum /= static_cast<float>(spp);
+      std::copy(sum.data(), sum.data() + nb, image.at(x, y));
+    }
+  }
+
+ private:
+  const Shading& shading_;
+  const CameraRays& camera_;
+};
+
+}  // namespace
+
+std::unique_ptr<FrameTransport> MakeDirectTransport(const Shading& shading, const CameraRays& camera) {
+  return std::make_unique<DirectTransport>(shading, camera);
+}
+
+}  // namespace phos::render

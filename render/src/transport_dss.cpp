@@ -1,0 +1,188 @@
+// dss transport (renderer.h, docs/render.md): the direct transport's rows,
+// then one bounce of diffuse light through deep screen space (dss.h), the
+// dipole's light beneath translucent surfaces (subsurface.h), and the
+// surfels' light on the media (volume.h).
+#include <algorithm>
+#include <atomic>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include "phos/render/dss.h"
+#include "phos/render/subsurface.h"
+#include "phos/render/volume.h"
+#include "phos/util/math.h"
+#include "transport.h"
+
+namespace phos::render {
+namespace {
+
+class DssTransport final : public FrameTransport {
+ public:
+  DssTransport(const Shading& shading, const CameraRays& camera)
+      : shading_(shading), camera_(camera), direct_(MakeDirectTransport(shading, camera)) {}
+
+  // The direct transport's pixels, without the sky's reflection and the
+  // translucent objects' (ShadeCameraRay): Finish adds them.
+  void RenderRow(int y, Image& image, std::uint64_t& rays) override { direct_->RenderRow(y, image, rays); }
+
+  std::uint64_t Finish(Image& image) override {
+    const SceneGeometry& geometry = shading_.geometry();
+    const Scene& scene = shading_.scene();
+    const VolumeMedia* media = shading_.media();
+    const FrameOptions& options = shading_.options();
+    const int nb = shading_.band_count(), width = image.width, height = image.height;
+    std::atomic<std::uint64_t> total_rays{0};
+    // One bounce through deep screen space: the surfels' radiosity, splatted
+    // as irradiance onto what the camera sees, reflected by its albedo.
+    const std::vector<Surfel> surfels =
+        Surfelize(geometry, camera_.origin(), static_cast<float>(scene.camera.fov_deg), SurfelOptions{});
+    // Translucent objects' dipoles (subsurface.h), per object and band.
+    std::vector<Dipole> dipoles(scene.objects.size() * nb);
+    bool translucent = false;
+    for (std::size_t o = 0; o < scene.objects.size(); ++o) {
+      const auto& sss = scene.objects[o].subsurface;
+      if (!sss) continue;
+      translucent = true;
+      for (int b = 0; b < nb; ++b)
+        dipoles[o * nb + b] = Dipole::From(sss->sigma_a_per_m[b], sss->sigma_s_prime_per_m[b], sss->eta);
+    }
+    std::vector<float> radiosity(surfels.size() * nb, 0.0f);
+    // The irradiance on translucent objects' surfels, kept for the dipole.
+    std::vector<float> surfel_E(translucent ? surfels.size() * nb : 0, 0.0f);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, surfels.size()),
+                      [&](const tbb::blocked_range<std::size_t>& range) {
+                        std::uint64_t rays = 0;
+                        Bands E, texture_albedo;
+                        for (std::size_t i = range.begin(); i != range.end(); ++i) {
+                          const Surfel& s = surfels[i];
+                          // The front side sends: what it reflects of the lights, and its glow
+                          // (a textured surfel's albedo at its centre: a point lookup).
+                          shading_.DirectIrradiance(s.position, s.normal, E, rays);
+                          Bands B = shading_.AlbedoAt(FrontHit(s), s.position, {}, texture_albedo) * E;
+                          Bands Le;
+                          if (shading_.Emission(FrontHit(s), Le)) B += kPiF * Le;
+                          std::copy(B.data(), B.data() + nb, &radiosity[i * nb]);
+                          if (translucent && scene.objects[s.object].subsurface)
+                            std::copy(E.data(), E.data() + nb, &surfel_E[i * nb]);
+                        }
+                        total_rays += rays;
+                      });
+    // Only surfels that send light matter to either receiver (the occlusion
+    // is not used here): a dark scene's unlit floor costs nothing. The sky
+    // needs every surfel (they occlude it).
+    const bool sky = shading_.sky_level() > 0;
+    std::vector<Surfel> sending;
+    std::vector<float> sending_B;
+    if (!sky)
+      for (std::size_t i = 0; i < surfels.size(); ++i) {
+        bool sends = false;
+        for (int b = 0; b < nb; ++b) sends = sends || radiosity[i * nb + b] > 0;
+        if (!sends) continue;
+        sending.push_back(surfels[i]);
+        sending_B.insert(sending_B.end(), &radiosity[i * nb], &radiosity[i * nb] + nb);
+      }
+    const std::vector<Surfel>& senders = sky ? surfels : sending;
+    const std::vector<float>& sent = sky ? radiosity : sending_B;
+    const GBuffer g = RenderGBuffer(geometry, scene, geometry.time_s());
+    DssOptions dss;
+    dss.channels = nb;
+    // With indirect visibility every surfel counts (the dark ones hide the glowing ones behind them).
+    const DssResult indirect = options.indirect_visibility ? SplatBouncedZBuffer(g, camera_, surfels, radiosity, dss)
+                                                           : SplatDeepScreenSpace(g, camera_, senders, sent, dss);
+    // The media between the camera and the surfaces dim the bounce as they
+    // dim the surface, and receive the surfels' light themselves.
+    IntervalMap intervals;
+    if (media) intervals = BuildIntervalMap(*media, g, camera_, options.interval_layers);
+    tbb::parallel_for(0, height, [&](int y) {
+      Bands texture_albedo;
+      for (int x = 0; x < width; ++x) {
+        const std::size_t p = static_cast<std::size_t>(y) * width + x;
+        if (g.object[p] < 0) continue;
+        Hit hit;  // the G-buffer's pixel, as the direct pass found it
+        hit.object = g.object[p];
+        hit.triangle = g.triangle[p];
+        hit.b1 = g.b1[p];
+        hit.b2 = g.b2[p];
+        hit.position = g.position[p];
+        hit.normal = g.normal[p];
+        const Bands& albedo = shading_.AlbedoAt(hit, camera_.origin(), CameraDifferential(shading_, camera_, x + 0.5f, y + 0.5f), texture_albedo);
+        const float T = media ? intervals.T_end[p] : 1.0f;
+        float* out = image.at(x, y);
+        for (int b = 0; b < nb; ++b) out[b] += T * albedo[b] * indirect.irradiance[p * nb + b] / kPiF;
+        if (sky && !scene.objects[g.object[p]].subsurface) {
+          // Directional occlusion: the sky less what the surfels hide of it.
+          const float gradient = static_cast<float>(scene.environment->gradient);
+          const float unit =
+              SkyIrradianceFromOcclusion(indirect.occlusion[p], indirect.occlusion_y[p], g.normal[p].y(), gradient);
+          for (int b = 0; b < nb; ++b) out[b] += T * albedo[b] * shading_.sky_L()[b] * unit / kPiF;
+        }
+      }
+    });
+    // Translucent objects: the lights' irradiance on their surfels, carried
+    // beneath the surface by the dipole (subsurface.h) to the pixels of the
+    // same object.
+    if (translucent) {
+      std::vector<Surfel> entering;
+      std::vector<float> E_in;
+      for (std::size_t i = 0; i < surfels.size(); ++i) {
+        const float* E = &surfel_E[i * nb];
+        if (!scene.objects[surfels[i].object].subsurface || *std::max_element(E, E + nb) <= 0) continue;
+        entering.push_back(surfels[i]);
+        E_in.insert(E_in.end(), E, E + nb);
+      }
+      // The near field of each receiver (two target surfel radii at its
+      // depth) from its own irradiance in closed form; the surfels send the rest.
+      const std::vector<float> near =
+          SubsurfaceNearField(g, SurfelOptions{}.s, static_cast<float>(scene.camera.fov_deg));
+      DssOptions sss_options = dss;
+      sss_options.dipoles = &dipoles;
+      sss_options.near_m = &near;
+      const DssResult exitance = SplatDeepScreenSpace(g, camera_, entering, E_in, sss_options);
+      tbb::parallel_for(0, height, [&](int y) {
+        std::uint64_t rays = 0;
+        Bands E;
+        for (int x = 0; x < width; ++x) {
+          const std::size_t p = static_cast<std::size_t>(y) * width + x;
+          if (g.object[p] < 0 || !scene.objects[g.object[p]].subsurface) continue;
+          const float T = media ? intervals.T_end[p] : 1.0f;
+          shading_.DirectIrradiance(g.position[p], g.normal[p], E, rays);
+          const Dipole* d = &dipoles[static_cast<std::size_t>(g.object[p]) * nb];
+          float* out = image.at(x, y);
+          for (int b = 0; b < nb; ++b) out[b] += T * d[b].Exitance(E[b], near[p], exitance.irradiance[p * nb + b]) / kPiF;
+        }
+        total_rays += rays;
+      });
+    }
+    for (const GBuffer& layer : intervals.layer) {
+      if (senders.empty()) break;
+      const DssResult in_medium = SplatDeepScreenSpace(layer, camera_, senders, sent, dss);
+      tbb::parallel_for(0, height, [&](int y) {
+        for (int x = 0; x < width; ++x) {
+          const std::size_t p = static_cast<std::size_t>(y) * width + x;
+          const int v = layer.object[p];
+          if (v < 0) continue;
+          const std::vector<double>& albedo = scene.volumes[v].albedo;
+          float* out = image.at(x, y);
+          for (int b = 0; b < nb; ++b)
+            out[b] +=
+                intervals.delta_T[p] * static_cast<float>(albedo[b]) * in_medium.irradiance[p * nb + b] / (4 * kPiF);
+        }
+      });
+    }
+    return total_rays.load();
+  }
+
+ private:
+  const Shading& shading_;
+  const CameraRays& camera_;
+  std::unique_ptr<FrameTransport> direct_;
+};
+
+}  // namespace
+
+std::unique_ptr<FrameTransport> MakeDssTransport(const Shading& shading, const CameraRays& camera) {
+  return std::make_unique<DssTransport>(shading, camera);
+}
+
+}  // namespace phos::render

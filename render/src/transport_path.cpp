@@ -1,0 +1,606 @@
+// Path transport (renderer.h): the spectral path tracer, the reference. All
+// bands travel together; next-event estimation for the lights and for the
+// glowing triangles, combined with BSDF sampling by multiple importance
+// sampling (power heuristic), so the glow of one surface lights the others
+// (Fig. 8.15).
+#include <algorithm>
+#include <cmath>
+#include <vector>
+
+#include <tbb/enumerable_thread_specific.h>
+
+#include "phos/render/bsdf.h"
+#include "phos/util/error.h"
+#include "phos/util/math.h"
+#include "phos/util/random.h"
+#include "transport.h"
+
+namespace phos::render {
+namespace {
+
+// Cosine-weighted direction about the unit normal n (Malley's method): a
+// uniform point of the unit disk, by rejection from its square (on average
+// 1.27 tries, 2.5 random numbers: cheaper than the sine and cosine of a polar
+// map, which were a tenth of the path tracer's own time), lifted onto the
+// hemisphere in the branchless orthonormal basis of Duff et al. 2017.
+Vec3f SampleCosine(const Vec3f& n, SplitMix64& random) {
+  float x, y, r2;
+  do {
+    x = 2 * random.UniformFloat() - 1;
+    y = 2 * random.UniformFloat() - 1;
+    r2 = x * x + y * y;
+  } while (r2 >= 1.0f);
+  const float sign = std::copysign(1.0f, n.z());
+  const float a = -1.0f / (sign + n.z()), b = n.x() * n.y() * a;
+  const Vec3f t(1.0f + sign * n.x() * n.x() * a, sign * b, -sign * n.x());
+  const Vec3f bt(b, sign + n.y() * n.y() * a, -n.y());
+  return x * t + y * bt + std::sqrt(1.0f - r2) * n;
+}
+
+// Barycentric weights (b1, b2) of a uniform point on a triangle without a
+// square root (Heitz 2019, "A Low-Distortion Map Between Triangle and
+// Square", as pbrt-v4's SampleUniformTriangle).
+void SampleUniformTriangle(float u1, float u2, float& b1, float& b2) {
+  if (u1 < u2) {
+    b1 = u1 / 2;
+    b2 = u2 - b1;
+  } else {
+    b2 = u2 / 2;
+    b1 = u1 - b2;
+  }
+}
+
+// The glowing triangles of this moment, for next-event estimation: chosen in
+// proportion to their emitted power (texel Lp summed over bands, times area),
+// in O(1) from an alias table (Walker 1977; Vose 1991's construction, as
+// pbrt-v4's AliasTable): a binary search of a CDF over thousands of triangles
+// was a tenth of the path tracer's time.
+struct EmitterDistribution {
+  // Everything a sample needs of its triangle in one cache line: sampling
+  // walked from the entry to the mesh's indices, its vertices and the atlas's
+  // per-triangle tables, a cache miss at each step.
+  struct alignas(64) Entry {
+    Vec3f v0, e1, e2;  // the triangle: v0 + b1 e1 + b2 e2
+    Vec3f normal;      // front
+    float area_pdf;    // probability per m^2 of a point on it
+    std::uint32_t triangle;
+    std::uint32_t first_texel;  // auto atlas: its first texel
+    std::int16_t slot;          // the object's texel slot
+    std::uint16_t m;            // auto atlas: subdivisions (0: UV atlas, ask TexelOf)
+    std::size_t Texel(const TexelAtlas& atlas, float b1, float b2) const {
+      return m > 0 ? first_texel + static_cast<std::size_t>(SubTriangleIndex(m, b1, b2))
+                   : atlas.TexelOf(slot, static_cast<int>(triangle), b1, b2);
+    }
+  };
+  struct Column {
+    float keep;  // probability of keeping this column's entry over its alias
+    std::uint32_t alias;
+  };
+  std::vector<Entry> entries;
+  std::vector<Column> columns;
+  std::vector<std::vector<float>> pdf;  // per object, per triangle: probability of choosing it, per m^2 of it
+  std::vector<std::uint8_t> two_sided;  // per texel slot: the object glows from both faces
+  bool empty() const { return entries.empty(); }
+
+  EmitterDistribution(const SceneGeometry& geometry, const CoupledSolver* solver) {
+    pdf.resize(geometry.object_count());
+    if (!solver) return;
+    const TexelAtlas& atlas = solver->atlas();
+    PHOS_CHECK(atlas.objects().size() <= 32767);
+    for (const TexelAtlas::ObjectTexels& texels : atlas.objects())
+      two_sided.push_back(geometry.scene().objects[texels.object].two_sided);
+    std::vector<double> power;
+    double total = 0;
+    for (std::size_t s = 0; s < atlas.objects().size(); ++s) {
+      const TexelAtlas::ObjectTexels& texels = atlas.objects()[s];
+      const int object = texels.object;
+      const int triangles = geometry.triangle_count(object);
+      // Mean Lp (summed over bands) of each triangle's texels.
+      std::vector<double> sum(triangles, 0.0);
+      std::vector<std::size_t> count(triangles, 0);
+      const std::vector<int>& bands = solver->emission_bands(static_cast<int>(s));
+      atlas.ForEachTexel(static_cast<int>(s), [&](std::size_t k, int t, float, float) {
+        for (int b : bands) sum[t] += solver->Lp(static_cast<int>(s), b, k);
+        ++count[t];
+      });
+      for (int t = 0; t < triangles; ++t) {
+        const float area = geometry.Area(object, t);
+        const double p = count[t] ? sum[t] / static_cast<double>(count[t]) * area : 0.0;
+        if (!(p > 0)) continue;
+        Entry entry;
+        entry.v0 = geometry.Vertex(object, t, 0);
+        entry.e1 = geometry.Vertex(object, t, 1) - entry.v0;
+        entry.e2 = geometry.Vertex(object, t, 2) - entry.v0;
+        entry.normal = geometry.FrontNormal(object, t);
+        entry.area_pdf = area;  // divided by the total power below
+        entry.triangle = static_cast<std::uint32_t>(t);
+        entry.slot = static_cast<std::int16_t>(s);
+        entry.m = texels.uv() ? 0 : texels.m[t];
+        entry.first_texel = texels.uv() ? 0 : texels.first[t];
+        entries.push_back(entry);
+        power.push_back(p);
+        total += p;
+      }
+    }
+    if (entries.empty()) return;
+    for (std::size_t e = 0; e < entries.size(); ++e) {
+      Entry& entry = entries[e];
+      const float area = entry.area_pdf;
+      entry.area_pdf = static_cast<float>(power[e] / total / area);
+      const int object = atlas.objects()[entry.slot].object;
+      auto& object_pdf = pdf[object];
+      if (object_pdf.empty()) object_pdf.assign(geometry.triangle_count(object), 0.0f);
+      object_pdf[entry.triangle] = entry.area_pdf;
+    }
+    BuildAliasTable(power, total);
+  }
+  // Vose: entries scaled so the mean is 1; each under-full one is topped up
+  // by an over-full one, which becomes its alias.
+  void BuildAliasTable(const std::vector<double>& power, double total) {
+    const std::size_t n = power.size();
+    std::vector<double> scaled(n);
+    std::vector<std::uint32_t> small, large;
+    for (std::size_t e = 0; e < n; ++e) {
+      scaled[e] = power[e] / total * static_cast<double>(n);
+      (scaled[e] < 1.0 ? small : large).push_back(static_cast<std::uint32_t>(e));
+    }
+    columns.resize(n);
+    for (std::size_t e = 0; e < n; ++e) columns[e] = {1.0f, static_cast<std::uint32_t>(e)};
+    while (!small.empty() && !large.empty()) {
+      const std::uint32_t under = small.back(), over = large.back();
+      small.pop_back();
+      columns[under] = {static_cast<float>(scaled[under]), over};
+      scaled[over] -= 1.0 - scaled[under];
+      if (scaled[over] < 1.0) {
+        large.pop_back();
+        small.push_back(over);
+      }
+    }
+    // What remains is full up to rounding: kept with probability 1.
+  }
+  // Probability per unit area of sampling a point of (object, triangle).
+  float AreaPdf(int object, int triangle) const {
+    const auto& p = pdf[object];
+    return p.empty() ? 0.0f : p[triangle];
+  }
+  // One 64-bit random word: the high half picks a column (Lemire's
+  // multiply-shift), the low half decides between it and its alias.
+  const Entry& Pick(std::uint64_t random) const {
+    const std::size_t column = static_cast<std::size_t>(((random >> 32) * entries.size()) >> 32);
+    const float u = static_cast<float>(random & 0xFFFFFFu) * (1.0f / 16777216.0f);
+    const Column& c = columns[column];
+    return entries[u < c.keep ? column : c.alias];
+  }
+};
+
+class PathTransport final : public FrameTransport {
+ public:
+  PathTransport(const Shading& shading, const CameraRays& camera)
+      : shading_(shading),
+        camera_(camera),
+        geometry_(shading.geometry()),
+        scene_(shading.scene()),
+        solver_(shading.solver()),
+        media_(shading.media()),
+        options_(shading.options()),
+        nb_(shading.band_count()),
+        emitters_(geometry_, solver_) {
+    if (solver_) CopyGlowByTexel();
+  }
+
+  // A row's pixels, spp samples each, traced a wavefront at a time.
+  void RenderRow(int y, Image& image, std::uint64_t& rays) override {
+    const int nb = nb_, width = image.width, spp = options_.spp;
+    // A row's pixels trace their s-th samples together (TracePaths),
+    // in the thread's wavefront.
+    PathRow& row = rows_.local();
+    std::vector<SplitMix64>& streams = row.streams;
+    streams.clear();
+    for (int x = 0; x < width; ++x) streams.push_back(PixelStream(options_, width, x, y));
+    std::vector<Bands>& sums = row.sums;
+    sums.assign(width, Bands::Zero(nb));
+    // Pixels of a row in groups of 256: enough rays per stream call for
+    // Embree to fill its packets (64 measured slower), few enough lanes for
+    // the L2 cache (a whole row of 512 measured slower).
+    constexpr int kLanes = 256;
+    std::vector<PathLane>& lanes = row.wave.lanes;
+    for (int x0 = 0; x0 < width; x0 += kLanes) {
+      const int count = std::min(kLanes, width - x0);
+      lanes.resize(count);
+      for (int s = 0; s < spp; ++s) {
+        for (int k = 0; k < count; ++k) {
+          // One centred sample when there is one; jittered otherwise.
+          const int x = x0 + k;
+          SplitMix64& random = streams[x];
+          const float jx = spp == 1 ? 0.5f : random.UniformFloat(), jy = spp == 1 ? 0.5f : random.UniformFloat();
+          lanes[k].Start(camera_.origin(), camera_.Direction(static_cast<float>(x) + jx, static_cast<float>(y) + jy),
+                         CameraDifferential(shading_, camera_, static_cast<float>(x) + jx, static_cast<float>(y) + jy), random, nb);
+        }
+        TracePaths(row.wave, rays);
+        for (int k = 0; k < count; ++k) sums[x0 + k] += lanes[k].L;
+      }
+    }
+    for (int x = 0; x < width; ++x) {
+      sums[x] /= static_cast<float>(spp);
+      std::copy(sums[x].data(), sums[x].data() + nb, image.at(x, y));
+    }
+  }
+
+ private:
+  // The texel-major glow of a hit on a phosphor's glowing side (path
+  // transport): its emission bands and their Lp, prefetched; empty elsewhere.
+  struct GlowTexel {
+    const std::vector<int>* bands = nullptr;
+    const float* Lp = nullptr;
+    explicit operator bool() const { return Lp != nullptr; }
+  };
+  GlowTexel GlowAt(const Hit& hit) const {
+    if (glow_by_texel_.empty() || !shading_.ShowsGlow(hit)) return {};
+    const int slot = solver_->atlas().SlotOf(hit.object);
+    if (slot < 0) return {};
+    return GlowAt(slot, solver_->atlas().TexelOf(slot, hit.triangle, hit.b1, hit.b2));
+  }
+  GlowTexel GlowAt(int slot, std::size_t texel) const {
+    const GlowByTexel& glow = glow_by_texel_[slot];
+    if (glow.bands.empty() || texel == TexelAtlas::kNoTexel) return {};
+    const float* Lp = &glow.Lp[texel * glow.bands.size()];
+    __builtin_prefetch(Lp);
+    return {&glow.bands, Lp};
+  }
+
+
+  // A path of the path tracer, one per pixel sample in flight.
+  struct PathLane {
+    Vec3f origin, direction;
+    RayDifferential differential;  // the camera ray's; bounces have none
+    Bands L, beta;
+    const Bands* albedo = nullptr;  // at this bounce's hit: the object's, or texture_albedo
+    Bands texture_albedo;
+    float bsdf_pdf = 0;  // solid-angle pdf of the direction that led here (0: camera ray)
+    SplitMix64* random = nullptr;
+    // This bounce: the hit, the shading normal, the next ray's origin and the
+    // shadow ray to a point on a glowing triangle (if glow_there).
+    Hit hit;
+    Vec3f n_s, origin_s, wi;
+    float emitter_distance = 0, emitter_scale = 0;
+    const Gloss* gloss = nullptr;  // a glossy hit's; null: Lambertian
+    Bands glow_f_cos;              // glossy: f cos toward the glowing point (emitter_scale then w / p_light)
+    GlowTexel glow_there;
+    GlowTexel glow_here;
+    bool scatters = false;
+    const EmitterDistribution::Entry* emitter = nullptr;  // the glowing triangle to sample
+    void Start(const Vec3f& camera, const Vec3f& d, const RayDifferential& footprint, SplitMix64& stream, int nb) {
+      origin = camera;
+      direction = d;
+      differential = footprint;
+      L = Bands::Zero(nb);
+      beta = Bands::Ones(nb);
+      bsdf_pdf = 0;
+      random = &stream;
+    }
+  };
+
+  // A lane's shadow ray toward one of the lights (next-event estimation).
+  struct LightShadowRay {
+    int lane, light;
+    LightRay ray;
+  };
+  // A thread's lanes and the lists of one bounce, kept from row to row: a
+  // lane is 1.4 KB (four Bands of kMaxBands), and allocating and zeroing 256
+  // of them for every row was 2.5% of a path-traced frame (perf, bench_render
+  // --benchmark_filter=PathFrameDark1spp).
+  struct Wavefront {
+    std::vector<PathLane> lanes;
+    std::vector<int> live, scattering, shadowed;
+    std::vector<LightShadowRay> light_rays;
+    std::vector<SceneGeometry::RayQuery> queries;
+    std::vector<Hit> hits;
+    std::vector<char> blocked;
+  };
+
+  // Traces every lane's path to its end, all lanes a bounce at a time (a
+  // wavefront, as in Laine, Karras and Aila 2013, "Megakernels Considered
+  // Harmful"): the closest hits of every live path, then their shading, then
+  // their shadow rays, then their next directions. Traced one path at a time,
+  // Embree's traversal and the shading evicted each other from the caches
+  // and branch predictors at every ray: the path tracer took 1.8 to 2x the
+  // time of bare Embree calls on its own rays (bench_render,
+  // BM_PathAgainstBareEmbree). Each lane draws from its own stream in the
+  // order a lone path would, so the result is the same as path by path.
+  void TracePaths(Wavefront& wave, std::uint64_t& rays) const {
+    std::vector<PathLane>& lanes = wave.lanes;
+    std::vector<int>& live = wave.live;
+    std::vector<int>& scattering = wave.scattering;
+    std::vector<int>& shadowed = wave.shadowed;
+    std::vector<LightShadowRay>& light_rays = wave.light_rays;
+    std::vector<SceneGeometry::RayQuery>& queries = wave.queries;
+    std::vector<Hit>& hits = wave.hits;
+    std::vector<char>& blocked = wave.blocked;
+    live.resize(lanes.size());
+    for (std::size_t i = 0; i < lanes.size(); ++i) live[i] = static_cast<int>(i);
+    for (int depth = 0; depth < options_.max_depth && !live.empty(); ++depth) {
+      queries.clear();
+      for (int i : live) queries.push_back({lanes[i].origin, lanes[i].direction});
+      hits.resize(queries.size());
+      geometry_.IntersectMany(queries.data(), queries.size(), hits.data(), /*coherent=*/depth == 0);
+      for (std::size_t k = 0; k < live.size(); ++k) lanes[live[k]].hit = hits[k];
+      rays += live.size();
+      scattering.clear();
+      shadowed.clear();
+      light_rays.clear();
+      std::size_t kept = 0;
+      for (int i : live)
+        if (BeginVertex(lanes[i], depth)) live[kept++] = i;
+      live.resize(kept);
+      for (int i : live) {
+        if (!ShadeVertex(lanes[i], i, depth, light_rays)) continue;
+        scattering.push_back(i);
+        if (lanes[i].glow_there) shadowed.push_back(i);
+      }
+      // The shadow rays: to the glowing points, then to the lights.
+      queries.clear();
+      for (int i : shadowed) {
+        const PathLane& lane = lanes[i];
+        queries.push_back({lane.origin_s, lane.wi, lane.emitter_distance * (1 - 1e-4f) - 2 * geometry_.ray_epsilon()});
+      }
+      for (const LightShadowRay& shadow : light_rays)
+        queries.push_back({shadow.ray.origin, shadow.ray.direction, shadow.ray.t_far});
+      blocked.resize(queries.size());
+      geometry_.OccludedMany(queries.data(), queries.size(), reinterpret_cast<bool*>(blocked.data()));
+      rays += queries.size();
+      // The glowing points, where nothing lies between.
+      for (std::size_t k = 0; k < shadowed.size(); ++k) {
+        if (blocked[k]) continue;
+        PathLane& lane = lanes[shadowed[k]];
+        const Bands& albedo = lane.gloss ? lane.glow_f_cos : *lane.albedo;  // glossy: f cos, else albedo (pi folded in)
+        for (std::size_t c = 0; c < lane.glow_there.bands->size(); ++c) {
+          const int b = (*lane.glow_there.bands)[c];
+          lane.L[b] += lane.beta[b] * albedo[b] * lane.glow_there.Lp[c] * lane.emitter_scale;
+        }
+      }
+      // The lights, where nothing (and no medium) lies between.
+      for (std::size_t k = 0; k < light_rays.size(); ++k) {
+        if (blocked[shadowed.size() + k]) continue;
+        const LightShadowRay& shadow = light_rays[k];
+        PathLane& lane = lanes[shadow.lane];
+        const Shading::LitLight& light = shading_.lights()[shadow.light];
+        float unit = shadow.ray.unit;
+        if (media_) unit *= shading_.Transmittance(light.pose, lane.hit.position);
+        if (lane.gloss) {
+          Bands f(nb_);
+          GlossyBsdf(*lane.gloss, lane.albedo->data(), nb_).Eval(lane.n_s, -lane.direction, shadow.ray.direction, f.data());
+          lane.L += lane.beta * f * light.E * unit;
+        } else {
+          lane.L += lane.beta * *lane.albedo * light.E * (unit * kInvPiF);
+        }
+      }
+      live.clear();
+      for (int i : scattering)
+        if (ContinuePath(lanes[i], depth)) live.push_back(i);
+    }
+  }
+
+  // At a lane's hit: the media of a camera ray, the sky on a miss, the glow
+  // found there (MIS-weighted against light sampling), next-event estimation
+  // of the lights, and the point on a glowing triangle its shadow ray will
+  // test. False: the path ends here (a miss, or a surface that reflects nothing).
+  // The first half of a vertex, for every live lane before any finishes:
+  // what needs no memory beyond the hit (the media of a camera ray, the sky
+  // on a miss), and the addresses of what does (the glow here, the glowing
+  // triangle to sample), prefetched so that the misses of all lanes overlap.
+  // False: the path ends at a miss.
+  bool BeginVertex(PathLane& lane, int depth) const {
+    const Hit& hit = lane.hit;
+    SplitMix64& random = *lane.random;
+    if (depth == 0 && media_) {
+      // The camera ray's media (single scattering; later bounces pass
+      // through them unattenuated, see volume.h).
+      Bands Lm = Bands::Zero(nb_);
+      lane.beta *= shading_.Media(lane.origin, lane.direction, hit, random.UniformFloat(), Lm);
+      lane.L += Lm;
+    }
+    // The area lights this ray crosses: seen by the camera, or found by a
+    // bounce and weighted against their next-event estimation (power
+    // heuristic, p_light = d^2 / (cos_light A)).
+    if (!shading_.area_lights().empty())
+      shading_.AddAreaLightsSeen(lane.origin, lane.direction, hit ? hit.distance : 1e30f, lane.beta, lane.L,
+                        [&](const LightPose& pose, const Vec3f& direction, float t) {
+                          if (depth == 0) return 1.0f;
+                          const float p_light = t * t / (-pose.normal.dot(direction) * pose.area_m2);
+                          return PowerHeuristic(lane.bsdf_pdf, p_light);
+                        });
+    // An emissive object's front, likewise.
+    if (const Bands* Le = hit ? shading_.EmitterAt(hit) : nullptr) {
+      float weight = 1;
+      if (depth > 0) {
+        const float cos_light = -hit.normal.dot(lane.direction);
+        const float p_light = hit.distance * hit.distance / (cos_light * geometry_.EmitterArea(hit.object));
+        weight = PowerHeuristic(lane.bsdf_pdf, p_light);
+      }
+      lane.L += lane.beta * *Le * weight;
+    }
+    if (!hit) {
+      // The sky, found by the camera ray or a bounce (cosine sampling; no
+      // light sampling for it, so no weight).
+      if (shading_.sky_level() > 0) lane.L += lane.beta * shading_.sky_L() * scene_.environment->Shape(lane.direction.y());
+      return false;
+    }
+    lane.glow_here = GlowAt(hit);
+    // Textures are filtered over the camera ray's footprint; bounces look up
+    // a point (zero derivatives: their footprint is the BSDF's, not a pixel's).
+    lane.albedo = &shading_.AlbedoAt(hit, lane.origin, depth == 0 ? lane.differential : RayDifferential{}, lane.texture_albedo);
+    lane.gloss = shading_.GlossAt(hit.object);
+    lane.scatters = lane.gloss || lane.albedo->maxCoeff() > 0;  // a glossy coat reflects on black too
+    lane.emitter = nullptr;
+    if (lane.scatters && !emitters_.empty()) {
+      lane.emitter = &emitters_.Pick(random.Next());
+      __builtin_prefetch(lane.emitter);
+    }
+    return true;
+  }
+
+  // The second half (after BeginVertex on every lane): the shading normal,
+  // the point on the glowing triangle and its MIS weight, the lights' shadow
+  // rays, and the glow found here. False: the surface reflects nothing.
+  bool ShadeVertex(PathLane& lane, int lane_index, int depth, std::vector<LightShadowRay>& light_rays) const {
+    const Hit& hit = lane.hit;
+    SplitMix64& random = *lane.random;
+    lane.n_s = hit.front ? hit.normal : Vec3f(-hit.normal);
+    const Vec3f& n_s = lane.n_s;
+    const GlowTexel glow_here = lane.glow_here;
+    const bool scatters = lane.scatters;
+    lane.origin_s = hit.position + geometry_.ray_epsilon() * n_s;
+    lane.glow_there = {};
+    if (lane.emitter) {
+      const auto& entry = *lane.emitter;
+      float b1, b2;
+      const float u1 = random.UniformFloat();
+      SampleUniformTriangle(u1, random.UniformFloat(), b1, b2);
+      const Vec3f q = entry.v0 + b1 * entry.e1 + b2 * entry.e2;
+      lane.wi = q - hit.position;
+      const float distance2 = lane.wi.squaredNorm();
+      lane.emitter_distance = std::sqrt(distance2);
+      lane.wi *= 1.0f / lane.emitter_distance;
+      const float cos_s = n_s.dot(lane.wi), cos_front = -entry.normal.dot(lane.wi);
+      const float cos_l = emitters_.two_sided[entry.slot] ? std::abs(cos_front) : cos_front;  // the side facing us
+      if (cos_s > 0 && cos_l > 0) {
+        lane.glow_there = GlowAt(entry.slot, entry.Texel(solver_->atlas(), b1, b2));
+        // f cos / p_light with MIS (power heuristic) against the BSDF's
+        // cosine sampling, f = albedo / pi: with p_light = a d^2 / cos_l
+        // (a: the area pdf) and p_bsdf = cos_s / pi, the weight over
+        // p_light is a d^2 cos_l / ((a d^2)^2 + p_bsdf^2 cos_l^2): one division.
+        const float area_term = entry.area_pdf * distance2;
+        if (lane.gloss) {  // f cos kept per band; emitter_scale the weight over p_light
+          const GlossyBsdf bsdf(*lane.gloss, lane.albedo->data(), nb_);
+          const Vec3f wo = -lane.direction;
+          const float p_bsdf = bsdf.Pdf(n_s, wo, lane.wi);
+          lane.glow_f_cos.resize(nb_);
+          bsdf.Eval(n_s, wo, lane.wi, lane.glow_f_cos.data());
+          lane.glow_f_cos *= cos_s;
+          lane.emitter_scale = area_term * cos_l / (area_term * area_term + p_bsdf * p_bsdf * cos_l * cos_l);
+        } else {
+          const float p_bsdf = cos_s * kInvPiF;
+          lane.emitter_scale = p_bsdf * area_term * cos_l / (area_term * area_term + p_bsdf * p_bsdf * cos_l * cos_l);
+        }
+      }
+    }
+    // Next-event estimation for the lights, when any is on: their shadow
+    // rays are cast with the batch's (TracePaths). A delta light has no MIS;
+    // an area light's point is weighted against the BSDF's finding it.
+    if (scatters)
+      for (std::size_t l = 0; l < shading_.lights().size(); ++l) {
+        const LightPose& pose = shading_.lights()[l].pose;
+        LightRay ray;
+        if (pose.area()) {
+          const float u1 = random.UniformFloat();
+          ray = RayToLight(geometry_, pose, hit.position, n_s, u1, random.UniformFloat());
+          const float p_bsdf = !(ray.unit > 0) ? 0.0f
+                               : lane.gloss ? GlossyBsdf(*lane.gloss, lane.albedo->data(), nb_)
+                                                  .Pdf(n_s, -lane.direction, ray.direction)
+                                            : n_s.dot(ray.direction) * kInvPiF;
+          ray.unit *= PowerHeuristic(ray.area_pdf, p_bsdf);
+        } else {
+          ray = RayToLight(geometry_, pose, hit.position, n_s);
+        }
+        if (ray.unit > 0) light_rays.push_back({lane_index, static_cast<int>(l), ray});
+      }
+    // Emission found by the BSDF sample, weighted against light sampling.
+    if (glow_here) {
+      float weight = 1;
+      if (depth > 0) {
+        // p_bsdf^2 / (p_bsdf^2 + p_light^2), p_light = a d^2 / cos: one division.
+        const float cos_light = -hit.normal.dot(lane.direction);
+        const float area_term = emitters_.AreaPdf(hit.object, hit.triangle) * hit.distance * hit.distance;
+        const float bsdf_cos = lane.bsdf_pdf * cos_light;
+        weight = bsdf_cos * bsdf_cos / (bsdf_cos * bsdf_cos + area_term * area_term);
+      }
+      for (std::size_t k = 0; k < glow_here.bands->size(); ++k) {
+        const int b = (*glow_here.bands)[k];
+        lane.L[b] += lane.beta[b] * glow_here.Lp[k] * weight;
+      }
+    }
+    return scatters;
+  }
+
+  // The next direction: cosine sampling of the diffuse BSDF (f cos / pdf =
+  // albedo), then Russian roulette from the fourth bounce. False: it ends.
+  bool ContinuePath(PathLane& lane, int depth) const {
+    SplitMix64& random = *lane.random;
+    if (lane.gloss) {
+      // The glossy BSDF's own sampling: beta *= f cos / pdf.
+      const GlossyBsdf bsdf(*lane.gloss, lane.albedo->data(), nb_);
+      const Vec3f wo = -lane.direction;
+      const float u0 = random.UniformFloat(), u1 = random.UniformFloat(), u2 = random.UniformFloat();
+      Vec3f wi;
+      float pdf;
+      if (!bsdf.Sample(lane.n_s, wo, u0, u1, u2, &wi, &pdf)) return false;
+      Bands f(nb_);
+      bsdf.Eval(lane.n_s, wo, wi, f.data());
+      lane.beta *= f * (lane.n_s.dot(wi) / pdf);
+      lane.direction = wi;
+      lane.bsdf_pdf = pdf;
+      lane.origin = lane.origin_s;
+    } else {
+      lane.direction = SampleCosine(lane.n_s, random);
+      lane.bsdf_pdf = lane.n_s.dot(lane.direction) * kInvPiF;
+      lane.origin = lane.origin_s;
+      lane.beta *= *lane.albedo;
+    }
+    if (depth >= 3) {  // Russian roulette keeps the estimate unbiased
+      const float survive = std::min(1.0f, lane.beta.maxCoeff());
+      if (random.UniformFloat() >= survive) return false;
+      lane.beta /= survive;
+    }
+    return true;
+  }
+
+
+  // The solver keeps Lp band-major ([band][texel], for its batch kernel), so
+  // one texel's bands lie a texel count apart: a cache miss per band for
+  // every path vertex that meets or samples a glow. The path tracer reads a
+  // texel-major copy made once per frame instead.
+  struct GlowByTexel {
+    std::vector<int> bands;  // the emission bands
+    std::vector<float> Lp;   // [texel * bands.size() + i]
+  };
+  void CopyGlowByTexel() {
+    const TexelAtlas& atlas = solver_->atlas();
+    glow_by_texel_.resize(atlas.objects().size());
+    for (std::size_t s = 0; s < atlas.objects().size(); ++s) {
+      const int slot = static_cast<int>(s);
+      GlowByTexel& glow = glow_by_texel_[s];
+      glow.bands = solver_->emission_bands(slot);
+      const std::size_t n = atlas.objects()[s].count, nb = glow.bands.size();
+      glow.Lp.resize(n * nb);
+      for (std::size_t i = 0; i < nb; ++i)
+        for (std::size_t k = 0; k < n; ++k)  // a masked texel glows by the share its paint covers
+          glow.Lp[k * nb + i] = atlas.Coverage(slot, k) * solver_->Lp(slot, glow.bands[i], k);
+    }
+  }
+  std::vector<GlowByTexel> glow_by_texel_;  // per slot
+
+  // A thread's row state, kept from row to row.
+  struct PathRow {
+    std::vector<SplitMix64> streams;
+    std::vector<Bands> sums;
+    Wavefront wave;
+  };
+  const Shading& shading_;
+  const CameraRays& camera_;
+  const SceneGeometry& geometry_;
+  const Scene& scene_;
+  const CoupledSolver* solver_;
+  const VolumeMedia* media_;
+  const FrameOptions& options_;
+  int nb_;
+  EmitterDistribution emitters_;
+  tbb::enumerable_thread_specific<PathRow> rows_;
+};
+
+}  // namespace
+
+std::unique_ptr<FrameTransport> MakePathTransport(const Shading& shading, const CameraRays& camera) {
+  return std::make_unique<PathTransport>(shading, camera);
+}
+
+}  // namespace phos::render
