@@ -9,7 +9,7 @@
 
 #include <embree3/rtcore.h>
 
-#include "phos/render/albedo_texture.h"
+#include "phos/render/surface_textures.h"
 #include "phos/util/error.h"
 #include "phos/util/math.h"
 #include "phos/util/random.h"
@@ -70,7 +70,7 @@ SceneGeometry::SceneGeometry(const Scene& scene) : scene_(scene), embree_(std::m
   rtcCommitScene(embree_->scene);
   for (const Object& object : scene.objects)
     if (object.albedo_texture) {
-      albedo_textures_ = std::make_unique<AlbedoTextures>(scene);
+      surface_textures_ = std::make_unique<SurfaceTextures>(scene);
       break;
     }
   Eigen::AlignedBox3f box;

@@ -58,7 +58,7 @@ void CheckCounts(std::size_t vertices, std::size_t triangles, const std::string&
 
 // A texture a mesh file names, relative to the file's folder: it must be a
 // regular file (OpenImageIO decodes it when the renderer first looks it up;
-// render/albedo_texture.h says there whether it is an image).
+// render/surface_textures.h says there whether it is an image).
 std::filesystem::path TextureFile(const std::filesystem::path& base_dir, const std::string& name,
                                   const std::string& where, const std::string& field) {
   const std::filesystem::path file = base_dir / name;
@@ -315,7 +315,7 @@ bool GltfNoWrite(std::string* err, const std::string&, const std::vector<unsigne
   return false;
 }
 // Images are not decoded here: a base colour texture is read through
-// OpenImageIO's TextureSystem when rendering (albedo_texture.h), and a
+// OpenImageIO's TextureSystem when rendering (surface_textures.h), and a
 // crafted image must not cost memory or time at load.
 bool GltfSkipImage(tinygltf::Image*, const int, std::string*, std::string*, int, int, const unsigned char*, int,
                    void*) {

@@ -16,7 +16,7 @@ Shading::Shading(const SceneGeometry& geometry, const CoupledSolver* solver, con
     sky_L_ = Bands(nb_);
     for (int b = 0; b < nb_; ++b) sky_L_[b] = static_cast<float>(sky_level_ * scene_.environment->L_per_band[b]);
   }
-  textures_ = geometry.albedo_textures();
+  textures_ = geometry.surface_textures();
   for (const Object& object : scene_.objects) {
     Bands a(nb_);
     for (int b = 0; b < nb_; ++b) a[b] = static_cast<float>(object.albedo[b]);

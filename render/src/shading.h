@@ -10,7 +10,7 @@
 
 #include <Eigen/Core>
 
-#include "phos/render/albedo_texture.h"
+#include "phos/render/surface_textures.h"
 #include "phos/render/bsdf.h"
 #include "phos/render/geometry.h"
 #include "phos/render/renderer.h"
@@ -213,7 +213,7 @@ class Shading {
   std::vector<LitLight> area_lights_;
   std::vector<int> emitter_of_object_;  // per object: its emissive light in lights_, or -1 (empty: none)
   std::vector<Bands> albedo_;           // per object
-  const AlbedoTextures* textures_ = nullptr;
+  const SurfaceTextures* textures_ = nullptr;
   float sky_level_ = 0;
   Bands sky_L_;
 };

@@ -14,7 +14,7 @@
 #include <functional>
 #include <random>
 
-#include "phos/render/albedo_texture.h"
+#include "phos/render/surface_textures.h"
 #include "phos/render/geometry.h"
 #include "phos/render/renderer.h"
 #include "phos/render/spectral_upsampling.h"
@@ -122,7 +122,7 @@ TEST(AlbedoTexture, TheFixtureIsATexturedPlaneWithItsFactor) {
 TEST(AlbedoTexture, TexturedPlaneUnderAPointLightIsAlbedoTimesEOverPiInEveryTransport) {
   const Scene scene = TexturedPlane();
   SceneGeometry geometry(scene);
-  ASSERT_NE(geometry.albedo_textures(), nullptr);
+  ASSERT_NE(geometry.surface_textures(), nullptr);
   for (Transport transport : {Transport::kDirect, Transport::kPath, Transport::kDss}) {
     FrameOptions options = DefaultFrameOptions(scene, transport);
     options.spp = 1;  // centred: the path tracer's camera ray is the direct one, and nothing bounces back

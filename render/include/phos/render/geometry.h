@@ -55,7 +55,7 @@ inline int SubTriangleIndex(int m, float b1, float b2) {
 // Barycentric centre (b1, b2) of sub-triangle `index` (the inverse of SubTriangleIndex).
 void SubTriangleCenter(int m, int index, float& b1, float& b2);
 
-class AlbedoTextures;
+class SurfaceTextures;
 
 struct Hit {
   int object = -1;
@@ -118,10 +118,10 @@ class SceneGeometry {
   // Installs a recorder of every ray cast (nullptr removes it). Not while
   // rays are being cast.
   void SetRayRecorder(RayRecorder* recorder) { recorder_ = recorder; }
-  // The objects' albedo textures (albedo_texture.h), opened with the
+  // The objects' albedo textures (surface_textures.h), opened with the
   // geometry so that a bad file is refused before any frame; null when no
   // object is textured.
-  const AlbedoTextures* albedo_textures() const { return albedo_textures_.get(); }
+  const SurfaceTextures* surface_textures() const { return surface_textures_.get(); }
   RTCSceneTy* embree_scene() const;
 
  private:
@@ -139,7 +139,7 @@ class SceneGeometry {
   std::vector<std::vector<float>> area_cdf_;      // emissive objects: running sums of area_; others empty
   std::vector<bool> emissive_;                    // per object: some Light::Kind::kMesh light is it
   RayRecorder* recorder_ = nullptr;
-  std::unique_ptr<AlbedoTextures> albedo_textures_;
+  std::unique_ptr<SurfaceTextures> surface_textures_;
   double time_s_ = 0;
   std::uint64_t version_ = 0;
   float ray_epsilon_ = 1e-4f, diagonal_ = 1.0f;

@@ -314,7 +314,7 @@ Mesh MakeSphere(double radius, int subdivisions, bool inward);  // icosphere
 // .mtl are read as regular files of at most kMaxInputFileBytes; the base
 // colour (Mesh::base_colour) comes from the glTF material or the MTL's Kd
 // and map_Kd, its texture checked to be a regular file but not decoded here
-// (albedo_texture.h reads it when rendering).
+// (surface_textures.h reads it when rendering).
 Mesh LoadMesh(const std::filesystem::path& path, const std::string& group, const std::string& where);
 // The same from the file's bytes in memory (the fuzz harnesses): `format` is
 // ".obj", ".gltf" or ".glb", `base_dir` where a glTF's external buffers are.

@@ -1,4 +1,4 @@
-#include "phos/render/albedo_texture.h"
+#include "phos/render/surface_textures.h"
 
 #include <algorithm>
 
@@ -10,7 +10,7 @@ namespace phos::render {
 
 std::vector<float> SampleMaskGrid(const std::filesystem::path& file, bool v_up, int resolution,
                                   const std::string& where) {
-  // The process's shared TextureSystem, as AlbedoTextures (see there).
+  // The process's shared TextureSystem, as SurfaceTextures (see there).
   OIIO::TextureSystem* system = OIIO::TextureSystem::create(/*shared=*/true);
   const OIIO::ustring name(file.string());
   system->invalidate(name);
@@ -39,7 +39,7 @@ std::vector<float> SampleMaskGrid(const std::filesystem::path& file, bool v_up, 
   return coverage;
 }
 
-AlbedoTextures::AlbedoTextures(const Scene& scene)
+SurfaceTextures::SurfaceTextures(const Scene& scene)
     : scene_(scene), to_bands_(scene.bands), handles_(scene.objects.size(), nullptr), srgb_(scene.objects.size(), 0) {
   // The process's shared TextureSystem, never destroyed: OpenImageIO 2.4's
   // TextureSystem::destroy of a private one deletes it through the wrong
@@ -73,7 +73,7 @@ AlbedoTextures::AlbedoTextures(const Scene& scene)
   }
 }
 
-AlbedoTextures::~AlbedoTextures() = default;
+SurfaceTextures::~SurfaceTextures() = default;
 
 namespace {
 
@@ -104,7 +104,7 @@ void UvFootprint(const SceneGeometry& geometry, const Hit& hit, const Mesh& mesh
 
 }  // namespace
 
-void AlbedoTextures::Albedo(const SceneGeometry& geometry, const Hit& hit, const Vec3f& dp_dx, const Vec3f& dp_dy,
+void SurfaceTextures::Albedo(const SceneGeometry& geometry, const Hit& hit, const Vec3f& dp_dx, const Vec3f& dp_dy,
                             float* bands) const {
   const Mesh& mesh = *scene_.objects[hit.object].mesh;
   const BaseColour& colour = *scene_.objects[hit.object].albedo_texture;

@@ -22,15 +22,15 @@ OIIO_NAMESPACE_END
 
 namespace phos::render {
 
-class AlbedoTextures {
+class SurfaceTextures {
  public:
   // Opens every textured object's file; one that is not an image OpenImageIO
   // can read is a UserError naming the scene's object, the mesh file's field
   // and the texture file.
-  explicit AlbedoTextures(const Scene& scene);
-  ~AlbedoTextures();
-  AlbedoTextures(const AlbedoTextures&) = delete;
-  AlbedoTextures& operator=(const AlbedoTextures&) = delete;
+  explicit SurfaceTextures(const Scene& scene);
+  ~SurfaceTextures();
+  SurfaceTextures(const SurfaceTextures&) = delete;
+  SurfaceTextures& operator=(const SurfaceTextures&) = delete;
 
   bool textured(int object) const { return handles_[object] != nullptr; }
   // Albedo per band at a hit on a textured object, written to bands[0, band
