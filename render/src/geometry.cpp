@@ -69,7 +69,7 @@ SceneGeometry::SceneGeometry(const Scene& scene) : scene_(scene), embree_(std::m
   }
   rtcCommitScene(embree_->scene);
   for (const Object& object : scene.objects)
-    if (object.albedo_texture) {
+    if (object.albedo_texture || object.gloss_texture) {
       surface_textures_ = std::make_unique<SurfaceTextures>(scene);
       break;
     }

@@ -322,6 +322,24 @@ bool GltfSkipImage(tinygltf::Image*, const int, std::string*, std::string*, int,
   return true;
 }
 
+// The image file of a glTF texture reference (`field` names it in messages):
+// TEXCOORD_0 and an image in its own file only.
+std::filesystem::path GltfTextureFile(const tinygltf::Model& model, const tinygltf::TextureInfo& info,
+                                      const std::filesystem::path& base_dir, const std::string& where,
+                                      const std::string& field) {
+  if (info.texCoord != 0) ThrowUserError(where, field + ".texCoord", "only TEXCOORD_0 is supported");
+  if (info.index >= static_cast<int>(model.textures.size()))
+    ThrowUserError(where, field + ".index", "texture index out of range");
+  const int source = model.textures[info.index].source;
+  if (source < 0 || source >= static_cast<int>(model.images.size()))
+    ThrowUserError(where, "textures[" + std::to_string(info.index) + "].source", "image index out of range");
+  const tinygltf::Image& image = model.images[source];
+  const std::string image_field = "images[" + std::to_string(source) + "].uri";
+  if (image.uri.empty() || image.uri.rfind("data:", 0) == 0)
+    ThrowUserError(where, image_field, "only images in their own files are supported (not embedded ones)");
+  return TextureFile(base_dir, image.uri, where, image_field);
+}
+
 // The base colour of glTF material `index` (pbrMetallicRoughness
 // baseColorFactor, linear, and baseColorTexture, sRGB), none without one.
 std::optional<BaseColour> GltfBaseColour(const tinygltf::Model& model, int index,
@@ -339,24 +357,14 @@ std::optional<BaseColour> GltfBaseColour(const tinygltf::Model& model, int index
   const tinygltf::TextureInfo& info = pbr.baseColorTexture;
   if (info.index < 0) return colour;
   colour.field = field + ".pbrMetallicRoughness.baseColorTexture";
-  if (info.texCoord != 0) ThrowUserError(where, colour.field + ".texCoord", "only TEXCOORD_0 is supported");
-  if (info.index >= static_cast<int>(model.textures.size()))
-    ThrowUserError(where, colour.field + ".index", "texture index out of range");
-  const int source = model.textures[info.index].source;
-  if (source < 0 || source >= static_cast<int>(model.images.size()))
-    ThrowUserError(where, "textures[" + std::to_string(info.index) + "].source", "image index out of range");
-  const tinygltf::Image& image = model.images[source];
-  const std::string image_field = "images[" + std::to_string(source) + "].uri";
-  if (image.uri.empty() || image.uri.rfind("data:", 0) == 0)
-    ThrowUserError(where, image_field, "only images in their own files are supported (not embedded ones)");
-  colour.texture = TextureFile(base_dir, image.uri, where, image_field);
+  colour.texture = GltfTextureFile(model, info, base_dir, where, colour.field);
   return colour;
 }
 
 // A glTF material's metallic-roughness factors as a Gloss, when they make it
-// glossy (metallic > 0 or roughness < 1); a rough dielectric (metallic 0,
-// roughness 1, which glTF's spec draws nearly as a Lambertian surface) stays
-// Lambertian. The metallicRoughnessTexture is not read.
+// glossy (metallic > 0 or roughness < 1, or a metallicRoughnessTexture); a
+// rough dielectric (metallic 0, roughness 1, which glTF's spec draws nearly
+// as a Lambertian surface) stays Lambertian.
 std::optional<Gloss> GltfGloss(const tinygltf::Model& model, int index, const std::string& where) {
   if (index < 0 || index >= static_cast<int>(model.materials.size())) return std::nullopt;
   const tinygltf::PbrMetallicRoughness& pbr = model.materials[index].pbrMetallicRoughness;
@@ -365,9 +373,22 @@ std::optional<Gloss> GltfGloss(const tinygltf::Model& model, int index, const st
     ThrowUserError(where, field + ".metallicFactor", "expected a value in [0, 1]");
   if (!(pbr.roughnessFactor >= 0 && pbr.roughnessFactor <= 1))
     ThrowUserError(where, field + ".roughnessFactor", "expected a value in [0, 1]");
-  if (pbr.metallicFactor == 0 && pbr.roughnessFactor == 1) return std::nullopt;
+  if (pbr.metallicFactor == 0 && pbr.roughnessFactor == 1 && pbr.metallicRoughnessTexture.index < 0)
+    return std::nullopt;
   return Gloss{static_cast<float>(pbr.metallicFactor),
                std::max(kMinRoughness, static_cast<float>(pbr.roughnessFactor))};
+}
+
+// A glTF material's metallicRoughnessTexture, none without one.
+std::optional<GlossTexture> GltfGlossTexture(const tinygltf::Model& model, int index,
+                                             const std::filesystem::path& base_dir, const std::string& where) {
+  if (index < 0 || index >= static_cast<int>(model.materials.size())) return std::nullopt;
+  const tinygltf::TextureInfo& info = model.materials[index].pbrMetallicRoughness.metallicRoughnessTexture;
+  if (info.index < 0) return std::nullopt;
+  GlossTexture gloss;
+  gloss.field = "materials[" + std::to_string(index) + "].pbrMetallicRoughness.metallicRoughnessTexture";
+  gloss.texture = GltfTextureFile(model, info, base_dir, where, gloss.field);
+  return gloss;
 }
 
 // The extensions phos reads: a file that requires any other is refused,
@@ -448,7 +469,10 @@ Mesh ParseGltf(std::string_view data, bool binary, const std::filesystem::path& 
         if (primitive.mode != TINYGLTF_MODE_TRIANGLES && primitive.mode != -1)
           continue;  // points and lines carry no surface
         MergeBaseColour(mesh, GltfBaseColour(model, primitive.material, base_dir, file_where), first_primitive);
-        if (first_primitive) mesh.gloss = GltfGloss(model, primitive.material, file_where);
+        if (first_primitive) {
+          mesh.gloss = GltfGloss(model, primitive.material, file_where);
+          mesh.gloss_texture = GltfGlossTexture(model, primitive.material, base_dir, file_where);
+        }
         first_primitive = false;
         const auto position = primitive.attributes.find("POSITION");
         if (position == primitive.attributes.end())

@@ -702,8 +702,13 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
         f->Fail("the mesh has no UV map (" + object.mesh->source + "); use \"auto\"");
     }
     if (auto f = o.Optional("uv_resolution")) object.uv_resolution = f->Integer(1, 16384);
-    // Gloss: the scene's factors over the mesh's glTF material's.
+    // Gloss: the scene's factors over the mesh's glTF material's; its
+    // texture, if any, multiplies them at each hit.
     object.gloss = object.mesh->gloss;
+    object.gloss_texture = object.mesh->gloss_texture;
+    if (object.gloss_texture && !object.mesh->has_uvs())
+      o["mesh"].Fail("the mesh (" + object.mesh->source + ") has a gloss texture (" + object.gloss_texture->field +
+                     ") but no UV map (TEXCOORD_0 on every corner)");
     if (o.Has("metallic") || o.Has("roughness")) {
       Gloss gloss = object.gloss.value_or(Gloss{});
       if (auto f = o.Optional("metallic")) gloss.metallic = static_cast<float>(f->NumberInRange(0, 1));

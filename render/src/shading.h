@@ -128,10 +128,17 @@ class Shading {
     return l >= 0 ? &lights_[l].E : nullptr;
   }
 
-  // An object's gloss, or null for a Lambertian one.
-  const Gloss* GlossAt(int object) const {
-    const auto& gloss = scene_.objects[object].gloss;
-    return gloss ? &*gloss : nullptr;
+  // The gloss at a hit, or null on a Lambertian object: the object's, or
+  // its factors times its gloss texture filtered over the footprint of the
+  // ray from `origin`, written to `texture_gloss` (as AlbedoAt).
+  const Gloss* GlossAt(const Hit& hit, const Vec3f& origin, const RayDifferential& differential,
+                       Gloss& texture_gloss) const {
+    const auto& gloss = scene_.objects[hit.object].gloss;
+    if (!gloss) return nullptr;
+    if (!textures_ || !textures_->gloss_textured(hit.object)) return &*gloss;
+    texture_gloss = textures_->GlossAt(geometry_, hit, OffsetOnHitPlane(hit, origin, differential.dx),
+                                       OffsetOnHitPlane(hit, origin, differential.dy), *gloss);
+    return &texture_gloss;
   }
 
   // A glossy surface's reflection in direct transport (docs/render.md,

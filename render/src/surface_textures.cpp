@@ -40,7 +40,11 @@ std::vector<float> SampleMaskGrid(const std::filesystem::path& file, bool v_up, 
 }
 
 SurfaceTextures::SurfaceTextures(const Scene& scene)
-    : scene_(scene), to_bands_(scene.bands), handles_(scene.objects.size(), nullptr), srgb_(scene.objects.size(), 0) {
+    : scene_(scene),
+      to_bands_(scene.bands),
+      handles_(scene.objects.size(), nullptr),
+      gloss_handles_(scene.objects.size(), nullptr),
+      srgb_(scene.objects.size(), 0) {
   // The process's shared TextureSystem, never destroyed: OpenImageIO 2.4's
   // TextureSystem::destroy of a private one deletes it through the wrong
   // type (AddressSanitizer: new-delete-type-mismatch). A file re-read by a
@@ -51,26 +55,36 @@ SurfaceTextures::SurfaceTextures(const Scene& scene)
   system_->attribute("automip", 1);
   system_->attribute("gray_to_rgb", 1);
   for (std::size_t o = 0; o < scene.objects.size(); ++o) {
-    const auto& texture = scene.objects[o].albedo_texture;
-    if (!texture) continue;
-    const std::string where = scene.source + ": objects[" + std::to_string(o) + "] '" + scene.objects[o].name +
-                              "': " + scene.objects[o].mesh->source;
-    const OIIO::ustring file(texture->texture.string());
-    system_->invalidate(file);
-    OIIO::TextureSystem::TextureHandle* handle = system_->get_texture_handle(file);
-    OIIO::ImageSpec spec;
-    if (!handle || !system_->get_imagespec(handle, nullptr, 0, spec)) {
-      // OpenImageIO's message may hold newlines: ThrowUserError escapes them (one line).
-      const std::string error = system_->geterror();
-      ThrowUserError(where, texture->field,
-                     "texture file '" + texture->texture.string() + "' is not an image OpenImageIO can read" +
-                         (error.empty() ? "" : ": " + error));
+    const Object& object = scene.objects[o];
+    const std::string where =
+        scene.source + ": objects[" + std::to_string(o) + "] '" + object.name + "': " + object.mesh->source;
+    if (object.albedo_texture) {
+      OIIO::ImageSpec spec;
+      handles_[o] = Open(object.albedo_texture->texture, where, object.albedo_texture->field, spec);
+      // glTF says a base colour texture is sRGB-encoded; 8- and 16-bit images
+      // are taken as such, float ones (EXR) as linear.
+      srgb_[o] = !spec.format.is_floating_point();
     }
-    handles_[o] = handle;
-    // glTF says a base colour texture is sRGB-encoded; 8- and 16-bit images
-    // are taken as such, float ones (EXR) as linear.
-    srgb_[o] = !spec.format.is_floating_point();
+    if (object.gloss_texture) {
+      OIIO::ImageSpec spec;
+      gloss_handles_[o] = Open(object.gloss_texture->texture, where, object.gloss_texture->field, spec);
+    }
   }
+}
+
+void* SurfaceTextures::Open(const std::filesystem::path& texture, const std::string& where, const std::string& field,
+                            OIIO::ImageSpec& spec) const {
+  const OIIO::ustring file(texture.string());
+  system_->invalidate(file);
+  OIIO::TextureSystem::TextureHandle* handle = system_->get_texture_handle(file);
+  if (!handle || !system_->get_imagespec(handle, nullptr, 0, spec)) {
+    // OpenImageIO's message may hold newlines: ThrowUserError escapes them (one line).
+    const std::string error = system_->geterror();
+    ThrowUserError(where, field,
+                   "texture file '" + texture.string() + "' is not an image OpenImageIO can read" +
+                       (error.empty() ? "" : ": " + error));
+  }
+  return handle;
 }
 
 SurfaceTextures::~SurfaceTextures() = default;
@@ -104,17 +118,17 @@ void UvFootprint(const SceneGeometry& geometry, const Hit& hit, const Mesh& mesh
 
 }  // namespace
 
-void SurfaceTextures::Albedo(const SceneGeometry& geometry, const Hit& hit, const Vec3f& dp_dx, const Vec3f& dp_dy,
-                            float* bands) const {
+void SurfaceTextures::Lookup(void* handle, const Hit& hit, const Vec3f& dp_dx, const Vec3f& dp_dy,
+                             const SceneGeometry& geometry, bool v_up, int first_channel, int channels,
+                             float* out) const {
   const Mesh& mesh = *scene_.objects[hit.object].mesh;
-  const BaseColour& colour = *scene_.objects[hit.object].albedo_texture;
   const Eigen::Vector3i& t = mesh.uv_triangles[hit.triangle];
   const Eigen::Vector2f uv = (1 - hit.b1 - hit.b2) * mesh.uvs[t[0]] + hit.b1 * mesh.uvs[t[1]] + hit.b2 * mesh.uvs[t[2]];
   Eigen::Vector2f duv_dx = Eigen::Vector2f::Zero(), duv_dy = Eigen::Vector2f::Zero();
   if (!dp_dx.isZero() || !dp_dy.isZero()) UvFootprint(geometry, hit, mesh, dp_dx, dp_dy, duv_dx, duv_dy);
   // OpenImageIO's t runs down the image from its top row, as glTF's v; an
   // OBJ's v runs up from the bottom row.
-  const float flip = colour.v_up ? -1.0f : 1.0f;
+  const float flip = v_up ? -1.0f : 1.0f;
   OIIO::TextureOpt options;
   options.swrap = options.twrap = OIIO::TextureOpt::WrapPeriodic;  // glTF's default sampler repeats
   // Trilinear across levels, bilinear within one: OpenImageIO's defaults
@@ -123,10 +137,17 @@ void SurfaceTextures::Albedo(const SceneGeometry& geometry, const Hit& hit, cons
   // BM_TexturedDirectFrame); docs/render.md says what it blurs.
   options.interpmode = OIIO::TextureOpt::InterpBilinear;
   options.mipmode = OIIO::TextureOpt::MipModeTrilinear;
+  options.firstchannel = first_channel;
+  system_->texture(static_cast<OIIO::TextureSystem::TextureHandle*>(handle), system_->get_perthread_info(), options,
+                   uv.x(), v_up ? 1 - uv.y() : uv.y(), duv_dx.x(), flip * duv_dx.y(), duv_dy.x(), flip * duv_dy.y(),
+                   channels, out);
+}
+
+void SurfaceTextures::Albedo(const SceneGeometry& geometry, const Hit& hit, const Vec3f& dp_dx, const Vec3f& dp_dy,
+                             float* bands) const {
+  const BaseColour& colour = *scene_.objects[hit.object].albedo_texture;
   float rgb[3] = {0, 0, 0};
-  auto* handle = static_cast<OIIO::TextureSystem::TextureHandle*>(handles_[hit.object]);
-  system_->texture(handle, system_->get_perthread_info(), options, uv.x(), colour.v_up ? 1 - uv.y() : uv.y(),
-                   duv_dx.x(), flip * duv_dx.y(), duv_dy.x(), flip * duv_dy.y(), 3, rgb);
+  Lookup(handles_[hit.object], hit, dp_dx, dp_dy, geometry, colour.v_up, 0, 3, rgb);
   for (int c = 0; c < 3; ++c) {
     // Decoded after the filter: OpenImageIO 2.4's TextureSystem has no
     // colour transform (docs/render.md, "Textures", says what that costs).
@@ -134,6 +155,15 @@ void SurfaceTextures::Albedo(const SceneGeometry& geometry, const Hit& hit, cons
     rgb[c] = colour.factor[c] * linear;
   }
   to_bands_.Albedo(rgb, bands);
+}
+
+Gloss SurfaceTextures::GlossAt(const SceneGeometry& geometry, const Hit& hit, const Vec3f& dp_dx, const Vec3f& dp_dy,
+                               const Gloss& factors) const {
+  float roughness_metallic[2] = {1, 1};  // glTF: G roughness, B metallic
+  Lookup(gloss_handles_[hit.object], hit, dp_dx, dp_dy, geometry, scene_.objects[hit.object].mesh->v_up, 1, 2,
+         roughness_metallic);
+  return {factors.metallic * std::clamp(roughness_metallic[1], 0.0f, 1.0f),
+          factors.roughness * std::clamp(roughness_metallic[0], 0.0f, 1.0f)};
 }
 
 }  // namespace phos::render

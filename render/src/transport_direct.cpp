@@ -32,7 +32,8 @@ Bands ShadeCameraRay(const Shading& shading, const Vec3f& origin, const Vec3f& d
   const Vec3f n_s = hit.front ? hit.normal : Vec3f(-hit.normal);
   Bands texture_albedo;
   const Bands& albedo = shading.AlbedoAt(hit, origin, differential, texture_albedo);
-  if (const Gloss* gloss = shading.GlossAt(hit.object)) {
+  Gloss texture_gloss;
+  if (const Gloss* gloss = shading.GlossAt(hit, origin, differential, texture_gloss)) {
     L += shading.GlossyReflection(*gloss, albedo, hit.position, n_s, -direction, rays);
     return Lm + T * L;
   }

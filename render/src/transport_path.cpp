@@ -263,7 +263,8 @@ class PathTransport final : public FrameTransport {
     Hit hit;
     Vec3f n_s, origin_s, wi;
     float emitter_distance = 0, emitter_scale = 0;
-    const Gloss* gloss = nullptr;  // a glossy hit's; null: Lambertian
+    const Gloss* gloss = nullptr;  // a glossy hit's (the object's, or texture_gloss); null: Lambertian
+    Gloss texture_gloss;
     Bands glow_f_cos;              // glossy: f cos toward the glowing point (emitter_scale then w / p_light)
     GlowTexel glow_there;
     GlowTexel glow_here;
@@ -429,7 +430,8 @@ class PathTransport final : public FrameTransport {
     // Textures are filtered over the camera ray's footprint; bounces look up
     // a point (zero derivatives: their footprint is the BSDF's, not a pixel's).
     lane.albedo = &shading_.AlbedoAt(hit, lane.origin, depth == 0 ? lane.differential : RayDifferential{}, lane.texture_albedo);
-    lane.gloss = shading_.GlossAt(hit.object);
+    lane.gloss =
+        shading_.GlossAt(hit, lane.origin, depth == 0 ? lane.differential : RayDifferential{}, lane.texture_gloss);
     lane.scatters = lane.gloss || lane.albedo->maxCoeff() > 0;  // a glossy coat reflects on black too
     lane.emitter = nullptr;
     if (lane.scatters && !emitters_.empty()) {

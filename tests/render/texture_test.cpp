@@ -5,6 +5,9 @@
 //    scripts/make_textured_fixture.py) under a point light: each quadrant's
 //    centre is albedo(u, v) E / pi in the direct, path and dss transports,
 //    and an OBJ/MTL map_Kd of the same checker (v up) renders the same;
+//  - a glTF metallicRoughnessTexture: each half of a two-valued texture
+//    renders as a plane of that half's constant gloss (direct and path), and
+//    the scene's factors multiply it;
 //  - bad input names the file and the field.
 
 #include <gtest/gtest.h>
@@ -14,11 +17,15 @@
 #include <functional>
 #include <random>
 
+#include <OpenImageIO/imageio.h>
+#include <nlohmann/json.hpp>
+
 #include "phos/render/surface_textures.h"
 #include "phos/render/geometry.h"
 #include "phos/render/renderer.h"
 #include "phos/render/spectral_upsampling.h"
 #include "phos/util/error.h"
+#include "phos/util/json.h"
 #include "render/scene_util.h"
 #include "test_util.h"
 
@@ -282,6 +289,121 @@ TEST(AlbedoTexture, EmbeddedImagesAndMeshesWithoutUvsAreRefused) {
   std::ofstream(dir / "plane.mtl", std::ios::trunc) << "newmtl m\nmap_Kd missing.png\n";
   const std::string missing = UserErrorOf([&] { LoadScene(dir / "obj.json"); });
   EXPECT_NE(missing.find("plane.mtl): newmtl m: map_Kd: texture file"), std::string::npos) << missing;
+}
+
+// A glossy grey plane under a point light, seen from above; its glTF
+// material has metallicFactor and roughnessFactor `factors` and, if `png`
+// is given, that metallicRoughnessTexture. `scene_factors`: the scene's
+// "metallic" and "roughness" keys, if any.
+Scene GlossPlane(const TempDir& dir, const std::string& name, Gloss factors, const std::string& png,
+                 const std::string& scene_factors = "") {
+  nlohmann::json gltf = ReadJsonFile(Fixture("scenes/textured/plane.gltf"));
+  nlohmann::json& pbr = gltf["materials"][0]["pbrMetallicRoughness"];
+  pbr.erase("baseColorTexture");
+  pbr["baseColorFactor"] = {0.6, 0.6, 0.6, 1};
+  pbr["metallicFactor"] = factors.metallic;
+  pbr["roughnessFactor"] = factors.roughness;
+  if (png.empty()) {
+    gltf.erase("textures");
+    gltf.erase("images");
+  } else {
+    pbr["metallicRoughnessTexture"] = {{"index", 0}};
+    gltf["images"][0]["uri"] = png;
+  }
+  std::ofstream(dir / (name + ".gltf")) << gltf.dump();
+  std::ofstream(dir / (name + ".json")) << R"({"schema": "phos.scene/1", "time": {"start_s": 0, "end_s": 1, "fps": 1},
+    "camera": {"position": [0, 1.6, 0.001], "look_at": [0, 0, 0], "up": [0, 1, 0], "fov_deg": 40,
+               "width": 160, "height": 120},
+    "objects": [{"name": "plane", "mesh": ")" + name + R"(.gltf")" + scene_factors + R"(}],
+    "lights": [{"type": "point", "position": [0, 1, 0], "intensity": 1, "spectrum": {"type": "white_led"}}]})";
+  return LoadScene(dir / (name + ".json"));
+}
+
+// An 8 x 8 RGB metallicRoughnessTexture: rows 0-3 (glTF's v < 0.5, the
+// plane's z < 0) hold `top` as (roughness in G, metallic in B), rows 4-7
+// `bottom`; R holds noise, which glTF leaves unused.
+void WriteGlossPng(const std::filesystem::path& file, std::array<int, 2> top, std::array<int, 2> bottom) {
+  std::vector<std::uint8_t> pixels;
+  for (int y = 0; y < 8; ++y)
+    for (int x = 0; x < 8; ++x) {
+      const std::array<int, 2>& half = y < 4 ? top : bottom;
+      pixels.insert(pixels.end(), {static_cast<std::uint8_t>(37 * (x + y) % 256), static_cast<std::uint8_t>(half[0]),
+                                   static_cast<std::uint8_t>(half[1])});
+    }
+  auto out = OIIO::ImageOutput::create(file.string());
+  ASSERT_TRUE(out);
+  ASSERT_TRUE(out->open(file.string(), OIIO::ImageSpec(8, 8, 3, OIIO::TypeDesc::UINT8)));
+  ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, pixels.data()));
+  out->close();
+}
+
+// The pixels within 4 of the one seeing the plane's point (0, 0, z).
+std::vector<std::array<int, 2>> PixelsAround(const Scene& scene, float z) {
+  const CameraRays camera(scene, 0);
+  float px, py, depth;
+  EXPECT_TRUE(camera.Project(Vec3f(0, 0, z), &px, &py, &depth));
+  std::vector<std::array<int, 2>> pixels;
+  for (int dy = -4; dy <= 4; ++dy)
+    for (int dx = -4; dx <= 4; ++dx) pixels.push_back({static_cast<int>(px) + dx, static_cast<int>(py) + dy});
+  return pixels;
+}
+
+// The largest relative difference of two frames over `pixels`, every band.
+double LargestDifference(const Image& a, const Image& b, const std::vector<std::array<int, 2>>& pixels) {
+  double largest = 0;
+  for (const auto& [x, y] : pixels)
+    for (int c = 0; c < a.channels; ++c) {
+      const double u = a.at(x, y)[c], v = b.at(x, y)[c];
+      largest = std::max(largest, std::abs(u - v) / std::max({std::abs(u), std::abs(v), 1e-12}));
+    }
+  return largest;
+}
+
+TEST(GlossTexture, EachHalfRendersAsItsConstantGlossAndTheScenesFactorsMultiplyIt) {
+  TempDir dir;
+  // Top: roughness 0.2, metallic 1 (a smooth metal); bottom: roughness 0.8,
+  // metallic 0 (a rough dielectric).
+  WriteGlossPng(dir / "mr.png", {51, 255}, {204, 0});
+  const Scene textured = GlossPlane(dir, "textured", {1, 1}, "mr.png");
+  ASSERT_TRUE(textured.objects[0].gloss_texture);
+  EXPECT_NE(textured.objects[0].gloss_texture->field.find("metallicRoughnessTexture"), std::string::npos);
+  const Scene top = GlossPlane(dir, "top", {1, 0.2f}, "");
+  const Scene bottom = GlossPlane(dir, "bottom", {0, 0.8f}, "");
+  // The scene's factors over the glTF's, times the texture: roughness 0.5 x
+  // 0.2 and metallic 0.5 x 1 at the top.
+  const Scene halved = GlossPlane(dir, "halved", {1, 1}, "mr.png", R"(, "metallic": 0.5, "roughness": 0.5)");
+  const Scene halved_top = GlossPlane(dir, "halved_top", {0.5f, 0.1f}, "");
+  const auto top_pixels = PixelsAround(textured, -0.25f), bottom_pixels = PixelsAround(textured, 0.25f);
+  for (Transport transport : {Transport::kDirect, Transport::kPath}) {
+    FrameOptions options = DefaultFrameOptions(textured, transport);
+    options.spp = 1;  // centred: the camera ray is the direct one, and a lone plane bounces nothing back
+    options.max_depth = 2;
+    auto render = [&](const Scene& scene) {
+      SceneGeometry geometry(scene);
+      return RenderBands(geometry, nullptr, options);
+    };
+    const Image mixed = render(textured), smooth = render(top), rough = render(bottom);
+    const std::string what = TransportName(transport);
+    EXPECT_LT(LargestDifference(mixed, smooth, top_pixels), 1e-4) << what;
+    EXPECT_LT(LargestDifference(mixed, rough, bottom_pixels), 1e-4) << what;
+    // The two glosses look different where they are checked: a texture read
+    // upside down, or its channels swapped, would fail above.
+    EXPECT_GT(LargestDifference(smooth, rough, top_pixels), 0.2) << what;
+    EXPECT_GT(LargestDifference(smooth, rough, bottom_pixels), 0.2) << what;
+    EXPECT_LT(LargestDifference(render(halved), render(halved_top), top_pixels), 1e-4) << what;
+  }
+}
+
+TEST(GlossTexture, AMissingOrUnreadableGlossTextureNamesTheField) {
+  TempDir dir;
+  const std::string missing = UserErrorOf([&] { GlossPlane(dir, "missing", {1, 1}, "gone.png"); });
+  EXPECT_NE(missing.find("gone.png' does not exist"), std::string::npos) << missing;
+  std::ofstream(dir / "notes.png") << "these are not pixels\n";
+  const Scene scene = GlossPlane(dir, "notes", {1, 1}, "notes.png");
+  const std::string unreadable = UserErrorOf([&] { SceneGeometry geometry(scene); });
+  EXPECT_NE(unreadable.find("metallicRoughnessTexture"), std::string::npos) << unreadable;
+  EXPECT_NE(unreadable.find("notes.png' is not an image"), std::string::npos) << unreadable;
+  EXPECT_EQ(unreadable.find('\n'), std::string::npos) << unreadable;
 }
 
 }  // namespace

@@ -53,6 +53,14 @@ struct Gloss {
 };
 inline constexpr float kMinRoughness = 0.02f;
 
+// A glTF metallicRoughnessTexture (glTF 2.0, material.pbrMetallicRoughness):
+// roughness in its G channel and metallic in its B channel, linear (not
+// sRGB), each times the object's Gloss factor at every hit.
+struct GlossTexture {
+  std::filesystem::path texture;
+  std::string field;  // where the file says so, for messages
+};
+
 // The base colour a mesh file declares (glTF pbrMetallicRoughness
 // baseColorFactor and baseColorTexture, OBJ/MTL Kd and map_Kd): a linear RGB
 // factor, times the texture's sRGB-decoded texel when there is one.
@@ -80,6 +88,7 @@ struct Mesh {
   std::string base_colours_differ;  // non-empty: why no single base colour was kept
   bool v_up = false;  // OBJ: v = 0 is an image's bottom row; glTF and built-in shapes: its top row
   std::optional<Gloss> gloss;  // glTF: its first material's metallic-roughness, when glossy
+  std::optional<GlossTexture> gloss_texture;  // glTF: its first material's metallicRoughnessTexture
   bool has_uvs() const { return !uv_triangles.empty() && uv_triangles.size() == triangles.size(); }
 };
 
@@ -145,6 +154,9 @@ struct Object {
   // Glossy (glTF metallic-roughness, render/bsdf.h): a GGX lobe over the
   // diffuse base. Unset: Lambertian, as before.
   std::optional<Gloss> gloss;
+  // Gloss that varies across the surface: the texture's roughness and
+  // metallic times gloss's factors at each hit (set only with gloss).
+  std::optional<GlossTexture> gloss_texture;
   double texel_size_m = 0.0;  // edge of the automatic atlas's texels (0: scene default)
   // Texels: "auto" (per-triangle atlas), "uv" (the mesh's UV map) or "" (the
   // UV map when the mesh has one, else auto). uv_resolution: texels per UV

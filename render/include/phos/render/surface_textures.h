@@ -1,12 +1,15 @@
 #pragma once
-// Albedo that varies across a surface (Sec. 8.5: "parameters per material
-// or, if spatial variation is desired, in textures"): an object's base colour
-// texture (Object::albedo_texture), looked up through OpenImageIO's
-// TextureSystem (mip-mapped, filtered over the hit's UV footprint), decoded
-// from sRGB and upsampled to the scene's bands (spectral_upsampling.h).
+// Albedo and gloss that vary across a surface (Sec. 8.5: "parameters per
+// material or, if spatial variation is desired, in textures"), looked up
+// through OpenImageIO's TextureSystem (mip-mapped, filtered over the hit's
+// UV footprint):
+//  - an object's base colour texture (Object::albedo_texture), decoded from
+//    sRGB and upsampled to the scene's bands (spectral_upsampling.h);
+//  - its glTF metallicRoughnessTexture (Object::gloss_texture): roughness
+//    from G and metallic from B, linear, times the object's Gloss factors.
 //
 // Only textured objects come here: the renderer keeps an untextured
-// object's constant albedo and never asks.
+// object's constant albedo and gloss and never asks.
 
 #include <memory>
 #include <vector>
@@ -18,6 +21,7 @@
 
 OIIO_NAMESPACE_BEGIN
 class TextureSystem;
+class ImageSpec;
 OIIO_NAMESPACE_END
 
 namespace phos::render {
@@ -41,11 +45,26 @@ class SurfaceTextures {
   void Albedo(const SceneGeometry& geometry, const Hit& hit, const Vec3f& dp_dx, const Vec3f& dp_dy,
               float* bands) const;
 
+  bool gloss_textured(int object) const { return gloss_handles_[object] != nullptr; }
+  // The gloss at a hit on an object with a gloss texture: `factors` (the
+  // object's Gloss) times the texture's B (metallic) and G (roughness),
+  // filtered over the footprint as Albedo's.
+  Gloss GlossAt(const SceneGeometry& geometry, const Hit& hit, const Vec3f& dp_dx, const Vec3f& dp_dy,
+                const Gloss& factors) const;
+
  private:
+  // A texture's handle; a file that is not an image is a UserError.
+  void* Open(const std::filesystem::path& texture, const std::string& where, const std::string& field,
+             OIIO::ImageSpec& spec) const;
+  // `channels` channels from `first_channel` of the texture at the hit.
+  void Lookup(void* handle, const Hit& hit, const Vec3f& dp_dx, const Vec3f& dp_dy, const SceneGeometry& geometry,
+              bool v_up, int first_channel, int channels, float* out) const;
+
   const Scene& scene_;
   RgbToBands to_bands_;
   OIIO::TextureSystem* system_ = nullptr;
-  std::vector<void*> handles_;      // per object: its texture's handle, null when untextured
+  std::vector<void*> handles_;      // per object: its albedo texture's handle, null when untextured
+  std::vector<void*> gloss_handles_;  // per object: its gloss texture's handle, null when none
   std::vector<char> srgb_;          // per object: its texels are sRGB-encoded
 };
 
