@@ -12,11 +12,13 @@
 //     phosphorescence over one without; counter `ratio`.
 //   BM_FrameAfterLightsOut: a frame an hour after lights-out over one a second
 //     after; counter `ratio` (the goal: within 20% of 1).
-//   BM_TexturedDirectFrame: a 640 x 480 direct frame of the textured-plane
+//   BM_TexturedDirectFrame/0: a 640 x 480 direct frame of the textured-plane
 //     fixture (fixtures/scenes/textured-plane.json, its albedo a glTF
 //     baseColorTexture through OpenImageIO's TextureSystem) over the same
 //     scene untextured (the texture's factor as a constant albedo); counter
-//     `ratio` (issue 14: at most 1.5).
+//     `ratio` (issue 14: at most 1.5). /1: the same for the glTF sign
+//     (fixtures/scenes/glow-sign.json at 640 x 480: textured sign, an area
+//     light and a point light), a scene whose untextured pixel costs more.
 //   BM_PathAgainstBareEmbree: a path-traced frame over bare rtcIntersect1 /
 //     rtcOccluded1 calls on the very rays that frame cast (recorded, then
 //     replayed in the same order); counter `ratio` (issue 17: at most 1.5).
@@ -303,9 +305,15 @@ BENCHMARK(BM_PhosphorescenceOverhead)->Unit(benchmark::kMillisecond)->UseRealTim
 // (the same scene with the texture dropped: its factor, 1, as the albedo).
 // Alternated; best of each side.
 void BM_TexturedDirectFrame(benchmark::State& state) {
-  const Scene textured = LoadScene(PHOS_FIXTURES_DIR "/scenes/textured-plane.json");
+  Scene textured = LoadScene(state.range(0) == 0 ? PHOS_FIXTURES_DIR "/scenes/textured-plane.json"
+                                                 : PHOS_FIXTURES_DIR "/scenes/glow-sign.json");
+  textured.camera.width = 640;
+  textured.camera.height = 480;
   Scene untextured = textured;
-  for (Object& object : untextured.objects) object.albedo_texture.reset();
+  for (Object& object : untextured.objects) {
+    object.albedo_texture.reset();
+    object.gloss_texture.reset();
+  }
   const SceneGeometry textured_geometry(textured), untextured_geometry(untextured);
   const FrameOptions options = DefaultFrameOptions(textured, Transport::kDirect);
   RenderBands(textured_geometry, nullptr, options);  // the texture's first read and its mip levels: once per run
@@ -324,7 +332,7 @@ void BM_TexturedDirectFrame(benchmark::State& state) {
   state.counters["untextured_ms"] = best_untextured * 1e3;
   state.counters["ratio"] = best_textured / best_untextured;
 }
-BENCHMARK(BM_TexturedDirectFrame)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(3.0);
+BENCHMARK(BM_TexturedDirectFrame)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(3.0);
 
 // A frame (coupled step + direct render) 1 s and 3600 s after lights-out, each
 // from a freshly charged state: both are one closed-form jump. Alternated.

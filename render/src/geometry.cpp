@@ -533,6 +533,8 @@ CameraRays::CameraRays(const Scene& scene, double t_s) {
   width_ = static_cast<float>(scene.camera.width);
   height_ = static_cast<float>(scene.camera.height);
   aspect_ = width_ / height_;
+  pixel_right_ = (2 / width_) * tan_half_y_ * aspect_ * right_;
+  pixel_down_ = -(2 / height_) * tan_half_y_ * up_;
 }
 
 bool CameraRays::Project(const Vec3f& p, float* x, float* y, float* depth) const {
@@ -546,10 +548,10 @@ bool CameraRays::Project(const Vec3f& p, float* x, float* y, float* depth) const
   return true;
 }
 
-Vec3f CameraRays::Direction(float x, float y) const {
+Vec3f CameraRays::Through(float x, float y) const {
   const float sx = (2 * x / width_ - 1) * tan_half_y_ * aspect_;
   const float sy = (1 - 2 * y / height_) * tan_half_y_;
-  return (forward_ + sx * right_ + sy * up_).normalized();
+  return forward_ + sx * right_ + sy * up_;
 }
 
 TexelAtlas::TexelAtlas(const Scene& scene, const SceneGeometry& geometry) : slot_(scene.objects.size(), -1) {

@@ -39,23 +39,17 @@ inline SplitMix64 PixelStream(const FrameOptions& options, int width, int x, int
                     (std::uint64_t(y) * std::uint64_t(width) + x) * 0x2545F4914F6CDD1Dull);
 }
 
-// The rays through the image point one pixel right of and below (px, py),
-// for filtering textures; none when nothing is textured (no cost there).
-inline RayDifferential CameraDifferential(const Shading& shading, const CameraRays& camera, float px, float py) {
+// The rays through the image points one pixel right of and below the one
+// `through` passes (CameraRays::Through), for filtering textures; none when
+// nothing is textured (no cost there). Unnormalized: a ray's footprint on
+// the hit's plane does not depend on its direction's length.
+inline RayDifferential CameraDifferential(const Shading& shading, const CameraRays& camera, const Vec3f& through) {
   RayDifferential d;
   if (shading.textured()) {
-    d.dx = camera.Direction(px + 1, py);
-    d.dy = camera.Direction(px, py + 1);
+    d.dx = through + camera.pixel_right();
+    d.dy = through + camera.pixel_down();
   }
   return d;
 }
-
-// The direct transport's radiance along one camera ray (docs/render.md,
-// "Transports"): the media before the hit, the area lights it crosses, the
-// sky on a miss, and at the hit its glow and what it reflects of the lights
-// and the sky. Under dss, without the sky's reflection and the reflection of
-// translucent objects (the bounce adds them).
-Bands ShadeCameraRay(const Shading& shading, const Vec3f& origin, const Vec3f& direction,
-                     const RayDifferential& differential, float jitter, std::uint64_t& rays);
 
 }  // namespace phos::render

@@ -136,7 +136,7 @@ class DssTransport final : public FrameTransport {
         hit.position = g.position[p];
         hit.normal = g.normal[p];
         const Bands& albedo = shading_.AlbedoAt(hit, camera_.origin(),
-                                                CameraDifferential(shading_, camera_, x + 0.5f, y + 0.5f), texture_albedo);
+                                                CameraDifferential(shading_, camera_, camera_.Through(x + 0.5f, y + 0.5f)), texture_albedo);
         const float T = media ? intervals.T_end[p] : 1.0f;
         float* out = image.at(x, y);
         for (int b = 0; b < nb; ++b) out[b] += T * albedo[b] * indirect.irradiance[p * nb + b] / kPiF;

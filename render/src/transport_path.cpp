@@ -213,8 +213,9 @@ class PathTransport final : public FrameTransport {
           const int x = x0 + k;
           SplitMix64& random = streams[x];
           const float jx = spp == 1 ? 0.5f : random.UniformFloat(), jy = spp == 1 ? 0.5f : random.UniformFloat();
-          lanes[k].Start(camera_.origin(), camera_.Direction(static_cast<float>(x) + jx, static_cast<float>(y) + jy),
-                         CameraDifferential(shading_, camera_, static_cast<float>(x) + jx, static_cast<float>(y) + jy), random, nb);
+          const Vec3f through = camera_.Through(static_cast<float>(x) + jx, static_cast<float>(y) + jy);
+          lanes[k].Start(camera_.origin(), through.normalized(), CameraDifferential(shading_, camera_, through), random,
+                         nb);
         }
         TracePaths(row.wave, rays);
         for (int k = 0; k < count; ++k) sums[x0 + k] += lanes[k].L;

@@ -35,6 +35,18 @@ namespace {
 using phos::testing::Fixture;
 using phos::testing::TempDir;
 
+// The decode against IEC 61966-2-1's formula in double, at every 8-bit code
+// and between them.
+TEST(SpectralUpsampling, SrgbToLinearIsTheStandardsCurve) {
+  for (int i = 0; i <= 255 * 16; ++i) {
+    const double encoded = i / (255.0 * 16);
+    const double exact = encoded <= 0.04045 ? encoded / 12.92 : std::pow((encoded + 0.055) / 1.055, 2.4);
+    EXPECT_NEAR(SrgbToLinear(static_cast<float>(encoded)), exact, 2e-5 * exact + 1e-9) << encoded;
+  }
+  EXPECT_EQ(SrgbToLinear(0), 0);
+  EXPECT_NEAR(SrgbToLinear(1), 1, 2e-5);
+}
+
 TEST(SpectralUpsampling, WhiteIsOneInEveryBandAndGreyItself) {
   for (const SpectralGrid& grid : {SpectralGrid::Paper(), SpectralGrid::Uniform(360, 830, 470)}) {
     const RgbToBands to_bands(grid);

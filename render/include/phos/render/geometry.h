@@ -267,14 +267,20 @@ class CameraRays {
  public:
   CameraRays(const Scene& scene, double t_s);
   Vec3f origin() const { return origin_; }
-  Vec3f Direction(float x, float y) const;
+  Vec3f Direction(float x, float y) const { return Through(x, y).normalized(); }
+  // Direction's ray before it is normalized, and the steps that take it one
+  // pixel right and one pixel down: the rays through the next pixels (a
+  // camera ray's differentials) at the cost of an addition each.
+  Vec3f Through(float x, float y) const;
+  Vec3f pixel_right() const { return pixel_right_; }
+  Vec3f pixel_down() const { return pixel_down_; }
   // The image point (pixels) of a world point and its depth along the view
   // axis; false when it lies behind the camera.
   bool Project(const Vec3f& p, float* x, float* y, float* depth) const;
   float tan_half_y() const { return tan_half_y_; }
 
  private:
-  Vec3f origin_, forward_, right_, up_;
+  Vec3f origin_, forward_, right_, up_, pixel_right_, pixel_down_;
   float tan_half_y_, aspect_, width_, height_;
 };
 
