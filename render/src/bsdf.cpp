@@ -5,6 +5,7 @@
 #include <cmath>
 
 #include "phos/util/math.h"
+#include "sampling.h"
 
 namespace phos::render {
 namespace {
@@ -175,16 +176,15 @@ float GlossyBsdf::Pdf(const Vec3f& n, const Vec3f& wo, const Vec3f& wi) const {
 
 bool GlossyBsdf::Sample(const Vec3f& n, const Vec3f& wo, float u0, float u1, float u2, Vec3f* wi,
                         float* pdf) const {
-  const Vec3f t = n.unitOrthogonal(), b = n.cross(t);
+  const TangentFrame frame(n);
   if (u0 < specular_probability_) {
-    const Vec3f wo_local(wo.dot(t), wo.dot(b), wo.dot(n));
+    const Vec3f wo_local = frame.ToLocal(wo);
     if (!(wo_local.z() > 0)) return false;
     const Vec3f h_local = SampleVisibleNormal(wo_local, alpha_, u1, u2);
-    const Vec3f h = h_local.x() * t + h_local.y() * b + h_local.z() * n;
+    const Vec3f h = frame.ToWorld(h_local.x(), h_local.y(), h_local.z());
     *wi = 2 * wo.dot(h) * h - wo;
   } else {
-    const float r = std::sqrt(u1), phi = 2 * kPiF * u2;
-    *wi = r * std::cos(phi) * t + r * std::sin(phi) * b + std::sqrt(std::max(0.0f, 1 - u1)) * n;
+    *wi = SampleCosineHemisphere(frame, u1, u2);
   }
   if (!(n.dot(*wi) > 0)) return false;
   *pdf = Pdf(n, wo, *wi);

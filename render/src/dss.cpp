@@ -11,6 +11,8 @@
 #include <cmath>
 #include <limits>
 
+#include "sampling.h"
+
 namespace phos::render {
 
 std::vector<Surfel> Surfelize(const SceneGeometry& geometry, const Vec3f& eye, float fov_deg,
@@ -646,15 +648,13 @@ std::vector<float> RayTracedOcclusion(const SceneGeometry& geometry, const GBuff
     for (std::size_t p = range.begin(); p != range.end(); ++p) {
       if (g.object[p] < 0) continue;
       const Vec3f nrm = g.normal[p];
-      const Vec3f t = nrm.unitOrthogonal(), b = nrm.cross(t);
+      const TangentFrame frame(nrm);
       const Vec3f origin = g.position[p] + geometry.ray_epsilon() * nrm;
       int hits = 0;
       for (int k = 0; k < rays; ++k) {
-        // Cosine-distributed (Malley): a uniform disk point lifted to the hemisphere.
         const float u1 = Hash01(seed, p, 2 * static_cast<std::uint64_t>(k)),
                     u2 = Hash01(seed, p, 2 * static_cast<std::uint64_t>(k) + 1);
-        const float r = std::sqrt(u1), phi = 2 * kPiF * u2;
-        const Vec3f d = r * std::cos(phi) * t + r * std::sin(phi) * b + std::sqrt(std::max(0.0f, 1 - u1)) * nrm;
+        const Vec3f d = SampleCosineHemisphere(frame, u1, u2);
         hits += geometry.Occluded(origin, d, 1e30f);
       }
       occlusion[p] = static_cast<float>(hits) / static_cast<float>(std::max(rays, 1));

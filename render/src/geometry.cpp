@@ -14,6 +14,8 @@
 #include "phos/util/math.h"
 #include "phos/util/random.h"
 
+#include "sampling.h"
+
 namespace phos::render {
 
 void SubTriangleCenter(int m, int index, float& b1, float& b2) {
@@ -505,7 +507,7 @@ float UnitIrradiance(const SceneGeometry& geometry, const LightPose& light, cons
 float UnitSkyIrradiance(const SceneGeometry& geometry, const Environment& environment, const Vec3f& p, const Vec3f& n,
                         int rays, std::uint64_t seed, std::uint64_t* count) {
   const int side = std::max(1, static_cast<int>(std::lround(std::sqrt(static_cast<double>(rays)))));
-  const Vec3f t = n.unitOrthogonal(), b = n.cross(t);
+  const TangentFrame frame(n);
   const Vec3f origin = p + geometry.ray_epsilon() * n;
   SplitMix64 random(seed * 0x9E3779B97F4A7C15ull + 0x632BE59BD9B4E019ull);
   auto uniform = [&] { return random.UniformFloat(); };
@@ -514,8 +516,7 @@ float UnitSkyIrradiance(const SceneGeometry& geometry, const Environment& enviro
     for (int j = 0; j < side; ++j) {
       const float u1 = (static_cast<float>(i) + uniform()) / static_cast<float>(side);
       const float u2 = (static_cast<float>(j) + uniform()) / static_cast<float>(side);
-      const float r = std::sqrt(u1), phi = 2 * kPiF * u2;
-      const Vec3f w = r * std::cos(phi) * t + r * std::sin(phi) * b + std::sqrt(std::max(0.0f, 1 - u1)) * n;
+      const Vec3f w = SampleCosineHemisphere(frame, u1, u2);
       if (count) ++*count;
       if (!geometry.Occluded(origin, w, 1e30f)) sum += environment.Shape(w.y());
     }

@@ -13,29 +13,11 @@
 #include "phos/util/error.h"
 #include "phos/util/math.h"
 #include "phos/util/random.h"
+#include "sampling.h"
 #include "transport.h"
 
 namespace phos::render {
 namespace {
-
-// Cosine-weighted direction about the unit normal n (Malley's method): a
-// uniform point of the unit disk, by rejection from its square (on average
-// 1.27 tries, 2.5 random numbers: cheaper than the sine and cosine of a polar
-// map, which were a tenth of the path tracer's own time), lifted onto the
-// hemisphere in the branchless orthonormal basis of Duff et al. 2017.
-Vec3f SampleCosine(const Vec3f& n, SplitMix64& random) {
-  float x, y, r2;
-  do {
-    x = 2 * random.UniformFloat() - 1;
-    y = 2 * random.UniformFloat() - 1;
-    r2 = x * x + y * y;
-  } while (r2 >= 1.0f);
-  const float sign = std::copysign(1.0f, n.z());
-  const float a = -1.0f / (sign + n.z()), b = n.x() * n.y() * a;
-  const Vec3f t(1.0f + sign * n.x() * n.x() * a, sign * b, -sign * n.x());
-  const Vec3f bt(b, sign + n.y() * n.y() * a, -n.y());
-  return x * t + y * bt + std::sqrt(1.0f - r2) * n;
-}
 
 // Barycentric weights (b1, b2) of a uniform point on a triangle without a
 // square root (Heitz 2019, "A Low-Distortion Map Between Triangle and
@@ -544,7 +526,7 @@ class PathTransport final : public FrameTransport {
       lane.bsdf_pdf = pdf;
       lane.origin = lane.origin_s;
     } else {
-      lane.direction = SampleCosine(lane.n_s, random);
+      lane.direction = SampleCosineHemisphere(TangentFrame(lane.n_s), random);
       lane.bsdf_pdf = lane.n_s.dot(lane.direction) * kInvPiF;
       lane.origin = lane.origin_s;
       lane.beta *= *lane.albedo;
