@@ -94,12 +94,30 @@ class Shading {
     if (sky && sky_level_ > 0) {
       E += sky_L_ * UnitSkyIrradiance(geometry_, *scene_.environment, p, n_s, options_.sky_rays, PointSeed(p), &rays);
     }
+    ForEachLightReaching(p, n_s, rays, [&](const LitLight& light, float unit, const Vec3f*) { E += light.E * unit; });
+  }
+
+  // Each light that is on and reaches p on the side of n_s, unshadowed and
+  // through the media (a cloud on the floor): reach(light, unit, direction)
+  // with its unit irradiance there (> 0) and, for a delta light (point,
+  // spot, directional, sheet), the direction toward it; null for an area
+  // light, whose irradiance is sampled over its surface (UnitIrradiance).
+  template <typename Reach>
+  void ForEachLightReaching(const Vec3f& p, const Vec3f& n_s, std::uint64_t& rays, Reach&& reach) const {
     for (const LitLight& light : lights_) {
-      float unit = UnitIrradiance(geometry_, light.pose, p, n_s, &rays);
-      // Media between the point and the light shadow it (a cloud on the floor;
-      // scenes with media have no area lights, see scene.cpp).
-      if (unit > 0 && media_) unit *= Transmittance(light.pose, p);
-      if (unit > 0) E += light.E * unit;
+      if (light.pose.area()) {
+        float unit = UnitIrradiance(geometry_, light.pose, p, n_s, &rays);
+        if (unit > 0 && media_) unit *= Transmittance(light.pose, p);
+        if (unit > 0) reach(light, unit, nullptr);
+        continue;
+      }
+      const LightRay ray = RayToLight(geometry_, light.pose, p, n_s);
+      if (!(ray.unit > 0)) continue;
+      ++rays;
+      if (geometry_.Occluded(ray.origin, ray.direction, ray.t_far)) continue;
+      float unit = ray.unit;
+      if (media_) unit *= Transmittance(light.pose, p);
+      if (unit > 0) reach(light, unit, &ray.direction);
     }
   }
 
@@ -153,22 +171,15 @@ class Shading {
     bool spread = sky_level_ > 0 && options_.transport != Transport::kDss;
     if (spread)
       E_diffuse += sky_L_ * UnitSkyIrradiance(geometry_, *scene_.environment, p, n_s, options_.sky_rays, PointSeed(p), &rays);
-    for (const LitLight& light : lights_) {
-      if (light.pose.area()) {
-        const float unit = UnitIrradiance(geometry_, light.pose, p, n_s, &rays);
-        if (unit > 0) E_diffuse += light.E * unit;
-        spread = spread || unit > 0;
-        continue;
+    ForEachLightReaching(p, n_s, rays, [&](const LitLight& light, float unit, const Vec3f* direction) {
+      if (!direction) {  // an area light: spread
+        E_diffuse += light.E * unit;
+        spread = true;
+        return;
       }
-      const LightRay ray = RayToLight(geometry_, light.pose, p, n_s);
-      if (!(ray.unit > 0)) continue;
-      ++rays;
-      if (geometry_.Occluded(ray.origin, ray.direction, ray.t_far)) continue;
-      float unit = ray.unit;
-      if (media_) unit *= Transmittance(light.pose, p);
-      bsdf.Eval(n_s, wo, ray.direction, f.data());
+      bsdf.Eval(n_s, wo, *direction, f.data());
       L += f * light.E * unit;
-    }
+    });
     if (spread) {
       bsdf.DirectionalAlbedo(n_s.dot(wo), rho.data());
       L += rho * E_diffuse / kPiF;
