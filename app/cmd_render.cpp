@@ -166,6 +166,21 @@ MeteredFrames FramesToMeter(const render::Scene& scene, const std::vector<double
   return frames;
 }
 
+// What "exposure": "auto" meters of a frame: under path or dss transport,
+// the direct transport's frame of the same moment, whose pixels after dark
+// are the glow itself, of the surfaces and media the camera sees, and not
+// the light it throws on the rest. Metering the path tracer's own frame let
+// the dim, noisy indirect light of every other surface set the median: the
+// glow-sign's glowing letters came out white and the rest as noise. So every
+// transport chooses the same exposure, and its frames compare at one.
+render::Image MeteredFrame(const render::SceneGeometry& geometry, const render::CoupledSolver* solver,
+                           render::FrameOptions options, const render::Image& rgb) {
+  if (options.transport == render::Transport::kDirect) return rgb;
+  options.transport = render::Transport::kDirect;
+  options.progress_rows = nullptr;
+  return render::BandsToLinearSrgb(render::RenderBands(geometry, solver, options), geometry.scene().bands);
+}
+
 std::string FrameStem(std::size_t frame) {
   char name[32];
   std::snprintf(name, sizeof name, "frame-%04zu", frame);
@@ -493,7 +508,7 @@ void Run(const RenderArgs& args) {
     if (!scene.camera.exposure_auto)
       WriteFrameViews(args, scene, f, t, scene.camera.exposure, rgb, bands, &entry, &sheet);
     else if (metered.metered[f])
-      meter.Add(rgb);
+      meter.Add(MeteredFrame(geometry, solver.get(), options, rgb));
     frames.push_back(entry);
   }
   progress.Finish();
@@ -533,6 +548,7 @@ void Run(const RenderArgs& args) {
   if (scene.camera.exposure_auto)
     result["exposure_auto"] = {{"metered", metered.after_dark ? "after dark" : "all frames"},
                                {"metered_frames", chosen.metered_frames},
+                               {"metered_transport", "direct"},
                                {"glowing_pixels", chosen.glowing_pixels},
                                {"metered_luminance", chosen.metered_luminance},
                                {"percentile", kMeteredPercentile * 100},
@@ -565,10 +581,11 @@ void Run(const RenderArgs& args) {
               scene.camera.height, TransportName(transport), states.c_str());
   if (choose) std::printf("  transport for the %s\n", choice_line.c_str());
   if (scene.camera.exposure_auto)
-    std::printf("  exposure auto: %s, metered on %zu %s: the median glowing pixel (luminance %s) shown as mid-grey "
+    std::printf("  exposure auto: %s, metered on %zu %s%s: the median glowing pixel (luminance %s) shown as mid-grey "
                 "(%s)\n",
                 FormatShort(exposure, 4).c_str(), chosen.metered_frames,
                 metered.after_dark ? "frame(s) after dark" : "frame(s) (none is after dark)",
+                transport == Transport::kDirect ? "" : " (their direct-transport frames)",
                 FormatShort(chosen.metered_luminance, 4).c_str(), FormatShort(kMeteredDisplayLuminance).c_str());
   for (const auto& frame : frames)
     std::printf("  t = %8s s  %7.3f s  %s\n", FormatDouble(frame["t"].get<double>()).c_str(),
@@ -610,8 +627,8 @@ void RegisterRender(CLI::App& app) {
   cmd->add_option("--height", args->height, "Override the camera's height in pixels")->check(CLI::Range(1, 16384));
   cmd->add_option("--exposure", args->exposure_text,
                   "PNG exposure: a positive number, or auto: one exposure for the sequence that shows the median\n"
-                  "glowing pixel of the frames after dark (no light on; all frames if none is) as mid-grey\n"
-                  "(docs/render.md); default: the camera's \"exposure\" (1 if not given). EXR files are never scaled")
+                  "glowing pixel of the frames after dark (no light on; all frames if none is) as mid-grey,\n"
+                  "metered on their direct-transport frames under any transport (docs/render.md); default: the camera's \"exposure\" (1 if not given). EXR files are never scaled")
       ->each([args](const std::string&) { args->exposure_given = true; });
   cmd->add_option("--night-vision", args->night_vision_cd,
                   "Also write frame-NNNN-night.png as a dark-adapted eye sees it (Thompson et al. 2002:\n"

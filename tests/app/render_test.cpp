@@ -290,6 +290,34 @@ TEST(RenderCommand, AutoExposureMetersTheFramesAfterDark) {
   EXPECT_NE(text.out.find("metered on 2 frame(s) after dark"), std::string::npos) << text.out;
 }
 
+// Under path and dss transport, "auto" meters the direct transport's frames
+// of the same moments: the glow itself, not the light it throws on the
+// rest (the path tracer's indirect light set the median before). So every
+// transport gets the direct run's exposure, and its PNGs show its own EXRs
+// at that exposure.
+TEST(RenderCommand, AutoExposureUnderPathAndDssIsMeteredOnTheDirectFrames) {
+  TempDir dir;
+  auto run = [&](const std::string& transport) {
+    const CommandResult r = RunPhos("render " + kCornell + " --out " + (dir / transport).string() +
+                                    " --times 40,60 --width 24 --height 24 --spp 4 --exposure auto --json" +
+                                    " --transport " + transport);
+    EXPECT_EQ(r.exit_code, 0) << r.err;
+    return nlohmann::json::parse(r.out);
+  };
+  const nlohmann::json direct = run("direct");
+  const double exposure = direct["exposure"].get<double>();
+  EXPECT_NEAR(exposure, MidGreyExposureOf({direct["frames"][0]["exr"], direct["frames"][1]["exr"]}), 1e-9 * exposure);
+  for (const std::string transport : {"path", "dss"}) {
+    const nlohmann::json json = run(transport);
+    EXPECT_EQ(json["exposure_auto"]["metered_transport"], "direct");
+    EXPECT_EQ(json["exposure"].get<double>(), exposure) << transport;
+    // Its own frames' median would differ: their indirect light glows too.
+    const double own = MidGreyExposureOf({json["frames"][0]["exr"], json["frames"][1]["exr"]});
+    EXPECT_GT(std::abs(own - exposure), 0.01 * exposure) << transport;
+    for (const auto& frame : json["frames"]) EXPECT_TRUE(PngShowsExrAt(frame, exposure)) << transport;
+  }
+}
+
 TEST(RenderCommand, ANumericExposureIsUsedAsItIs) {
   TempDir dir;
   const std::string common = " --out " + dir.path().string() + " --times 40 --width 16 --height 16 --json";
