@@ -84,9 +84,10 @@ TEST(GlossyBsdf, AWhiteSurfaceReflectsAllItReceivesAtAnyRoughness) {
         const GlossyBsdf bsdf({metallic, roughness}, white.data(), 1);
         EXPECT_NEAR(Sampled(bsdf, View(mu), 1)[0], 1.0, 0.01)
             << "metallic " << metallic << " roughness " << roughness << " mu " << mu;
-        if (roughness >= 0.3f && mu >= 0.3f)
+        if (roughness >= 0.3f && mu >= 0.3f) {  // braces: EXPECT_NEAR is an if-else inside
           EXPECT_NEAR(Quadrature(bsdf, View(mu), 1)[0], 1.0, 0.01)
               << "metallic " << metallic << " roughness " << roughness << " mu " << mu;
+        }
         float rho;
         bsdf.DirectionalAlbedo(mu, &rho);
         EXPECT_NEAR(rho, 1.0, 0.01);
