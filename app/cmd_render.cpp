@@ -628,7 +628,8 @@ void RegisterRender(CLI::App& app) {
   cmd->add_option("--exposure", args->exposure_text,
                   "PNG exposure: a positive number, or auto: one exposure for the sequence that shows the median\n"
                   "glowing pixel of the frames after dark (no light on; all frames if none is) as mid-grey,\n"
-                  "metered on their direct-transport frames under any transport (docs/render.md); default: the camera's \"exposure\" (1 if not given). EXR files are never scaled")
+                  "metered on their direct-transport frames under any transport (docs/render.md);\n"
+                  "default: the camera's \"exposure\" (1 if not given). EXR files are never scaled")
       ->each([args](const std::string&) { args->exposure_given = true; });
   cmd->add_option("--night-vision", args->night_vision_cd,
                   "Also write frame-NNNN-night.png as a dark-adapted eye sees it (Thompson et al. 2002:\n"

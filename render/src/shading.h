@@ -10,11 +10,11 @@
 
 #include <Eigen/Core>
 
-#include "phos/render/surface_textures.h"
 #include "phos/render/bsdf.h"
 #include "phos/render/geometry.h"
 #include "phos/render/renderer.h"
 #include "phos/render/solver.h"
+#include "phos/render/surface_textures.h"
 #include "phos/render/volume.h"
 #include "phos/util/math.h"
 
