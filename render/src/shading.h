@@ -111,14 +111,23 @@ class Shading {
         if (unit > 0) reach(light, unit, nullptr);
         continue;
       }
-      const LightRay ray = RayToLight(geometry_, light.pose, p, n_s);
-      if (!(ray.unit > 0)) continue;
-      ++rays;
-      if (geometry_.Occluded(ray.origin, ray.direction, ray.t_far)) continue;
-      float unit = ray.unit;
-      if (media_) unit *= Transmittance(light.pose, p);
-      if (unit > 0) reach(light, unit, &ray.direction);
+      Vec3f direction;
+      if (const float unit = DeltaLightReaching(light, p, n_s, rays, direction); unit > 0)
+        reach(light, unit, &direction);
     }
+  }
+
+  // A delta light's (point, spot, directional, sheet) unit irradiance at p on
+  // the side of n_s, unshadowed and through the media, and the direction
+  // toward it; 0 where it does not reach.
+  float DeltaLightReaching(const LitLight& light, const Vec3f& p, const Vec3f& n_s, std::uint64_t& rays,
+                           Vec3f& direction) const {
+    const LightRay ray = RayToLight(geometry_, light.pose, p, n_s);
+    if (!(ray.unit > 0)) return 0.0f;
+    ++rays;
+    if (geometry_.Occluded(ray.origin, ray.direction, ray.t_far)) return 0.0f;
+    direction = ray.direction;
+    return media_ ? ray.unit * Transmittance(light.pose, p) : ray.unit;
   }
 
   // The media's transmittance from p to a light.
@@ -161,31 +170,49 @@ class Shading {
 
   // A glossy surface's reflection in direct transport (docs/render.md,
   // "Glossy surfaces"): the delta lights (point, spot, directional, sheet)
-  // through the whole BSDF toward each; area lights and the sky by their
-  // irradiance times the directional albedo over pi (a uniform sky's
-  // reflection exactly; an area light's as if it were spread over the sky).
+  // through the whole BSDF toward each, the area lights by
+  // GlossyAreaLight (their highlights), and the sky by its irradiance times
+  // the directional albedo over pi (a uniform sky's reflection exactly).
   Bands GlossyReflection(const Gloss& gloss, const Bands& albedo, const Vec3f& p, const Vec3f& n_s, const Vec3f& wo,
                          std::uint64_t& rays) const {
     const GlossyBsdf bsdf(gloss, albedo.data(), nb_);
-    Bands L = Bands::Zero(nb_), f(nb_), rho(nb_), E_diffuse = Bands::Zero(nb_);
-    bool spread = sky_level_ > 0 && options_.transport != Transport::kDss;
-    if (spread)
-      E_diffuse += sky_L_ * UnitSkyIrradiance(geometry_, *scene_.environment, p, n_s, options_.sky_rays, PointSeed(p), &rays);
-    ForEachLightReaching(p, n_s, rays, [&](const LitLight& light, float unit, const Vec3f* direction) {
-      if (!direction) {  // an area light: spread
-        E_diffuse += light.E * unit;
-        spread = true;
-        return;
-      }
-      bsdf.Eval(n_s, wo, *direction, f.data());
-      L += f * light.E * unit;
-    });
-    if (spread) {
+    Bands L = Bands::Zero(nb_), f(nb_);
+    if (sky_level_ > 0 && options_.transport != Transport::kDss) {
+      Bands rho(nb_);
       bsdf.DirectionalAlbedo(n_s.dot(wo), rho.data());
-      L += rho * E_diffuse / kPiF;
+      L += rho * sky_L_ *
+           (UnitSkyIrradiance(geometry_, *scene_.environment, p, n_s, options_.sky_rays, PointSeed(p), &rays) / kPiF);
+    }
+    for (const LitLight& light : lights_) {
+      if (light.pose.area()) {
+        L += GlossyAreaLight(bsdf, light, p, n_s, wo, rays);
+        continue;
+      }
+      Vec3f direction;
+      const float unit = DeltaLightReaching(light, p, n_s, rays, direction);
+      if (!(unit > 0)) continue;
+      bsdf.Eval(n_s, wo, direction, f.data());
+      L += f * light.E * unit;
     }
     return L;
   }
+
+  // An area light's reflection in a glossy surface at p (multiple importance
+  // sampling, Veach 1997 ch. 9; pbrt-v4's direct lighting): light.samples
+  // stratified points on the light and as many stratified draws of the
+  // BSDF, each weighted by the power heuristic against the other strategy
+  // finding the same direction. The light's points serve a rough lobe, the
+  // BSDF's draws a sharp highlight. Seeded by the point, as UnitIrradiance,
+  // so that a pixel is the same in every frame of a still scene.
+  Bands GlossyAreaLight(const GlossyBsdf& bsdf, const LitLight& light, const Vec3f& p, const Vec3f& n_s,
+                        const Vec3f& wo, std::uint64_t& rays) const;
+
+  // Where a ray from `origin` along unit `direction` meets an area light's
+  // emitting side unoccluded: the solid-angle pdf with which RayToLight
+  // would draw that direction; 0 where it does not (occluded, missed, the
+  // back of the light).
+  float AreaLightSeenPdf(const LightPose& pose, const Vec3f& origin, const Vec3f& direction,
+                         std::uint64_t& rays) const;
 
   // Converted to float bands once per frame, not at every hit.
   const Bands& Albedo(int object) const { return albedo_[object]; }

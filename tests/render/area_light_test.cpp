@@ -371,6 +371,60 @@ TEST(AreaLight, AnEmissiveObjectShowsItsRadianceOnItsFrontOnly) {
   EXPECT_FLOAT_EQ(RenderBands(geometry, nullptr, FrameOptions{}).at(8, 8)[3], 2.0f);
 }
 
+// A glossy floor under an area light, seen where the light's mirror image
+// falls: the direct transport's highlight (the light's points and the
+// BSDF's draws, weighted by MIS) against the path tracer's, which finds the
+// light by its own next-event estimation and bounces. Spreading the light's
+// irradiance over the directional albedo, as for a uniform sky (before
+// this test), made the first case's highlight 35x too dark and the
+// second's surroundings up to 1.8x too bright.
+TEST(AreaLight, AGlossyFloorShowsItsHighlightInDirectAsInThePathTracer) {
+  struct Case {
+    Gloss gloss;
+    Light light;
+  };
+  const std::vector<Case> cases = {
+      {{1.0f, 0.15f}, QuadLight(Vec3(0, 1, -0.5), Vec3(0.2, -1, 0.3), Vec3(1, 0, 0), 0.4, 0.3, 3.0)},
+      {{0.0f, 0.3f}, DiskLight(Vec3(0.1, 0.8, -0.3), Vec3(0, -1, 0.2), 0.15, 5.0)},
+      {{0.5f, 0.5f}, QuadLight(Vec3(-0.2, 1.2, -0.6), Vec3(0, -1, 0), Vec3(1, 0, 1), 0.5, 0.5, 2.0)},
+  };
+  for (const Case& c : cases) {
+    Scene scene = EmptyScene(32, 32);
+    scene.camera.keys = {{0, Vec3(0, 0.6, 1.2), Vec3(0, 0, 0.3)}};
+    scene.camera.fov_deg = 60;
+    Object floor = MakeObject("floor", MakeQuad(6, 6), 0.5);
+    floor.gloss = c.gloss;
+    scene.objects.push_back(floor);
+    scene.lights.push_back(c.light);
+    SceneGeometry geometry(scene);
+    const Image d = RenderBands(geometry, nullptr, FrameOptions{});
+    FrameOptions path;
+    path.transport = Transport::kPath;
+    path.spp = 256;
+    path.max_depth = 2;  // the floor's bounce that finds the light (nothing else reflects back)
+    const Image pt = RenderBands(geometry, nullptr, path);
+    double brightest = 0, dimmest = 1e30;
+    for (int by = 0; by < 32; by += 4)
+      for (int bx = 0; bx < 32; bx += 4) {
+        double sd = 0, sp = 0, sp2 = 0;
+        for (int y = by; y < by + 4; ++y)
+          for (int x = bx; x < bx + 4; ++x) {
+            sd += d.at(x, y)[3];
+            sp += pt.at(x, y)[3];
+            sp2 += double(pt.at(x, y)[3]) * pt.at(x, y)[3];
+          }
+        sd /= 16;
+        sp /= 16;
+        const double se = std::sqrt(std::max(0.0, sp2 / 16 - sp * sp) / 16);
+        EXPECT_NEAR(sd, sp, 4 * se + 0.03 * sp + 1e-4)
+            << "metallic " << c.gloss.metallic << " roughness " << c.gloss.roughness << ", block " << bx << "," << by;
+        brightest = std::max(brightest, sd);
+        dimmest = std::min(dimmest, sd);
+      }
+    EXPECT_GT(brightest, 5 * dimmest) << "a highlight";
+  }
+}
+
 TEST(AreaLight, ScenesDeclareThemWithUnitsAndBadOnesAreOneLine) {
   // The Cornell fixture, its lights replaced.
   auto scene_with = [](nlohmann::json light) {
