@@ -552,6 +552,7 @@ void Run(const RenderArgs& args) {
                                {"glowing_pixels", chosen.glowing_pixels},
                                {"metered_luminance", chosen.metered_luminance},
                                {"percentile", kMeteredPercentile * 100},
+                               {"frame", "brightest"},
                                {"display_luminance", kMeteredDisplayLuminance}};
   if (solver) {
     const SolverStats& s = solver->stats();
@@ -581,8 +582,8 @@ void Run(const RenderArgs& args) {
               scene.camera.height, TransportName(transport), states.c_str());
   if (choose) std::printf("  transport for the %s\n", choice_line.c_str());
   if (scene.camera.exposure_auto)
-    std::printf("  exposure auto: %s, metered on %zu %s%s: the median glowing pixel (luminance %s) shown as mid-grey "
-                "(%s)\n",
+    std::printf("  exposure auto: %s, metered on %zu %s%s: the brightest frame's median glowing pixel "
+                "(luminance %s) shown as mid-grey (%s)\n",
                 FormatShort(exposure, 4).c_str(), chosen.metered_frames,
                 metered.after_dark ? "frame(s) after dark" : "frame(s) (none is after dark)",
                 transport == Transport::kDirect ? "" : " (their direct-transport frames)",
@@ -627,8 +628,8 @@ void RegisterRender(CLI::App& app) {
   cmd->add_option("--height", args->height, "Override the camera's height in pixels")->check(CLI::Range(1, 16384));
   cmd->add_option("--exposure", args->exposure_text,
                   "PNG exposure: a positive number, or auto: one exposure for the sequence that shows the median\n"
-                  "glowing pixel of the frames after dark (no light on; all frames if none is) as mid-grey,\n"
-                  "metered on their direct-transport frames under any transport (docs/render.md);\n"
+                  "glowing pixel of the brightest frame after dark (no light on; of all frames if none is) as\n"
+                  "mid-grey, metered on their direct-transport frames under any transport (docs/render.md);\n"
                   "default: the camera's \"exposure\" (1 if not given). EXR files are never scaled")
       ->each([args](const std::string&) { args->exposure_given = true; });
   cmd->add_option("--night-vision", args->night_vision_cd,

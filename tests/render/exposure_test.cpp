@@ -65,17 +65,39 @@ TEST(AutoExposure, TheMedianGlowingPixelIsShownAsMidGrey) {
   EXPECT_GT(DisplayLuminance(6.0f, chosen.exposure), kMeteredDisplayLuminance);
 }
 
-TEST(AutoExposure, FramesArePooledIntoOneExposureForTheSequence) {
-  // A bright frame and a dim one (a glow fading): 7 pixels, the 4th smallest
-  // (nearest rank ceil(7 / 2)) is the first frame's 0.01.
-  ExposureMeter meter;
-  meter.Add(Grey({0.04f, 0.02f, 0.01f, 0}));
-  meter.Add(Grey({0.003f, 0.001f, 0.002f, 0.1f}));
-  const AutoExposure chosen = meter.Choose();
-  EXPECT_EQ(chosen.metered_frames, 2u);
-  EXPECT_EQ(chosen.glowing_pixels, 7u);
-  EXPECT_FLOAT_EQ(chosen.metered_luminance, 0.01f);
-  EXPECT_NEAR(DisplayLuminance(0.01f, chosen.exposure), 0.18, 1e-6);
+TEST(AutoExposure, TheBrightestFramesMedianSetsTheSequencesExposure) {
+  // A bright frame and a dim one (a glow fading): medians 0.02 (of 3
+  // glowing pixels) and 0.002 (of 4: the nearest rank ceil(4 / 2) = 2nd,
+  // beside a 0.1 that a pooled median would have let in), in either order.
+  for (bool bright_first : {true, false}) {
+    ExposureMeter meter;
+    const Image bright = Grey({0.04f, 0.02f, 0.01f, 0}), dim = Grey({0.003f, 0.001f, 0.002f, 0.1f});
+    meter.Add(bright_first ? bright : dim);
+    meter.Add(bright_first ? dim : bright);
+    const AutoExposure chosen = meter.Choose();
+    EXPECT_EQ(chosen.metered_frames, 2u);
+    EXPECT_EQ(chosen.glowing_pixels, 7u);
+    EXPECT_FLOAT_EQ(chosen.metered_luminance, 0.02f);
+    EXPECT_NEAR(DisplayLuminance(0.02f, chosen.exposure), 0.18, 1e-6);
+  }
+}
+
+TEST(AutoExposure, OneMorePixelInTheDimFrameDoesNotMoveTheExposure) {
+  // 500 pixels of a bright frame (0.9 to 1.1) and 499 or 501 of a dim one
+  // (0.009 to 0.011): a median of the pixels pooled is a bright one in the
+  // first case and a dim one in the second, 100x apart (the meter before).
+  auto frame = [](int n, float level) {
+    std::vector<float> values;
+    for (int i = 0; i < n; ++i) values.push_back(level * (0.9f + 0.2f * static_cast<float>(i) / static_cast<float>(n)));
+    return Grey(values);
+  };
+  ExposureMeter fewer, more;
+  fewer.Add(frame(500, 1.0f));
+  fewer.Add(frame(499, 0.01f));
+  more.Add(frame(500, 1.0f));
+  more.Add(frame(501, 0.01f));
+  EXPECT_EQ(fewer.Choose().metered_luminance, more.Choose().metered_luminance);
+  EXPECT_NEAR(fewer.Choose().metered_luminance, 1.0, 0.01);
 }
 
 TEST(AutoExposure, NothingGlowingKeepsExposureOne) {
