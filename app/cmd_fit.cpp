@@ -24,6 +24,7 @@
 #include "phos/acquire/session_records.h"
 #include "phos/fit/decay_fit.h"
 #include "phos/fit/decay_map.h"
+#include "phos/fit/decay_map_file.h"
 #include "phos/fit/session_fit.h"
 #include "phos/model/material.h"
 #include "phos/util/atomic_file.h"
@@ -218,59 +219,37 @@ std::string MapInputs(const MapArgs& args, int tiles) {
          (args.states == 1 ? "" : " states=" + std::to_string(args.states));
 }
 
-// How the session charged the sample before the decay (its settings and the
-// lab's calibrated band irradiance of the charge light): a renderer that
-// takes the map as a phosphor needs it to tell a texel's level from its
-// charge (docs/formats.md, "phos:charge_s"). Empty irradiance: not recorded.
-struct MapCharge {
-  float charge_s = 0;
-  std::vector<float> band_irradiance;
-
-  void Annotate(OIIO::ImageSpec& spec) const {
-    if (band_irradiance.empty()) return;
-    spec.attribute("phos:charge_s", charge_s);
-    spec.attribute("phos:charge_band_irradiance",
-                   OIIO::TypeDesc(OIIO::TypeDesc::FLOAT, static_cast<int>(band_irradiance.size())),
-                   band_irradiance.data());
+// How the session charged the sample before the decay, from its settings
+// and the lab's calibrated band irradiance of the charge light, for the
+// map's header (fit::DecayMapCharge).
+fit::DecayMapCharge ChargeOfSession(const SessionRecord& session) {
+  // Anything but what phos writes (a hand-edited record: other types, a
+  // charge of no length, a negative irradiance) is no
+  // recorded charge, not an error of the map: the renderer then takes the
+  // map as charged to r = 1, as docs/render.md says.
+  auto field = [](const nlohmann::json& object, const char* key) {
+    return object.is_object() && object.contains(key) ? object[key] : nlohmann::json();
+  };
+  const nlohmann::json light = field(session.settings, "charge_light"), charge_s = field(session.settings, "charge_s");
+  if (!light.is_string() || !charge_s.is_number() || !(charge_s.get<double>() > 0)) return {};
+  const nlohmann::json irradiance =
+      field(field(session.devices, "light_band_irradiance"), light.get<std::string>().c_str());
+  if (!irradiance.is_array() || irradiance.empty()) return {};
+  fit::DecayMapCharge charge;
+  for (const auto& value : irradiance) {
+    if (!value.is_number() || !(value.get<double>() >= 0)) return {};
+    charge.band_irradiance.push_back(value.get<float>());
   }
-  static MapCharge FromSpec(const OIIO::ImageSpec& spec) {
-    MapCharge charge;
-    const OIIO::ParamValue* irradiance = spec.find_attribute("phos:charge_band_irradiance");
-    if (!irradiance || irradiance->type().basetype != OIIO::TypeDesc::FLOAT) return charge;
-    const float* values = static_cast<const float*>(irradiance->data());
-    charge.band_irradiance.assign(values, values + irradiance->type().numelements());
-    charge.charge_s = spec.get_float_attribute("phos:charge_s", 0.0f);
-    return charge;
-  }
-  static MapCharge FromSession(const SessionRecord& session) {
-    // Anything but what phos writes (a hand-edited record: other types, a
-    // charge of no length, a negative irradiance) is no
-    // recorded charge, not an error of the map: the renderer then takes the
-    // map as charged to r = 1, as docs/render.md says.
-    auto field = [](const nlohmann::json& object, const char* key) {
-      return object.is_object() && object.contains(key) ? object[key] : nlohmann::json();
-    };
-    const nlohmann::json light = field(session.settings, "charge_light"), charge_s = field(session.settings, "charge_s");
-    if (!light.is_string() || !charge_s.is_number() || !(charge_s.get<double>() > 0)) return {};
-    const nlohmann::json irradiance =
-        field(field(session.devices, "light_band_irradiance"), light.get<std::string>().c_str());
-    if (!irradiance.is_array() || irradiance.empty()) return {};
-    MapCharge charge;
-    for (const auto& value : irradiance) {
-      if (!value.is_number() || !(value.get<double>() >= 0)) return {};
-      charge.band_irradiance.push_back(value.get<float>());
-    }
-    charge.charge_s = charge_s.get<float>();
-    return charge;
-  }
-};
+  charge.charge_s = charge_s.get<float>();
+  return charge;
+}
 
 // The session's frames as a map's input, only the rows of tile `index` of
 // `count` (rows [H index / count, H (index + 1) / count)): a tile holds only
 // its rows in memory. The whole map is tile 0 of 1.
 struct MapFrames {
   DecayMapInput input;
-  MapCharge charge;
+  fit::DecayMapCharge charge;
   std::vector<std::string> channel_names;
   int clipped = 0;
   int full_height = 0;
@@ -292,7 +271,7 @@ MapFrames ReadMapFrames(const MapArgs& args, int index, int count) {
     std::printf("phos fit map: %s: torn last line left out ('phos capture resume' repairs it)\n",
                 (dir / "frames.jsonl").string().c_str());
   MapFrames out;
-  out.charge = MapCharge::FromSession(session);
+  out.charge = ChargeOfSession(session);
   DecayMapInput& input = out.input;
   ProgressBar reading("reading frames", records.frames.size());
   for (const FrameRecord& line : records.frames) {
@@ -340,21 +319,17 @@ struct MapImage {
   std::size_t frames = 0;
   int clipped = 0;
   double seconds = 0;
-  MapCharge charge;
+  fit::DecayMapCharge charge;
 };
 
 MapImage MapImageOf(const DecayMap& map, const MapFrames& frames) {
-  MapImage image{map.width, map.height, {"kr"}, {}, map.no_decay, map.one_state, frames.input.frames.size(),
-                 frames.clipped, map.seconds, frames.charge};
   const bool two_states = !map.kr2.empty();
+  MapImage image{map.width,    map.height,    fit::DecayMapChannelNames(frames.channel_names, two_states),
+                 {},           map.no_decay,  map.one_state,
+                 frames.input.frames.size(),  frames.clipped,
+                 map.seconds,  frames.charge};
   const int C = map.channels, nch = 2 + 2 * C + (two_states ? 1 + C : 0);
-  for (int c = 0; c < C; ++c) image.names.push_back("amplitude." + frames.channel_names[c]);
-  for (int c = 0; c < C; ++c) image.names.push_back("background." + frames.channel_names[c]);
-  image.names.push_back("rms");
-  if (two_states) {
-    image.names.push_back("kr2");
-    for (int c = 0; c < C; ++c) image.names.push_back("amplitude2." + frames.channel_names[c]);
-  }
+  PHOS_CHECK(image.names.size() == static_cast<std::size_t>(nch));
   const std::size_t pixels = static_cast<std::size_t>(map.width) * map.height;
   image.pixels.resize(pixels * nch);
   for (std::size_t p = 0; p < pixels; ++p) {
@@ -401,7 +376,7 @@ void WriteMapOutputs(const MapArgs& args, const MapImage& map, const std::string
   for (std::size_t p = 0; p < pixels; ++p)
     grey[p] = std::isfinite(kr[p]) ? std::clamp((kr[p] - lo) / std::max(hi - lo, 1e-12f), 0.0f, 1.0f) : 0.0f;
   WriteFloatImage(fs::path(args.out) / "kr.png", map.width, map.height, {"Y"}, grey);
-  const bool two_states = std::find(map.names.begin(), map.names.end(), "kr2") != map.names.end();
+  const bool two_states = std::find(map.names.begin(), map.names.end(), fit::kDecayMapKr2) != map.names.end();
   if (args.json) {
     nlohmann::json json = nlohmann::json({{"width", map.width},
                                         {"height", map.height},
@@ -473,10 +448,10 @@ void RunFitMapTile(const MapArgs& args) {
     OIIO::ImageSpec spec(tile.width, tile.height, static_cast<int>(tile.names.size()), OIIO::TypeDesc::FLOAT);
     spec.channelnames = tile.names;
     spec.attribute("compression", "zip");
-    spec.attribute("phos:first_row", static_cast<int>(first_row));
+    spec.attribute(fit::kDecayMapFirstRow, static_cast<int>(first_row));
     spec.attribute("phos:map_height", frames.full_height);
     spec.attribute("phos:pixels_without_decay", static_cast<int>(tile.no_decay));
-    if (std::find(tile.names.begin(), tile.names.end(), "kr2") != tile.names.end())
+    if (std::find(tile.names.begin(), tile.names.end(), fit::kDecayMapKr2) != tile.names.end())
       spec.attribute("phos:pixels_with_one_state", static_cast<int>(tile.one_state));
     spec.attribute("phos:frames", static_cast<int>(tile.frames));
     spec.attribute("phos:clipped_frames", tile.clipped);
@@ -527,14 +502,14 @@ void RunFitMapMerge(const MapArgs& args) {
     auto in = OIIO::ImageInput::open(exr.string());
     if (!in) ThrowUserError(exr.string(), "", "cannot read: " + OIIO::geterror());
     const OIIO::ImageSpec& spec = in->spec();
-    const int first_row = spec.get_int_attribute("phos:first_row", -1);
+    const int first_row = spec.get_int_attribute(fit::kDecayMapFirstRow, -1);
     if (i == 0) {
       map.width = spec.width;
       map.height = spec.get_int_attribute("phos:map_height", 0);
       map.names = spec.channelnames;
       map.frames = static_cast<std::size_t>(spec.get_int_attribute("phos:frames", 0));
       map.clipped = spec.get_int_attribute("phos:clipped_frames", 0);
-      map.charge = MapCharge::FromSpec(spec);
+      map.charge = fit::DecayMapCharge::FromSpec(spec, exr.string(), "", "");
       map.pixels.resize(static_cast<std::size_t>(map.width) * map.height * map.names.size());
     }
     if (spec.width != map.width || spec.channelnames != map.names || first_row < 0 ||

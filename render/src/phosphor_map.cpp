@@ -6,6 +6,7 @@
 
 #include <OpenImageIO/imagebuf.h>
 
+#include "phos/fit/decay_map_file.h"
 #include "phos/model/schedule.h"
 #include "phos/util/error.h"
 
@@ -49,18 +50,18 @@ PhosphorMap ReadPhosphorMap(const std::filesystem::path& file, const std::string
                    named + "is not an image OpenImageIO can read" + (error.empty() ? "" : ": " + error));
   }
   const OIIO::ImageSpec& spec = image.spec();
-  if (spec.find_attribute("phos:first_row"))
+  if (spec.find_attribute(fit::kDecayMapFirstRow))
     ThrowUserError(where, field,
                    named + "is one tile of a map (phos fit map --tile): assemble it with phos fit map --merge");
   PhosphorMap map;
   map.file = file;
   map.width = spec.width;
   map.height = spec.height;
-  std::vector<StateChannels> states = {FindStateChannels(spec, "kr", "amplitude.")};
+  std::vector<StateChannels> states = {FindStateChannels(spec, fit::kDecayMapKr, fit::kDecayMapAmplitude)};
   if (states[0].kr < 0 || states[0].amplitude.empty())
     ThrowUserError(where, field,
                    named + "has no 'kr' and 'amplitude.<channel>' channels: it is not a decay map of phos fit map");
-  StateChannels second = FindStateChannels(spec, "kr2", "amplitude2.");
+  StateChannels second = FindStateChannels(spec, fit::kDecayMapKr2, fit::kDecayMapAmplitude2);
   if (second.kr >= 0) {
     if (second.amplitude.size() != states[0].amplitude.size())
       ThrowUserError(where, field, named + "has 'kr2' but not one 'amplitude2.<channel>' per 'amplitude.<channel>'");
@@ -91,18 +92,9 @@ PhosphorMap ReadPhosphorMap(const std::filesystem::path& file, const std::string
     }
   if (map.pixels_with_decay == 0)
     ThrowUserError(where, field, named + "has no pixel with a decay (a finite kr and an amplitude > 0)");
-  if (const OIIO::ParamValue* charge = spec.find_attribute("phos:charge_band_irradiance")) {
-    if (charge->type().basetype != OIIO::TypeDesc::FLOAT)
-      ThrowUserError(where, field, named + "has a phos:charge_band_irradiance that is not floats");
-    const float* values = static_cast<const float*>(charge->data());
-    map.charge_band_irradiance.assign(values, values + charge->type().numelements());
-    map.charge_s = spec.get_float_attribute("phos:charge_s", 0.0f);
-    const bool valid = std::all_of(map.charge_band_irradiance.begin(), map.charge_band_irradiance.end(),
-                                   [](double E) { return std::isfinite(E) && E >= 0; });
-    if (!valid || !(map.charge_s > 0) || !std::isfinite(map.charge_s))
-      ThrowUserError(where, field, named + "records a charge that is not finite and positive (phos:charge_s, "
-                                           "phos:charge_band_irradiance)");
-  }
+  const fit::DecayMapCharge charge = fit::DecayMapCharge::FromSpec(spec, where, field, named);
+  map.charge_band_irradiance.assign(charge.band_irradiance.begin(), charge.band_irradiance.end());
+  map.charge_s = charge.charge_s;
   return map;
 }
 
