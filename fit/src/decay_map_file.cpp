@@ -35,7 +35,9 @@ DecayMapCharge DecayMapCharge::FromSpec(const OIIO::ImageSpec& spec, const std::
   if (irradiance->type().basetype != OIIO::TypeDesc::FLOAT)
     ThrowUserError(where, field, subject + "has a phos:charge_band_irradiance that is not floats");
   const float* values = static_cast<const float*>(irradiance->data());
-  charge.band_irradiance.assign(values, values + irradiance->type().numelements());
+  // All its floats: OpenEXR keeps an array of 2, 3 (or 4, 9, 16) floats as
+  // one vector (or matrix), of one element of that many values.
+  charge.band_irradiance.assign(values, values + irradiance->type().basevalues());
   charge.charge_s = spec.get_float_attribute("phos:charge_s", 0.0f);
   const bool valid = std::all_of(charge.band_irradiance.begin(), charge.band_irradiance.end(),
                                  [](float E) { return std::isfinite(E) && E >= 0; });

@@ -44,7 +44,9 @@ TEST(DecayMapFile, TheChargeRoundTripsThroughAHeaderAndNoneIsNotRecorded) {
   TempDir dir;
   DecayMapCharge charge;
   charge.charge_s = 1800;
-  for (int bands : {1, 4, 8, 40}) {
+  // Of any number of bands: OpenEXR keeps 2, 3, 4, 9 and 16 floats as a
+  // vector or a matrix, one element of that many values.
+  for (int bands : {1, 2, 3, 4, 8, 9, 16, 40}) {
     charge.band_irradiance.clear();
     for (int b = 0; b < bands; ++b) charge.band_irradiance.push_back(0.25f * static_cast<float>(b));
     const DecayMapCharge read = DecayMapCharge::FromSpec(
@@ -80,7 +82,7 @@ TEST(DecayMapFile, AChargeThatIsNotFloatsOrNotFiniteAndPositiveIsOneLine) {
     float charge_s;
     float irradiance;
   };
-  for (const Bad bad : {Bad{0, 1}, Bad{-5, 1}, Bad{nan, 1}}) {
+  for (const Bad bad : {Bad{10, -1}, Bad{10, nan}, Bad{0, 1}, Bad{-5, 1}, Bad{nan, 1}}) {
     const std::string error = error_of([&](OIIO::ImageSpec& s) {
       DecayMapCharge charge;
       charge.charge_s = bad.charge_s;
