@@ -155,19 +155,6 @@ class Shading {
     return l >= 0 ? &lights_[l].E : nullptr;
   }
 
-  // The gloss at a hit, or null on a Lambertian object: the object's, or
-  // its factors times its gloss texture filtered over the footprint of the
-  // ray from `origin`, written to `texture_gloss` (as AlbedoAt).
-  const Gloss* GlossAt(const Hit& hit, const Vec3f& origin, const RayDifferential& differential,
-                       Gloss& texture_gloss) const {
-    const auto& gloss = scene_.objects[hit.object].gloss;
-    if (!gloss) return nullptr;
-    if (!textures_ || !textures_->gloss_textured(hit.object)) return &*gloss;
-    texture_gloss = textures_->GlossAt(geometry_, hit, OffsetOnHitPlane(hit, origin, differential.dx),
-                                       OffsetOnHitPlane(hit, origin, differential.dy), *gloss);
-    return &texture_gloss;
-  }
-
   // A glossy surface's reflection in direct transport (docs/render.md,
   // "Glossy surfaces"): the delta lights (point, spot, directional, sheet)
   // through the whole BSDF toward each, the area lights by
@@ -220,17 +207,48 @@ class Shading {
   // Whether any object is textured: only then do camera rays carry differentials.
   bool textured() const { return textures_ != nullptr; }
 
-  // The albedo at a hit: the object's constant bands, or a textured object's
-  // texture filtered over the footprint of the ray from `origin`, written to
-  // `texture_albedo`. Untextured objects skip the lookup and cost what they did.
+  // A hit's surface: its albedo and, on a glossy object, its gloss (null on
+  // a Lambertian one). Each is the object's constant, or its texture
+  // filtered over the footprint of the ray from `origin` (one footprint for
+  // both), written to `texture_albedo` or `texture_gloss`. Untextured
+  // objects skip the lookups and cost what they did.
+  struct Surface {
+    const Bands* albedo;
+    const Gloss* gloss;
+  };
+  Surface SurfaceAt(const Hit& hit, const Vec3f& origin, const RayDifferential& differential, Bands& texture_albedo,
+                    Gloss& texture_gloss) const {
+    const auto& gloss = scene_.objects[hit.object].gloss;
+    Surface surface{&albedo_[hit.object], gloss ? &*gloss : nullptr};
+    if (!textures_ || !textures_->any_textured(hit.object)) return surface;
+    const UvFootprint footprint = Footprint(hit, origin, differential);
+    if (textures_->textured(hit.object)) {
+      texture_albedo.resize(nb_);
+      textures_->Albedo(hit.object, footprint, texture_albedo.data());
+      surface.albedo = &texture_albedo;
+    }
+    if (gloss && textures_->gloss_textured(hit.object)) {
+      texture_gloss = textures_->GlossAt(hit.object, footprint, *gloss);
+      surface.gloss = &texture_gloss;
+    }
+    return surface;
+  }
+
+  // The albedo at a hit alone (as SurfaceAt's).
   const Bands& AlbedoAt(const Hit& hit, const Vec3f& origin, const RayDifferential& differential,
                         Bands& texture_albedo) const {
     if (!textures_ || !textures_->textured(hit.object)) return albedo_[hit.object];
     texture_albedo.resize(nb_);
-    textures_->Albedo(geometry_, hit, OffsetOnHitPlane(hit, origin, differential.dx),
-                      OffsetOnHitPlane(hit, origin, differential.dy), texture_albedo.data());
+    textures_->Albedo(hit.object, Footprint(hit, origin, differential), texture_albedo.data());
     return texture_albedo;
   }
+
+  // The hit's UV footprint for the ray from `origin` and its differential.
+  UvFootprint Footprint(const Hit& hit, const Vec3f& origin, const RayDifferential& differential) const {
+    return textures_->Footprint(geometry_, hit, OffsetOnHitPlane(hit, origin, differential.dx),
+                                OffsetOnHitPlane(hit, origin, differential.dy));
+  }
+
   // Where the ray from origin along `direction` meets the hit's plane, less
   // the hit; zero for no direction or a ray along the plane.
   static Vec3f OffsetOnHitPlane(const Hit& hit, const Vec3f& origin, const Vec3f& direction) {

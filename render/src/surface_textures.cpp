@@ -94,8 +94,8 @@ namespace {
 // The UV offsets of the points hit + dp_dx and hit + dp_dy of the hit's
 // plane (the footprint), through their barycentric offsets in the hit's
 // world-space triangle: one solve of its 2 x 2 normal equations for both.
-void UvFootprint(const SceneGeometry& geometry, const Hit& hit, const Mesh& mesh, const Vec3f& dp_dx,
-                 const Vec3f& dp_dy, Eigen::Vector2f& duv_dx, Eigen::Vector2f& duv_dy) {
+void UvOffsets(const SceneGeometry& geometry, const Hit& hit, const Mesh& mesh, const Vec3f& dp_dx,
+               const Vec3f& dp_dy, Eigen::Vector2f& duv_dx, Eigen::Vector2f& duv_dy) {
   const Vec3f v0 = geometry.Vertex(hit.object, hit.triangle, 0);
   const Vec3f e1 = geometry.Vertex(hit.object, hit.triangle, 1) - v0;
   const Vec3f e2 = geometry.Vertex(hit.object, hit.triangle, 2) - v0;
@@ -118,17 +118,23 @@ void UvFootprint(const SceneGeometry& geometry, const Hit& hit, const Mesh& mesh
 
 }  // namespace
 
-void SurfaceTextures::Lookup(void* handle, const Hit& hit, const Vec3f& dp_dx, const Vec3f& dp_dy,
-                             const SceneGeometry& geometry, bool v_up, int first_channel, int channels,
-                             float* out) const {
+UvFootprint SurfaceTextures::Footprint(const SceneGeometry& geometry, const Hit& hit, const Vec3f& dp_dx,
+                                       const Vec3f& dp_dy) const {
   const Mesh& mesh = *scene_.objects[hit.object].mesh;
   const Eigen::Vector3i& t = mesh.uv_triangles[hit.triangle];
-  const Eigen::Vector2f uv = (1 - hit.b1 - hit.b2) * mesh.uvs[t[0]] + hit.b1 * mesh.uvs[t[1]] + hit.b2 * mesh.uvs[t[2]];
-  Eigen::Vector2f duv_dx = Eigen::Vector2f::Zero(), duv_dy = Eigen::Vector2f::Zero();
-  if (!dp_dx.isZero() || !dp_dy.isZero()) UvFootprint(geometry, hit, mesh, dp_dx, dp_dy, duv_dx, duv_dy);
+  UvFootprint footprint;
+  footprint.uv = (1 - hit.b1 - hit.b2) * mesh.uvs[t[0]] + hit.b1 * mesh.uvs[t[1]] + hit.b2 * mesh.uvs[t[2]];
+  if (!dp_dx.isZero() || !dp_dy.isZero())
+    UvOffsets(geometry, hit, mesh, dp_dx, dp_dy, footprint.duv_dx, footprint.duv_dy);
+  return footprint;
+}
+
+void SurfaceTextures::Lookup(void* handle, const UvFootprint& footprint, bool v_up, int first_channel, int channels,
+                             float* out) const {
   // OpenImageIO's t runs down the image from its top row, as glTF's v; an
   // OBJ's v runs up from the bottom row.
   const float flip = v_up ? -1.0f : 1.0f;
+  const Eigen::Vector2f &uv = footprint.uv, &duv_dx = footprint.duv_dx, &duv_dy = footprint.duv_dy;
   OIIO::TextureOpt options;
   options.swrap = options.twrap = OIIO::TextureOpt::WrapPeriodic;  // glTF's default sampler repeats
   // Trilinear across levels, bilinear within one: OpenImageIO's defaults
@@ -143,25 +149,22 @@ void SurfaceTextures::Lookup(void* handle, const Hit& hit, const Vec3f& dp_dx, c
                    channels, out);
 }
 
-void SurfaceTextures::Albedo(const SceneGeometry& geometry, const Hit& hit, const Vec3f& dp_dx, const Vec3f& dp_dy,
-                             float* bands) const {
-  const BaseColour& colour = *scene_.objects[hit.object].albedo_texture;
+void SurfaceTextures::Albedo(int object, const UvFootprint& footprint, float* bands) const {
+  const BaseColour& colour = *scene_.objects[object].albedo_texture;
   float rgb[3] = {0, 0, 0};
-  Lookup(handles_[hit.object], hit, dp_dx, dp_dy, geometry, colour.v_up, 0, 3, rgb);
+  Lookup(handles_[object], footprint, colour.v_up, 0, 3, rgb);
   for (int c = 0; c < 3; ++c) {
     // Decoded after the filter: OpenImageIO 2.4's TextureSystem has no
     // colour transform (docs/render.md, "Textures", says what that costs).
-    const float linear = srgb_[hit.object] ? SrgbToLinear(rgb[c]) : rgb[c];
+    const float linear = srgb_[object] ? SrgbToLinear(rgb[c]) : rgb[c];
     rgb[c] = colour.factor[c] * linear;
   }
   to_bands_.Albedo(rgb, bands);
 }
 
-Gloss SurfaceTextures::GlossAt(const SceneGeometry& geometry, const Hit& hit, const Vec3f& dp_dx, const Vec3f& dp_dy,
-                               const Gloss& factors) const {
+Gloss SurfaceTextures::GlossAt(int object, const UvFootprint& footprint, const Gloss& factors) const {
   float roughness_metallic[2] = {1, 1};  // glTF: G roughness, B metallic
-  Lookup(gloss_handles_[hit.object], hit, dp_dx, dp_dy, geometry, scene_.objects[hit.object].mesh->v_up, 1, 2,
-         roughness_metallic);
+  Lookup(gloss_handles_[object], footprint, scene_.objects[object].mesh->v_up, 1, 2, roughness_metallic);
   return {factors.metallic * std::clamp(roughness_metallic[1], 0.0f, 1.0f),
           factors.roughness * std::clamp(roughness_metallic[0], 0.0f, 1.0f)};
 }

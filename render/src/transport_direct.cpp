@@ -40,10 +40,11 @@ Bands ShadeCameraRay(const Shading& shading, const Vec3f& origin, const Vec3f& d
   Bands E;
   const Vec3f n_s = hit.front ? hit.normal : Vec3f(-hit.normal);
   Bands texture_albedo;
-  const Bands& albedo = shading.AlbedoAt(hit, origin, differential, texture_albedo);
   Gloss texture_gloss;
-  if (const Gloss* gloss = shading.GlossAt(hit, origin, differential, texture_gloss)) {
-    L += shading.GlossyReflection(*gloss, albedo, hit.position, n_s, -direction, rays);
+  const Shading::Surface surface = shading.SurfaceAt(hit, origin, differential, texture_albedo, texture_gloss);
+  const Bands& albedo = *surface.albedo;
+  if (surface.gloss) {
+    L += shading.GlossyReflection(*surface.gloss, albedo, hit.position, n_s, -direction, rays);
     return Lm + T * L;
   }
   shading.DirectIrradiance(hit.position, n_s, E, rays, !dss);

@@ -412,9 +412,10 @@ class PathTransport final : public FrameTransport {
     lane.glow_here = GlowAt(hit);
     // Textures are filtered over the camera ray's footprint; bounces look up
     // a point (zero derivatives: their footprint is the BSDF's, not a pixel's).
-    lane.albedo = &shading_.AlbedoAt(hit, lane.origin, depth == 0 ? lane.differential : RayDifferential{}, lane.texture_albedo);
-    lane.gloss =
-        shading_.GlossAt(hit, lane.origin, depth == 0 ? lane.differential : RayDifferential{}, lane.texture_gloss);
+    const Shading::Surface surface = shading_.SurfaceAt(
+        hit, lane.origin, depth == 0 ? lane.differential : RayDifferential{}, lane.texture_albedo, lane.texture_gloss);
+    lane.albedo = surface.albedo;
+    lane.gloss = surface.gloss;
     lane.scatters = lane.gloss || lane.albedo->maxCoeff() > 0;  // a glossy coat reflects on black too
     lane.emitter = nullptr;
     if (lane.scatters && !emitters_.empty()) {

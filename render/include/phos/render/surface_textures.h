@@ -26,6 +26,13 @@ OIIO_NAMESPACE_END
 
 namespace phos::render {
 
+// Where a hit lies in its mesh's UV map, and the UV offsets of its pixel's
+// footprint: worked out once per hit for all of its textures.
+struct UvFootprint {
+  Eigen::Vector2f uv = Eigen::Vector2f::Zero();
+  Eigen::Vector2f duv_dx = Eigen::Vector2f::Zero(), duv_dy = Eigen::Vector2f::Zero();  // zero: a point lookup
+};
+
 class SurfaceTextures {
  public:
   // Opens every textured object's file; one that is not an image OpenImageIO
@@ -37,28 +44,31 @@ class SurfaceTextures {
   SurfaceTextures& operator=(const SurfaceTextures&) = delete;
 
   bool textured(int object) const { return handles_[object] != nullptr; }
-  // Albedo per band at a hit on a textured object, written to bands[0, band
-  // count). dp_dx, dp_dy: where the rays through the next pixel right and
-  // down meet the hit's plane, less the hit (world metres; pbrt's ray
-  // differentials): the texture is filtered over their UV footprint. Zero:
-  // a point lookup at the finest level.
-  void Albedo(const SceneGeometry& geometry, const Hit& hit, const Vec3f& dp_dx, const Vec3f& dp_dy,
-              float* bands) const;
-
   bool gloss_textured(int object) const { return gloss_handles_[object] != nullptr; }
-  // The gloss at a hit on an object with a gloss texture: `factors` (the
-  // object's Gloss) times the texture's B (metallic) and G (roughness),
-  // filtered over the footprint as Albedo's.
-  Gloss GlossAt(const SceneGeometry& geometry, const Hit& hit, const Vec3f& dp_dx, const Vec3f& dp_dy,
-                const Gloss& factors) const;
+  bool any_textured(int object) const { return textured(object) || gloss_textured(object); }
+
+  // A hit's place in its mesh's UV map and its footprint there. dp_dx,
+  // dp_dy: where the rays through the next pixel right and down meet the
+  // hit's plane, less the hit (world metres; pbrt's ray differentials): the
+  // textures are filtered over their UV footprint. Zero: a point lookup at
+  // the finest level.
+  UvFootprint Footprint(const SceneGeometry& geometry, const Hit& hit, const Vec3f& dp_dx, const Vec3f& dp_dy) const;
+
+  // Albedo per band of a textured object over a footprint, written to
+  // bands[0, band count).
+  void Albedo(int object, const UvFootprint& footprint, float* bands) const;
+
+  // The gloss of an object with a gloss texture over a footprint: `factors`
+  // (the object's Gloss) times the texture's B (metallic) and G (roughness).
+  Gloss GlossAt(int object, const UvFootprint& footprint, const Gloss& factors) const;
 
  private:
   // A texture's handle; a file that is not an image is a UserError.
   void* Open(const std::filesystem::path& texture, const std::string& where, const std::string& field,
              OIIO::ImageSpec& spec) const;
-  // `channels` channels from `first_channel` of the texture at the hit.
-  void Lookup(void* handle, const Hit& hit, const Vec3f& dp_dx, const Vec3f& dp_dy, const SceneGeometry& geometry,
-              bool v_up, int first_channel, int channels, float* out) const;
+  // `channels` channels from `first_channel` of the texture over a footprint.
+  void Lookup(void* handle, const UvFootprint& footprint, bool v_up, int first_channel, int channels,
+              float* out) const;
 
   const Scene& scene_;
   RgbToBands to_bands_;
