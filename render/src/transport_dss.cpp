@@ -128,14 +128,7 @@ class DssTransport final : public FrameTransport {
       for (int x = 0; x < width; ++x) {
         const std::size_t p = static_cast<std::size_t>(y) * width + x;
         if (g.object[p] < 0) continue;
-        Hit hit;  // the G-buffer's pixel, as the direct pass found it
-        hit.object = g.object[p];
-        hit.triangle = g.triangle[p];
-        hit.b1 = g.b1[p];
-        hit.b2 = g.b2[p];
-        hit.position = g.position[p];
-        hit.normal = g.normal[p];
-        const Bands& albedo = shading_.AlbedoAt(hit, camera_.origin(),
+        const Bands& albedo = shading_.AlbedoAt(g.SeenHit(p), camera_.origin(),
                                                 CameraDifferential(shading_, camera_, camera_.Through(x + 0.5f, y + 0.5f)), texture_albedo);
         const float T = media ? intervals.T_end[p] : 1.0f;
         float* out = image.at(x, y);

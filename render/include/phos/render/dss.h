@@ -100,6 +100,21 @@ struct GBuffer {
   // Where on the object (RenderGBuffer only): for looking up a texture.
   std::vector<int> triangle;
   std::vector<float> b1, b2;
+
+  // Pixel p's hit as RenderGBuffer found it, on the side the camera sees
+  // (taken as its front, as FrontHit takes a surfel's); p must hit.
+  Hit SeenHit(std::size_t p) const {
+    Hit hit;
+    hit.object = object[p];
+    hit.triangle = triangle[p];
+    hit.b1 = b1[p];
+    hit.b2 = b2[p];
+    hit.distance = depth[p];
+    hit.position = position[p];
+    hit.normal = normal[p];
+    hit.front = true;
+    return hit;
+  }
 };
 GBuffer RenderGBuffer(const SceneGeometry& geometry, const Scene& scene, double t_s);
 
