@@ -565,7 +565,9 @@ TexelAtlas::TexelAtlas(const Scene& scene, const SceneGeometry& geometry) : slot
     texels.object = static_cast<int>(o);
     texels.mesh = object.mesh.get();
     const int triangles = geometry.triangle_count(static_cast<int>(o));
-    const bool uv = object.texels == "uv" || (object.texels.empty() && object.mesh->has_uvs());
+    // By default a mesh's UV map holds its texels when it can (a tiled or
+    // reused map cannot: it would give one state to several places).
+    const bool uv = object.texels == "uv" || (object.texels.empty() && UvMapIsOneToOne(*object.mesh));
     if (uv) {
       BuildUv(texels, object, geometry, size);
     } else {

@@ -527,6 +527,43 @@ Mesh ParseGltf(std::string_view data, bool binary, const std::filesystem::path& 
 
 }  // namespace
 
+bool UvMapIsOneToOne(const Mesh& mesh) {
+  if (!mesh.has_uvs()) return false;
+  constexpr float kSlack = 1e-4f;  // a unwrap's float rounding at the square's edges
+  for (const Eigen::Vector2f& uv : mesh.uvs)
+    if (!(uv.minCoeff() >= -kSlack && uv.maxCoeff() <= 1 + kSlack)) return false;
+  // Cell centres strictly inside each triangle (either orientation: a
+  // mirrored island is still one-to-one), counted per cell.
+  constexpr int kGrid = 512;
+  std::vector<std::uint8_t> covers(std::size_t(kGrid) * kGrid, 0);
+  std::size_t covered = 0, overlapping = 0;
+  for (const Eigen::Vector3i& t : mesh.uv_triangles) {
+    const Eigen::Vector2f a = mesh.uvs[t[0]] * kGrid, b = mesh.uvs[t[1]] * kGrid, c = mesh.uvs[t[2]] * kGrid;
+    const float area2 = (b - a).x() * (c - a).y() - (b - a).y() * (c - a).x();
+    if (!(std::abs(area2) > 1e-9f)) continue;
+    const float sign = area2 > 0 ? 1.0f : -1.0f, inside = 1e-5f * std::abs(area2);
+    auto edge = [&](const Eigen::Vector2f& p, const Eigen::Vector2f& q, const Eigen::Vector2f& r) {
+      return sign * ((q - p).x() * (r - p).y() - (q - p).y() * (r - p).x());
+    };
+    const Eigen::Vector2f lo = a.cwiseMin(b).cwiseMin(c), hi = a.cwiseMax(b).cwiseMax(c);
+    const int x0 = std::clamp(static_cast<int>(std::floor(lo.x())), 0, kGrid - 1),
+              x1 = std::clamp(static_cast<int>(std::ceil(hi.x())), 0, kGrid - 1);
+    const int y0 = std::clamp(static_cast<int>(std::floor(lo.y())), 0, kGrid - 1),
+              y1 = std::clamp(static_cast<int>(std::ceil(hi.y())), 0, kGrid - 1);
+    for (int y = y0; y <= y1; ++y)
+      for (int x = x0; x <= x1; ++x) {
+        const Eigen::Vector2f q(x + 0.5f, y + 0.5f);
+        if (edge(a, b, q) > inside && edge(b, c, q) > inside && edge(c, a, q) > inside) {
+          std::uint8_t& n = covers[std::size_t(y) * kGrid + x];
+          if (n == 0) ++covered;
+          if (n == 1) ++overlapping;
+          n = static_cast<std::uint8_t>(std::min(2, n + 1));
+        }
+      }
+  }
+  return overlapping * 1000 <= covered;
+}
+
 Mesh MakeQuad(double size_x, double size_z) {
   Mesh mesh;
   mesh.source = "shape quad";

@@ -352,6 +352,15 @@ void ReadPhosphor(const JsonField& o, const std::filesystem::path& base_dir, con
   path = file.string();
 }
 
+// The texels of a masked, mapped or "texels": "uv" phosphor are its UV map's:
+// one that is not one-to-one (UvMapIsOneToOne) is refused at field f.
+void RequireOneToOneUvMap(const JsonField& f, const Mesh& mesh) {
+  if (!UvMapIsOneToOne(mesh))
+    f.Fail("the mesh's UV map (" + mesh.source +
+           ") is not one-to-one (UVs outside [0, 1], or triangles over the same place of UV space): its texels "
+           "would each lie in several places");
+}
+
 // "phosphor_map": a decay map of `phos fit map` over the mesh's UV map
 // (phosphor_map.h): one texel per map pixel along its longer side unless
 // "uv_resolution" says fewer.
@@ -360,6 +369,7 @@ void ReadPhosphorMapField(const JsonField& f, const std::filesystem::path& base_
   if (!object.mesh->has_uvs())
     f.Fail("the map lies on the mesh's UV map, and the mesh (" + object.mesh->source + ") has none");
   if (object.texels == "auto") f.Fail("a mapped phosphor's texels are its UV map's: use \"texels\": \"uv\"");
+  RequireOneToOneUvMap(f, *object.mesh);
   const std::filesystem::path file = base_dir / f.NonEmptyString();
   std::error_code ec;
   if (!std::filesystem::is_regular_file(file, ec))
@@ -700,6 +710,7 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
         f->Fail("expected \"auto\" or \"uv\", got \"" + object.texels + "\"");
       if (object.texels == "uv" && !object.mesh->has_uvs())
         f->Fail("the mesh has no UV map (" + object.mesh->source + "); use \"auto\"");
+      if (object.texels == "uv") RequireOneToOneUvMap(*f, *object.mesh);
     }
     if (auto f = o.Optional("uv_resolution")) object.uv_resolution = f->Integer(1, 16384);
     // Gloss: the scene's factors over the mesh's glTF material's; its
@@ -722,6 +733,7 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
       if (!object.mesh->has_uvs())
         f->Fail("the mask lies on the mesh's UV map, and the mesh (" + object.mesh->source + ") has none");
       if (object.texels == "auto") f->Fail("a masked phosphor's texels are its UV map's: use \"texels\": \"uv\"");
+      RequireOneToOneUvMap(*f, *object.mesh);
       const std::filesystem::path file = base_dir / f->NonEmptyString();
       std::error_code ec;
       if (!std::filesystem::is_regular_file(file, ec))

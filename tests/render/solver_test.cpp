@@ -7,10 +7,13 @@
 
 #include <algorithm>
 #include <cmath>
+#include <filesystem>
+#include <fstream>
 
 #include "phos/render/geometry.h"
 #include "phos/render/renderer.h"
 #include "phos/render/solver.h"
+#include "phos/util/json.h"
 #include "phos/util/error.h"
 #include "render/scene_util.h"
 #include "test_util.h"
@@ -287,6 +290,73 @@ TEST(GlowIrradiance, AGlowingPlateChargesTheOneFacingItInTheDark) {
   // Lp <= 0.05 * 0.9 per band in two bands, ke = 0.5, for 5 s.
   EXPECT_GT(charged, 0.0);
   EXPECT_LT(charged, 0.5 * 2 * M_PI * 0.05 * 0.9 * 5.0);
+}
+
+// A unit cube (MakeBox's triangles) as an OBJ whose UV map is laid out by
+// `layout`: each face's own square (s, t) in [0, 1]^2, face f of 6 (the
+// bottom, -y, is face 0; as BoxTextured of Khronos's glTF samples, where
+// u runs 0 to 6, and before this test its texels all lay on one face).
+enum class UvLayout { kTiled, kReused, kAtlas };
+std::filesystem::path WriteCubeObj(const std::filesystem::path& dir, UvLayout layout) {
+  const Mesh box = MakeBox(Vec3(1, 1, 1), false);
+  std::filesystem::create_directories(dir);
+  const std::filesystem::path obj = dir / "cube.obj";
+  std::ofstream out(obj);
+  for (const Vec3f& p : box.positions) out << "v " << p.x() << " " << p.y() << " " << p.z() << "\n";
+  int vt = 0;
+  for (const Eigen::Vector3i& t : box.triangles) {
+    const Vec3f n = (box.positions[t[1]] - box.positions[t[0]]).cross(box.positions[t[2]] - box.positions[t[0]]);
+    int axis;
+    n.cwiseAbs().maxCoeff(&axis);
+    // Faces in the order -y, +y, -x, +x, -z, +z.
+    const int face = (axis == 1 ? 0 : axis == 0 ? 2 : 4) + (n[axis] > 0 ? 1 : 0);
+    for (int c = 0; c < 3; ++c) {
+      const Vec3f& p = box.positions[t[c]];
+      const float s = p[(axis + 1) % 3] + 0.5f, r = p[(axis + 2) % 3] + 0.5f;
+      float u = s, v = r;
+      if (layout == UvLayout::kTiled) u = static_cast<float>(face) + s;
+      if (layout == UvLayout::kAtlas) {
+        u = (static_cast<float>(face % 3) + 0.9f * s + 0.05f) / 3;
+        v = (static_cast<float>(face / 3) + 0.9f * r + 0.05f) / 2;
+      }
+      out << "vt " << u << " " << v << "\n";
+    }
+    out << "f";
+    for (int c = 0; c < 3; ++c) out << " " << t[c] + 1 << "/" << ++vt;
+    out << "\n";
+  }
+  return obj;
+}
+
+TEST(TexelAtlas, AUvMapThatTilesOrReusesItsSquareLeavesTheTexelsToTheTriangles) {
+  const std::filesystem::path dir = std::filesystem::path(::testing::TempDir()) / "uv-layouts";
+  for (UvLayout layout : {UvLayout::kTiled, UvLayout::kReused, UvLayout::kAtlas}) {
+    const Mesh cube = LoadMesh(WriteCubeObj(dir, layout), "", "test");
+    const bool one_to_one = layout == UvLayout::kAtlas;
+    EXPECT_EQ(UvMapIsOneToOne(cube), one_to_one) << static_cast<int>(layout);
+    // Lit from above: its top charges, whichever texels it has.
+    Scene scene = EmptyScene(8, 8);
+    scene.objects.push_back(MakeObject("cube", cube, 0.5,
+                                       UniformPhosphor(0.2, std::vector<double>(8, 0.1), {0, 0, 1, 2, 1, 0, 0, 0})));
+    scene.lights.push_back(PointLight(Vec3(0.2, 3, 0.1), std::vector<double>(8, 1.0), 5.0));
+    SceneGeometry geometry(scene);
+    CoupledSolver solver(scene, geometry);
+    solver.AdvanceTo(1.0);
+    EXPECT_EQ(solver.atlas().objects()[0].uv(), one_to_one) << static_cast<int>(layout);
+    EXPECT_FALSE(solver.charge_report(0).NeverCharged()) << static_cast<int>(layout);
+    EXPECT_TRUE(solver.charge_report(0).received) << static_cast<int>(layout);
+  }
+  // Asked for ("texels": "uv", or a mask or map, which imply it), a map that
+  // is not one-to-one is one line naming the field.
+  WriteCubeObj(dir, UvLayout::kTiled);
+  const nlohmann::json json = nlohmann::json::parse(R"({"schema": "phos.scene/1",
+    "camera": {"position": [0, 0, 3], "look_at": [0, 0, 0]},
+    "objects": [{"name": "cube", "mesh": "cube.obj", "albedo": 0.5, "texels": "uv",
+                 "phosphor": ")" + std::string(PHOS_FIXTURES_DIR) + R"(/materials/green.json", "unknown_ke": "zero"}],
+    "lights": []})");
+  const std::string error = phos::testing::ErrorOfType<UserError>([&] { SceneFromJson(json, dir, "cube.json"); });
+  EXPECT_NE(error.find("objects[0].texels"), std::string::npos) << error;
+  EXPECT_NE(error.find("is not one-to-one"), std::string::npos) << error;
 }
 
 }  // namespace

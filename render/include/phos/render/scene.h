@@ -315,6 +315,14 @@ struct Scene {
 Scene LoadScene(const std::filesystem::path& path);
 Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& base_dir, const std::string& source);
 
+// Whether a mesh's UV map can hold its texels (docs/render.md, "The
+// coupled solver"): every UV in [0, 1] and no two triangles over the same
+// place of UV space (at most 0.1% of the covered cells of a 512 x 512 grid,
+// for the rounding of a real unwrap). A map that tiles a texture (UVs
+// past 1, as a glTF's repeating sampler wants) or reuses one region of it
+// on several faces would give one texel's state to several places.
+bool UvMapIsOneToOne(const Mesh& mesh);
+
 // Built-in shapes (also usable from scene files as {"shape": ...}).
 Mesh MakeQuad(double size_x, double size_z);                    // in the y = 0 plane, normal +y
 Mesh MakeBox(const Vec3& size, bool inward);                    // centred at the origin
