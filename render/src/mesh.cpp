@@ -168,6 +168,7 @@ Mesh ParseObj(std::string_view text, const std::filesystem::path& base_dir, cons
     if (!material.diffuse_texname.empty()) {
       colour.field += ": map_Kd";
       colour.texture = TextureFile(base_dir, material.diffuse_texname, mtl_where, colour.field);
+      if (material.diffuse_texopt.clamp) colour.wraps = {TextureWrap::kClampToEdge, TextureWrap::kClampToEdge};
       // A texture under a black Kd: the file left Kd out (tinyobjloader
       // reads a missing Kd as 0); no exporter means black.
       if (colour.factor.isZero()) colour.factor.setOnes();
@@ -340,6 +341,30 @@ std::filesystem::path GltfTextureFile(const tinygltf::Model& model, const tinygl
   return TextureFile(base_dir, image.uri, where, image_field);
 }
 
+// How the texture of `info` wraps: its sampler's wrapS and wrapT (glTF 2.0,
+// 5.26: 33071 CLAMP_TO_EDGE, 33648 MIRRORED_REPEAT, 10497 REPEAT, the
+// default, also without a sampler).
+TextureWraps GltfTextureWraps(const tinygltf::Model& model, const tinygltf::TextureInfo& info,
+                              const std::string& where) {
+  const int sampler = model.textures[info.index].sampler;
+  if (sampler < 0) return {};
+  const std::string field = "samplers[" + std::to_string(sampler) + "]";
+  if (sampler >= static_cast<int>(model.samplers.size()))
+    ThrowUserError(where, "textures[" + std::to_string(info.index) + "].sampler", "sampler index out of range");
+  auto wrap = [&](int mode, const char* name) {
+    switch (mode) {
+      case TINYGLTF_TEXTURE_WRAP_REPEAT: return TextureWrap::kRepeat;
+      case TINYGLTF_TEXTURE_WRAP_CLAMP_TO_EDGE: return TextureWrap::kClampToEdge;
+      case TINYGLTF_TEXTURE_WRAP_MIRRORED_REPEAT: return TextureWrap::kMirroredRepeat;
+      default:
+        ThrowUserError(where, field + "." + name,
+                       "expected 10497 (REPEAT), 33071 (CLAMP_TO_EDGE) or 33648 (MIRRORED_REPEAT), got " +
+                           std::to_string(mode));
+    }
+  };
+  return {wrap(model.samplers[sampler].wrapS, "wrapS"), wrap(model.samplers[sampler].wrapT, "wrapT")};
+}
+
 // The base colour of glTF material `index` (pbrMetallicRoughness
 // baseColorFactor, linear, and baseColorTexture, sRGB), none without one.
 std::optional<BaseColour> GltfBaseColour(const tinygltf::Model& model, int index,
@@ -358,6 +383,7 @@ std::optional<BaseColour> GltfBaseColour(const tinygltf::Model& model, int index
   if (info.index < 0) return colour;
   colour.field = field + ".pbrMetallicRoughness.baseColorTexture";
   colour.texture = GltfTextureFile(model, info, base_dir, where, colour.field);
+  colour.wraps = GltfTextureWraps(model, info, where);
   return colour;
 }
 
@@ -388,6 +414,7 @@ std::optional<GlossTexture> GltfGlossTexture(const tinygltf::Model& model, int i
   GlossTexture gloss;
   gloss.field = "materials[" + std::to_string(index) + "].pbrMetallicRoughness.metallicRoughnessTexture";
   gloss.texture = GltfTextureFile(model, info, base_dir, where, gloss.field);
+  gloss.wraps = GltfTextureWraps(model, info, where);
   return gloss;
 }
 

@@ -118,6 +118,19 @@ void UvOffsets(const SceneGeometry& geometry, const Hit& hit, const Mesh& mesh, 
 
 }  // namespace
 
+namespace {
+
+OIIO::TextureOpt::Wrap OiioWrap(TextureWrap wrap) {
+  switch (wrap) {
+    case TextureWrap::kClampToEdge: return OIIO::TextureOpt::WrapClamp;
+    case TextureWrap::kMirroredRepeat: return OIIO::TextureOpt::WrapMirror;
+    case TextureWrap::kRepeat: break;
+  }
+  return OIIO::TextureOpt::WrapPeriodic;
+}
+
+}  // namespace
+
 UvFootprint SurfaceTextures::Footprint(const SceneGeometry& geometry, const Hit& hit, const Vec3f& dp_dx,
                                        const Vec3f& dp_dy) const {
   const Mesh& mesh = *scene_.objects[hit.object].mesh;
@@ -129,14 +142,15 @@ UvFootprint SurfaceTextures::Footprint(const SceneGeometry& geometry, const Hit&
   return footprint;
 }
 
-void SurfaceTextures::Lookup(void* handle, const UvFootprint& footprint, bool v_up, int first_channel, int channels,
-                             float* out) const {
+void SurfaceTextures::Lookup(void* handle, const UvFootprint& footprint, bool v_up, const TextureWraps& wraps,
+                             int first_channel, int channels, float* out) const {
   // OpenImageIO's t runs down the image from its top row, as glTF's v; an
   // OBJ's v runs up from the bottom row.
   const float flip = v_up ? -1.0f : 1.0f;
   const Eigen::Vector2f &uv = footprint.uv, &duv_dx = footprint.duv_dx, &duv_dy = footprint.duv_dy;
   OIIO::TextureOpt options;
-  options.swrap = options.twrap = OIIO::TextureOpt::WrapPeriodic;  // glTF's default sampler repeats
+  options.swrap = OiioWrap(wraps.s);
+  options.twrap = OiioWrap(wraps.t);
   // Trilinear across levels, bilinear within one: OpenImageIO's defaults
   // (smart bicubic, anisotropic) took 2.9x the untextured frame and
   // bilinear-anisotropic 2.4x, trilinear 1.9x (bench_render,
@@ -152,7 +166,7 @@ void SurfaceTextures::Lookup(void* handle, const UvFootprint& footprint, bool v_
 void SurfaceTextures::Albedo(int object, const UvFootprint& footprint, float* bands) const {
   const BaseColour& colour = *scene_.objects[object].albedo_texture;
   float rgb[3] = {0, 0, 0};
-  Lookup(handles_[object], footprint, colour.v_up, 0, 3, rgb);
+  Lookup(handles_[object], footprint, colour.v_up, colour.wraps, 0, 3, rgb);
   for (int c = 0; c < 3; ++c) {
     // Decoded after the filter: OpenImageIO 2.4's TextureSystem has no
     // colour transform (docs/render.md, "Textures", says what that costs).
@@ -164,7 +178,8 @@ void SurfaceTextures::Albedo(int object, const UvFootprint& footprint, float* ba
 
 Gloss SurfaceTextures::GlossAt(int object, const UvFootprint& footprint, const Gloss& factors) const {
   float roughness_metallic[2] = {1, 1};  // glTF: G roughness, B metallic
-  Lookup(gloss_handles_[object], footprint, scene_.objects[object].mesh->v_up, 1, 2, roughness_metallic);
+  const Object& o = scene_.objects[object];
+  Lookup(gloss_handles_[object], footprint, o.mesh->v_up, o.gloss_texture->wraps, 1, 2, roughness_metallic);
   return {factors.metallic * std::clamp(roughness_metallic[1], 0.0f, 1.0f),
           factors.roughness * std::clamp(roughness_metallic[0], 0.0f, 1.0f)};
 }

@@ -15,6 +15,7 @@
 #include <cmath>
 #include <fstream>
 #include <functional>
+#include <map>
 #include <random>
 
 #include <OpenImageIO/imageio.h>
@@ -416,6 +417,89 @@ TEST(GlossTexture, AMissingOrUnreadableGlossTextureNamesTheField) {
   EXPECT_NE(unreadable.find("metallicRoughnessTexture"), std::string::npos) << unreadable;
   EXPECT_NE(unreadable.find("notes.png' is not an image"), std::string::npos) << unreadable;
   EXPECT_EQ(unreadable.find('\n'), std::string::npos) << unreadable;
+}
+
+// A 1 m plane facing +y whose UVs run 0 to 2 (so past the texture's
+// square), wearing a 16 x 1 grey ramp through a glTF sampler with wrapS =
+// `wrap_s` (glTF's numbers), as plane.gltf, plane.bin and ramp.png in dir.
+std::filesystem::path WrappedRampPlane(const TempDir& dir, int wrap_s) {
+  const float data[] = {-0.5f, 0, -0.5f, 0.5f, 0, -0.5f, 0.5f, 0, 0.5f, -0.5f, 0, 0.5f,  // POSITION
+                        0,     0, 2,     0,    2, 2,     0,    2};                       // TEXCOORD_0 = 2 (x, z) + 1
+  const std::uint16_t indices[] = {0, 3, 2, 0, 2, 1};  // counter-clockwise seen from +y
+  std::ofstream bin(dir / "plane.bin", std::ios::binary);
+  bin.write(reinterpret_cast<const char*>(data), sizeof(data));
+  bin.write(reinterpret_cast<const char*>(indices), sizeof(indices));
+  bin.close();
+  std::uint8_t ramp[16 * 3];
+  for (int x = 0; x < 16; ++x) ramp[3 * x] = ramp[3 * x + 1] = ramp[3 * x + 2] = static_cast<std::uint8_t>(8 + 16 * x);
+  auto out = OIIO::ImageOutput::create((dir / "ramp.png").string());
+  EXPECT_TRUE(out && out->open((dir / "ramp.png").string(), OIIO::ImageSpec(16, 1, 3, OIIO::TypeDesc::UINT8)) &&
+              out->write_image(OIIO::TypeDesc::UINT8, ramp) && out->close());
+  nlohmann::json gltf = {
+      {"asset", {{"version", "2.0"}}},
+      {"scenes", {{{"nodes", {0}}}}},
+      {"nodes", {{{"mesh", 0}}}},
+      {"meshes", {{{"primitives", {{{"attributes", {{"POSITION", 0}, {"TEXCOORD_0", 1}}}, {"indices", 2},
+                                     {"material", 0}}}}}}},
+      {"materials", {{{"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 0}}}}}}}},
+      {"textures", {{{"source", 0}, {"sampler", 0}}}},
+      {"samplers", {{{"wrapS", wrap_s}, {"wrapT", 10497}}}},
+      {"images", {{{"uri", "ramp.png"}}}},
+      {"accessors",
+       {{{"bufferView", 0}, {"componentType", 5126}, {"count", 4}, {"type", "VEC3"},
+         {"min", {-0.5, 0, -0.5}}, {"max", {0.5, 0, 0.5}}},
+        {{"bufferView", 1}, {"componentType", 5126}, {"count", 4}, {"type", "VEC2"}},
+        {{"bufferView", 2}, {"componentType", 5123}, {"count", 6}, {"type", "SCALAR"}}}},
+      {"bufferViews",
+       {{{"buffer", 0}, {"byteOffset", 0}, {"byteLength", 48}},
+        {{"buffer", 0}, {"byteOffset", 48}, {"byteLength", 32}},
+        {{"buffer", 0}, {"byteOffset", 80}, {"byteLength", 12}}}},
+      {"buffers", {{{"uri", "plane.bin"}, {"byteLength", 92}}}}};
+  std::ofstream(dir / "plane.gltf") << gltf.dump();
+  const std::filesystem::path scene = dir / "scene.json";
+  std::ofstream(scene) << R"({"schema": "phos.scene/1", "camera": {"position": [0, 2, 0.001], "look_at": [0, 0, 0]},
+    "objects": [{"name": "plane", "mesh": "plane.gltf"}], "lights": []})";
+  return scene;
+}
+
+// The albedo (band 4) a point lookup finds at u, v = 1.95 on the plane.
+float AlbedoAtU(const SceneGeometry& geometry, float u) {
+  // On triangle (0, 3, 2), uv = (2 b2, 2 (b1 + b2)).
+  Hit hit;
+  hit.object = 0;
+  hit.triangle = 0;
+  hit.b2 = u / 2;
+  hit.b1 = 0.975f - hit.b2;  // v = 1.95
+  const SurfaceTextures& textures = *geometry.surface_textures();
+  std::vector<float> bands(static_cast<std::size_t>(geometry.scene().bands.band_count()));
+  textures.Albedo(0, textures.Footprint(geometry, hit, Vec3f::Zero(), Vec3f::Zero()), bands.data());
+  return bands[4];
+}
+
+TEST(AlbedoTexture, TheGltfSamplersWrapSaysHowTheTextureReadsPastItsSquare) {
+  // At u = 1.265625 (a texel's centre past the square): REPEAT reads
+  // u - 1, MIRRORED_REPEAT 2 - u, CLAMP_TO_EDGE the last column, as at 1.9.
+  const float u = 1.265625f;
+  std::map<int, std::pair<float, float>> expected;  // wrapS: (the lookup's partner u, its reading at u)
+  for (int wrap : {10497, 33648, 33071}) {
+    TempDir dir;
+    const Scene scene = LoadScene(WrappedRampPlane(dir, wrap));
+    EXPECT_EQ(scene.objects[0].albedo_texture->wraps.s,
+              wrap == 10497 ? TextureWrap::kRepeat
+                            : wrap == 33648 ? TextureWrap::kMirroredRepeat : TextureWrap::kClampToEdge);
+    const SceneGeometry geometry(scene);
+    const float at = AlbedoAtU(geometry, u);
+    const float partner = AlbedoAtU(geometry, wrap == 10497 ? u - 1 : wrap == 33648 ? 2 - u : 1.9f);
+    EXPECT_NEAR(at, partner, 1e-6f) << wrap;
+    expected[wrap] = {partner, at};
+  }
+  // And the three differ (the ramp rises along u).
+  EXPECT_GT(std::abs(expected[10497].second - expected[33648].second), 0.05f);
+  EXPECT_GT(std::abs(expected[33648].second - expected[33071].second), 0.05f);
+  // A wrap glTF does not have is one line naming the sampler's field.
+  TempDir dir;
+  const std::string message = UserErrorOf([&] { LoadScene(WrappedRampPlane(dir, 12345)); });
+  EXPECT_NE(message.find("samplers[0].wrapS"), std::string::npos) << message;
 }
 
 }  // namespace

@@ -53,12 +53,22 @@ struct Gloss {
 };
 inline constexpr float kMinRoughness = 0.02f;
 
+// How a texture is read past [0, 1] in u (s) and v (t): a glTF sampler's
+// wrapS and wrapT (REPEAT, the default, CLAMP_TO_EDGE, MIRRORED_REPEAT); an
+// OBJ/MTL map_Kd repeats unless it says -clamp on.
+enum class TextureWrap { kRepeat, kClampToEdge, kMirroredRepeat };
+struct TextureWraps {
+  TextureWrap s = TextureWrap::kRepeat, t = TextureWrap::kRepeat;
+  bool operator==(const TextureWraps&) const = default;
+};
+
 // A glTF metallicRoughnessTexture (glTF 2.0, material.pbrMetallicRoughness):
 // roughness in its G channel and metallic in its B channel, linear (not
 // sRGB), each times the object's Gloss factor at every hit.
 struct GlossTexture {
   std::filesystem::path texture;
   std::string field;  // where the file says so, for messages
+  TextureWraps wraps;
 };
 
 // The base colour a mesh file declares (glTF pbrMetallicRoughness
@@ -69,8 +79,9 @@ struct BaseColour {
   std::filesystem::path texture;                      // empty: none
   std::string field;                                  // where the file says so, for messages
   bool v_up = false;  // OBJ: v = 0 is the image's bottom row; glTF: its top row
+  TextureWraps wraps;
   bool operator==(const BaseColour& other) const {
-    return factor == other.factor && texture == other.texture && v_up == other.v_up;
+    return factor == other.factor && texture == other.texture && v_up == other.v_up && wraps == other.wraps;
   }
 };
 
