@@ -283,6 +283,30 @@ TEST(AreaLight, TheCameraSeesItsFrontOnlyAndPathAgreesWithDirect) {
   EXPECT_EQ(RenderBands(away, nullptr, FrameOptions{}).at(12, 12)[3], 0.0f);
 }
 
+// A direct frame and a path-traced one of the same view, band 3, in 4 x 4
+// pixel blocks: each block's means and the path tracer's standard error.
+struct Block {
+  int x, y;
+  double direct, path, path_se;
+};
+std::vector<Block> Blocks(const Image& direct, const Image& path) {
+  std::vector<Block> blocks;
+  for (int by = 0; by + 4 <= direct.height; by += 4)
+    for (int bx = 0; bx + 4 <= direct.width; bx += 4) {
+      double sd = 0, sp = 0, sp2 = 0;
+      for (int y = by; y < by + 4; ++y)
+        for (int x = bx; x < bx + 4; ++x) {
+          sd += direct.at(x, y)[3];
+          sp += path.at(x, y)[3];
+          sp2 += double(path.at(x, y)[3]) * path.at(x, y)[3];
+        }
+      sd /= 16;
+      sp /= 16;
+      blocks.push_back({bx, by, sd, sp, std::sqrt(std::max(0.0, sp2 / 16 - sp * sp) / 16)});
+    }
+  return blocks;
+}
+
 // A glowing ball (an emissive icosphere of radius R, radiance L) over a
 // grey floor, seen from above: the floor is lit as by a point light of
 // intensity pi R^2 L at its centre (a Lambertian sphere), while the
@@ -335,20 +359,8 @@ TEST(AreaLight, AnEmissiveBallIsSeenAndThePathTracerAgreesWithDirect) {
   path.max_depth = 2;  // the floor's bounce that finds the ball (nothing else reflects back)
   const Image pt = RenderBands(geometry, nullptr, path);
   // Floor pixels: direct's rho E / pi against the path tracer's, in 4 x 4 blocks.
-  for (int by = 0; by < 32; by += 4)
-    for (int bx = 0; bx < 32; bx += 4) {
-      double sd = 0, sp = 0, sp2 = 0;
-      for (int y = by; y < by + 4; ++y)
-        for (int x = bx; x < bx + 4; ++x) {
-          sd += d.at(x, y)[3];
-          sp += pt.at(x, y)[3];
-          sp2 += double(pt.at(x, y)[3]) * pt.at(x, y)[3];
-        }
-      sd /= 16;
-      sp /= 16;
-      const double se = std::sqrt(std::max(0.0, sp2 / 16 - sp * sp) / 16);
-      EXPECT_NEAR(sp, sd, 4 * se + 0.02 * sd + 1e-6) << "block " << bx << "," << by;
-    }
+  for (const Block& b : Blocks(d, pt))
+    EXPECT_NEAR(b.path, b.direct, 4 * b.path_se + 0.02 * b.direct + 1e-6) << "block " << b.x << "," << b.y;
 }
 
 TEST(AreaLight, AnEmissiveObjectShowsItsRadianceOnItsFrontOnly) {
@@ -404,23 +416,12 @@ TEST(AreaLight, AGlossyFloorShowsItsHighlightInDirectAsInThePathTracer) {
     path.max_depth = 2;  // the floor's bounce that finds the light (nothing else reflects back)
     const Image pt = RenderBands(geometry, nullptr, path);
     double brightest = 0, dimmest = 1e30;
-    for (int by = 0; by < 32; by += 4)
-      for (int bx = 0; bx < 32; bx += 4) {
-        double sd = 0, sp = 0, sp2 = 0;
-        for (int y = by; y < by + 4; ++y)
-          for (int x = bx; x < bx + 4; ++x) {
-            sd += d.at(x, y)[3];
-            sp += pt.at(x, y)[3];
-            sp2 += double(pt.at(x, y)[3]) * pt.at(x, y)[3];
-          }
-        sd /= 16;
-        sp /= 16;
-        const double se = std::sqrt(std::max(0.0, sp2 / 16 - sp * sp) / 16);
-        EXPECT_NEAR(sd, sp, 4 * se + 0.03 * sp + 1e-4)
-            << "metallic " << c.gloss.metallic << " roughness " << c.gloss.roughness << ", block " << bx << "," << by;
-        brightest = std::max(brightest, sd);
-        dimmest = std::min(dimmest, sd);
-      }
+    for (const Block& b : Blocks(d, pt)) {
+      EXPECT_NEAR(b.direct, b.path, 4 * b.path_se + 0.03 * b.path + 1e-4)
+          << "metallic " << c.gloss.metallic << " roughness " << c.gloss.roughness << ", block " << b.x << "," << b.y;
+      brightest = std::max(brightest, b.direct);
+      dimmest = std::min(dimmest, b.direct);
+    }
     EXPECT_GT(brightest, 5 * dimmest) << "a highlight";
   }
 }
