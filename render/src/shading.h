@@ -94,27 +94,20 @@ class Shading {
     if (sky && sky_level_ > 0) {
       E += sky_L_ * UnitSkyIrradiance(geometry_, *scene_.environment, p, n_s, options_.sky_rays, PointSeed(p), &rays);
     }
-    ForEachLightReaching(p, n_s, rays, [&](const LitLight& light, float unit, const Vec3f*) { E += light.E * unit; });
+    for (const LitLight& light : lights_) {
+      Vec3f direction;
+      const float unit = light.pose.area() ? AreaLightReaching(light, p, n_s, rays)
+                                           : DeltaLightReaching(light, p, n_s, rays, direction);
+      if (unit > 0) E += light.E * unit;
+    }
   }
 
-  // Each light that is on and reaches p on the side of n_s, unshadowed and
-  // through the media (a cloud on the floor): reach(light, unit, direction)
-  // with its unit irradiance there (> 0) and, for a delta light (point,
-  // spot, directional, sheet), the direction toward it; null for an area
-  // light, whose irradiance is sampled over its surface (UnitIrradiance).
-  template <typename Reach>
-  void ForEachLightReaching(const Vec3f& p, const Vec3f& n_s, std::uint64_t& rays, Reach&& reach) const {
-    for (const LitLight& light : lights_) {
-      if (light.pose.area()) {
-        float unit = UnitIrradiance(geometry_, light.pose, p, n_s, &rays);
-        if (unit > 0 && media_) unit *= Transmittance(light.pose, p);
-        if (unit > 0) reach(light, unit, nullptr);
-        continue;
-      }
-      Vec3f direction;
-      if (const float unit = DeltaLightReaching(light, p, n_s, rays, direction); unit > 0)
-        reach(light, unit, &direction);
-    }
+  // An area light's (quad, disk, emissive mesh) unit irradiance at p on the
+  // side of n_s, shadowed (UnitIrradiance's ratio estimator) and through the
+  // media; 0 where it does not reach.
+  float AreaLightReaching(const LitLight& light, const Vec3f& p, const Vec3f& n_s, std::uint64_t& rays) const {
+    const float unit = UnitIrradiance(geometry_, light.pose, p, n_s, &rays);
+    return unit > 0 && media_ ? unit * Transmittance(light.pose, p) : unit;
   }
 
   // A delta light's (point, spot, directional, sheet) unit irradiance at p on
