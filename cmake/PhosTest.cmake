@@ -26,5 +26,13 @@ function(phos_test part name)
   add_dependencies(${target} phos)
   # A GTEST_SKIP shows as skipped in ctest's output (and says why in the
   # test's log), not as passed: the Slurm test skips where no cluster can start.
-  gtest_discover_tests(${target} DISCOVERY_TIMEOUT 60 PROPERTIES TIMEOUT 600 SKIP_REGULAR_EXPRESSION "\\[  SKIPPED \\]")
+  # PHOS_TEST_COST_<target> (seconds, tests/CMakeLists.txt): ctest -j starts
+  # the costliest tests first; a clean clone has no timings of its own, and a
+  # four-minute test started last would run alone at the end of CI.
+  set(cost 0)
+  if(DEFINED PHOS_TEST_COST_${target})
+    set(cost ${PHOS_TEST_COST_${target}})
+  endif()
+  gtest_discover_tests(${target} DISCOVERY_TIMEOUT 60
+                       PROPERTIES TIMEOUT 600 COST ${cost} SKIP_REGULAR_EXPRESSION "\\[  SKIPPED \\]")
 endfunction()
