@@ -90,6 +90,12 @@ std::string Tail(const fs::path& log) {
   return text.size() > 600 ? text.substr(text.size() - 600) : text;
 }
 
+// A job credential's lifetime (slurm.conf AuthInfo cred_expire; Slurm's
+// default 120 s), which is also how long a requeued job waits before it may
+// start again (slurm.conf(5)). A local node launches in well under a second;
+// the default made the requeue two thirds of this test's time.
+constexpr int kCredentialLifetimeS = 20;
+
 // munged, slurmctld and slurmd as a one-node cluster in a folder of its own.
 class OneNodeSlurm {
  public:
@@ -122,6 +128,7 @@ class OneNodeSlurm {
         "ClusterName=phos" + std::to_string(::getpid()) + "\nSlurmctldHost=" + hostname +
             "\nSlurmctldPort=" + std::to_string(FreePort()) + "\nSlurmdPort=" + std::to_string(FreePort()) +
             "\nSlurmUser=root\nSlurmdUser=root\nAuthType=auth/munge\nAuthInfo=socket=" + (d / "munge.sock").string() +
+            ",cred_expire=" + std::to_string(kCredentialLifetimeS) +
             "\nStateSaveLocation=" + (d / "state").string() + "\nSlurmdSpoolDir=" + (d / "spool").string() +
             "\nSlurmctldPidFile=" + (d / "slurmctld.pid").string() + "\nSlurmdPidFile=" + (d / "slurmd.pid").string() +
             "\nSlurmctldLogFile=" + (d / "slurmctld.log").string() + "\nSlurmdLogFile=" + (d / "slurmd.log").string() +
@@ -229,8 +236,8 @@ TEST(SlurmCluster, ArraysEqualOneProcessAndARequeuedTaskIsRedoneWhole) {
   ASSERT_TRUE(mid_run) << "task 0 was never caught between its first and last frame";
   ASSERT_EQ(Shell("scontrol requeue " + render_tasks + "_0").exit_code, 0);
   // Slurm holds a requeued job before it may start again: slurmctld sets its
-  // BeginTime past the expiry of the killed run's job credential (about 2
-  // minutes), because the node refuses to launch a job whose credential it
+  // BeginTime past the expiry of the killed run's job credential
+  // (kCredentialLifetimeS, 120 s by default), because the node refuses to launch a job whose credential it
   // has just revoked. Forcing the start earlier (scontrol update
   // StartTime=now) launched the rerun into that refusal: it failed at once
   // with exit code 1 and no output, even once the killed run's process was
@@ -265,7 +272,7 @@ TEST(SlurmCluster, ArraysEqualOneProcessAndARequeuedTaskIsRedoneWhole) {
             0);
 
   // Every job of the three chains ends, and ends well.
-  const bool ended = WaitFor([] { return Shell("squeue -h").out.empty(); }, 360, 0.25);  // the requeue's 2 minutes
+  const bool ended = WaitFor([] { return Shell("squeue -h").out.empty(); }, 360, 0.25);  // the requeue's hold, and the rest
   ASSERT_TRUE(ended) << Shell("squeue").out << Tail(slurm.dir() / "slurmctld.log") << Logs(render_job) << Logs(map_job) << Logs(batch_job);
   for (const fs::path& job : {render_job, map_job, batch_job}) {
     const nlohmann::json record = Job(job);  // kept: a loop over Job(job)["stages"] read a destroyed temporary
