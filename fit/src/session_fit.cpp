@@ -66,17 +66,29 @@ void PeakMoments(const std::vector<double>& p, double* centroid, double* sigma) 
 
 // min sum_r (w_r (A x - y)_r)^2 + alpha |D x|^2 over x >= 0 (D: first
 // differences), as a bounded Ceres problem: the non-negative, regularized
-// reconstruction of a spectrum from blurred samples.
-struct LinearRow {
+// reconstruction of a spectrum from blurred samples. A row is linear, so its
+// Jacobian is the row itself: written out, not autodiffed. Autodiff of a
+// dynamic block of n parameters evaluated each row n/4 times with Jets it
+// allocated afresh: a fifth of `phos fit session` in Release and two thirds
+// under the sanitizers (perf). The fitted values move by rounding only
+// (5e-14 relative at most on orange, white and a two-state fixture).
+class LinearRow : public ceres::CostFunction {
+ public:
   LinearRow(std::vector<double> row, double target, double weight)
-      : row_(std::move(row)), target_(target), weight_(weight) {}
-  template <typename T>
-  bool operator()(T const* const* x, T* residual) const {
-    T sum = T(-target_);
+      : row_(std::move(row)), target_(target), weight_(weight) {
+    set_num_residuals(1);
+    mutable_parameter_block_sizes()->push_back(static_cast<std::int32_t>(row_.size()));
+  }
+  bool Evaluate(double const* const* x, double* residual, double** jacobian) const override {
+    double sum = -target_;
     for (std::size_t i = 0; i < row_.size(); ++i) sum += row_[i] * x[0][i];
     residual[0] = weight_ * sum;
+    if (jacobian != nullptr && jacobian[0] != nullptr)
+      for (std::size_t i = 0; i < row_.size(); ++i) jacobian[0][i] = weight_ * row_[i];
     return true;
   }
+
+ private:
   std::vector<double> row_;
   double target_, weight_;
 };
@@ -95,10 +107,7 @@ std::vector<double> SolveNonNegative(const std::vector<std::vector<double>>& A, 
   std::fill(x.begin(), x.end(), aa > 0 ? std::max(ay / aa, 0.0) : 0.0);
   ceres::Problem problem;
   auto add = [&](std::vector<double> row, double target, double w) {
-    auto* cost = new ceres::DynamicAutoDiffCostFunction<LinearRow>(new LinearRow(std::move(row), target, w));
-    cost->AddParameterBlock(static_cast<int>(n));
-    cost->SetNumResiduals(1);
-    problem.AddResidualBlock(cost, nullptr, x.data());
+    problem.AddResidualBlock(new LinearRow(std::move(row), target, w), nullptr, x.data());
   };
   for (std::size_t r = 0; r < A.size(); ++r) add(A[r], y[r], weight[r]);
   for (std::size_t i = 0; i + 1 < n && alpha > 0; ++i) {
