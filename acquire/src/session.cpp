@@ -434,7 +434,14 @@ Frame ReadFrame(const std::filesystem::path& path) {
   frame.channels = spec.nchannels;
   frame.channel_names = spec.channelnames;
   frame.pixels.resize(static_cast<std::size_t>(spec.width) * spec.height * spec.nchannels);
-  if (!in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::UINT16, frame.pixels.data()))
+  // A frame phos wrote is 16-bit already: read natively, straight into the
+  // pixels. A requested format, even the file's own, took OpenImageIO 2.4's
+  // converting path, which allocates a 64 MiB chunk buffer for every read
+  // (ImageInput::read_scanlines; perf): that was most of what checking a
+  // session's frames cost.
+  const bool native = spec.format == OIIO::TypeDesc::UINT16 && spec.channelformats.empty();
+  if (!in->read_image(0, 0, 0, spec.nchannels, native ? OIIO::TypeDesc::UNKNOWN : OIIO::TypeDesc::UINT16,
+                      frame.pixels.data()))
     ThrowUserError(path.string(), "", "cannot read the frame: " + in->geterror());
   frame.exposure_s = spec.get_float_attribute("ExposureTime", 0.0f);
   return frame;
