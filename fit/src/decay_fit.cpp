@@ -353,7 +353,6 @@ class VarProNormalEquations {
 
   // False where a rate over- or underflows (as VarProCost refuses it).
   bool Evaluate(const double* theta, Point* out) {
-    const int m = d_.m;
     double k[kMaxDecayComponents];
     for (int i = 0; i < nc_; ++i) {
       k[i] = std::exp(theta[i]);

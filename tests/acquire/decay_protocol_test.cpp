@@ -87,8 +87,9 @@ TEST(DecayProtocol, RecordsTimingFramesAndTheSamplesDecayRate) {
     EXPECT_NEAR(delays[m], expected, 1e-12);
     EXPECT_NEAR(delay, expected, 1e-9);
     // An exposure never runs into the next frame's slot.
-    if (m + 1 < frames.size())
+    if (m + 1 < frames.size()) {
       EXPECT_LE(frames[m]["exposure_s"].get<double>(), 0.9 * (delays[m + 1] - delays[m]) + 1e-12);
+    }
     Frame frame = ReadFrame(dir / "s" / frames[m]["file"].get<std::string>());
     EXPECT_EQ(frame.width * frame.height * frame.channels, 64 * 48 * 3);
     // Signal per second of exposure, at the middle of the exposure.

@@ -247,7 +247,9 @@ TEST(SessionRecords, ABadFrameIsFoundSetAsideAndMeasuredAgain) {
       const SessionCheck after = CheckSession(s);
       EXPECT_TRUE(after.complete() && after.clean()) << (after.problems.empty() ? "" : after.problems.front());
       EXPECT_EQ(Measured(s), expected);
-      if (damage != 1) EXPECT_TRUE(fs::exists(frame.string() + ".bad-1"));  // kept aside, not overwritten
+      if (damage != 1) {
+        EXPECT_TRUE(fs::exists(frame.string() + ".bad-1"));  // kept aside, not overwritten
+      }
       fs::remove_all(s);
     }
   }

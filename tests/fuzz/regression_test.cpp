@@ -71,7 +71,7 @@ TEST(FuzzRegressions, ALabConfigFromMemoryIsTheSameAsFromItsFile) {
   testing::WriteText(dir / "lab.json", good);
   EXPECT_EQ(LabConfigFromJson(good, dir / "lab.json").ToJson(), LoadLabConfig(dir / "lab.json").ToJson());
   EXPECT_EQ(LabConfigFromJson(good, dir / "lab.json").source, dir / "lab.json");
-  for (const std::string bad :
+  for (const std::string& bad :
        {std::string("{"), std::string(R"({"schema": "phos.lab/2"})"),
         std::string(R"({"schema": "phos.lab/1", "camera": {"aravis": "Fake_1", "region": [0, 0, 1e9, 1]}})")}) {
     testing::WriteText(dir / "lab.json", bad);

@@ -19,8 +19,8 @@ Material TwoStateMaterial() {
   Material m;
   m.name = "two-state";
   m.bands = SpectralGrid::Paper();
-  m.states.push_back({0.3, {0.2, 0.1, 0.05, 0.01, 0, 0, 0, 0}, {0, 0, 0.1, 0.6, 0.2, 0, 0, 0}});
-  m.states.push_back({0.01, {0.02, 0.03, 0.01, 0.0, 0, 0, 0, 0}, {0, 0.1, 0.3, 0.2, 0, 0, 0, 0}});
+  m.states.push_back({0.3, {0.2, 0.1, 0.05, 0.01, 0, 0, 0, 0}, {0, 0, 0.1, 0.6, 0.2, 0, 0, 0}, {}, {}});
+  m.states.push_back({0.01, {0.02, 0.03, 0.01, 0.0, 0, 0, 0, 0}, {0, 0.1, 0.3, 0.2, 0, 0, 0, 0}, {}, {}});
   return m;
 }
 

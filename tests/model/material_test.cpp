@@ -56,8 +56,8 @@ TEST(Material, SaveAndLoadRoundTrip) {
   m.name = "two-state";
   m.bands = SpectralGrid{{350, 400, 500, 700}};
   m.albedo = std::vector<double>{0.2, 0.5, 0.9};
-  m.states.push_back({0.5, {0.1, std::nullopt, 0.0}, {1, 2, 3}});
-  m.states.push_back({0.01, {0.2, 0.3, 0.4}, {0, 0.5, 0}});
+  m.states.push_back({0.5, {0.1, std::nullopt, 0.0}, {1, 2, 3}, {}, {}});
+  m.states.push_back({0.01, {0.2, 0.3, 0.4}, {0, 0.5, 0}, {}, {}});
   SaveMaterial(m, dir / "m.json");
   Material back = LoadMaterial(dir / "m.json");
   EXPECT_EQ(back.name, m.name);

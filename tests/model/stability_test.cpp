@@ -150,7 +150,7 @@ TEST(Extremes, EulerIsRefusedOrWarnedWheneverItCouldLeaveTheRange) {
   Material m;
   m.name = "extreme";
   m.bands = SpectralGrid{{400, 500}};
-  m.states.push_back({1.0, {1.0}, {1.0}});
+  m.states.push_back({1.0, {1.0}, {1.0}, {}, {}});
   int refused = 0, warned = 0, clean = 0;
   for (double kr : kRates)
     for (double a : ExcitationRatesGrid())
