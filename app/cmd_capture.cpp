@@ -14,6 +14,7 @@
 #include <string>
 
 #include <nlohmann/json.hpp>
+#include <CLI/CLI.hpp>
 
 #include "cli_finite.h"
 #include "commands.h"

@@ -10,6 +10,7 @@
 #include <string>
 
 #include <nlohmann/json.hpp>
+#include <CLI/CLI.hpp>
 
 #include "commands.h"
 #include "phos/editor/solve.h"

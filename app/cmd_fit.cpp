@@ -15,6 +15,7 @@
 #include <thread>
 #include <string>
 
+#include <CLI/CLI.hpp>
 #include <OpenImageIO/imageio.h>
 #include <nlohmann/json.hpp>
 

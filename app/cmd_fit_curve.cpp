@@ -11,6 +11,7 @@
 #include <vector>
 
 #include <nlohmann/json.hpp>
+#include <CLI/CLI.hpp>
 
 #include "cli_finite.h"
 #include "commands.h"

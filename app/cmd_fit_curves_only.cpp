@@ -3,6 +3,8 @@
 // session reader and OpenImageIO that fit session, map and batch need
 // (those are phos-fit, with cmd_fit.cpp).
 
+#include <CLI/CLI.hpp>
+
 #include "commands.h"
 
 namespace phos::app {

@@ -10,6 +10,7 @@
 #include <memory>
 
 #include <nlohmann/json.hpp>
+#include <CLI/CLI.hpp>
 
 #include "commands.h"
 #include "phos/model/spectral.h"

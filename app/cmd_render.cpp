@@ -17,6 +17,7 @@
 #include <regex>
 #include <string>
 
+#include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
 #include "cli_finite.h"

@@ -7,6 +7,7 @@
 #include <memory>
 #include <sstream>
 #include <string>
+#include <CLI/CLI.hpp>
 
 #include "cli_finite.h"
 #include "commands.h"

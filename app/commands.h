@@ -8,7 +8,12 @@
 #include <string>
 #include <string_view>
 
-#include <CLI/CLI.hpp>
+// Declared, not included: CLI11 is header-only and heavy (7 s of each of the
+// nine command_main.cpp compiles under the sanitizers), and the mains need
+// only the name. Each command's source includes <CLI/CLI.hpp> itself.
+namespace CLI {
+class App;
+}  // namespace CLI
 
 namespace phos {
 enum class Weighting;  // phos/fit/curve.h; declared here so commands without fits need no fit headers
