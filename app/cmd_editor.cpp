@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <memory>
 #include <string>
+
 #include <CLI/CLI.hpp>
 
 #include "commands.h"
