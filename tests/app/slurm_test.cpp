@@ -237,12 +237,12 @@ TEST(SlurmCluster, ArraysEqualOneProcessAndARequeuedTaskIsRedoneWhole) {
   ASSERT_EQ(Shell("scontrol requeue " + render_tasks + "_0").exit_code, 0);
   // Slurm holds a requeued job before it may start again: slurmctld sets its
   // BeginTime past the expiry of the killed run's job credential
-  // (kCredentialLifetimeS, 120 s by default), because the node refuses to
-  // launch a job whose credential it has just revoked. Forcing the start earlier (scontrol update
-  // StartTime=now) launched the rerun into that refusal: it failed at once
-  // with exit code 1 and no output, even once the killed run's process was
-  // gone and nothing was completing (CI, 3 December, twice). So the test
-  // waits for Slurm's own restart.
+  // (kCredentialLifetimeS here; Slurm's default is 120 s), because the node
+  // refuses to launch a job whose credential it has just revoked. Forcing
+  // the start earlier (scontrol update StartTime=now) launched the rerun
+  // into that refusal: it failed at once with exit code 1 and no output,
+  // even once the killed run's process was gone and nothing was completing
+  // (CI, 3 December, twice). So the test waits for Slurm's own restart.
   ASSERT_TRUE(WaitFor([&] { return JobState(render_tasks + "_0") == "PENDING"; }, 30, 0.05))
       << JobState(render_tasks + "_0");
 
