@@ -276,7 +276,10 @@ class PathTransport final : public FrameTransport {
     std::vector<PathLane> lanes;
     std::vector<int> live, scattering, shadowed;
     std::vector<LightShadowRay> light_rays;
-    std::vector<SceneGeometry::RayQuery> queries;
+    // Written as each lane's ray is made, not in a pass over the lanes after:
+    // the next closest-hit rays, and the shadow rays (to glowing points, then
+    // to the lights).
+    std::vector<SceneGeometry::RayQuery> queries, shadow_queries;
     std::vector<Hit> hits;
     std::vector<char> blocked;
   };
@@ -297,37 +300,41 @@ class PathTransport final : public FrameTransport {
     std::vector<int>& shadowed = wave.shadowed;
     std::vector<LightShadowRay>& light_rays = wave.light_rays;
     std::vector<SceneGeometry::RayQuery>& queries = wave.queries;
+    std::vector<SceneGeometry::RayQuery>& shadow_queries = wave.shadow_queries;
     std::vector<Hit>& hits = wave.hits;
     std::vector<char>& blocked = wave.blocked;
     live.resize(lanes.size());
-    for (std::size_t i = 0; i < lanes.size(); ++i) live[i] = static_cast<int>(i);
+    queries.clear();
+    for (std::size_t i = 0; i < lanes.size(); ++i) {
+      live[i] = static_cast<int>(i);
+      queries.push_back({lanes[i].origin, lanes[i].direction});
+    }
     for (int depth = 0; depth < options_.max_depth && !live.empty(); ++depth) {
-      queries.clear();
-      for (int i : live) queries.push_back({lanes[i].origin, lanes[i].direction});
       hits.resize(queries.size());
       geometry_.IntersectMany(queries.data(), queries.size(), hits.data(), /*coherent=*/depth == 0);
       rays += live.size();
       scattering.clear();
       shadowed.clear();
       light_rays.clear();
+      shadow_queries.clear();
       for (std::size_t k = 0; k < live.size(); ++k) {
         const int i = live[k];
-        if (!BeginVertex(lanes[i], hits[k], depth)) continue;
-        if (!ShadeVertex(lanes[i], hits[k], i, depth, light_rays)) continue;
+        PathLane& lane = lanes[i];
+        if (!BeginVertex(lane, hits[k], depth)) continue;
+        if (!ShadeVertex(lane, hits[k], i, depth, light_rays)) continue;
         scattering.push_back(i);
-        if (lanes[i].glow_there) shadowed.push_back(i);
+        if (lane.glow_there) {
+          shadowed.push_back(i);
+          shadow_queries.push_back(
+              {lane.origin_s, lane.wi, lane.emitter_distance * (1 - 1e-4f) - 2 * geometry_.ray_epsilon()});
+        }
       }
       // The shadow rays: to the glowing points, then to the lights.
-      queries.clear();
-      for (int i : shadowed) {
-        const PathLane& lane = lanes[i];
-        queries.push_back({lane.origin_s, lane.wi, lane.emitter_distance * (1 - 1e-4f) - 2 * geometry_.ray_epsilon()});
-      }
       for (const LightShadowRay& shadow : light_rays)
-        queries.push_back({shadow.ray.origin, shadow.ray.direction, shadow.ray.t_far});
-      blocked.resize(queries.size());
-      geometry_.OccludedMany(queries.data(), queries.size(), reinterpret_cast<bool*>(blocked.data()));
-      rays += queries.size();
+        shadow_queries.push_back({shadow.ray.origin, shadow.ray.direction, shadow.ray.t_far});
+      blocked.resize(shadow_queries.size());
+      geometry_.OccludedMany(shadow_queries.data(), shadow_queries.size(), reinterpret_cast<bool*>(blocked.data()));
+      rays += shadow_queries.size();
       // The glowing points, where nothing lies between.
       for (std::size_t k = 0; k < shadowed.size(); ++k) {
         if (blocked[k]) continue;
@@ -355,8 +362,12 @@ class PathTransport final : public FrameTransport {
         }
       }
       live.clear();
+      queries.clear();
       for (int i : scattering)
-        if (ContinuePath(lanes[i], depth)) live.push_back(i);
+        if (ContinuePath(lanes[i], depth)) {
+          live.push_back(i);
+          queries.push_back({lanes[i].origin, lanes[i].direction});
+        }
     }
   }
 
