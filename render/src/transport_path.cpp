@@ -211,7 +211,7 @@ class PathTransport final : public FrameTransport {
   // The texel-major glow of a hit on a phosphor's glowing side (path
   // transport): its emission bands and their Lp, prefetched; empty elsewhere.
   struct GlowTexel {
-    const std::vector<int>* bands = nullptr;
+    int first_band = 0, band_count = 0;  // Lp[i] is band first_band + i's
     const float* Lp = nullptr;
     explicit operator bool() const { return Lp != nullptr; }
   };
@@ -223,10 +223,10 @@ class PathTransport final : public FrameTransport {
   }
   GlowTexel GlowAt(int slot, std::size_t texel) const {
     const GlowByTexel& glow = glow_by_texel_[slot];
-    if (glow.bands.empty() || texel == TexelAtlas::kNoTexel) return {};
-    const float* Lp = &glow.Lp[texel * glow.bands.size()];
+    if (glow.band_count == 0 || texel == TexelAtlas::kNoTexel) return {};
+    const float* Lp = &glow.Lp[texel * static_cast<std::size_t>(glow.band_count)];
     __builtin_prefetch(Lp);
-    return {&glow.bands, Lp};
+    return {glow.first_band, glow.band_count, Lp};
   }
 
 
@@ -340,9 +340,10 @@ class PathTransport final : public FrameTransport {
         if (blocked[k]) continue;
         PathLane& lane = lanes[shadowed[k]];
         const Bands& albedo = lane.gloss ? lane.glow_f_cos : *lane.albedo;  // glossy: f cos, else albedo (pi folded in)
-        for (std::size_t c = 0; c < lane.glow_there.bands->size(); ++c) {
-          const int b = (*lane.glow_there.bands)[c];
-          lane.L[b] += lane.beta[b] * albedo[b] * lane.glow_there.Lp[c] * lane.emitter_scale;
+        const GlowTexel& glow = lane.glow_there;
+        for (int c = 0; c < glow.band_count; ++c) {
+          const int b = glow.first_band + c;
+          lane.L[b] += lane.beta[b] * albedo[b] * glow.Lp[c] * lane.emitter_scale;
         }
       }
       // The lights, where nothing (and no medium) lies between.
@@ -508,9 +509,9 @@ class PathTransport final : public FrameTransport {
         const float bsdf_cos = lane.bsdf_pdf * cos_light;
         weight = bsdf_cos * bsdf_cos / (bsdf_cos * bsdf_cos + area_term * area_term);
       }
-      for (std::size_t k = 0; k < glow_here.bands->size(); ++k) {
-        const int b = (*glow_here.bands)[k];
-        lane.L[b] += lane.beta[b] * glow_here.Lp[k] * weight;
+      for (int c = 0; c < glow_here.band_count; ++c) {
+        const int b = glow_here.first_band + c;
+        lane.L[b] += lane.beta[b] * glow_here.Lp[c] * weight;
       }
     }
     return scatters;
@@ -552,10 +553,15 @@ class PathTransport final : public FrameTransport {
   // The solver keeps Lp band-major ([band][texel], for its batch kernel), so
   // one texel's bands lie a texel count apart: a cache miss per band for
   // every path vertex that meets or samples a glow. The path tracer reads a
-  // texel-major copy made once per frame instead.
+  // texel-major copy made once per frame instead, over the span of bands
+  // from the first emission band to the last (a band inside it that the
+  // phosphor does not emit holds 0), so a glow adds to a run of bands in one
+  // vector operation: through the list of emission bands, band by band, it
+  // was a tenth of TracePaths (perf, bench_render
+  // --benchmark_filter=PathFrameDark1spp).
   struct GlowByTexel {
-    std::vector<int> bands;  // the emission bands
-    std::vector<float> Lp;   // [texel * bands.size() + i]
+    int first_band = 0, band_count = 0;  // the span of emission bands
+    std::vector<float> Lp;               // [texel * band_count + i]: band first_band + i
   };
   void CopyGlowByTexel() {
     const TexelAtlas& atlas = solver_->atlas();
@@ -563,12 +569,16 @@ class PathTransport final : public FrameTransport {
     for (std::size_t s = 0; s < atlas.objects().size(); ++s) {
       const int slot = static_cast<int>(s);
       GlowByTexel& glow = glow_by_texel_[s];
-      glow.bands = solver_->emission_bands(slot);
-      const std::size_t n = atlas.objects()[s].count, nb = glow.bands.size();
-      glow.Lp.resize(n * nb);
-      for (std::size_t i = 0; i < nb; ++i)
+      const std::vector<int>& bands = solver_->emission_bands(slot);
+      if (bands.empty()) continue;
+      glow.first_band = bands.front();
+      glow.band_count = bands.back() - bands.front() + 1;
+      const std::size_t n = atlas.objects()[s].count, span = static_cast<std::size_t>(glow.band_count);
+      glow.Lp.assign(n * span, 0.0f);
+      for (int b : bands)
         for (std::size_t k = 0; k < n; ++k)  // a masked texel glows by the share its paint covers
-          glow.Lp[k * nb + i] = atlas.Coverage(slot, k) * solver_->Lp(slot, glow.bands[i], k);
+          glow.Lp[k * span + static_cast<std::size_t>(b - glow.first_band)] =
+              atlas.Coverage(slot, k) * solver_->Lp(slot, b, k);
     }
   }
   std::vector<GlowByTexel> glow_by_texel_;  // per slot
