@@ -149,7 +149,10 @@ struct EmitterDistribution {
     const std::size_t column = static_cast<std::size_t>(((random >> 32) * entries.size()) >> 32);
     const float u = static_cast<float>(random & 0xFFFFFFu) * (1.0f / 16777216.0f);
     const Column& c = columns[column];
-    return entries[u < c.keep ? column : c.alias];
+    // The column or its alias by a mask, not a branch: the choice is random,
+    // so a branch was mispredicted at every other sample.
+    const std::uint32_t keep = 0u - static_cast<std::uint32_t>(u < c.keep);
+    return entries[(static_cast<std::uint32_t>(column) & keep) | (c.alias & ~keep)];
   }
 };
 
