@@ -41,7 +41,8 @@ class AravisCamera final : public Camera {
   int max_retakes() const { return max_retakes_; }
 
   // The GigE Vision stream's counts since its stream was built (a region,
-  // binning or format change builds a new one); all 0 on other interfaces.
+  // binning or format change builds a new one; the fresh stream a retake
+  // starts on carries the counts over); all 0 on other interfaces.
   struct StreamStatistics {
     std::uint64_t completed_frames = 0, failed_frames = 0;
     std::uint64_t resend_requests = 0;  // packets asked for again
@@ -91,6 +92,8 @@ class AravisCamera final : public Camera {
 
  private:
   void AllocateBuffers();
+  // A fresh stream for a retake, its counts carried over (Capture).
+  void RenewStreamForRetake();
   Trigger trigger_ = Trigger::kFreeRun;
   std::string trigger_source_;
   struct Impl;
