@@ -1,7 +1,7 @@
 // Light transport against closed forms and against each other:
 //  - a closed box with uniform glow and albedo rho: every pixel sees
 //    Lp / (1 - rho) under the path tracer (the enclosure's radiosity) and Lp
-//    under direct transport;
+//    under direct transport, on the paper's 8 bands and on other grids;
 //  - an open plane under a point light: direct transport gives rho E / pi
 //    exactly, and the path tracer (nothing to bounce off) must agree;
 //  - image regression of the Cornell fixture against stored references with
@@ -12,6 +12,8 @@
 
 #include <cmath>
 #include <cstdlib>
+#include <string>
+#include <vector>
 
 #include "phos/render/geometry.h"
 #include "phos/render/renderer.h"
@@ -43,11 +45,20 @@ Mean ChannelMean(const Image& image, int channel) {
   return {mean, std::sqrt(std::max(0.0, sum2 / n - mean * mean) / n)};
 }
 
-TEST(Transport, ClosedGlowingBoxIsLpOverOneMinusAlbedo) {
+// The closed box on a grid of `band_count` equal bands over 400-700 nm, the
+// phosphor emitting in bands 2 to 4 (twice in band 3). The path tracer's
+// lanes have a size fixed at compile time on the paper's 8 bands and one
+// set at run time on any other grid: both must give the enclosure's radiosity.
+void ExpectClosedGlowingBoxIsLpOverOneMinusAlbedo(int band_count) {
   const double albedo = 0.5, kr = 0.2, r0 = 0.5;
   Scene scene = EmptyScene(24, 24);
-  scene.objects.push_back(MakeObject("box", MakeBox(Vec3(1, 1, 1), /*inward=*/true), albedo,
-                                     UniformPhosphor(kr, std::vector<double>(8, 0.1), {0, 0, 1, 2, 1, 0, 0, 0})));
+  scene.bands = SpectralGrid::Uniform(400.0, 700.0, band_count);
+  std::vector<double> Lambda(band_count, 0.0);
+  Lambda[2] = Lambda[4] = 1;
+  Lambda[3] = 2;
+  auto phosphor = UniformPhosphor(kr, std::vector<double>(band_count, 0.1), Lambda);
+  phosphor->bands = scene.bands;
+  scene.objects.push_back(MakeObject("box", MakeBox(Vec3(1, 1, 1), /*inward=*/true), albedo, phosphor));
   scene.objects[0].initial = {InitialState::Kind::kUniform, r0};
   scene.texel_size_m = 0.1;
   SceneGeometry geometry(scene);
@@ -56,9 +67,10 @@ TEST(Transport, ClosedGlowingBoxIsLpOverOneMinusAlbedo) {
 
   FrameOptions direct;
   const Image d = RenderBands(geometry, &solver, direct);
-  for (std::size_t p = 0; p < d.pixels.size() / 8; ++p) {
-    ASSERT_FLOAT_EQ(d.pixels[p * 8 + 3], static_cast<float>(Lp3));
-    ASSERT_EQ(d.pixels[p * 8 + 0], 0.0f);
+  ASSERT_EQ(d.channels, band_count);
+  for (std::size_t p = 0; p < d.pixels.size() / band_count; ++p) {
+    ASSERT_FLOAT_EQ(d.pixels[p * band_count + 3], static_cast<float>(Lp3));
+    ASSERT_EQ(d.pixels[p * band_count + 0], 0.0f);
   }
 
   FrameOptions path;
@@ -73,6 +85,16 @@ TEST(Transport, ClosedGlowingBoxIsLpOverOneMinusAlbedo) {
     EXPECT_LT(m.standard_error, 0.01 * expected);
   }
   EXPECT_EQ(ChannelMean(image, 0).mean, 0.0);
+  EXPECT_EQ(ChannelMean(image, band_count - 1).mean, 0.0);
+}
+
+TEST(Transport, ClosedGlowingBoxIsLpOverOneMinusAlbedo) { ExpectClosedGlowingBoxIsLpOverOneMinusAlbedo(8); }
+
+TEST(Transport, ClosedGlowingBoxIsLpOverOneMinusAlbedoOnAnyBandGrid) {
+  for (int band_count : {6, 13}) {
+    SCOPED_TRACE(std::to_string(band_count) + " bands");
+    ExpectClosedGlowingBoxIsLpOverOneMinusAlbedo(band_count);
+  }
 }
 
 TEST(Transport, OpenPlaneDirectIsAlbedoTimesIrradianceOverPiAndPathAgrees) {
