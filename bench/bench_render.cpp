@@ -22,6 +22,10 @@
 //   BM_PathAgainstBareEmbree: a path-traced frame over bare rtcIntersect1 /
 //     rtcOccluded1 calls on the very rays that frame cast (recorded, then
 //     replayed in the same order); counter `ratio` (issue 17: at most 1.5).
+//   BM_PathAgainstBareEmbreeBySize/s: the same after dark, with a plain
+//     white icosphere of 20 x 4^s triangles floating in the box: how the
+//     ratio moves as Embree's traversal costs more per ray and the shading
+//     per vertex stays the same (the fixture itself has 30 triangles).
 //
 // Run: build/bin/bench_render (make bench saves the output in docs/bench/).
 
@@ -53,10 +57,21 @@ struct Cornell {
   Scene scene;
   std::unique_ptr<SceneGeometry> geometry;
   std::unique_ptr<CoupledSolver> solver;
-  explicit Cornell(double texel_size_m = 0.0) {
+  // sphere_subdivisions >= 0: a plain white icosphere (20 x 4^s triangles,
+  // radius 8 cm) floats in the box above the short block.
+  explicit Cornell(double texel_size_m = 0.0, int sphere_subdivisions = -1) {
     scene = LoadScene(PHOS_FIXTURES_DIR "/scenes/cornell-phosphor.json");
     scene.camera.width = scene.camera.height = kSize;
     if (texel_size_m > 0) scene.texel_size_m = texel_size_m;
+    if (sphere_subdivisions >= 0) {
+      Mesh sphere = MakeSphere(0.08, sphere_subdivisions, /*inward=*/false);
+      for (Eigen::Vector3f& p : sphere.positions) p += Eigen::Vector3f(0.42f, 0.42f, 0.12f);
+      Object ball;
+      ball.name = "ball";
+      ball.mesh = std::make_shared<Mesh>(std::move(sphere));
+      ball.albedo.assign(scene.bands.band_count(), 0.8);
+      scene.objects.push_back(std::move(ball));
+    }
     geometry = std::make_unique<SceneGeometry>(scene);
     solver = std::make_unique<CoupledSolver>(scene, *geometry);
   }
@@ -234,9 +249,8 @@ int ReplayWrapped(const SceneGeometry& geometry, const std::vector<CastRay>& ray
 // The path tracer (1 spp, lit at 20 s or dark at 40 s) against bare Embree on
 // the same rays: what shading, sampling and bookkeeping add to tracing.
 // Alternated; best of each side.
-void BM_PathAgainstBareEmbree(benchmark::State& state) {
-  Cornell c;
-  c.solver->AdvanceTo(static_cast<double>(state.range(0)));
+void PathAgainstBareEmbree(benchmark::State& state, Cornell& c, double t_s) {
+  c.solver->AdvanceTo(t_s);
   FrameOptions options = DefaultFrameOptions(c.scene, Transport::kPath);
   options.spp = 1;
   ThreadRayLog log;
@@ -267,7 +281,27 @@ void BM_PathAgainstBareEmbree(benchmark::State& state) {
   state.counters["bare_Mrays/s"] = static_cast<double>(rays.size()) * 1e-6 / best_bare;
   state.counters["ratio"] = best_path / best_bare;
 }
+void BM_PathAgainstBareEmbree(benchmark::State& state) {
+  Cornell c;
+  PathAgainstBareEmbree(state, c, static_cast<double>(state.range(0)));
+}
 BENCHMARK(BM_PathAgainstBareEmbree)->Arg(20)->Arg(40)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(2.0);
+void BM_PathAgainstBareEmbreeBySize(benchmark::State& state) {
+  Cornell c(0.0, static_cast<int>(state.range(0)));
+  std::size_t triangles = 0;
+  for (const Object& object : c.scene.objects) triangles += object.mesh->triangles.size();
+  PathAgainstBareEmbree(state, c, 40);
+  state.counters["triangles"] = static_cast<double>(triangles);
+}
+BENCHMARK(BM_PathAgainstBareEmbreeBySize)
+    ->Arg(0)
+    ->Arg(2)
+    ->Arg(4)
+    ->Arg(6)
+    ->Arg(8)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->MinTime(2.0);
 
 // A frame of an animation at 30 fps while the LED is on: the coupled step for
 // 1/30 s and the direct render, against the render alone of the same scene
