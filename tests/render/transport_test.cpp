@@ -59,6 +59,7 @@ void ExpectClosedGlowingBoxIsLpOverOneMinusAlbedo(int band_count) {
   auto phosphor = UniformPhosphor(kr, std::vector<double>(band_count, 0.1), Lambda);
   phosphor->bands = scene.bands;
   scene.objects.push_back(MakeObject("box", MakeBox(Vec3(1, 1, 1), /*inward=*/true), albedo, phosphor));
+  scene.objects[0].albedo.assign(band_count, albedo);  // MakeObject's is on the paper's 8 bands
   scene.objects[0].initial = {InitialState::Kind::kUniform, r0};
   scene.texel_size_m = 0.1;
   SceneGeometry geometry(scene);
