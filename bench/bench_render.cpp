@@ -26,6 +26,8 @@
 //     white icosphere of 20 x 4^s triangles floating in the box: how the
 //     ratio moves as Embree's traversal costs more per ray and the shading
 //     per vertex stays the same (the fixture itself has 30 triangles).
+//   BM_PathAgainstBareEmbreeGlowingBySize/s: the same with the sphere painted
+//     with the back wall's phosphor, so its glow is looked up and sampled.
 //
 // Run: build/bin/bench_render (make bench saves the output in docs/bench/).
 
@@ -58,8 +60,10 @@ struct Cornell {
   std::unique_ptr<SceneGeometry> geometry;
   std::unique_ptr<CoupledSolver> solver;
   // sphere_subdivisions >= 0: a plain white icosphere (20 x 4^s triangles,
-  // radius 8 cm) floats in the box above the short block.
-  explicit Cornell(double texel_size_m = 0.0, int sphere_subdivisions = -1) {
+  // radius 8 cm) floats in the box above the short block; glowing_sphere:
+  // painted with the back wall's phosphor instead (a texel per triangle at
+  // least, so its atlas grows with it).
+  explicit Cornell(double texel_size_m = 0.0, int sphere_subdivisions = -1, bool glowing_sphere = false) {
     scene = LoadScene(PHOS_FIXTURES_DIR "/scenes/cornell-phosphor.json");
     scene.camera.width = scene.camera.height = kSize;
     if (texel_size_m > 0) scene.texel_size_m = texel_size_m;
@@ -67,9 +71,10 @@ struct Cornell {
       Mesh sphere = MakeSphere(0.08, sphere_subdivisions, /*inward=*/false);
       for (Eigen::Vector3f& p : sphere.positions) p += Eigen::Vector3f(0.42f, 0.42f, 0.12f);
       Object ball;
+      if (glowing_sphere) ball = scene.objects[2];  // the back wall: green phosphor, albedo 0.7
       ball.name = "ball";
       ball.mesh = std::make_shared<Mesh>(std::move(sphere));
-      ball.albedo.assign(scene.bands.band_count(), 0.8);
+      if (!glowing_sphere) ball.albedo.assign(scene.bands.band_count(), 0.8);
       scene.objects.push_back(std::move(ball));
     }
     geometry = std::make_unique<SceneGeometry>(scene);
@@ -286,16 +291,26 @@ void BM_PathAgainstBareEmbree(benchmark::State& state) {
   PathAgainstBareEmbree(state, c, static_cast<double>(state.range(0)));
 }
 BENCHMARK(BM_PathAgainstBareEmbree)->Arg(20)->Arg(40)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(2.0);
-void BM_PathAgainstBareEmbreeBySize(benchmark::State& state) {
-  Cornell c(0.0, static_cast<int>(state.range(0)));
+void PathAgainstBareEmbreeBySize(benchmark::State& state, bool glowing_sphere) {
+  Cornell c(0.0, static_cast<int>(state.range(0)), glowing_sphere);
   std::size_t triangles = 0;
   for (const Object& object : c.scene.objects) triangles += object.mesh->triangles.size();
   PathAgainstBareEmbree(state, c, 40);
   state.counters["triangles"] = static_cast<double>(triangles);
+  state.counters["texels"] = static_cast<double>(c.solver->stats().texels);
 }
+void BM_PathAgainstBareEmbreeBySize(benchmark::State& state) { PathAgainstBareEmbreeBySize(state, false); }
 BENCHMARK(BM_PathAgainstBareEmbreeBySize)
     ->Arg(0)
     ->Arg(2)
+    ->Arg(4)
+    ->Arg(6)
+    ->Arg(8)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->MinTime(2.0);
+void BM_PathAgainstBareEmbreeGlowingBySize(benchmark::State& state) { PathAgainstBareEmbreeBySize(state, true); }
+BENCHMARK(BM_PathAgainstBareEmbreeGlowingBySize)
     ->Arg(4)
     ->Arg(6)
     ->Arg(8)
