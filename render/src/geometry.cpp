@@ -72,7 +72,7 @@ SceneGeometry::SceneGeometry(const Scene& scene) : scene_(scene), embree_(std::m
   rtcCommitScene(embree_->scene);
   std::size_t triangles = 0;
   for (const auto& object_corners : corners_) triangles += object_corners.size();
-  prefetch_hit_triangles_ = triangles * (sizeof(std::array<Vec3f, 3>) + sizeof(Vec3f)) > kHitTrianglesInCacheBytes;
+  prefetch_hit_triangles_ = triangles * (sizeof(std::array<Vec3f, 3>) + sizeof(Vec3f)) > kCoreCacheBytes;
   for (const Object& object : scene.objects)
     if (object.albedo_texture || object.gloss_texture) {
       surface_textures_ = std::make_unique<SurfaceTextures>(scene);

@@ -68,6 +68,12 @@ struct Hit {
   explicit operator bool() const { return object >= 0; }
 };
 
+// A core's L2 cache (1 MiB on the machines measured). Tables read at random
+// per ray (a large mesh's triangles, its glow, its emitter table) are
+// prefetched ahead of use only when they outgrow it: below that they are in
+// cache already, and the prefetches would only cost.
+inline constexpr std::size_t kCoreCacheBytes = std::size_t{1} << 20;
+
 class SceneGeometry {
  public:
   explicit SceneGeometry(const Scene& scene);
@@ -136,9 +142,7 @@ class SceneGeometry {
   std::vector<std::vector<std::array<Vec3f, 3>>> corners_;
   std::vector<std::vector<Vec3f>> front_normal_;  // per object, per triangle
   // IntersectMany prefetches a stream's hit triangles (corners_,
-  // front_normal_) only when those tables outgrow a core's L2 cache (1 MiB
-  // on the machines measured): below that they are in cache already.
-  static constexpr std::size_t kHitTrianglesInCacheBytes = std::size_t{1} << 20;
+  // front_normal_) only when those tables outgrow kCoreCacheBytes.
   bool prefetch_hit_triangles_ = false;
   std::vector<std::vector<float>> area_;          // per object, per triangle, m^2
   std::vector<std::vector<float>> area_cdf_;      // emissive objects: running sums of area_; others empty
