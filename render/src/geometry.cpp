@@ -12,6 +12,7 @@
 #include "phos/render/surface_textures.h"
 #include "phos/util/error.h"
 #include "phos/util/math.h"
+#include "phos/util/prefetch.h"
 #include "phos/util/random.h"
 
 #include "sampling.h"
@@ -234,9 +235,9 @@ void SceneGeometry::IntersectMany(const RayQuery* queries, std::size_t count, Hi
     const RTCHit& hit = rays[i].hit;
     if (hit.geomID == RTC_INVALID_GEOMETRY_ID) continue;
     const auto* corners = &corners_[hit.geomID][hit.primID];
-    __builtin_prefetch(corners);
-    __builtin_prefetch(reinterpret_cast<const char*>(corners) + sizeof(*corners) - 1);
-    __builtin_prefetch(&front_normal_[hit.geomID][hit.primID]);
+    Prefetch(corners);
+    Prefetch(reinterpret_cast<const char*>(corners) + sizeof(*corners) - 1);
+    Prefetch(&front_normal_[hit.geomID][hit.primID]);
   }
   for (std::size_t i = 0; i < count; ++i) hits[i] = HitOf(*this, rays[i], queries[i].direction);
 }

@@ -15,7 +15,9 @@
 
 #include "phos/render/bsdf.h"
 #include "phos/util/error.h"
+#include "phos/util/large_table.h"
 #include "phos/util/math.h"
+#include "phos/util/prefetch.h"
 #include "phos/util/random.h"
 #include "sampling.h"
 #include "transport.h"
@@ -60,15 +62,17 @@ struct EmitterDistribution {
     float keep;  // probability of keeping this column's entry over its alias
     std::uint32_t alias;
   };
-  // The entries live in arrays allocated for overwrite: a 1.3M-triangle
-  // glowing mesh has 83 MB of them, and zeroing that on one thread before
-  // filling it on two was most of a frame's set-up.
-  std::unique_ptr<Entry[]> entries;
-  std::size_t entry_count = 0;
-  std::vector<Column> columns;
-  std::vector<std::vector<float>> pdf;  // per object, per triangle: probability of choosing it, per m^2 of it
+  // Large tables (large_table.h): a 1.3M-triangle glowing mesh has 83 MB of
+  // entries, and zeroing that on one thread before filling it on two was
+  // most of a frame's set-up.
+  LargeTable<Entry> entries;
+  LargeTable<Column> columns;
+  std::vector<LargeTable<float>> pdf;  // per object, per triangle: probability of choosing it, per m^2 of it
   std::vector<std::uint8_t> two_sided;  // per texel slot: the object glows from both faces
-  bool empty() const { return entry_count == 0; }
+  bool empty() const { return entries.empty(); }
+  // The table outgrows a core's cache: a pick's column is then a cache miss,
+  // worth fetching as soon as its random word is known.
+  bool outgrows_cache() const { return entries.size() * (sizeof(Entry) + sizeof(Column)) > kCoreCacheBytes; }
 
   // Built for every frame, as the glow changes, in stages: each triangle's
   // power (in parallel), the glowing triangles in order with their total (in
@@ -84,15 +88,14 @@ struct EmitterDistribution {
     for (const TexelAtlas::ObjectTexels& texels : atlas.objects())
       two_sided.push_back(geometry.scene().objects[texels.object].two_sided);
     const Glowing glowing = FindGlowing(geometry, *solver);
-    entry_count = glowing.triangles.size();
-    if (entry_count == 0) return;
+    if (glowing.triangles.empty()) return;
     for (std::size_t s = 0; s < atlas.objects().size(); ++s)
       if (glowing.slot_glows[s]) {
         const int object = atlas.objects()[s].object;
         pdf[object].assign(geometry.triangle_count(object), 0.0f);
       }
-    entries = std::make_unique_for_overwrite<Entry[]>(entry_count);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, entry_count, 4096), [&](const tbb::blocked_range<std::size_t>& r) {
+    entries.resize(glowing.triangles.size());  // not zeroed: each is written below
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, entries.size(), 4096), [&](const tbb::blocked_range<std::size_t>& r) {
       for (std::size_t e = r.begin(); e < r.end(); ++e) {
         const auto [slot, t] = glowing.triangles[e];
         const TexelAtlas::ObjectTexels& texels = atlas.objects()[slot];
@@ -201,8 +204,11 @@ struct EmitterDistribution {
   }
   // One 64-bit random word: the high half picks a column (Lemire's
   // multiply-shift), the low half decides between it and its alias.
+  std::size_t ColumnOf(std::uint64_t random) const {
+    return static_cast<std::size_t>(((random >> 32) * entries.size()) >> 32);
+  }
   const Entry& Pick(std::uint64_t random) const {
-    const std::size_t column = static_cast<std::size_t>(((random >> 32) * entry_count) >> 32);
+    const std::size_t column = ColumnOf(random);
     const float u = static_cast<float>(random & 0xFFFFFFu) * (1.0f / 16777216.0f);
     const Column& c = columns[column];
     // The column or its alias by a mask, not a branch: the choice is random,
@@ -225,6 +231,7 @@ class PathTransport final : public FrameTransport {
         nb_(shading.band_count()),
         emitters_(geometry_, solver_) {
     if (solver_) CopyGlowByTexel();
+    prefetch_emitters_ = emitters_.outgrows_cache();
   }
 
   // A row's pixels, spp samples each, traced a wavefront at a time.
@@ -284,7 +291,7 @@ class PathTransport final : public FrameTransport {
     const GlowByTexel& glow = glow_by_texel_[slot];
     if (glow.band_count == 0 || texel == TexelAtlas::kNoTexel) return {};
     const float* Lp = &glow.Lp[texel * static_cast<std::size_t>(glow.band_count)];
-    __builtin_prefetch(Lp);
+    Prefetch(Lp);
     return {glow.first_band, glow.band_count, Lp};
   }
 
@@ -372,6 +379,7 @@ class PathTransport final : public FrameTransport {
       hits.resize(queries.size());
       geometry_.IntersectMany(queries.data(), queries.size(), hits.data(), /*coherent=*/depth == 0);
       rays += live.size();
+      if (prefetch_emitters_) PrefetchEmitterPicks(lanes, live, depth);
       scattering.clear();
       shadowed.clear();
       light_rays.clear();
@@ -431,6 +439,25 @@ class PathTransport final : public FrameTransport {
     }
   }
 
+  // The alias column each lane's BeginVertex will read, asked for as soon
+  // as the bounce's hits are in, before any lane is shaded. With a glowing
+  // 1.3M-triangle sphere the column, read cold, was 70% of BeginVertex's
+  // time (perf), and the path/bare ratio is 0.88 of what it was (five
+  // alternated pairs, bench_render
+  // --benchmark_filter=PathAgainstBareEmbreeGlowingBySize/8). The word that
+  // picks a lane's emitter is its next draw (after the camera ray's media
+  // draw), so it is known here without drawing it: results are unchanged,
+  // and a vertex that picks nothing wasted one fetch. Tried and not kept:
+  // asking as each ray is queued, a stream call earlier (the fetches did not
+  // survive Embree's traversal: 0.95 without them), and a second pass
+  // fetching the picked entries, the hit's atlas entry, its glow and its
+  // area pdf (1.10 with it, six pairs: the prefetches themselves stalled).
+  // Only when the table outgrows a core's cache (prefetch_emitters_).
+  void PrefetchEmitterPicks(const std::vector<PathLane>& lanes, const std::vector<int>& live, int depth) const {
+    const int skip = depth == 0 && media_ ? 1 : 0;
+    for (int i : live) Prefetch(&emitters_.columns[emitters_.ColumnOf(lanes[i].random->Peek(skip))]);
+  }
+
   // A lane's vertex is BeginVertex then ShadeVertex, one lane after another.
   // They were once two passes over all the live lanes, so that the memory
   // BeginVertex prefetches (the glow here, the glowing triangle to sample)
@@ -488,7 +515,7 @@ class PathTransport final : public FrameTransport {
     lane.emitter = nullptr;
     if (lane.scatters && !emitters_.empty()) {
       lane.emitter = &emitters_.Pick(random.Next());
-      __builtin_prefetch(lane.emitter);
+      Prefetch(lane.emitter);
     }
     return true;
   }
@@ -622,7 +649,7 @@ class PathTransport final : public FrameTransport {
   // eight alternated pairs).
   struct GlowByTexel {
     int first_band = 0, band_count = 0;  // the span of emission bands
-    std::vector<float> Lp;               // [texel * band_count + i]: band first_band + i
+    LargeTable<float> Lp;                // [texel * band_count + i]: band first_band + i
   };
   void CopyGlowByTexel() {
     const TexelAtlas& atlas = solver_->atlas();
@@ -659,6 +686,7 @@ class PathTransport final : public FrameTransport {
   const FrameOptions& options_;
   int nb_;
   EmitterDistribution emitters_;
+  bool prefetch_emitters_ = false;  // PrefetchEmitterPicks
   tbb::enumerable_thread_specific<PathRow> rows_;
 };
 

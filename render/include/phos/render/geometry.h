@@ -18,6 +18,7 @@
 #include <Eigen/Core>
 
 #include "phos/render/scene.h"
+#include "phos/util/large_table.h"
 
 struct RTCSceneTy;  // Embree 3's scene handle (RTCScene), for benchmarks that call Embree directly
 
@@ -139,12 +140,12 @@ class SceneGeometry {
   // Per object, per triangle: its three world-space vertices side by side, so
   // that a hit's position is one cache line away, not a walk through the
   // mesh's index buffer.
-  std::vector<std::vector<std::array<Vec3f, 3>>> corners_;
-  std::vector<std::vector<Vec3f>> front_normal_;  // per object, per triangle
+  std::vector<LargeTable<std::array<Vec3f, 3>>> corners_;
+  std::vector<LargeTable<Vec3f>> front_normal_;  // per object, per triangle
   // IntersectMany prefetches a stream's hit triangles (corners_,
   // front_normal_) only when those tables outgrow kCoreCacheBytes.
   bool prefetch_hit_triangles_ = false;
-  std::vector<std::vector<float>> area_;          // per object, per triangle, m^2
+  std::vector<LargeTable<float>> area_;           // per object, per triangle, m^2
   std::vector<std::vector<float>> area_cdf_;      // emissive objects: running sums of area_; others empty
   std::vector<bool> emissive_;                    // per object: some Light::Kind::kMesh light is it
   RayRecorder* recorder_ = nullptr;
@@ -307,8 +308,8 @@ class TexelAtlas {
     std::size_t count = 0;  // texels of the object
     // Auto atlas: per triangle, the index of its first texel and its subdivisions.
     // UV atlas: first is unused and m is 8 (the glow patches' granularity).
-    std::vector<std::uint32_t> first;
-    std::vector<std::uint16_t> m;
+    LargeTable<std::uint32_t> first;
+    LargeTable<std::uint16_t> m;
     // UV atlas.
     int uv_resolution = 0;                    // 0: auto atlas
     std::vector<std::int32_t> uv_index;       // [y * resolution + x]: texel, or -1 where no triangle lies

@@ -15,17 +15,24 @@ namespace phos {
 class SplitMix64 {
  public:
   explicit SplitMix64(std::uint64_t state) : state_(state) {}
-  std::uint64_t Next() {
-    std::uint64_t z = (state_ += 0x9E3779B97F4A7C15ull);
-    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-    return z ^ (z >> 31);
+  std::uint64_t Next() { return Mix(state_ += kGolden); }
+  // What Next() will return after `skip` more draws, without drawing: a
+  // consumer that knows its next draws can fetch what they will index. The
+  // state is a counter, so that is one step of it.
+  std::uint64_t Peek(int skip = 0) const {
+    return Mix(state_ + static_cast<std::uint64_t>(skip + 1) * kGolden);
   }
   // Uniform in [0, 1): 24 bits for a float, 53 for a double (every value exact).
   float UniformFloat() { return static_cast<float>(Next() >> 40) * (1.0f / 16777216.0f); }
   double UniformDouble() { return static_cast<double>(Next() >> 11) * 0x1.0p-53; }
 
  private:
+  static constexpr std::uint64_t kGolden = 0x9E3779B97F4A7C15ull;
+  static std::uint64_t Mix(std::uint64_t z) {
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+    return z ^ (z >> 31);
+  }
   std::uint64_t state_;
 };
 
