@@ -118,8 +118,8 @@ struct EmitterDistribution {
   // The triangles that glow now, slot by slot, with their power (mean texel
   // Lp summed over bands, times area) and its total.
   struct Glowing {
-    std::vector<std::pair<int, int>> triangles;  // (slot, triangle)
-    std::vector<double> power;
+    LargeTable<std::pair<int, int>> triangles;  // (slot, triangle)
+    LargeTable<double> power;
     double total = 0;
     std::vector<char> slot_glows;  // per slot: any of its triangles
   };
@@ -128,7 +128,9 @@ struct EmitterDistribution {
     glowing.slot_glows.assign(solver.atlas().objects().size(), 0);
     for (std::size_t s = 0; s < solver.atlas().objects().size(); ++s) {
       const int slot = static_cast<int>(s);
-      const std::vector<double> power = TrianglePower(geometry, solver, slot);
+      const LargeTable<double> power = TrianglePower(geometry, solver, slot);
+      glowing.triangles.reserve(glowing.triangles.size() + power.size());
+      glowing.power.reserve(glowing.power.size() + power.size());
       for (std::size_t t = 0; t < power.size(); ++t) {
         if (!(power[t] > 0)) continue;
         glowing.triangles.emplace_back(slot, static_cast<int>(t));
@@ -143,14 +145,15 @@ struct EmitterDistribution {
   // times its area. An auto atlas's triangles own their texels, one chunk
   // each, so they are summed in parallel; a UV atlas's texels fall on
   // triangles in any order, so they are summed in texel order.
-  static std::vector<double> TrianglePower(const SceneGeometry& geometry, const CoupledSolver& solver, int slot) {
+  static LargeTable<double> TrianglePower(const SceneGeometry& geometry, const CoupledSolver& solver, int slot) {
     const TexelAtlas& atlas = solver.atlas();
     const TexelAtlas::ObjectTexels& texels = atlas.objects()[slot];
     const int object = texels.object;
     const int triangles = geometry.triangle_count(object);
     const std::vector<int>& bands = solver.emission_bands(slot);
-    std::vector<double> power(triangles, 0.0);
+    LargeTable<double> power;
     if (texels.uv()) {
+      power.assign(triangles, 0.0);
       std::vector<std::size_t> count(triangles, 0);
       atlas.ForEachTexel(slot, [&](std::size_t k, int t, float, float) {
         for (int b : bands) power[t] += solver.Lp(slot, b, k);
@@ -160,6 +163,7 @@ struct EmitterDistribution {
         power[t] = count[t] ? power[t] / static_cast<double>(count[t]) * geometry.Area(object, t) : 0.0;
       return power;
     }
+    power.resize(triangles);  // not zeroed: each is written below
     tbb::parallel_for(tbb::blocked_range<int>(0, triangles, 4096), [&](const tbb::blocked_range<int>& r) {
       for (int t = r.begin(); t < r.end(); ++t) {
         double sum = 0;
@@ -175,10 +179,13 @@ struct EmitterDistribution {
   }
   // Vose: entries scaled so the mean is 1; each under-full one is topped up
   // by an over-full one, which becomes its alias.
-  void BuildAliasTable(const std::vector<double>& power, double total) {
+  void BuildAliasTable(const LargeTable<double>& power, double total) {
     const std::size_t n = power.size();
-    std::vector<double> scaled(n);
-    std::vector<std::uint32_t> small, large;
+    LargeTable<double> scaled;
+    scaled.resize(n);
+    LargeTable<std::uint32_t> small, large;
+    small.reserve(n);
+    large.reserve(n);
     for (std::size_t e = 0; e < n; ++e) {
       scaled[e] = power[e] / total * static_cast<double>(n);
       (scaled[e] < 1.0 ? small : large).push_back(static_cast<std::uint32_t>(e));
@@ -639,13 +646,13 @@ class PathTransport final : public FrameTransport {
   // The solver keeps Lp band-major ([band][texel], for its batch kernel), so
   // one texel's bands lie a texel count apart: a cache miss per band for
   // every path vertex that meets or samples a glow. The path tracer reads a
-  // texel-major copy made once per frame instead, over the span of bands
-  // from the first emission band to the last (a band inside it that the
-  // phosphor does not emit holds 0), so a glow adds to consecutive bands,
-  // indexed directly. Through the list of emission bands, the two loops that
-  // add a glow held a tenth of TracePaths's samples (perf, bench_render
-  // --benchmark_filter=PathFrameDark1spp); indexed directly, the dark
-  // path/bare ratio is 0.988 of what it was (PathAgainstBareEmbree/40,
+  // texel-major copy made once per frame instead (in parallel, by texel),
+  // over the span of bands from the first emission band to the last (a band
+  // inside it that the phosphor does not emit holds 0), so a glow adds to
+  // consecutive bands, indexed directly. Through the list of emission bands,
+  // the two loops that add a glow held a tenth of TracePaths's samples (perf,
+  // bench_render --benchmark_filter=PathFrameDark1spp); indexed directly, the
+  // dark path/bare ratio is 0.988 of what it was (PathAgainstBareEmbree/40,
   // eight alternated pairs).
   struct GlowByTexel {
     int first_band = 0, band_count = 0;  // the span of emission bands
@@ -662,11 +669,14 @@ class PathTransport final : public FrameTransport {
       glow.first_band = bands.front();
       glow.band_count = bands.back() - bands.front() + 1;
       const std::size_t n = atlas.objects()[s].count, span = static_cast<std::size_t>(glow.band_count);
-      glow.Lp.assign(n * span, 0.0f);
-      for (int b : bands)
-        for (std::size_t k = 0; k < n; ++k)  // a masked texel glows by the share its paint covers
-          glow.Lp[k * span + static_cast<std::size_t>(b - glow.first_band)] =
-              atlas.Coverage(slot, k) * solver_->Lp(slot, b, k);
+      glow.Lp.resize(n * span);  // not zeroed: each is written below
+      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 16384), [&](const tbb::blocked_range<std::size_t>& r) {
+        std::fill(glow.Lp.begin() + r.begin() * span, glow.Lp.begin() + r.end() * span, 0.0f);
+        for (int b : bands)
+          for (std::size_t k = r.begin(); k < r.end(); ++k)  // a masked texel glows by the share its paint covers
+            glow.Lp[k * span + static_cast<std::size_t>(b - glow.first_band)] =
+                atlas.Coverage(slot, k) * solver_->Lp(slot, b, k);
+      });
     }
   }
   std::vector<GlowByTexel> glow_by_texel_;  // per slot

@@ -7,8 +7,6 @@
 #include <utility>
 #include <vector>
 
-#include <sys/mman.h>
-
 namespace phos {
 
 // A std::vector allocator for such tables. From 2 MiB up, storage is
@@ -23,11 +21,23 @@ namespace phos {
 // resize() default-initialises (as make_unique_for_overwrite does): a table
 // whose every element is written next is not zeroed first on one thread.
 // assign(n, value) and resize(n, value) fill as usual.
+// Blocks of a multiple of 2 MiB, 2 MiB-aligned, advised as huge pages. A
+// freed block is kept (up to 1 GiB in all) for the next request of its exact
+// size: the path tracer rebuilds its tables every frame at the same sizes,
+// and faulting them in afresh (the kernel zeroing, and compacting memory for
+// huge pages) each frame undid much of what huge pages gained. A kept block
+// holds its last contents.
+void* AllocateHugePageBlock(std::size_t bytes);
+void FreeHugePageBlock(void* block, std::size_t bytes);
+
 template <typename T>
 class LargeTableAllocator {
  public:
   using value_type = T;
   static constexpr std::size_t kHugePageBytes = std::size_t{2} << 20;
+  static std::size_t RoundedBytes(std::size_t bytes) {
+    return (bytes + kHugePageBytes - 1) / kHugePageBytes * kHugePageBytes;
+  }
 
   LargeTableAllocator() = default;
   template <typename U>
@@ -36,17 +46,14 @@ class LargeTableAllocator {
   T* allocate(std::size_t n) {
     const std::size_t bytes = n * sizeof(T);
     if (bytes < kHugePageBytes) return static_cast<T*>(::operator new(bytes, std::align_val_t{alignof(T)}));
-    const std::size_t rounded = (bytes + kHugePageBytes - 1) / kHugePageBytes * kHugePageBytes;
-    void* p = ::operator new(rounded, std::align_val_t{kHugePageBytes});
-    madvise(p, rounded, MADV_HUGEPAGE);  // advice only: a kernel without THP ignores it
-    return static_cast<T*>(p);
+    return static_cast<T*>(AllocateHugePageBlock(RoundedBytes(bytes)));
   }
   void deallocate(T* p, std::size_t n) {
     const std::size_t bytes = n * sizeof(T);
     if (bytes < kHugePageBytes)
       ::operator delete(p, std::align_val_t{alignof(T)});
     else
-      ::operator delete(p, std::align_val_t{kHugePageBytes});
+      FreeHugePageBlock(p, RoundedBytes(bytes));
   }
   template <typename U>
   void construct(U* p) {
