@@ -23,30 +23,30 @@ class SplitMix64 {
     return Mix(state_ + static_cast<std::uint64_t>(skip + 1) * kGolden);
   }
   // Uniform in [0, 1): 24 bits for a float, 53 for a double (every value exact).
-  float UniformFloat() { return static_cast<float>(Next() >> 40) * (1.0f / 16777216.0f); }
+  float UniformFloat() { return ToUniformFloat(Next()); }
   double UniformDouble() { return static_cast<double>(Next() >> 11) * 0x1.0p-53; }
 
- private:
-  static constexpr std::uint64_t kGolden = 0x9E3779B97F4A7C15ull;
+  // The finaliser (Stafford's Mix13): every bit of the output depends on
+  // every bit of the input. Hash01 uses it too.
   static std::uint64_t Mix(std::uint64_t z) {
     z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
     z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
     return z ^ (z >> 31);
   }
+  // A word's top 24 bits as a float in [0, 1), every value exact.
+  static float ToUniformFloat(std::uint64_t word) { return static_cast<float>(word >> 40) * (1.0f / 16777216.0f); }
+
+ private:
+  static constexpr std::uint64_t kGolden = 0x9E3779B97F4A7C15ull;
   std::uint64_t state_;
 };
 
 // A reproducible uniform number in [0, 1) from three integers, without a
 // stream: SplitMix64's finaliser on a mix of them.
 inline float Hash01(std::uint64_t a, std::uint64_t b, std::uint64_t c) {
-  std::uint64_t x =
+  const std::uint64_t x =
       a * 0x9E3779B97F4A7C15ull ^ (b + 0x632BE59BD9B4E019ull) * 0xBF58476D1CE4E5B9ull ^ c * 0x94D049BB133111EBull;
-  x ^= x >> 30;
-  x *= 0xBF58476D1CE4E5B9ull;
-  x ^= x >> 27;
-  x *= 0x94D049BB133111EBull;
-  x ^= x >> 31;
-  return static_cast<float>(x >> 40) / static_cast<float>(1ull << 24);
+  return SplitMix64::ToUniformFloat(SplitMix64::Mix(x));
 }
 
 // Interleaved gradient noise (Jimenez 2014), in [0, 1): a fixed per-pixel
