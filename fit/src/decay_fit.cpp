@@ -465,6 +465,12 @@ class VarProNormalEquations {
 // general machinery. For an m x 3 Jacobian that machinery (a QR of the whole
 // Jacobian, column scaling, array checks on every iteration) cost more than
 // evaluating the model. Returns the iterations taken.
+// GCC 12 warns (-Warray-bounds) that Eigen's vectorized norm() and dot()
+// could read a second 4-double packet past a SmallVector's 5 entries: it does
+// not see that the packet loop stops at the vector's size (at most 5), so the
+// warning is switched off for this function alone.
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Warray-bounds"
 int LevenbergMarquardt(const Data& d, int max_iterations, std::vector<double>* theta) {
   constexpr double kFunctionTolerance = 1e-10, kGradientTolerance = 1e-12, kParameterTolerance = 1e-10;
   constexpr double kMinRelativeDecrease = 1e-3;   // a step must achieve this share of its predicted decrease
@@ -514,6 +520,7 @@ int LevenbergMarquardt(const Data& d, int max_iterations, std::vector<double>* t
   for (int i = 0; i < nc; ++i) (*theta)[i] = x[i];
   return iteration;
 }
+#pragma GCC diagnostic pop
 
 // Refinement of the rates of `fit` by variable projection, then the
 // amplitudes and background at the refined rates.

@@ -69,8 +69,11 @@ std::string SessionReportHtml(const SessionFit& fit, const std::string& title,
     html.append("<tr><td>").append(m.bands.BandName(b)).append("</td>");
     for (const ExcitedState& state : m.states) {
       const auto& ke = state.ke[b];
-      const std::optional<double> ke_stderr =
-          b < static_cast<int>(state.ke_stderr.size()) ? state.ke_stderr[b] : std::nullopt;
+      // A reference, not a copy: GCC 12 took the copy of a std::nullopt for
+      // one whose value might be read uninitialized (-Wmaybe-uninitialized).
+      static const std::optional<double> kNotKnown;
+      const std::optional<double>& ke_stderr =
+          b < static_cast<int>(state.ke_stderr.size()) ? state.ke_stderr[b] : kNotKnown;
       html.append("<td>").append(ke ? with_stderr(*ke, ke_stderr) : "not measured").append("</td>");
     }
     for (const ExcitedState& state : m.states) html.append("<td>").append(FormatShort(state.Lambda[b])).append("</td>");
