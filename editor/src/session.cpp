@@ -111,8 +111,11 @@ std::filesystem::path WriteUnderRoot(const std::filesystem::path& root, const st
   std::string temporary;
   FileDescriptor file;
   for (int attempt = 0; attempt < 100 && file.fd < 0; ++attempt) {
-    temporary =
-        "." + name + ".tmp" + (attempt == 0 ? "" : "." + std::to_string(::getpid()) + "." + std::to_string(attempt));
+    // Appended, not "." + std::to_string(...): GCC 12 warns on that
+    // operator+ (-Wrestrict, a false positive: GCC bug 105329).
+    temporary = "." + name + ".tmp";
+    if (attempt > 0)
+      temporary.append(".").append(std::to_string(::getpid())).append(".").append(std::to_string(attempt));
     file.fd = ::openat(folder.fd, temporary.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC, 0644);
     if (file.fd < 0 && errno != EEXIST) fail("cannot create a temporary file beside it");
   }
