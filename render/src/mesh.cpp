@@ -365,6 +365,40 @@ TextureWraps GltfTextureWraps(const tinygltf::Model& model, const tinygltf::Text
   return {wrap(model.samplers[sampler].wrapS, "wrapS"), wrap(model.samplers[sampler].wrapT, "wrapT")};
 }
 
+// The KHR_texture_transform of a texture reference, the identity without
+// one: offset [x, y], rotation (radians, counter-clockwise in UV) and scale
+// [x, y], composed as the extension's matrix T R S; its texCoord, when
+// given, must be 0 (phos reads TEXCOORD_0 only).
+UvTransform GltfUvTransform(const tinygltf::TextureInfo& info, const std::string& where, const std::string& field) {
+  const auto extension = info.extensions.find("KHR_texture_transform");
+  if (extension == info.extensions.end()) return {};
+  const tinygltf::Value& value = extension->second;
+  const std::string at = field + ".extensions.KHR_texture_transform";
+  auto number = [&](const tinygltf::Value& v, const std::string& name) {
+    const double x = v.IsNumber() ? v.GetNumberAsDouble() : std::nan("");
+    if (!(std::isfinite(x) && std::abs(x) <= 1e6)) ThrowUserError(where, at + "." + name, "expected a finite number");
+    return static_cast<float>(x);
+  };
+  auto pair = [&](const char* name, float fallback) -> Eigen::Vector2f {
+    if (!value.Has(name)) return Eigen::Vector2f::Constant(fallback);
+    const tinygltf::Value& v = value.Get(name);
+    if (!v.IsArray() || v.ArrayLen() != 2) ThrowUserError(where, at + "." + name, "expected 2 numbers");
+    return {number(v.Get(0), name), number(v.Get(1), name)};
+  };
+  if (value.Has("texCoord") && number(value.Get("texCoord"), "texCoord") != 0)
+    ThrowUserError(where, at + ".texCoord", "only TEXCOORD_0 is supported");
+  const Eigen::Vector2f offset = pair("offset", 0.0f), scale = pair("scale", 1.0f);
+  const float rotation = value.Has("rotation") ? number(value.Get("rotation"), "rotation") : 0.0f;
+  // The extension's rotation matrix (its README gives it in GLSL, column by
+  // column: mat3(cos, sin, 0, -sin, cos, 0, 0, 0, 1)), here row by row.
+  Eigen::Matrix2f rotate;
+  rotate << std::cos(rotation), -std::sin(rotation), std::sin(rotation), std::cos(rotation);
+  UvTransform transform;
+  transform.linear = rotate * scale.asDiagonal();
+  transform.offset = offset;
+  return transform;
+}
+
 // The base colour of glTF material `index` (pbrMetallicRoughness
 // baseColorFactor, linear, and baseColorTexture, sRGB), none without one.
 std::optional<BaseColour> GltfBaseColour(const tinygltf::Model& model, int index,
@@ -384,6 +418,7 @@ std::optional<BaseColour> GltfBaseColour(const tinygltf::Model& model, int index
   colour.field = field + ".pbrMetallicRoughness.baseColorTexture";
   colour.texture = GltfTextureFile(model, info, base_dir, where, colour.field);
   colour.wraps = GltfTextureWraps(model, info, where);
+  colour.uv_transform = GltfUvTransform(info, where, colour.field);
   return colour;
 }
 
@@ -415,13 +450,14 @@ std::optional<GlossTexture> GltfGlossTexture(const tinygltf::Model& model, int i
   gloss.field = "materials[" + std::to_string(index) + "].pbrMetallicRoughness.metallicRoughnessTexture";
   gloss.texture = GltfTextureFile(model, info, base_dir, where, gloss.field);
   gloss.wraps = GltfTextureWraps(model, info, where);
+  gloss.uv_transform = GltfUvTransform(info, where, gloss.field);
   return gloss;
 }
 
 // The extensions phos reads: a file that requires any other is refused,
 // since it would be drawn wrong (glTF 2.0 spec, 3.12: a loader must not load
 // an asset whose required extension it does not support).
-constexpr const char* kSupportedGltfExtensions[] = {"KHR_lights_punctual"};
+constexpr const char* kSupportedGltfExtensions[] = {"KHR_lights_punctual", "KHR_texture_transform"};
 
 // The glTF's model through tinygltf, with its limits checked.
 tinygltf::Model ReadGltfModel(std::string_view data, bool binary, const std::filesystem::path& base_dir,
@@ -445,7 +481,7 @@ tinygltf::Model ReadGltfModel(std::string_view data, bool binary, const std::fil
         std::end(kSupportedGltfExtensions))
       ThrowUserError(where + " (" + name + ")", "extensionsRequired",
                      "the file requires the extension '" + extension +
-                         "', which phos does not read (it reads KHR_lights_punctual)");
+                         "', which phos does not read (it reads KHR_lights_punctual and KHR_texture_transform)");
   return model;
 }
 

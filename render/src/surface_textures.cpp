@@ -143,11 +143,14 @@ UvFootprint SurfaceTextures::Footprint(const SceneGeometry& geometry, const Hit&
 }
 
 void SurfaceTextures::Lookup(void* handle, const UvFootprint& footprint, bool v_up, const TextureWraps& wraps,
-                             int first_channel, int channels, float* out) const {
+                             const UvTransform& transform, int first_channel, int channels, float* out) const {
   // OpenImageIO's t runs down the image from its top row, as glTF's v; an
   // OBJ's v runs up from the bottom row.
   const float flip = v_up ? -1.0f : 1.0f;
-  const Eigen::Vector2f &uv = footprint.uv, &duv_dx = footprint.duv_dx, &duv_dy = footprint.duv_dy;
+  // The texture's own UV (KHR_texture_transform): the point through the
+  // whole affine map, the footprint's offsets through its linear part.
+  const Eigen::Vector2f uv = transform(footprint.uv), duv_dx = transform.linear * footprint.duv_dx,
+                        duv_dy = transform.linear * footprint.duv_dy;
   OIIO::TextureOpt options;
   options.swrap = OiioWrap(wraps.s);
   options.twrap = OiioWrap(wraps.t);
@@ -166,7 +169,7 @@ void SurfaceTextures::Lookup(void* handle, const UvFootprint& footprint, bool v_
 void SurfaceTextures::Albedo(int object, const UvFootprint& footprint, float* bands) const {
   const BaseColour& colour = *scene_.objects[object].albedo_texture;
   float rgb[3] = {0, 0, 0};
-  Lookup(handles_[object], footprint, colour.v_up, colour.wraps, 0, 3, rgb);
+  Lookup(handles_[object], footprint, colour.v_up, colour.wraps, colour.uv_transform, 0, 3, rgb);
   for (int c = 0; c < 3; ++c) {
     // Decoded after the filter: OpenImageIO 2.4's TextureSystem has no
     // colour transform (docs/render.md, "Textures", says what that costs).
@@ -179,7 +182,8 @@ void SurfaceTextures::Albedo(int object, const UvFootprint& footprint, float* ba
 Gloss SurfaceTextures::GlossAt(int object, const UvFootprint& footprint, const Gloss& factors) const {
   float roughness_metallic[2] = {1, 1};  // glTF: G roughness, B metallic
   const Object& o = scene_.objects[object];
-  Lookup(gloss_handles_[object], footprint, o.mesh->v_up, o.gloss_texture->wraps, 1, 2, roughness_metallic);
+  Lookup(gloss_handles_[object], footprint, o.mesh->v_up, o.gloss_texture->wraps, o.gloss_texture->uv_transform, 1,
+         2, roughness_metallic);
   return {factors.metallic * std::clamp(roughness_metallic[1], 0.0f, 1.0f),
           factors.roughness * std::clamp(roughness_metallic[0], 0.0f, 1.0f)};
 }

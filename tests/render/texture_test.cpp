@@ -34,6 +34,7 @@ namespace phos::render {
 namespace {
 
 using phos::testing::Fixture;
+using phos::testing::ReadText;
 using phos::testing::TempDir;
 
 // The decode against IEC 61966-2-1's formula in double, at every 8-bit code
@@ -93,7 +94,10 @@ std::array<float, 3> QuadrantSrgb(int u_half, int v_half) {
 
 // albedo E / pi at the pixel seeing the centre of each quadrant of the
 // plane, E from the point light (1 m above the plane's centre), for every band.
-void ExpectQuadrantsAreAlbedoTimesEOverPi(const Scene& scene, const Image& image, const char* what) {
+// `shown` (u_half, v_half) -> the texture's quadrant seen there; none: the same.
+using QuadrantMap = std::function<std::array<int, 2>(int, int)>;
+void ExpectQuadrantsAreAlbedoTimesEOverPi(const Scene& scene, const Image& image, const std::string& what,
+                                          const QuadrantMap& shown = nullptr) {
   const CameraRays camera(scene, 0);
   const RgbToBands to_bands(scene.bands);
   const int nb = scene.bands.band_count();
@@ -111,14 +115,15 @@ void ExpectQuadrantsAreAlbedoTimesEOverPi(const Scene& scene, const Image& image
       ASSERT_LT((p - centre).norm(), 0.05f);  // well inside the quadrant (0.25 m from its edges)
       const Vec3f to_light = Vec3f(0, 1, 0) - p;
       const double unit = 1.0 / to_light.norm() / to_light.squaredNorm();  // cos / d^2, cos = 1 / d
-      const std::array<float, 3> srgb = QuadrantSrgb(u_half, v_half);
+      const std::array<int, 2> seen = shown ? shown(u_half, v_half) : std::array<int, 2>{u_half, v_half};
+      const std::array<float, 3> srgb = QuadrantSrgb(seen[0], seen[1]);
       const float linear[3] = {SrgbToLinear(srgb[0]), SrgbToLinear(srgb[1]), SrgbToLinear(srgb[2])};
       std::vector<float> albedo(nb);
       to_bands.Albedo(linear, albedo.data());
       for (int b = 0; b < nb; ++b) {
         const double expected = albedo[b] * scene.lights[0].E_per_band[b] * unit / M_PI;
         EXPECT_NEAR(image.at(x, y)[b], expected, 1e-4 * expected + 1e-9)
-            << what << ", quadrant " << u_half << v_half << ", band " << b;
+            << what << ", quadrant " << u_half << v_half << " showing " << seen[0] << seen[1] << ", band " << b;
       }
       ++checked;
     }
@@ -500,6 +505,89 @@ TEST(AlbedoTexture, TheGltfSamplersWrapSaysHowTheTextureReadsPastItsSquare) {
   TempDir dir;
   const std::string message = UserErrorOf([&] { LoadScene(WrappedRampPlane(dir, 12345)); });
   EXPECT_NE(message.find("samplers[0].wrapS"), std::string::npos) << message;
+}
+
+// The textured plane with KHR_texture_transform on its base colour texture,
+// `transform` the extension's object.
+std::filesystem::path TransformedPlane(const TempDir& dir, const nlohmann::json& transform) {
+  std::filesystem::copy_file(Fixture("scenes/textured/checker.png"), dir / "checker.png",
+                             std::filesystem::copy_options::overwrite_existing);
+  nlohmann::json gltf = nlohmann::json::parse(ReadText(Fixture("scenes/textured/plane.gltf")));
+  gltf["extensionsUsed"] = {"KHR_texture_transform"};
+  gltf["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]["extensions"]["KHR_texture_transform"] = transform;
+  std::ofstream(dir / "plane.gltf") << gltf.dump();
+  nlohmann::json scene = nlohmann::json::parse(ReadText(Fixture("scenes/textured-plane.json")));
+  scene["objects"][0]["mesh"] = "plane.gltf";
+  scene["objects"][0]["phosphor"] = Fixture("materials/green.json").string();
+  scene["camera"]["width"] = 160;
+  scene["camera"]["height"] = 120;
+  std::ofstream(dir / "scene.json") << scene.dump();
+  return dir / "scene.json";
+}
+
+// Random offsets, rotations and scales: each quadrant's centre shows the
+// quadrant of the texture that the extension's matrix, T R S, sends it to,
+// written out here from its README (GLSL, column by column):
+// u' = sx cos u - sy sin v + ox, v' = sx sin u + sy cos v + oy, then REPEAT.
+TEST(AlbedoTexture, KhrTextureTransformMovesTheTextureAsTheExtensionsMatrixSays) {
+  std::mt19937_64 random(20261206);
+  std::uniform_real_distribution<double> offset(-1.5, 1.5), angle(-2 * M_PI, 2 * M_PI), scale(0.5, 1.5);
+  auto half = [](double x) { return x - std::floor(x) >= 0.5 ? 1 : 0; };
+  // Away from the texture's quadrant edges by more than the pixel's offset
+  // from the centre (0.05 m, times the scale) and a texel or two of filter.
+  auto clear = [](double x) {
+    const double f = x - std::floor(x);
+    return std::min({std::abs(f), std::abs(f - 0.5), std::abs(f - 1)}) > 0.1;
+  };
+  int rendered = 0, rotated_half_turn = 0;
+  for (int draw = 0; draw < 5000 && rendered < 6; ++draw) {
+    const double ox = offset(random), oy = offset(random), r = angle(random);
+    const double sx = scale(random) * (random() % 2 ? -1 : 1), sy = scale(random);
+    auto sent = [&](int u_half, int v_half) {
+      const double u = u_half ? 0.75 : 0.25, v = v_half ? 0.75 : 0.25;
+      return std::array<double, 2>{sx * std::cos(r) * u - sy * std::sin(r) * v + ox,
+                                   sx * std::sin(r) * u + sy * std::cos(r) * v + oy};
+    };
+    bool usable = true;
+    for (int u_half = 0; u_half < 2; ++u_half)
+      for (int v_half = 0; v_half < 2; ++v_half) usable = usable && clear(sent(u_half, v_half)[0]) && clear(sent(u_half, v_half)[1]);
+    if (!usable) continue;
+    TempDir dir;
+    const Scene scene = LoadScene(TransformedPlane(
+        dir, {{"offset", {ox, oy}}, {"rotation", r}, {"scale", {sx, sy}}}));
+    SceneGeometry geometry(scene);
+    FrameOptions options = DefaultFrameOptions(scene, Transport::kDirect);
+    options.direct_spp = 1;
+    ExpectQuadrantsAreAlbedoTimesEOverPi(scene, RenderBands(geometry, nullptr, options),
+                                         "offset " + std::to_string(ox) + ", " + std::to_string(oy) + ", rotation " +
+                                             std::to_string(r) + ", scale " + std::to_string(sx) + ", " +
+                                             std::to_string(sy),
+                                         [&](int u_half, int v_half) {
+                                           const std::array<double, 2> uv = sent(u_half, v_half);
+                                           return std::array<int, 2>{half(uv[0]), half(uv[1])};
+                                         });
+    rotated_half_turn += std::abs(std::remainder(r, 2 * M_PI)) > M_PI / 2;
+    ++rendered;
+  }
+  EXPECT_EQ(rendered, 6);
+  EXPECT_GE(rotated_half_turn, 1);  // the draws turn the texture past a quarter turn, where a sign error shows
+}
+
+TEST(AlbedoTexture, AKhrTextureTransformPhosCannotFollowIsOneLineNamingItsField) {
+  TempDir dir;
+  std::string message = UserErrorOf([&] { LoadScene(TransformedPlane(dir, {{"texCoord", 1}})); });
+  EXPECT_NE(message.find("baseColorTexture.extensions.KHR_texture_transform.texCoord"), std::string::npos) << message;
+  message = UserErrorOf([&] { LoadScene(TransformedPlane(dir, {{"scale", {1, 2, 3}}})); });
+  EXPECT_NE(message.find("KHR_texture_transform.scale: expected 2 numbers"), std::string::npos) << message;
+  message = UserErrorOf([&] { LoadScene(TransformedPlane(dir, {{"rotation", "a quarter turn"}})); });
+  EXPECT_NE(message.find("KHR_texture_transform.rotation: expected a finite number"), std::string::npos) << message;
+  // A file that requires the extension now loads.
+  TempDir required;
+  const std::filesystem::path scene = TransformedPlane(required, {{"offset", {0.5, 0}}});
+  nlohmann::json gltf = nlohmann::json::parse(ReadText(required / "plane.gltf"));
+  gltf["extensionsRequired"] = {"KHR_texture_transform"};
+  std::ofstream(required / "plane.gltf") << gltf.dump();
+  EXPECT_EQ(LoadScene(scene).objects[0].albedo_texture->uv_transform.offset, Eigen::Vector2f(0.5f, 0));
 }
 
 }  // namespace

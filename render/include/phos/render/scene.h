@@ -62,6 +62,18 @@ struct TextureWraps {
   bool operator==(const TextureWraps&) const = default;
 };
 
+// Where a texture is read, given the mesh's UV: glTF's KHR_texture_transform
+// (uv' = T R S uv, offset then rotation then scale, as the extension's
+// matrix; rotation counter-clockwise in UV space, radians). The identity
+// for OBJ/MTL and for glTF without the extension.
+struct UvTransform {
+  Eigen::Matrix2f linear = Eigen::Matrix2f::Identity();  // R S
+  Eigen::Vector2f offset = Eigen::Vector2f::Zero();
+  bool identity() const { return linear.isIdentity(0.0f) && offset.isZero(0.0f); }
+  Eigen::Vector2f operator()(const Eigen::Vector2f& uv) const { return linear * uv + offset; }
+  bool operator==(const UvTransform&) const = default;
+};
+
 // A glTF metallicRoughnessTexture (glTF 2.0, material.pbrMetallicRoughness):
 // roughness in its G channel and metallic in its B channel, linear (not
 // sRGB), each times the object's Gloss factor at every hit.
@@ -69,6 +81,7 @@ struct GlossTexture {
   std::filesystem::path texture;
   std::string field;  // where the file says so, for messages
   TextureWraps wraps;
+  UvTransform uv_transform;
 };
 
 // The base colour a mesh file declares (glTF pbrMetallicRoughness
@@ -80,8 +93,10 @@ struct BaseColour {
   std::string field;                                  // where the file says so, for messages
   bool v_up = false;  // OBJ: v = 0 is the image's bottom row; glTF: its top row
   TextureWraps wraps;
+  UvTransform uv_transform;
   bool operator==(const BaseColour& other) const {
-    return factor == other.factor && texture == other.texture && v_up == other.v_up && wraps == other.wraps;
+    return factor == other.factor && texture == other.texture && v_up == other.v_up && wraps == other.wraps &&
+           uv_transform == other.uv_transform;
   }
 };
 

@@ -67,8 +67,8 @@ class SurfaceTextures {
   void* Open(const std::filesystem::path& texture, const std::string& where, const std::string& field,
              OIIO::ImageSpec& spec) const;
   // `channels` channels from `first_channel` of the texture over a footprint.
-  void Lookup(void* handle, const UvFootprint& footprint, bool v_up, const TextureWraps& wraps, int first_channel,
-              int channels, float* out) const;
+  void Lookup(void* handle, const UvFootprint& footprint, bool v_up, const TextureWraps& wraps,
+              const UvTransform& transform, int first_channel, int channels, float* out) const;
 
   const Scene& scene_;
   RgbToBands to_bands_;
