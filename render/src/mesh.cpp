@@ -8,6 +8,7 @@
 #include <cstring>
 #include <functional>
 #include <map>
+#include <memory>
 #include <type_traits>
 
 #include <tiny_gltf.h>
@@ -315,19 +316,65 @@ bool GltfNoWrite(std::string* err, const std::string&, const std::vector<unsigne
   if (err) *err += "phos writes no glTF files\n";
   return false;
 }
-// Images are not decoded here: a base colour texture is read through
-// OpenImageIO's TextureSystem when rendering (surface_textures.h), and a
-// crafted image must not cost memory or time at load.
-bool GltfSkipImage(tinygltf::Image*, const int, std::string*, std::string*, int, int, const unsigned char*, int,
-                   void*) {
+// Images are not decoded here: a texture is read through OpenImageIO's
+// TextureSystem when rendering (surface_textures.h), and a crafted image
+// must not cost time at load. A data: URI's bytes, decoded by tinygltf, are
+// kept (they exist nowhere else); a file's are dropped (the render opens it
+// by name), and a bufferView's are taken from its buffer once its range is
+// checked (GltfTextureSource): tinygltf hands them over unchecked.
+bool GltfKeepDataUriImage(tinygltf::Image* image, const int, std::string*, std::string*, int, int,
+                          const unsigned char* bytes, int size, void*) {
+  if (image->bufferView < 0 && image->uri.empty() && bytes != nullptr && size > 0)
+    image->image.assign(bytes, bytes + size);
   return true;
 }
 
-// The image file of a glTF texture reference (`field` names it in messages):
-// TEXCOORD_0 and an image in its own file only.
-std::filesystem::path GltfTextureFile(const tinygltf::Model& model, const tinygltf::TextureInfo& info,
-                                      const std::filesystem::path& base_dir, const std::string& where,
-                                      const std::string& field) {
+// Where a glTF texture reference's image is: a file of its own, or its
+// bytes inside the glTF.
+struct GltfTextureSource {
+  std::filesystem::path texture;
+  std::shared_ptr<const EmbeddedImage> embedded;
+};
+
+// An embedded image's bytes (a data: URI's, kept by GltfKeepDataUriImage,
+// or a bufferView's, its range checked here) and its file extension.
+std::shared_ptr<const EmbeddedImage> GltfEmbeddedImage(const tinygltf::Model& model, int source,
+                                                       const std::string& where) {
+  const tinygltf::Image& image = model.images[source];
+  const std::string field = "images[" + std::to_string(source) + "]";
+  auto embedded = std::make_shared<EmbeddedImage>();
+  if (image.mimeType == "image/png") {
+    embedded->extension = ".png";
+  } else if (image.mimeType == "image/jpeg") {
+    embedded->extension = ".jpg";
+  } else {
+    ThrowUserError(where, field + ".mimeType", "expected image/png or image/jpeg, got '" + image.mimeType + "'");
+  }
+  if (image.bufferView >= 0) {
+    if (image.bufferView >= static_cast<int>(model.bufferViews.size()))
+      ThrowUserError(where, field + ".bufferView", "bufferView index out of range");
+    const tinygltf::BufferView& view = model.bufferViews[image.bufferView];
+    const std::string view_field = "bufferViews[" + std::to_string(image.bufferView) + "]";
+    if (view.buffer < 0 || view.buffer >= static_cast<int>(model.buffers.size()))
+      ThrowUserError(where, view_field + ".buffer", "buffer index out of range");
+    const std::vector<unsigned char>& data = model.buffers[view.buffer].data;
+    if (view.byteLength == 0 || view.byteLength > data.size() || view.byteOffset > data.size() - view.byteLength)
+      ThrowUserError(where, view_field, "the image's bytes lie outside its buffer");
+    const auto* first = reinterpret_cast<const char*>(data.data() + view.byteOffset);
+    embedded->bytes.assign(first, first + view.byteLength);
+  } else {
+    if (image.image.empty()) ThrowUserError(where, field + ".uri", "the data: URI holds no image");
+    embedded->bytes.assign(image.image.begin(), image.image.end());
+  }
+  return embedded;
+}
+
+// The image of a glTF texture reference (`field` names it in messages),
+// through TEXCOORD_0: a file beside the glTF, a data: URI or a .glb's
+// bufferView (PNG or JPEG).
+GltfTextureSource GltfTextureImage(const tinygltf::Model& model, const tinygltf::TextureInfo& info,
+                                   const std::filesystem::path& base_dir, const std::string& where,
+                                   const std::string& field) {
   if (info.texCoord != 0) ThrowUserError(where, field + ".texCoord", "only TEXCOORD_0 is supported");
   if (info.index >= static_cast<int>(model.textures.size()))
     ThrowUserError(where, field + ".index", "texture index out of range");
@@ -335,10 +382,9 @@ std::filesystem::path GltfTextureFile(const tinygltf::Model& model, const tinygl
   if (source < 0 || source >= static_cast<int>(model.images.size()))
     ThrowUserError(where, "textures[" + std::to_string(info.index) + "].source", "image index out of range");
   const tinygltf::Image& image = model.images[source];
-  const std::string image_field = "images[" + std::to_string(source) + "].uri";
-  if (image.uri.empty() || image.uri.rfind("data:", 0) == 0)
-    ThrowUserError(where, image_field, "only images in their own files are supported (not embedded ones)");
-  return TextureFile(base_dir, image.uri, where, image_field);
+  if (image.bufferView >= 0 || image.uri.empty() || image.uri.rfind("data:", 0) == 0)
+    return {"images[" + std::to_string(source) + "] (embedded)", GltfEmbeddedImage(model, source, where)};
+  return {TextureFile(base_dir, image.uri, where, "images[" + std::to_string(source) + "].uri"), nullptr};
 }
 
 // How the texture of `info` wraps: its sampler's wrapS and wrapT (glTF 2.0,
@@ -416,7 +462,9 @@ std::optional<BaseColour> GltfBaseColour(const tinygltf::Model& model, int index
   const tinygltf::TextureInfo& info = pbr.baseColorTexture;
   if (info.index < 0) return colour;
   colour.field = field + ".pbrMetallicRoughness.baseColorTexture";
-  colour.texture = GltfTextureFile(model, info, base_dir, where, colour.field);
+  GltfTextureSource source = GltfTextureImage(model, info, base_dir, where, colour.field);
+  colour.texture = std::move(source.texture);
+  colour.embedded = std::move(source.embedded);
   colour.wraps = GltfTextureWraps(model, info, where);
   colour.uv_transform = GltfUvTransform(info, where, colour.field);
   return colour;
@@ -448,7 +496,9 @@ std::optional<GlossTexture> GltfGlossTexture(const tinygltf::Model& model, int i
   if (info.index < 0) return std::nullopt;
   GlossTexture gloss;
   gloss.field = "materials[" + std::to_string(index) + "].pbrMetallicRoughness.metallicRoughnessTexture";
-  gloss.texture = GltfTextureFile(model, info, base_dir, where, gloss.field);
+  GltfTextureSource source = GltfTextureImage(model, info, base_dir, where, gloss.field);
+  gloss.texture = std::move(source.texture);
+  gloss.embedded = std::move(source.embedded);
   gloss.wraps = GltfTextureWraps(model, info, where);
   gloss.uv_transform = GltfUvTransform(info, where, gloss.field);
   return gloss;
@@ -467,7 +517,7 @@ tinygltf::Model ReadGltfModel(std::string_view data, bool binary, const std::fil
                    "glTF '" + name + "' is more than the limit of " + std::to_string(kMaxInputFileBytes) + " bytes");
   tinygltf::TinyGLTF loader;
   loader.SetFsCallbacks({&GltfFileExists, &GltfExpandPath, &GltfReadFile, &GltfNoWrite, nullptr});
-  loader.SetImageLoader(&GltfSkipImage, nullptr);
+  loader.SetImageLoader(&GltfKeepDataUriImage, nullptr);
   tinygltf::Model model;
   std::string error, warning;
   const bool ok = binary ? loader.LoadBinaryFromMemory(&model, &error, &warning,

@@ -1,9 +1,14 @@
 #include "phos/render/surface_textures.h"
 
 #include <algorithm>
+#include <cstdio>
+#include <cstdlib>
 
 #include <OpenImageIO/texture.h>
+#include <unistd.h>
+#include <xxhash.h>
 
+#include "phos/util/atomic_file.h"
 #include "phos/util/error.h"
 
 namespace phos::render {
@@ -39,6 +44,45 @@ std::vector<float> SampleMaskGrid(const std::filesystem::path& file, bool v_up, 
   return coverage;
 }
 
+namespace {
+
+// The folder embedded images are written to: the user's cache
+// ($XDG_CACHE_HOME/phos/textures, else ~/.cache/phos/textures), else the
+// system's temporary folder (phos-textures-<uid>).
+std::filesystem::path EmbeddedImageFolder() {
+  const char* cache = std::getenv("XDG_CACHE_HOME");
+  if (cache && cache[0] == '/') return std::filesystem::path(cache) / "phos" / "textures";
+  const char* home = std::getenv("HOME");
+  if (home && home[0] == '/') return std::filesystem::path(home) / ".cache" / "phos" / "textures";
+  return std::filesystem::temp_directory_path() / ("phos-textures-" + std::to_string(::getuid()));
+}
+
+}  // namespace
+
+std::filesystem::path TextureFileOf(const std::filesystem::path& texture,
+                                    const std::shared_ptr<const EmbeddedImage>& embedded, const std::string& where,
+                                    const std::string& field) {
+  if (!embedded) return texture;
+  // Named by a hash of its bytes (XXH3, 128 bits): a second render, or two at
+  // once, find or write the same file; OpenImageIO's TextureSystem opens
+  // textures by name only (in 2.4 it takes no bytes from memory).
+  const XXH128_hash_t hash = XXH3_128bits(embedded->bytes.data(), embedded->bytes.size());
+  char name[40];
+  std::snprintf(name, sizeof(name), "%016llx%016llx", static_cast<unsigned long long>(hash.high64),
+                static_cast<unsigned long long>(hash.low64));
+  const std::filesystem::path folder = EmbeddedImageFolder();
+  const std::filesystem::path file = folder / (name + embedded->extension);
+  std::error_code ec;
+  if (std::filesystem::is_regular_file(file, ec) && std::filesystem::file_size(file, ec) == embedded->bytes.size())
+    return file;
+  std::filesystem::create_directories(folder, ec);
+  if (ec)
+    ThrowUserError(where, field,
+                   "cannot create the folder '" + folder.string() + "' for its embedded image: " + ec.message());
+  WriteFileAtomically(file, embedded->bytes);
+  return file;
+}
+
 SurfaceTextures::SurfaceTextures(const Scene& scene)
     : scene_(scene),
       to_bands_(scene.bands),
@@ -60,21 +104,25 @@ SurfaceTextures::SurfaceTextures(const Scene& scene)
         scene.source + ": objects[" + std::to_string(o) + "] '" + object.name + "': " + object.mesh->source;
     if (object.albedo_texture) {
       OIIO::ImageSpec spec;
-      handles_[o] = Open(object.albedo_texture->texture, where, object.albedo_texture->field, spec);
+      handles_[o] = Open(TextureFileOf(object.albedo_texture->texture, object.albedo_texture->embedded, where,
+                                       object.albedo_texture->field),
+                         object.albedo_texture->texture, where, object.albedo_texture->field, spec);
       // glTF says a base colour texture is sRGB-encoded; 8- and 16-bit images
       // are taken as such, float ones (EXR) as linear.
       srgb_[o] = !spec.format.is_floating_point();
     }
     if (object.gloss_texture) {
       OIIO::ImageSpec spec;
-      gloss_handles_[o] = Open(object.gloss_texture->texture, where, object.gloss_texture->field, spec);
+      gloss_handles_[o] = Open(TextureFileOf(object.gloss_texture->texture, object.gloss_texture->embedded, where,
+                                             object.gloss_texture->field),
+                               object.gloss_texture->texture, where, object.gloss_texture->field, spec);
     }
   }
 }
 
-void* SurfaceTextures::Open(const std::filesystem::path& texture, const std::string& where, const std::string& field,
-                            OIIO::ImageSpec& spec) const {
-  const OIIO::ustring file(texture.string());
+void* SurfaceTextures::Open(const std::filesystem::path& file_path, const std::filesystem::path& texture,
+                            const std::string& where, const std::string& field, OIIO::ImageSpec& spec) const {
+  const OIIO::ustring file(file_path.string());
   system_->invalidate(file);
   OIIO::TextureSystem::TextureHandle* handle = system_->get_texture_handle(file);
   if (!handle || !system_->get_imagespec(handle, nullptr, 0, spec)) {

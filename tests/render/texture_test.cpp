@@ -16,9 +16,11 @@
 #include <fstream>
 #include <functional>
 #include <map>
+#include <optional>
 #include <random>
 
 #include <OpenImageIO/imageio.h>
+#include <OpenImageIO/strutil.h>
 #include <nlohmann/json.hpp>
 
 #include "phos/render/surface_textures.h"
@@ -292,10 +294,8 @@ TEST(AlbedoTexture, ATextureThatIsNotAnImageNamesTheFileAndTheField) {
   EXPECT_EQ(message.find('\n'), std::string::npos) << message;
 }
 
-TEST(AlbedoTexture, EmbeddedImagesAndMeshesWithoutUvsAreRefused) {
+TEST(AlbedoTexture, MeshesWithoutUvsAndMissingMtlTexturesAreRefused) {
   TempDir dir;
-  const std::string embedded = UserErrorOf([&] { LoadScene(GltfScene(dir, "data:image/png;base64,AAAA")); });
-  EXPECT_NE(embedded.find("images[0].uri: only images in their own files"), std::string::npos) << embedded;
   std::filesystem::copy_file(Fixture("scenes/textured/checker.png"), dir / "checker.png");
   std::ofstream(dir / "plane.obj") << "mtllib plane.mtl\nv 0 0 0\nv 1 0 0\nv 0 0 1\nusemtl m\nf 1 3 2\n";
   std::ofstream(dir / "plane.mtl") << "newmtl m\nmap_Kd checker.png\n";
@@ -507,22 +507,36 @@ TEST(AlbedoTexture, TheGltfSamplersWrapSaysHowTheTextureReadsPastItsSquare) {
   EXPECT_NE(message.find("samplers[0].wrapS"), std::string::npos) << message;
 }
 
-// The textured plane with KHR_texture_transform on its base colour texture,
-// `transform` the extension's object.
-std::filesystem::path TransformedPlane(const TempDir& dir, const nlohmann::json& transform) {
-  std::filesystem::copy_file(Fixture("scenes/textured/checker.png"), dir / "checker.png",
-                             std::filesystem::copy_options::overwrite_existing);
-  nlohmann::json gltf = nlohmann::json::parse(ReadText(Fixture("scenes/textured/plane.gltf")));
-  gltf["extensionsUsed"] = {"KHR_texture_transform"};
-  gltf["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]["extensions"]["KHR_texture_transform"] = transform;
-  std::ofstream(dir / "plane.gltf") << gltf.dump();
+// The textured-plane fixture's scene at 160 x 120 with `mesh` (a file in
+// dir) as its plane.
+std::filesystem::path PlaneScene(const TempDir& dir, const std::string& mesh) {
   nlohmann::json scene = nlohmann::json::parse(ReadText(Fixture("scenes/textured-plane.json")));
-  scene["objects"][0]["mesh"] = "plane.gltf";
+  scene["objects"][0]["mesh"] = mesh;
   scene["objects"][0]["phosphor"] = Fixture("materials/green.json").string();
   scene["camera"]["width"] = 160;
   scene["camera"]["height"] = 120;
-  std::ofstream(dir / "scene.json") << scene.dump();
+  std::ofstream(dir / "scene.json", std::ios::trunc) << scene.dump();
   return dir / "scene.json";
+}
+
+// The fixture's glTF, `edit` applied, as plane.gltf beside checker.png in dir.
+std::filesystem::path EditedPlane(const TempDir& dir, const std::function<void(nlohmann::json&)>& edit) {
+  std::filesystem::copy_file(Fixture("scenes/textured/checker.png"), dir / "checker.png",
+                             std::filesystem::copy_options::overwrite_existing);
+  nlohmann::json gltf = nlohmann::json::parse(ReadText(Fixture("scenes/textured/plane.gltf")));
+  edit(gltf);
+  std::ofstream(dir / "plane.gltf", std::ios::trunc) << gltf.dump();
+  return PlaneScene(dir, "plane.gltf");
+}
+
+// The textured plane with KHR_texture_transform on its base colour texture,
+// `transform` the extension's object.
+std::filesystem::path TransformedPlane(const TempDir& dir, const nlohmann::json& transform) {
+  return EditedPlane(dir, [&](nlohmann::json& gltf) {
+    gltf["extensionsUsed"] = {"KHR_texture_transform"};
+    gltf["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]["extensions"]["KHR_texture_transform"] =
+        transform;
+  });
 }
 
 // Random offsets, rotations and scales: each quadrant's centre shows the
@@ -588,6 +602,104 @@ TEST(AlbedoTexture, AKhrTextureTransformPhosCannotFollowIsOneLineNamingItsField)
   gltf["extensionsRequired"] = {"KHR_texture_transform"};
   std::ofstream(required / "plane.gltf") << gltf.dump();
   EXPECT_EQ(LoadScene(scene).objects[0].albedo_texture->uv_transform.offset, Eigen::Vector2f(0.5f, 0));
+}
+
+// XDG_CACHE_HOME set to a folder of its own while it lives: where embedded
+// images are written (surface_textures.h).
+class ScopedCacheHome {
+ public:
+  explicit ScopedCacheHome(const std::filesystem::path& folder) {
+    if (const char* old = std::getenv("XDG_CACHE_HOME")) old_ = old;
+    ::setenv("XDG_CACHE_HOME", folder.c_str(), 1);
+  }
+  ~ScopedCacheHome() {
+    if (old_) {
+      ::setenv("XDG_CACHE_HOME", old_->c_str(), 1);
+    } else {
+      ::unsetenv("XDG_CACHE_HOME");
+    }
+  }
+
+ private:
+  std::optional<std::string> old_;
+};
+
+// A .glb: its JSON chunk, then `bin` as its BIN chunk (glTF 2.0, 4.4).
+void WriteGlb(const std::filesystem::path& path, const nlohmann::json& gltf, std::string bin) {
+  std::string json = gltf.dump();
+  while (json.size() % 4) json += ' ';
+  while (bin.size() % 4) bin += '\0';
+  std::ofstream out(path, std::ios::binary);
+  auto word = [&](std::uint32_t w) { out.write(reinterpret_cast<const char*>(&w), 4); };
+  out.write("glTF", 4);
+  word(2);
+  word(static_cast<std::uint32_t>(12 + 8 + json.size() + 8 + bin.size()));
+  word(static_cast<std::uint32_t>(json.size()));
+  word(0x4E4F534Au);  // JSON
+  out << json;
+  word(static_cast<std::uint32_t>(bin.size()));
+  word(0x004E4942u);  // BIN
+  out << bin;
+}
+
+// The checker plane with its image inside the glTF: a data: URI, or a .glb
+// whose BIN chunk holds the PNG (the plane's own buffer stays a data: URI,
+// buffers[1]). Each renders as the plane with the image in its own file,
+// albedo E / pi per quadrant, and the image's file in the cache holds its bytes.
+TEST(AlbedoTexture, ImagesEmbeddedInAGltfOrAGlbRenderAsTheirFiles) {
+  TempDir cache;
+  const ScopedCacheHome scoped(cache.path());
+  const std::string png = ReadText(Fixture("scenes/textured/checker.png"));
+  auto render = [&](const std::filesystem::path& scene_file, const std::string& what) {
+    const Scene scene = LoadScene(scene_file);
+    ASSERT_TRUE(scene.objects[0].albedo_texture && scene.objects[0].albedo_texture->embedded) << what;
+    SceneGeometry geometry(scene);
+    FrameOptions options = DefaultFrameOptions(scene, Transport::kDirect);
+    options.direct_spp = 1;
+    ExpectQuadrantsAreAlbedoTimesEOverPi(scene, RenderBands(geometry, nullptr, options), what);
+  };
+  TempDir uri_dir;
+  render(EditedPlane(uri_dir,
+                     [&](nlohmann::json& gltf) {
+                       gltf["images"][0]["uri"] = "data:image/png;base64," + OIIO::Strutil::base64_encode(png);
+                     }),
+         "data: URI");
+  TempDir glb_dir;
+  nlohmann::json gltf = nlohmann::json::parse(ReadText(Fixture("scenes/textured/plane.gltf")));
+  const nlohmann::json plane_buffer = gltf["buffers"][0];
+  gltf["buffers"] = nlohmann::json::array({nlohmann::json{{"byteLength", png.size()}}, plane_buffer});
+  for (nlohmann::json& view : gltf["bufferViews"]) view["buffer"] = 1;
+  gltf["bufferViews"].push_back({{"buffer", 0}, {"byteOffset", 0}, {"byteLength", png.size()}});
+  gltf["images"][0] = {{"bufferView", 3}, {"mimeType", "image/png"}};
+  WriteGlb(glb_dir / "plane.glb", gltf, png);
+  render(PlaneScene(glb_dir, "plane.glb"), "glb bufferView");
+  // One file in the cache, the PNG's bytes (the same image both times).
+  std::vector<std::filesystem::path> files;
+  for (const auto& entry : std::filesystem::recursive_directory_iterator(cache.path()))
+    if (entry.is_regular_file()) files.push_back(entry.path());
+  ASSERT_EQ(files.size(), 1u);
+  EXPECT_EQ(files[0].extension(), ".png");
+  EXPECT_EQ(ReadText(files[0]), png);
+
+  // A bufferView past its buffer's end, a format other than PNG and JPEG,
+  // and bytes that are no image: one line naming the field.
+  gltf["bufferViews"][3]["byteLength"] = png.size() + 1;
+  WriteGlb(glb_dir / "plane.glb", gltf, png);
+  std::string message = UserErrorOf([&] { LoadScene(PlaneScene(glb_dir, "plane.glb")); });
+  EXPECT_NE(message.find("bufferViews[3]: the image's bytes lie outside its buffer"), std::string::npos) << message;
+  gltf["bufferViews"][3]["byteLength"] = png.size();
+  gltf["images"][0]["mimeType"] = "image/gif";
+  WriteGlb(glb_dir / "plane.glb", gltf, png);
+  message = UserErrorOf([&] { LoadScene(PlaneScene(glb_dir, "plane.glb")); });
+  EXPECT_NE(message.find("images[0].mimeType: expected image/png or image/jpeg"), std::string::npos) << message;
+  TempDir junk_dir;
+  const Scene junk = LoadScene(EditedPlane(junk_dir, [&](nlohmann::json& g) {
+    g["images"][0]["uri"] = "data:image/png;base64,AAAA";
+  }));  // read when rendering starts, as a file's pixels are
+  message = UserErrorOf([&] { SceneGeometry geometry(junk); });
+  EXPECT_NE(message.find("baseColorTexture"), std::string::npos) << message;
+  EXPECT_NE(message.find("images[0] (embedded)' is not an image"), std::string::npos) << message;
+  EXPECT_EQ(message.find('\n'), std::string::npos) << message;
 }
 
 }  // namespace

@@ -74,11 +74,27 @@ struct UvTransform {
   bool operator==(const UvTransform&) const = default;
 };
 
+// An image inside a glTF file (a data: URI, or a bufferView of a .glb): its
+// bytes, which a render writes to a file of its own in the user's cache
+// before OpenImageIO opens it (surface_textures.h).
+struct EmbeddedImage {
+  std::string bytes;
+  std::string extension;  // ".png" or ".jpg", from the image's mimeType
+};
+// The same texture: the same file, or embedded images of the same bytes.
+inline bool SameTexture(const std::filesystem::path& a, const std::shared_ptr<const EmbeddedImage>& a_embedded,
+                        const std::filesystem::path& b, const std::shared_ptr<const EmbeddedImage>& b_embedded) {
+  if (a_embedded || b_embedded)
+    return a_embedded && b_embedded && a_embedded->bytes == b_embedded->bytes;
+  return a == b;
+}
+
 // A glTF metallicRoughnessTexture (glTF 2.0, material.pbrMetallicRoughness):
 // roughness in its G channel and metallic in its B channel, linear (not
 // sRGB), each times the object's Gloss factor at every hit.
 struct GlossTexture {
-  std::filesystem::path texture;
+  std::filesystem::path texture;  // embedded: the glTF's images[j], for messages
+  std::shared_ptr<const EmbeddedImage> embedded;  // null: the texture is a file of its own
   std::string field;  // where the file says so, for messages
   TextureWraps wraps;
   UvTransform uv_transform;
@@ -89,14 +105,15 @@ struct GlossTexture {
 // factor, times the texture's sRGB-decoded texel when there is one.
 struct BaseColour {
   Eigen::Vector3f factor = Eigen::Vector3f::Ones();  // linear RGB in [0, 1]
-  std::filesystem::path texture;                      // empty: none
+  std::filesystem::path texture;                      // empty: none; embedded: the glTF's images[j], for messages
+  std::shared_ptr<const EmbeddedImage> embedded;      // null: the texture (if any) is a file of its own
   std::string field;                                  // where the file says so, for messages
   bool v_up = false;  // OBJ: v = 0 is the image's bottom row; glTF: its top row
   TextureWraps wraps;
   UvTransform uv_transform;
   bool operator==(const BaseColour& other) const {
-    return factor == other.factor && texture == other.texture && v_up == other.v_up && wraps == other.wraps &&
-           uv_transform == other.uv_transform;
+    return factor == other.factor && SameTexture(texture, embedded, other.texture, other.embedded) &&
+           v_up == other.v_up && wraps == other.wraps && uv_transform == other.uv_transform;
   }
 };
 
