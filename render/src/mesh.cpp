@@ -435,10 +435,12 @@ UvTransform GltfUvTransform(const tinygltf::TextureInfo& info, const std::string
     ThrowUserError(where, at + ".texCoord", "only TEXCOORD_0 is supported");
   const Eigen::Vector2f offset = pair("offset", 0.0f), scale = pair("scale", 1.0f);
   const float rotation = value.Has("rotation") ? number(value.Get("rotation"), "rotation") : 0.0f;
-  // The extension's rotation matrix (its README gives it in GLSL, column by
-  // column: mat3(cos, sin, 0, -sin, cos, 0, 0, 0, 1)), here row by row.
+  // Counter-clockwise in glTF's UV space, whose v runs down: u' = c u + s v,
+  // v' = -s u + c v, as Khronos's sample renderer and the extension's sample
+  // model (TextureTransformTest) have it. The GLSL listing in the extension's
+  // README turns the other way (a y-up rotation; glTF issue 1563).
   Eigen::Matrix2f rotate;
-  rotate << std::cos(rotation), -std::sin(rotation), std::sin(rotation), std::cos(rotation);
+  rotate << std::cos(rotation), std::sin(rotation), -std::sin(rotation), std::cos(rotation);
   UvTransform transform;
   transform.linear = rotate * scale.asDiagonal();
   transform.offset = offset;

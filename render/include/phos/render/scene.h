@@ -63,9 +63,9 @@ struct TextureWraps {
 };
 
 // Where a texture is read, given the mesh's UV: glTF's KHR_texture_transform
-// (uv' = T R S uv, offset then rotation then scale, as the extension's
-// matrix; rotation counter-clockwise in UV space, radians). The identity
-// for OBJ/MTL and for glTF without the extension.
+// (uv' = T R S uv: scaled, then rotated, then offset; the rotation in
+// radians, counter-clockwise in glTF's UV space, where v runs down). The
+// identity for OBJ/MTL and for glTF without the extension.
 struct UvTransform {
   Eigen::Matrix2f linear = Eigen::Matrix2f::Identity();  // R S
   Eigen::Vector2f offset = Eigen::Vector2f::Zero();
