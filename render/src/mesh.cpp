@@ -321,20 +321,13 @@ bool GltfNoWrite(std::string* err, const std::string&, const std::vector<unsigne
 // must not cost time at load. A data: URI's bytes, decoded by tinygltf, are
 // kept (they exist nowhere else); a file's are dropped (the render opens it
 // by name), and a bufferView's are taken from its buffer once its range is
-// checked (GltfTextureSource): tinygltf hands them over unchecked.
+// checked (GltfEmbeddedImage): tinygltf hands them over unchecked.
 bool GltfKeepDataUriImage(tinygltf::Image* image, const int, std::string*, std::string*, int, int,
                           const unsigned char* bytes, int size, void*) {
   if (image->bufferView < 0 && image->uri.empty() && bytes != nullptr && size > 0)
     image->image.assign(bytes, bytes + size);
   return true;
 }
-
-// Where a glTF texture reference's image is: a file of its own, or its
-// bytes inside the glTF.
-struct GltfTextureSource {
-  std::filesystem::path texture;
-  std::shared_ptr<const EmbeddedImage> embedded;
-};
 
 // An embedded image's bytes (a data: URI's, kept by GltfKeepDataUriImage,
 // or a bufferView's, its range checked here) and its file extension.
@@ -369,12 +362,12 @@ std::shared_ptr<const EmbeddedImage> GltfEmbeddedImage(const tinygltf::Model& mo
   return embedded;
 }
 
-// The image of a glTF texture reference (`field` names it in messages),
-// through TEXCOORD_0: a file beside the glTF, a data: URI or a .glb's
-// bufferView (PNG or JPEG).
-GltfTextureSource GltfTextureImage(const tinygltf::Model& model, const tinygltf::TextureInfo& info,
-                                   const std::filesystem::path& base_dir, const std::string& where,
-                                   const std::string& field) {
+// The image of a glTF texture reference, through TEXCOORD_0: a file beside
+// the glTF, a data: URI or a .glb's bufferView (PNG or JPEG). `texture.field`
+// names the reference in messages.
+void GltfTextureImage(const tinygltf::Model& model, const tinygltf::TextureInfo& info,
+                      const std::filesystem::path& base_dir, const std::string& where, TextureSource& texture) {
+  const std::string& field = texture.field;
   if (info.texCoord != 0) ThrowUserError(where, field + ".texCoord", "only TEXCOORD_0 is supported");
   if (info.index >= static_cast<int>(model.textures.size()))
     ThrowUserError(where, field + ".index", "texture index out of range");
@@ -382,9 +375,12 @@ GltfTextureSource GltfTextureImage(const tinygltf::Model& model, const tinygltf:
   if (source < 0 || source >= static_cast<int>(model.images.size()))
     ThrowUserError(where, "textures[" + std::to_string(info.index) + "].source", "image index out of range");
   const tinygltf::Image& image = model.images[source];
-  if (image.bufferView >= 0 || image.uri.empty() || image.uri.rfind("data:", 0) == 0)
-    return {"images[" + std::to_string(source) + "] (embedded)", GltfEmbeddedImage(model, source, where)};
-  return {TextureFile(base_dir, image.uri, where, "images[" + std::to_string(source) + "].uri"), nullptr};
+  if (image.bufferView >= 0 || image.uri.empty() || image.uri.rfind("data:", 0) == 0) {
+    texture.texture = "images[" + std::to_string(source) + "] (embedded)";
+    texture.embedded = GltfEmbeddedImage(model, source, where);
+  } else {
+    texture.texture = TextureFile(base_dir, image.uri, where, "images[" + std::to_string(source) + "].uri");
+  }
 }
 
 // How the texture of `info` wraps: its sampler's wrapS and wrapT (glTF 2.0,
@@ -447,6 +443,14 @@ UvTransform GltfUvTransform(const tinygltf::TextureInfo& info, const std::string
   return transform;
 }
 
+// A glTF texture reference read whole: its image, wraps and transform.
+void ReadGltfTexture(const tinygltf::Model& model, const tinygltf::TextureInfo& info,
+                     const std::filesystem::path& base_dir, const std::string& where, TextureSource& texture) {
+  GltfTextureImage(model, info, base_dir, where, texture);
+  texture.wraps = GltfTextureWraps(model, info, where);
+  texture.uv_transform = GltfUvTransform(info, where, texture.field);
+}
+
 // The base colour of glTF material `index` (pbrMetallicRoughness
 // baseColorFactor, linear, and baseColorTexture, sRGB), none without one.
 std::optional<BaseColour> GltfBaseColour(const tinygltf::Model& model, int index,
@@ -464,11 +468,7 @@ std::optional<BaseColour> GltfBaseColour(const tinygltf::Model& model, int index
   const tinygltf::TextureInfo& info = pbr.baseColorTexture;
   if (info.index < 0) return colour;
   colour.field = field + ".pbrMetallicRoughness.baseColorTexture";
-  GltfTextureSource source = GltfTextureImage(model, info, base_dir, where, colour.field);
-  colour.texture = std::move(source.texture);
-  colour.embedded = std::move(source.embedded);
-  colour.wraps = GltfTextureWraps(model, info, where);
-  colour.uv_transform = GltfUvTransform(info, where, colour.field);
+  ReadGltfTexture(model, info, base_dir, where, colour);
   return colour;
 }
 
@@ -498,11 +498,7 @@ std::optional<GlossTexture> GltfGlossTexture(const tinygltf::Model& model, int i
   if (info.index < 0) return std::nullopt;
   GlossTexture gloss;
   gloss.field = "materials[" + std::to_string(index) + "].pbrMetallicRoughness.metallicRoughnessTexture";
-  GltfTextureSource source = GltfTextureImage(model, info, base_dir, where, gloss.field);
-  gloss.texture = std::move(source.texture);
-  gloss.embedded = std::move(source.embedded);
-  gloss.wraps = GltfTextureWraps(model, info, where);
-  gloss.uv_transform = GltfUvTransform(info, where, gloss.field);
+  ReadGltfTexture(model, info, base_dir, where, gloss);
   return gloss;
 }
 

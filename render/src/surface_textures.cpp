@@ -57,31 +57,32 @@ std::filesystem::path EmbeddedImageFolder() {
   return std::filesystem::temp_directory_path() / ("phos-textures-" + std::to_string(::getuid()));
 }
 
-}  // namespace
-
-std::filesystem::path TextureFileOf(const std::filesystem::path& texture,
-                                    const std::shared_ptr<const EmbeddedImage>& embedded, const std::string& where,
-                                    const std::string& field) {
-  if (!embedded) return texture;
-  // Named by a hash of its bytes (XXH3, 128 bits): a second render, or two at
-  // once, find or write the same file; OpenImageIO's TextureSystem opens
-  // textures by name only (in 2.4 it takes no bytes from memory).
-  const XXH128_hash_t hash = XXH3_128bits(embedded->bytes.data(), embedded->bytes.size());
+// The file OpenImageIO opens for a texture: its own, or for an image
+// embedded in a glTF, a file holding its bytes in EmbeddedImageFolder(),
+// named by a hash of them (XXH3, 128 bits) and written once: a second render,
+// or two at once, find or write the same file. OpenImageIO 2.4's
+// TextureSystem opens textures by name only; it takes no bytes from memory.
+std::filesystem::path TextureFileOf(const TextureSource& source, const std::string& where) {
+  if (!source.embedded) return source.texture;
+  const EmbeddedImage& image = *source.embedded;
+  const XXH128_hash_t hash = XXH3_128bits(image.bytes.data(), image.bytes.size());
   char name[40];
   std::snprintf(name, sizeof(name), "%016llx%016llx", static_cast<unsigned long long>(hash.high64),
                 static_cast<unsigned long long>(hash.low64));
   const std::filesystem::path folder = EmbeddedImageFolder();
-  const std::filesystem::path file = folder / (name + embedded->extension);
+  const std::filesystem::path file = folder / (name + image.extension);
   std::error_code ec;
-  if (std::filesystem::is_regular_file(file, ec) && std::filesystem::file_size(file, ec) == embedded->bytes.size())
+  if (std::filesystem::is_regular_file(file, ec) && std::filesystem::file_size(file, ec) == image.bytes.size())
     return file;
   std::filesystem::create_directories(folder, ec);
   if (ec)
-    ThrowUserError(where, field,
+    ThrowUserError(where, source.field,
                    "cannot create the folder '" + folder.string() + "' for its embedded image: " + ec.message());
-  WriteFileAtomically(file, embedded->bytes);
+  WriteFileAtomically(file, image.bytes);
   return file;
 }
+
+}  // namespace
 
 SurfaceTextures::SurfaceTextures(const Scene& scene)
     : scene_(scene),
@@ -104,32 +105,27 @@ SurfaceTextures::SurfaceTextures(const Scene& scene)
         scene.source + ": objects[" + std::to_string(o) + "] '" + object.name + "': " + object.mesh->source;
     if (object.albedo_texture) {
       OIIO::ImageSpec spec;
-      handles_[o] = Open(TextureFileOf(object.albedo_texture->texture, object.albedo_texture->embedded, where,
-                                       object.albedo_texture->field),
-                         object.albedo_texture->texture, where, object.albedo_texture->field, spec);
+      handles_[o] = Open(*object.albedo_texture, where, spec);
       // glTF says a base colour texture is sRGB-encoded; 8- and 16-bit images
       // are taken as such, float ones (EXR) as linear.
       srgb_[o] = !spec.format.is_floating_point();
     }
     if (object.gloss_texture) {
       OIIO::ImageSpec spec;
-      gloss_handles_[o] = Open(TextureFileOf(object.gloss_texture->texture, object.gloss_texture->embedded, where,
-                                             object.gloss_texture->field),
-                               object.gloss_texture->texture, where, object.gloss_texture->field, spec);
+      gloss_handles_[o] = Open(*object.gloss_texture, where, spec);
     }
   }
 }
 
-void* SurfaceTextures::Open(const std::filesystem::path& file_path, const std::filesystem::path& texture,
-                            const std::string& where, const std::string& field, OIIO::ImageSpec& spec) const {
-  const OIIO::ustring file(file_path.string());
+void* SurfaceTextures::Open(const TextureSource& source, const std::string& where, OIIO::ImageSpec& spec) const {
+  const OIIO::ustring file(TextureFileOf(source, where).string());
   system_->invalidate(file);
   OIIO::TextureSystem::TextureHandle* handle = system_->get_texture_handle(file);
   if (!handle || !system_->get_imagespec(handle, nullptr, 0, spec)) {
     // OpenImageIO's message may hold newlines: ThrowUserError escapes them (one line).
     const std::string error = system_->geterror();
-    ThrowUserError(where, field,
-                   "texture file '" + texture.string() + "' is not an image OpenImageIO can read" +
+    ThrowUserError(where, source.field,
+                   "texture file '" + source.texture.string() + "' is not an image OpenImageIO can read" +
                        (error.empty() ? "" : ": " + error));
   }
   return handle;
@@ -190,18 +186,19 @@ UvFootprint SurfaceTextures::Footprint(const SceneGeometry& geometry, const Hit&
   return footprint;
 }
 
-void SurfaceTextures::Lookup(void* handle, const UvFootprint& footprint, bool v_up, const TextureWraps& wraps,
-                             const UvTransform& transform, int first_channel, int channels, float* out) const {
+void SurfaceTextures::Lookup(void* handle, const UvFootprint& footprint, bool v_up, const TextureSource& source,
+                             int first_channel, int channels, float* out) const {
   // OpenImageIO's t runs down the image from its top row, as glTF's v; an
   // OBJ's v runs up from the bottom row.
   const float flip = v_up ? -1.0f : 1.0f;
   // The texture's own UV (KHR_texture_transform): the point through the
   // whole affine map, the footprint's offsets through its linear part.
+  const UvTransform& transform = source.uv_transform;
   const Eigen::Vector2f uv = transform(footprint.uv), duv_dx = transform.linear * footprint.duv_dx,
                         duv_dy = transform.linear * footprint.duv_dy;
   OIIO::TextureOpt options;
-  options.swrap = OiioWrap(wraps.s);
-  options.twrap = OiioWrap(wraps.t);
+  options.swrap = OiioWrap(source.wraps.s);
+  options.twrap = OiioWrap(source.wraps.t);
   // Trilinear across levels, bilinear within one: OpenImageIO's defaults
   // (smart bicubic, anisotropic) took 2.9x the untextured frame and
   // bilinear-anisotropic 2.4x, trilinear 1.9x (bench_render,
@@ -217,7 +214,7 @@ void SurfaceTextures::Lookup(void* handle, const UvFootprint& footprint, bool v_
 void SurfaceTextures::Albedo(int object, const UvFootprint& footprint, float* bands) const {
   const BaseColour& colour = *scene_.objects[object].albedo_texture;
   float rgb[3] = {0, 0, 0};
-  Lookup(handles_[object], footprint, colour.v_up, colour.wraps, colour.uv_transform, 0, 3, rgb);
+  Lookup(handles_[object], footprint, colour.v_up, colour, 0, 3, rgb);
   for (int c = 0; c < 3; ++c) {
     // Decoded after the filter: OpenImageIO 2.4's TextureSystem has no
     // colour transform (docs/render.md, "Textures", says what that costs).
@@ -230,8 +227,7 @@ void SurfaceTextures::Albedo(int object, const UvFootprint& footprint, float* ba
 Gloss SurfaceTextures::GlossAt(int object, const UvFootprint& footprint, const Gloss& factors) const {
   float roughness_metallic[2] = {1, 1};  // glTF: G roughness, B metallic
   const Object& o = scene_.objects[object];
-  Lookup(gloss_handles_[object], footprint, o.mesh->v_up, o.gloss_texture->wraps, o.gloss_texture->uv_transform, 1,
-         2, roughness_metallic);
+  Lookup(gloss_handles_[object], footprint, o.mesh->v_up, *o.gloss_texture, 1, 2, roughness_metallic);
   return {factors.metallic * std::clamp(roughness_metallic[1], 0.0f, 1.0f),
           factors.roughness * std::clamp(roughness_metallic[0], 0.0f, 1.0f)};
 }

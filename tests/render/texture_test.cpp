@@ -228,16 +228,26 @@ TEST(AlbedoTexture, TheScenesAlbedoOverridesTheMeshsBaseColour) {
   for (double v : scene.objects[0].albedo) EXPECT_EQ(v, 0.4);
 }
 
-// A copy of the fixture's glTF whose image is `image` (a file in dir, or none).
-std::filesystem::path GltfScene(const TempDir& dir, const std::string& image_uri) {
-  std::string gltf = phos::testing::ReadText(Fixture("scenes/textured/plane.gltf"));
-  const std::string uri = "\"uri\": \"checker.png\"";
-  gltf.replace(gltf.find(uri), uri.size(), "\"uri\": \"" + image_uri + "\"");
-  std::ofstream(dir / "plane.gltf") << gltf;
-  std::ofstream(dir / "scene.json") << R"({"schema": "phos.scene/1", "time": {"start_s": 0, "end_s": 1, "fps": 1},
-    "camera": {"position": [0, 2, 0], "look_at": [0, 0, 0], "up": [0, 0, 1]},
-    "objects": [{"name": "plane", "mesh": "plane.gltf"}], "lights": []})";
+// The textured-plane fixture's scene at 160 x 120 with `mesh` (a file in
+// dir) as its plane.
+std::filesystem::path PlaneScene(const TempDir& dir, const std::string& mesh) {
+  nlohmann::json scene = nlohmann::json::parse(ReadText(Fixture("scenes/textured-plane.json")));
+  scene["objects"][0]["mesh"] = mesh;
+  scene["objects"][0]["phosphor"] = Fixture("materials/green.json").string();
+  scene["camera"]["width"] = 160;
+  scene["camera"]["height"] = 120;
+  std::ofstream(dir / "scene.json", std::ios::trunc) << scene.dump();
   return dir / "scene.json";
+}
+
+// The fixture's glTF, `edit` applied, as plane.gltf beside checker.png in dir.
+std::filesystem::path EditedPlane(const TempDir& dir, const std::function<void(nlohmann::json&)>& edit) {
+  std::filesystem::copy_file(Fixture("scenes/textured/checker.png"), dir / "checker.png",
+                             std::filesystem::copy_options::overwrite_existing);
+  nlohmann::json gltf = nlohmann::json::parse(ReadText(Fixture("scenes/textured/plane.gltf")));
+  edit(gltf);
+  std::ofstream(dir / "plane.gltf", std::ios::trunc) << gltf.dump();
+  return PlaneScene(dir, "plane.gltf");
 }
 
 std::string UserErrorOf(const std::function<void()>& f) {
@@ -276,7 +286,8 @@ TEST(AlbedoTexture, KdAloneIsAConstantAlbedoAndDifferingPartsNeedTheScenesWord) 
 
 TEST(AlbedoTexture, AMissingTextureNamesTheFileAndTheField) {
   TempDir dir;
-  const std::string message = UserErrorOf([&] { LoadScene(GltfScene(dir, "gone.png")); });
+  const std::string message =
+      UserErrorOf([&] { LoadScene(EditedPlane(dir, [](nlohmann::json& g) { g["images"][0]["uri"] = "gone.png"; })); });
   EXPECT_NE(message.find("plane.gltf"), std::string::npos) << message;
   EXPECT_NE(message.find("images[0].uri"), std::string::npos) << message;
   EXPECT_NE(message.find("gone.png' does not exist"), std::string::npos) << message;
@@ -286,7 +297,9 @@ TEST(AlbedoTexture, AMissingTextureNamesTheFileAndTheField) {
 TEST(AlbedoTexture, ATextureThatIsNotAnImageNamesTheFileAndTheField) {
   TempDir dir;
   std::ofstream(dir / "notes.png") << "these are not pixels\n";
-  const Scene scene = LoadScene(GltfScene(dir, "notes.png"));  // a regular file: read when rendering starts
+  const Scene scene = LoadScene(EditedPlane(dir, [](nlohmann::json& g) {
+    g["images"][0]["uri"] = "notes.png";
+  }));  // a regular file: read when rendering starts
   const std::string message = UserErrorOf([&] { SceneGeometry geometry(scene); });
   EXPECT_NE(message.find("plane.gltf"), std::string::npos) << message;
   EXPECT_NE(message.find("baseColorTexture"), std::string::npos) << message;
@@ -507,28 +520,6 @@ TEST(AlbedoTexture, TheGltfSamplersWrapSaysHowTheTextureReadsPastItsSquare) {
   EXPECT_NE(message.find("samplers[0].wrapS"), std::string::npos) << message;
 }
 
-// The textured-plane fixture's scene at 160 x 120 with `mesh` (a file in
-// dir) as its plane.
-std::filesystem::path PlaneScene(const TempDir& dir, const std::string& mesh) {
-  nlohmann::json scene = nlohmann::json::parse(ReadText(Fixture("scenes/textured-plane.json")));
-  scene["objects"][0]["mesh"] = mesh;
-  scene["objects"][0]["phosphor"] = Fixture("materials/green.json").string();
-  scene["camera"]["width"] = 160;
-  scene["camera"]["height"] = 120;
-  std::ofstream(dir / "scene.json", std::ios::trunc) << scene.dump();
-  return dir / "scene.json";
-}
-
-// The fixture's glTF, `edit` applied, as plane.gltf beside checker.png in dir.
-std::filesystem::path EditedPlane(const TempDir& dir, const std::function<void(nlohmann::json&)>& edit) {
-  std::filesystem::copy_file(Fixture("scenes/textured/checker.png"), dir / "checker.png",
-                             std::filesystem::copy_options::overwrite_existing);
-  nlohmann::json gltf = nlohmann::json::parse(ReadText(Fixture("scenes/textured/plane.gltf")));
-  edit(gltf);
-  std::ofstream(dir / "plane.gltf", std::ios::trunc) << gltf.dump();
-  return PlaneScene(dir, "plane.gltf");
-}
-
 // The textured plane with KHR_texture_transform on its base colour texture,
 // `transform` the extension's object.
 std::filesystem::path TransformedPlane(const TempDir& dir, const nlohmann::json& transform) {
@@ -568,7 +559,8 @@ TEST(AlbedoTexture, KhrTextureTransformMovesTheTextureAsTheExtensionsMatrixSays)
     };
     bool usable = true;
     for (int u_half = 0; u_half < 2; ++u_half)
-      for (int v_half = 0; v_half < 2; ++v_half) usable = usable && clear(sent(u_half, v_half)[0]) && clear(sent(u_half, v_half)[1]);
+      for (int v_half = 0; v_half < 2; ++v_half)
+        usable = usable && clear(sent(u_half, v_half)[0]) && clear(sent(u_half, v_half)[1]);
     if (!usable) continue;
     TempDir dir;
     const Scene scene = LoadScene(TransformedPlane(

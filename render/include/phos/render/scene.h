@@ -69,7 +69,6 @@ struct TextureWraps {
 struct UvTransform {
   Eigen::Matrix2f linear = Eigen::Matrix2f::Identity();  // R S
   Eigen::Vector2f offset = Eigen::Vector2f::Zero();
-  bool identity() const { return linear.isIdentity(0.0f) && offset.isZero(0.0f); }
   Eigen::Vector2f operator()(const Eigen::Vector2f& uv) const { return linear * uv + offset; }
   bool operator==(const UvTransform&) const = default;
 };
@@ -81,39 +80,38 @@ struct EmbeddedImage {
   std::string bytes;
   std::string extension;  // ".png" or ".jpg", from the image's mimeType
 };
-// The same texture: the same file, or embedded images of the same bytes.
-inline bool SameTexture(const std::filesystem::path& a, const std::shared_ptr<const EmbeddedImage>& a_embedded,
-                        const std::filesystem::path& b, const std::shared_ptr<const EmbeddedImage>& b_embedded) {
-  if (a_embedded || b_embedded)
-    return a_embedded && b_embedded && a_embedded->bytes == b_embedded->bytes;
-  return a == b;
-}
+
+// A texture image a mesh file names, and how it is read: what a base colour
+// and a gloss texture share.
+struct TextureSource {
+  std::filesystem::path texture;                  // empty: none; embedded: the glTF's images[j], for messages
+  std::shared_ptr<const EmbeddedImage> embedded;  // null: the texture (if any) is a file of its own
+  std::string field;                              // where the file says so, for messages
+  TextureWraps wraps;
+  UvTransform uv_transform;
+  // The same image (the same file, or embedded images of the same bytes),
+  // read the same way; `field`, words for messages, aside.
+  bool SameReading(const TextureSource& other) const {
+    const bool same_image = embedded || other.embedded
+                                ? embedded && other.embedded && embedded->bytes == other.embedded->bytes
+                                : texture == other.texture;
+    return same_image && wraps == other.wraps && uv_transform == other.uv_transform;
+  }
+};
 
 // A glTF metallicRoughnessTexture (glTF 2.0, material.pbrMetallicRoughness):
 // roughness in its G channel and metallic in its B channel, linear (not
 // sRGB), each times the object's Gloss factor at every hit.
-struct GlossTexture {
-  std::filesystem::path texture;  // embedded: the glTF's images[j], for messages
-  std::shared_ptr<const EmbeddedImage> embedded;  // null: the texture is a file of its own
-  std::string field;  // where the file says so, for messages
-  TextureWraps wraps;
-  UvTransform uv_transform;
-};
+struct GlossTexture : TextureSource {};
 
 // The base colour a mesh file declares (glTF pbrMetallicRoughness
 // baseColorFactor and baseColorTexture, OBJ/MTL Kd and map_Kd): a linear RGB
 // factor, times the texture's sRGB-decoded texel when there is one.
-struct BaseColour {
+struct BaseColour : TextureSource {
   Eigen::Vector3f factor = Eigen::Vector3f::Ones();  // linear RGB in [0, 1]
-  std::filesystem::path texture;                      // empty: none; embedded: the glTF's images[j], for messages
-  std::shared_ptr<const EmbeddedImage> embedded;      // null: the texture (if any) is a file of its own
-  std::string field;                                  // where the file says so, for messages
   bool v_up = false;  // OBJ: v = 0 is the image's bottom row; glTF: its top row
-  TextureWraps wraps;
-  UvTransform uv_transform;
   bool operator==(const BaseColour& other) const {
-    return factor == other.factor && SameTexture(texture, embedded, other.texture, other.embedded) &&
-           v_up == other.v_up && wraps == other.wraps && uv_transform == other.uv_transform;
+    return factor == other.factor && v_up == other.v_up && SameReading(other);
   }
 };
 

@@ -33,15 +33,6 @@ struct UvFootprint {
   Eigen::Vector2f duv_dx = Eigen::Vector2f::Zero(), duv_dy = Eigen::Vector2f::Zero();  // zero: a point lookup
 };
 
-// The file OpenImageIO opens for a texture: `texture` itself, or for an
-// image embedded in a glTF, a file holding its bytes in the user's cache
-// ($XDG_CACHE_HOME/phos/textures, else ~/.cache/phos/textures), named by
-// their hash and written once. A folder that cannot be made is a UserError
-// naming `where` and `field`.
-std::filesystem::path TextureFileOf(const std::filesystem::path& texture,
-                                    const std::shared_ptr<const EmbeddedImage>& embedded, const std::string& where,
-                                    const std::string& field);
-
 class SurfaceTextures {
  public:
   // Opens every textured object's file; one that is not an image OpenImageIO
@@ -72,13 +63,16 @@ class SurfaceTextures {
   Gloss GlossAt(int object, const UvFootprint& footprint, const Gloss& factors) const;
 
  private:
-  // A texture's handle; a file that is not an image is a UserError naming
-  // `texture` (the file, or the glTF's embedded image).
-  void* Open(const std::filesystem::path& file, const std::filesystem::path& texture, const std::string& where,
-             const std::string& field, OIIO::ImageSpec& spec) const;
-  // `channels` channels from `first_channel` of the texture over a footprint.
-  void Lookup(void* handle, const UvFootprint& footprint, bool v_up, const TextureWraps& wraps,
-              const UvTransform& transform, int first_channel, int channels, float* out) const;
+  // A texture's handle (an embedded image is first written to a file of its
+  // own in the user's cache: $XDG_CACHE_HOME/phos/textures, else
+  // ~/.cache/phos/textures); an image OpenImageIO cannot read is a
+  // UserError naming `source.texture` (the file, or the glTF's embedded
+  // image) and its field.
+  void* Open(const TextureSource& source, const std::string& where, OIIO::ImageSpec& spec) const;
+  // `channels` channels from `first_channel` of `source`'s texture (its
+  // wraps and UV transform) over a footprint.
+  void Lookup(void* handle, const UvFootprint& footprint, bool v_up, const TextureSource& source, int first_channel,
+              int channels, float* out) const;
 
   const Scene& scene_;
   RgbToBands to_bands_;
