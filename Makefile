@@ -11,6 +11,7 @@
 JOBS ?= $(shell nproc)
 FUZZ_SECONDS ?= 60
 FUZZ_CI_SECONDS ?= 4
+FUZZ_JOBS ?= 1
 
 .PHONY: all bootstrap build demo test bench study fuzz fuzz-build format clean
 
@@ -30,7 +31,7 @@ test: bootstrap
 	@cmake --preset asan >/dev/null
 	@cmake --build --preset asan -j $(JOBS)
 	@ctest --preset asan -j $(JOBS)
-	@$(MAKE) --no-print-directory fuzz FUZZ_SECONDS=$(FUZZ_CI_SECONDS)
+	@$(MAKE) --no-print-directory fuzz FUZZ_SECONDS=$(FUZZ_CI_SECONDS) FUZZ_JOBS=$(JOBS)
 
 bench: build
 	@bash scripts/bench.sh
@@ -45,13 +46,13 @@ study: build
 	@build/bin/phos-two-state-map-study --out docs
 
 # The harnesses (fuzz/, its own CMake project: clang, libFuzzer, ASan + UBSan,
-# only the loaders' sources), each run for FUZZ_SECONDS, one at a time.
+# only the loaders' sources), each run for FUZZ_SECONDS, FUZZ_JOBS at a time (1; make test: all cores).
 fuzz-build: bootstrap
 	@cd fuzz && cmake --preset fuzz >/dev/null
 	@cmake --build build-fuzz -j $(JOBS)
 
 fuzz: fuzz-build
-	@FUZZ_SECONDS=$(FUZZ_SECONDS) bash fuzz/run.sh
+	@FUZZ_SECONDS=$(FUZZ_SECONDS) FUZZ_JOBS=$(FUZZ_JOBS) bash fuzz/run.sh
 
 clean:
 	rm -rf build build-asan build-fuzz results

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# Runs every fuzz harness (or those named) for FUZZ_SECONDS each, one after
-# the other, at the lowest CPU priority, on one core: libFuzzer with
+# Runs every fuzz harness (or those named) for FUZZ_SECONDS each, FUZZ_JOBS
+# at a time (default 1: one core, so a machine stays usable through `make
+# fuzz`; `make test` runs nproc at once), at the lowest CPU priority: libFuzzer with
 # -max_total_time, seeded from fixtures/ (and fuzz/seeds/), the corpus it
 # grows kept in build-fuzz/corpus/<target>. A crash, a sanitizer report, a
 # timeout (FUZZ_TIMEOUT s for one input) or running out of memory
@@ -15,6 +16,7 @@ cd "$(dirname "$0")/.."
 ROOT=$PWD
 BIN=$ROOT/build-fuzz/bin
 SECONDS_EACH=${FUZZ_SECONDS:-60}
+JOBS=${FUZZ_JOBS:-1}
 TIMEOUT=${FUZZ_TIMEOUT:-10}
 RSS_MB=${FUZZ_RSS_MB:-2048}
 MAX_LEN=${FUZZ_MAX_LEN:-65536}
@@ -43,12 +45,17 @@ budget_text="$SECONDS_EACH s"
 [ -n "${FUZZ_RUNS:-}" ] && budget_text="$FUZZ_RUNS runs"
 echo "# $(date -u +%FT%TZ), $budget_text per harness, $(nproc) cores" >>"$summary"
 for t in "${TARGETS[@]}"; do
-  exe=$BIN/fuzz-$t
-  [ -x "$exe" ] || { echo "fuzz: $exe missing (build it: cmake --preset fuzz -S fuzz && cmake --build build-fuzz)" >&2; exit 2; }
-  corpus=$ROOT/build-fuzz/corpus/$t seed=$ROOT/build-fuzz/seeds/$t findings=$ROOT/build-fuzz/findings/$t
+  [ -x "$BIN/fuzz-$t" ] || { echo "fuzz: $BIN/fuzz-$t missing (build it: cmake --preset fuzz -S fuzz && cmake --build build-fuzz)" >&2; exit 2; }
+done
+
+# One harness for its budget; returns its fuzzer's exit code.
+fuzz_one() {
+  local t=$1
+  local exe=$BIN/fuzz-$t
+  local corpus=$ROOT/build-fuzz/corpus/$t seed=$ROOT/build-fuzz/seeds/$t findings=$ROOT/build-fuzz/findings/$t
   mkdir -p "$corpus" "$seed" "$findings"
   seeds "$t" | while read -r f; do cp -f "$f" "$seed/"; done
-  dict=()
+  local dict=() log budget cmd rc runs took line
   [ -f "fuzz/$t.dict" ] && dict=(-dict="fuzz/$t.dict")
   log=$ROOT/build-fuzz/fuzz-$t.log
   budget=(-max_total_time="$SECONDS_EACH")
@@ -69,9 +76,24 @@ for t in "${TARGETS[@]}"; do
   echo "fuzz: $line"
   echo "$line" >>"$summary"
   if [ $rc -ne 0 ]; then
-    status=1
     echo "fuzz: $t found a problem; the input is in $findings/, the log in $log:" >&2
     grep -m6 -E "ERROR|SUMMARY|runtime error|internal error|terminate|logic_error|what\(\)" "$log" >&2
   fi
+  return $rc
+}
+
+# FUZZ_JOBS harnesses at a time (each on one core); as each ends, the next starts.
+running=0
+for t in "${TARGETS[@]}"; do
+  if [ $running -ge "$JOBS" ]; then
+    wait -n || status=1
+    running=$((running - 1))
+  fi
+  fuzz_one "$t" &
+  running=$((running + 1))
+done
+while [ $running -gt 0 ]; do
+  wait -n || status=1
+  running=$((running - 1))
 done
 exit $status
