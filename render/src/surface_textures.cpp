@@ -1,8 +1,10 @@
 #include "phos/render/surface_textures.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cstdio>
 #include <cstdlib>
+#include <vector>
 
 #include <OpenImageIO/texture.h>
 #include <unistd.h>
@@ -10,6 +12,7 @@
 
 #include "phos/util/atomic_file.h"
 #include "phos/util/error.h"
+#include "phos/util/format.h"
 
 namespace phos::render {
 
@@ -57,6 +60,54 @@ std::filesystem::path EmbeddedImageFolder() {
   return std::filesystem::temp_directory_path() / ("phos-textures-" + std::to_string(::getuid()));
 }
 
+// The most the folder of embedded images keeps, in bytes:
+// PHOS_TEXTURE_CACHE_MB (MiB, default 1024).
+std::uintmax_t EmbeddedImageCacheBytes() {
+  constexpr double kDefaultMiB = 1024;
+  const char* text = std::getenv("PHOS_TEXTURE_CACHE_MB");
+  double mib = kDefaultMiB;
+  if (text && !ParseDouble(text, &mib)) mib = -1;
+  if (!(mib >= 0) || mib > 1e9)
+    ThrowUserError("", "PHOS_TEXTURE_CACHE_MB",
+                   std::string("expected a size in MiB from 0 up, not '") + (text ? text : "") + "'");
+  return static_cast<std::uintmax_t>(mib * 1024 * 1024);
+}
+
+// Keeps the folder of embedded images within `budget` bytes, as ccache
+// keeps its cache: the files least recently used (their modification time,
+// which a render that finds a file moves to now) go first. Files used in the
+// last day stay whatever their size, as a render running beside this one
+// may be reading them; so does `keep`, the file just written. A file that
+// cannot be removed is left (another process's prune may have taken it).
+void PruneEmbeddedImages(const std::filesystem::path& folder, std::uintmax_t budget,
+                         const std::filesystem::path& keep) {
+  struct File {
+    std::filesystem::path path;
+    std::filesystem::file_time_type used;
+    std::uintmax_t bytes;
+  };
+  std::vector<File> files;
+  std::uintmax_t total = 0;
+  std::error_code ec;
+  for (const auto& entry : std::filesystem::directory_iterator(folder, ec)) {
+    std::error_code entry_ec;
+    if (!entry.is_regular_file(entry_ec)) continue;
+    const std::uintmax_t bytes = entry.file_size(entry_ec);
+    const std::filesystem::file_time_type used = entry.last_write_time(entry_ec);
+    if (entry_ec) continue;
+    files.push_back({entry.path(), used, bytes});
+    total += bytes;
+  }
+  if (total <= budget) return;
+  std::sort(files.begin(), files.end(), [](const File& a, const File& b) { return a.used < b.used; });
+  const auto recent = std::filesystem::file_time_type::clock::now() - std::chrono::hours(24);
+  for (const File& file : files) {
+    if (total <= budget || file.used >= recent) break;
+    if (file.path == keep) continue;
+    if (std::filesystem::remove(file.path, ec)) total -= file.bytes;
+  }
+}
+
 // The file OpenImageIO opens for a texture: its own, or for an image
 // embedded in a glTF, a file holding its bytes in EmbeddedImageFolder(),
 // named by a hash of them (XXH3, 128 bits) and written once: a second render,
@@ -71,14 +122,19 @@ std::filesystem::path TextureFileOf(const TextureSource& source, const std::stri
                 static_cast<unsigned long long>(hash.low64));
   const std::filesystem::path folder = EmbeddedImageFolder();
   const std::filesystem::path file = folder / (name + image.extension);
+  const std::uintmax_t budget = EmbeddedImageCacheBytes();
   std::error_code ec;
-  if (std::filesystem::is_regular_file(file, ec) && std::filesystem::file_size(file, ec) == image.bytes.size())
+  if (std::filesystem::is_regular_file(file, ec) && std::filesystem::file_size(file, ec) == image.bytes.size()) {
+    // Used now: the prune below keeps the files used last.
+    std::filesystem::last_write_time(file, std::filesystem::file_time_type::clock::now(), ec);
     return file;
+  }
   std::filesystem::create_directories(folder, ec);
   if (ec)
     ThrowUserError(where, source.field,
                    "cannot create the folder '" + folder.string() + "' for its embedded image: " + ec.message());
   WriteFileAtomically(file, image.bytes);
+  PruneEmbeddedImages(folder, budget, file);
   return file;
 }
 

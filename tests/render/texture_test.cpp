@@ -12,12 +12,16 @@
 
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <fstream>
 #include <functional>
 #include <map>
 #include <optional>
 #include <random>
+#include <set>
 
 #include <OpenImageIO/imageio.h>
 #include <OpenImageIO/strutil.h>
@@ -600,23 +604,26 @@ TEST(AlbedoTexture, AKhrTextureTransformPhosCannotFollowIsOneLineNamingItsField)
   EXPECT_EQ(LoadScene(scene).objects[0].albedo_texture->uv_transform.offset, Eigen::Vector2f(0.5f, 0));
 }
 
-// XDG_CACHE_HOME set to a folder of its own while it lives: where embedded
-// images are written (surface_textures.h).
-class ScopedCacheHome {
+// An environment variable set (or unset, for nullopt) while it lives:
+// XDG_CACHE_HOME, where embedded images are written, and
+// PHOS_TEXTURE_CACHE_MB, how much of them is kept (surface_textures.h).
+class ScopedEnv {
  public:
-  explicit ScopedCacheHome(const std::filesystem::path& folder) {
-    if (const char* old = std::getenv("XDG_CACHE_HOME")) old_ = old;
-    ::setenv("XDG_CACHE_HOME", folder.c_str(), 1);
+  ScopedEnv(std::string name, const std::optional<std::string>& value) : name_(std::move(name)) {
+    if (const char* old = std::getenv(name_.c_str())) old_ = old;
+    Set(value);
   }
-  ~ScopedCacheHome() {
-    if (old_) {
-      ::setenv("XDG_CACHE_HOME", old_->c_str(), 1);
-    } else {
-      ::unsetenv("XDG_CACHE_HOME");
-    }
-  }
+  ~ScopedEnv() { Set(old_); }
 
  private:
+  void Set(const std::optional<std::string>& value) {
+    if (value) {
+      ::setenv(name_.c_str(), value->c_str(), 1);
+    } else {
+      ::unsetenv(name_.c_str());
+    }
+  }
+  std::string name_;
   std::optional<std::string> old_;
 };
 
@@ -644,7 +651,7 @@ void WriteGlb(const std::filesystem::path& path, const nlohmann::json& gltf, std
 // albedo E / pi per quadrant, and the image's file in the cache holds its bytes.
 TEST(AlbedoTexture, ImagesEmbeddedInAGltfOrAGlbRenderAsTheirFiles) {
   TempDir cache;
-  const ScopedCacheHome scoped(cache.path());
+  const ScopedEnv scoped("XDG_CACHE_HOME", cache.path().string());
   const std::string png = ReadText(Fixture("scenes/textured/checker.png"));
   auto render = [&](const std::filesystem::path& scene_file, const std::string& what) {
     const Scene scene = LoadScene(scene_file);
@@ -696,6 +703,67 @@ TEST(AlbedoTexture, ImagesEmbeddedInAGltfOrAGlbRenderAsTheirFiles) {
   EXPECT_NE(message.find("baseColorTexture"), std::string::npos) << message;
   EXPECT_NE(message.find("images[0] (embedded)' is not an image"), std::string::npos) << message;
   EXPECT_EQ(message.find('\n'), std::string::npos) << message;
+}
+
+// The cache of embedded images keeps within PHOS_TEXTURE_CACHE_MB, least
+// recently used first: files used in the last day stay, as does the one just
+// written, and a render that finds its image there marks it used.
+TEST(AlbedoTexture, TheCacheOfEmbeddedImagesKeepsWithinItsBudgetLeastRecentlyUsedFirst) {
+  TempDir cache;
+  const ScopedEnv home("XDG_CACHE_HOME", cache.path().string());
+  const std::filesystem::path folder = cache / "phos" / "textures";
+  std::filesystem::create_directories(folder);
+  const auto now = std::filesystem::file_time_type::clock::now();
+  auto old_file = [&](const std::string& name, std::chrono::hours age) {
+    testing::WriteText(folder / name, std::string(1000, 'x'));
+    std::filesystem::last_write_time(folder / name, now - age);
+  };
+  old_file("three-days.png", std::chrono::hours(72));
+  old_file("two-days.png", std::chrono::hours(48));
+  old_file("one-day.png", std::chrono::hours(25));
+  old_file("one-hour.png", std::chrono::hours(1));
+  const std::string png = ReadText(Fixture("scenes/textured/checker.png"));
+  // Room for the new image and 2000 bytes of the old files: the two oldest go.
+  char budget_mib[32];
+  std::snprintf(budget_mib, sizeof(budget_mib), "%.17g", static_cast<double>(png.size() + 2000) / (1024.0 * 1024.0));
+  const ScopedEnv budget("PHOS_TEXTURE_CACHE_MB", budget_mib);
+  TempDir scene_dir;
+  const std::filesystem::path scene_file = EditedPlane(scene_dir, [&](nlohmann::json& gltf) {
+    gltf["images"][0]["uri"] = "data:image/png;base64," + OIIO::Strutil::base64_encode(png);
+  });
+  const Scene scene = LoadScene(scene_file);
+  { SceneGeometry geometry(scene); }
+  std::set<std::string> kept;
+  std::filesystem::path written;
+  for (const auto& entry : std::filesystem::directory_iterator(folder)) {
+    kept.insert(entry.path().filename().string());
+    if (entry.path().extension() == ".png" && entry.file_size() == png.size()) written = entry.path();
+  }
+  EXPECT_EQ(kept.count("three-days.png"), 0u);
+  EXPECT_EQ(kept.count("two-days.png"), 0u);
+  EXPECT_EQ(kept.count("one-day.png"), 1u);
+  EXPECT_EQ(kept.count("one-hour.png"), 1u);
+  ASSERT_FALSE(written.empty());
+  EXPECT_EQ(kept.size(), 3u);
+
+  // Found again by a later render: marked used now.
+  std::filesystem::last_write_time(written, now - std::chrono::hours(96));
+  { SceneGeometry geometry(scene); }
+  EXPECT_GT(std::filesystem::last_write_time(written), now - std::chrono::hours(1));
+
+  // A budget of nothing keeps the image being rendered and the recent files.
+  std::filesystem::remove(written);
+  const ScopedEnv nothing("PHOS_TEXTURE_CACHE_MB", "0");
+  { SceneGeometry geometry(scene); }
+  EXPECT_TRUE(std::filesystem::exists(written));
+  EXPECT_TRUE(std::filesystem::exists(folder / "one-hour.png"));
+  EXPECT_FALSE(std::filesystem::exists(folder / "one-day.png"));
+
+  // A budget that is no size: one line naming the variable.
+  const ScopedEnv bad("PHOS_TEXTURE_CACHE_MB", "lots");
+  const std::string message = UserErrorOf([&] { SceneGeometry geometry(scene); });
+  EXPECT_NE(message.find("PHOS_TEXTURE_CACHE_MB: expected a size in MiB from 0 up, not 'lots'"), std::string::npos)
+      << message;
 }
 
 }  // namespace
