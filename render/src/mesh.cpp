@@ -407,6 +407,41 @@ TextureWraps GltfTextureWraps(const tinygltf::Model& model, const tinygltf::Text
   return {wrap(model.samplers[sampler].wrapS, "wrapS"), wrap(model.samplers[sampler].wrapT, "wrapT")};
 }
 
+// How the texture of `info` is filtered: its sampler's magFilter and
+// minFilter (scene.h, TextureFilter; glTF 2.0, 5.26: 9728 NEAREST, 9729
+// LINEAR, 9984 to 9987 the MIP-mapped minifications; without a sampler or a
+// filter, the renderer's own: bilinear, trilinear).
+TextureFilter GltfTextureFilter(const tinygltf::Model& model, const tinygltf::TextureInfo& info,
+                                const std::string& where) {
+  const int sampler = model.textures[info.index].sampler;  // in range: GltfTextureWraps checked it
+  if (sampler < 0) return {};
+  const tinygltf::Sampler& s = model.samplers[sampler];
+  const std::string field = "samplers[" + std::to_string(sampler) + "]";
+  TextureFilter filter;
+  switch (s.magFilter) {
+    case -1:
+    case TINYGLTF_TEXTURE_FILTER_LINEAR: break;
+    case TINYGLTF_TEXTURE_FILTER_NEAREST: filter.interpolation = TexelInterpolation::kClosest; break;
+    default:
+      ThrowUserError(where, field + ".magFilter",
+                     "expected 9728 (NEAREST) or 9729 (LINEAR), got " + std::to_string(s.magFilter));
+  }
+  switch (s.minFilter) {
+    case -1:
+    case TINYGLTF_TEXTURE_FILTER_NEAREST_MIPMAP_LINEAR:
+    case TINYGLTF_TEXTURE_FILTER_LINEAR_MIPMAP_LINEAR: break;
+    case TINYGLTF_TEXTURE_FILTER_NEAREST:
+    case TINYGLTF_TEXTURE_FILTER_LINEAR: filter.mip = MipLevels::kNone; break;
+    case TINYGLTF_TEXTURE_FILTER_NEAREST_MIPMAP_NEAREST:
+    case TINYGLTF_TEXTURE_FILTER_LINEAR_MIPMAP_NEAREST: filter.mip = MipLevels::kNearestLevel; break;
+    default:
+      ThrowUserError(where, field + ".minFilter",
+                     "expected 9728, 9729 or 9984 to 9987 (NEAREST, LINEAR, the MIPMAP ones), got " +
+                         std::to_string(s.minFilter));
+  }
+  return filter;
+}
+
 // The KHR_texture_transform of a texture reference, the identity without
 // one: offset [x, y], rotation (radians, counter-clockwise in UV) and scale
 // [x, y], composed as the extension's matrix T R S; its texCoord, when
@@ -443,11 +478,12 @@ UvTransform GltfUvTransform(const tinygltf::TextureInfo& info, const std::string
   return transform;
 }
 
-// A glTF texture reference read whole: its image, wraps and transform.
+// A glTF texture reference read whole: its image, wraps, filters and transform.
 void ReadGltfTexture(const tinygltf::Model& model, const tinygltf::TextureInfo& info,
                      const std::filesystem::path& base_dir, const std::string& where, TextureSource& texture) {
   GltfTextureImage(model, info, base_dir, where, texture);
   texture.wraps = GltfTextureWraps(model, info, where);
+  texture.filter = GltfTextureFilter(model, info, where);
   texture.uv_transform = GltfUvTransform(info, where, texture.field);
 }
 

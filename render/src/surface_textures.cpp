@@ -229,6 +229,20 @@ OIIO::TextureOpt::Wrap OiioWrap(TextureWrap wrap) {
   return OIIO::TextureOpt::WrapPeriodic;
 }
 
+OIIO::TextureOpt::InterpMode OiioInterpolation(TexelInterpolation interpolation) {
+  return interpolation == TexelInterpolation::kClosest ? OIIO::TextureOpt::InterpClosest
+                                                       : OIIO::TextureOpt::InterpBilinear;
+}
+
+OIIO::TextureOpt::MipMode OiioMipMode(MipLevels mip) {
+  switch (mip) {
+    case MipLevels::kNone: return OIIO::TextureOpt::MipModeNoMIP;
+    case MipLevels::kNearestLevel: return OIIO::TextureOpt::MipModeOneLevel;
+    case MipLevels::kTrilinear: break;
+  }
+  return OIIO::TextureOpt::MipModeTrilinear;
+}
+
 }  // namespace
 
 UvFootprint SurfaceTextures::Footprint(const SceneGeometry& geometry, const Hit& hit, const Vec3f& dp_dx,
@@ -255,12 +269,12 @@ void SurfaceTextures::Lookup(void* handle, const UvFootprint& footprint, bool v_
   OIIO::TextureOpt options;
   options.swrap = OiioWrap(source.wraps.s);
   options.twrap = OiioWrap(source.wraps.t);
-  // Trilinear across levels, bilinear within one: OpenImageIO's defaults
-  // (smart bicubic, anisotropic) took 2.9x the untextured frame and
-  // bilinear-anisotropic 2.4x, trilinear 1.9x (bench_render,
-  // BM_TexturedDirectFrame); docs/render.md says what it blurs.
-  options.interpmode = OIIO::TextureOpt::InterpBilinear;
-  options.mipmode = OIIO::TextureOpt::MipModeTrilinear;
+  // Unless the sampler says otherwise, trilinear across levels, bilinear
+  // within one: OpenImageIO's defaults (smart bicubic, anisotropic) took
+  // 2.9x the untextured frame and bilinear-anisotropic 2.4x, trilinear 1.9x
+  // (bench_render, BM_TexturedDirectFrame); docs/render.md says what it blurs.
+  options.interpmode = OiioInterpolation(source.filter.interpolation);
+  options.mipmode = OiioMipMode(source.filter.mip);
   options.firstchannel = first_channel;
   system_->texture(static_cast<OIIO::TextureSystem::TextureHandle*>(handle), system_->get_perthread_info(), options,
                    uv.x(), v_up ? 1 - uv.y() : uv.y(), duv_dx.x(), flip * duv_dx.y(), duv_dy.x(), flip * duv_dy.y(),

@@ -23,6 +23,7 @@
 #include <random>
 #include <set>
 
+#include <OpenImageIO/imagebuf.h>
 #include <OpenImageIO/imageio.h>
 #include <OpenImageIO/strutil.h>
 #include <nlohmann/json.hpp>
@@ -602,6 +603,63 @@ TEST(AlbedoTexture, AKhrTextureTransformPhosCannotFollowIsOneLineNamingItsField)
   gltf["extensionsRequired"] = {"KHR_texture_transform"};
   std::ofstream(required / "plane.gltf") << gltf.dump();
   EXPECT_EQ(LoadScene(scene).objects[0].albedo_texture->uv_transform.offset, Eigen::Vector2f(0.5f, 0));
+}
+
+// A glTF sampler's filters (scene.h, TextureFilter). The checker as a 2 x 2
+// image, moved by a quarter texel less than half (KHR_texture_transform
+// offset 0.15 in u): each quadrant's centre then reads u' = 0.4 or 0.9.
+// NEAREST shows the closest texel whole, the quadrant's own colour; LINEAR
+// (the default) blends 30% of the neighbouring texel in.
+TEST(AlbedoTexture, ASamplersNearestMagFilterShowsTheClosestTexelWhole) {
+  TempDir dir;
+  auto render = [&](const nlohmann::json& sampler) {
+    const std::filesystem::path scene_file = EditedPlane(dir, [&](nlohmann::json& gltf) {
+      gltf["images"][0]["uri"] = "tiny.png";
+      gltf["samplers"] = nlohmann::json::array({sampler});
+      gltf["textures"][0]["sampler"] = 0;
+      gltf["extensionsUsed"] = {"KHR_texture_transform"};
+      gltf["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]["extensions"]["KHR_texture_transform"] = {
+          {"offset", {0.15, 0}}};
+    });
+    OIIO::ImageBuf tiny(OIIO::ImageSpec(2, 2, 3, OIIO::TypeDesc::UINT8));
+    for (int v_half = 0; v_half < 2; ++v_half)
+      for (int u_half = 0; u_half < 2; ++u_half) {
+        const std::array<float, 3> srgb = QuadrantSrgb(u_half, v_half);
+        tiny.setpixel(u_half, v_half, srgb.data());
+      }
+    EXPECT_TRUE(tiny.write((dir / "tiny.png").string()));
+    Scene scene = LoadScene(scene_file);
+    scene.camera.width = 160;
+    scene.camera.height = 120;
+    SceneGeometry geometry(scene);
+    FrameOptions options = DefaultFrameOptions(scene, Transport::kDirect);
+    options.direct_spp = 1;
+    return std::make_pair(scene, RenderBands(geometry, nullptr, options));
+  };
+  const auto [nearest_scene, nearest] = render({{"magFilter", 9728}, {"minFilter", 9728}});
+  EXPECT_EQ(nearest_scene.objects[0].albedo_texture->filter.interpolation, TexelInterpolation::kClosest);
+  EXPECT_EQ(nearest_scene.objects[0].albedo_texture->filter.mip, MipLevels::kNone);
+  ExpectQuadrantsAreAlbedoTimesEOverPi(nearest_scene, nearest, "magFilter NEAREST");
+  const auto [linear_scene, linear] = render({{"magFilter", 9729}});
+  EXPECT_EQ(linear_scene.objects[0].albedo_texture->filter, TextureFilter{});
+  // Quadrant (0, 0)'s centre: red (230, 60, 40) with 30% of green (40, 180, 70) blended in.
+  const CameraRays camera(linear_scene, 0);
+  float px, py, depth;
+  ASSERT_TRUE(camera.Project(Vec3f(-0.25f, 0, -0.25f), &px, &py, &depth));
+  const float* blended = linear.at(static_cast<int>(px), static_cast<int>(py));
+  const float* whole = nearest.at(static_cast<int>(px), static_cast<int>(py));
+  const int nb = linear_scene.bands.band_count();
+  double largest = 0;
+  for (int b = 0; b < nb; ++b) largest = std::max(largest, std::abs(blended[b] / whole[b] - 1.0));
+  EXPECT_GT(largest, 0.3);
+
+  // Another number: one line naming the field.
+  std::string message = UserErrorOf([&] { render({{"magFilter", 9984}}); });
+  EXPECT_NE(message.find("samplers[0].magFilter: expected 9728 (NEAREST) or 9729 (LINEAR), got 9984"),
+            std::string::npos)
+      << message;
+  message = UserErrorOf([&] { render({{"minFilter", 1}}); });
+  EXPECT_NE(message.find("samplers[0].minFilter: expected 9728, 9729 or 9984 to 9987"), std::string::npos) << message;
 }
 
 // An environment variable set (or unset, for nullopt) while it lives:

@@ -62,6 +62,21 @@ struct TextureWraps {
   bool operator==(const TextureWraps&) const = default;
 };
 
+// How a texture's texels are filtered: a glTF sampler's magFilter and
+// minFilter (glTF 2.0, 5.26). OpenImageIO's TextureSystem has one
+// interpolation for magnified and minified lookups, so magFilter picks it
+// (NEAREST: the closest texel, a pixel-art sign stays crisp; LINEAR or none:
+// bilinear) and minFilter picks the MIP levels (NEAREST or LINEAR: none,
+// the full image only; *_MIPMAP_NEAREST: the one nearest level;
+// *_MIPMAP_LINEAR or none: trilinear, between two levels).
+enum class TexelInterpolation { kBilinear, kClosest };
+enum class MipLevels { kTrilinear, kNearestLevel, kNone };
+struct TextureFilter {
+  TexelInterpolation interpolation = TexelInterpolation::kBilinear;
+  MipLevels mip = MipLevels::kTrilinear;
+  bool operator==(const TextureFilter&) const = default;
+};
+
 // Where a texture is read, given the mesh's UV: glTF's KHR_texture_transform
 // (uv' = T R S uv: scaled, then rotated, then offset; the rotation in
 // radians, counter-clockwise in glTF's UV space, where v runs down). The
@@ -88,6 +103,7 @@ struct TextureSource {
   std::shared_ptr<const EmbeddedImage> embedded;  // null: the texture (if any) is a file of its own
   std::string field;                              // where the file says so, for messages
   TextureWraps wraps;
+  TextureFilter filter;
   UvTransform uv_transform;
   // The same image (the same file, or embedded images of the same bytes),
   // read the same way; `field`, words for messages, aside.
@@ -95,7 +111,7 @@ struct TextureSource {
     const bool same_image = embedded || other.embedded
                                 ? embedded && other.embedded && embedded->bytes == other.embedded->bytes
                                 : texture == other.texture;
-    return same_image && wraps == other.wraps && uv_transform == other.uv_transform;
+    return same_image && wraps == other.wraps && filter == other.filter && uv_transform == other.uv_transform;
   }
 };
 
