@@ -383,16 +383,22 @@ void GltfTextureImage(const tinygltf::Model& model, const tinygltf::TextureInfo&
   }
 }
 
-// How the texture of `info` wraps: its sampler's wrapS and wrapT (glTF 2.0,
-// 5.26: 33071 CLAMP_TO_EDGE, 33648 MIRRORED_REPEAT, 10497 REPEAT, the
-// default, also without a sampler).
-TextureWraps GltfTextureWraps(const tinygltf::Model& model, const tinygltf::TextureInfo& info,
-                              const std::string& where) {
+// The sampler of the texture `info` refers to (glTF 2.0, 5.26), null without
+// one; an index past the file's samplers is a UserError. `field` names it
+// for messages.
+const tinygltf::Sampler* GltfSampler(const tinygltf::Model& model, const tinygltf::TextureInfo& info,
+                                     const std::string& where, std::string& field) {
   const int sampler = model.textures[info.index].sampler;
-  if (sampler < 0) return {};
-  const std::string field = "samplers[" + std::to_string(sampler) + "]";
+  if (sampler < 0) return nullptr;
   if (sampler >= static_cast<int>(model.samplers.size()))
     ThrowUserError(where, "textures[" + std::to_string(info.index) + "].sampler", "sampler index out of range");
+  field = "samplers[" + std::to_string(sampler) + "]";
+  return &model.samplers[sampler];
+}
+
+// How a sampler wraps: its wrapS and wrapT (33071 CLAMP_TO_EDGE, 33648
+// MIRRORED_REPEAT, 10497 REPEAT, the default, also without a sampler).
+TextureWraps GltfTextureWraps(const tinygltf::Sampler& sampler, const std::string& field, const std::string& where) {
   auto wrap = [&](int mode, const char* name) {
     switch (mode) {
       case TINYGLTF_TEXTURE_WRAP_REPEAT: return TextureWrap::kRepeat;
@@ -404,29 +410,25 @@ TextureWraps GltfTextureWraps(const tinygltf::Model& model, const tinygltf::Text
                            std::to_string(mode));
     }
   };
-  return {wrap(model.samplers[sampler].wrapS, "wrapS"), wrap(model.samplers[sampler].wrapT, "wrapT")};
+  return {wrap(sampler.wrapS, "wrapS"), wrap(sampler.wrapT, "wrapT")};
 }
 
-// How the texture of `info` is filtered: its sampler's magFilter and
-// minFilter (scene.h, TextureFilter; glTF 2.0, 5.26: 9728 NEAREST, 9729
-// LINEAR, 9984 to 9987 the MIP-mapped minifications; without a sampler or a
-// filter, the renderer's own: bilinear, trilinear).
-TextureFilter GltfTextureFilter(const tinygltf::Model& model, const tinygltf::TextureInfo& info,
+// How a sampler filters: its magFilter and minFilter (scene.h,
+// TextureFilter; 9728 NEAREST, 9729 LINEAR, 9984 to 9987 the MIP-mapped
+// minifications; without a sampler or a filter, the renderer's own:
+// bilinear, trilinear).
+TextureFilter GltfTextureFilter(const tinygltf::Sampler& sampler, const std::string& field,
                                 const std::string& where) {
-  const int sampler = model.textures[info.index].sampler;  // in range: GltfTextureWraps checked it
-  if (sampler < 0) return {};
-  const tinygltf::Sampler& s = model.samplers[sampler];
-  const std::string field = "samplers[" + std::to_string(sampler) + "]";
   TextureFilter filter;
-  switch (s.magFilter) {
+  switch (sampler.magFilter) {
     case -1:
     case TINYGLTF_TEXTURE_FILTER_LINEAR: break;
     case TINYGLTF_TEXTURE_FILTER_NEAREST: filter.interpolation = TexelInterpolation::kClosest; break;
     default:
       ThrowUserError(where, field + ".magFilter",
-                     "expected 9728 (NEAREST) or 9729 (LINEAR), got " + std::to_string(s.magFilter));
+                     "expected 9728 (NEAREST) or 9729 (LINEAR), got " + std::to_string(sampler.magFilter));
   }
-  switch (s.minFilter) {
+  switch (sampler.minFilter) {
     case -1:
     case TINYGLTF_TEXTURE_FILTER_NEAREST_MIPMAP_LINEAR:
     case TINYGLTF_TEXTURE_FILTER_LINEAR_MIPMAP_LINEAR: break;
@@ -437,7 +439,7 @@ TextureFilter GltfTextureFilter(const tinygltf::Model& model, const tinygltf::Te
     default:
       ThrowUserError(where, field + ".minFilter",
                      "expected 9728, 9729 or 9984 to 9987 (NEAREST, LINEAR, the MIPMAP ones), got " +
-                         std::to_string(s.minFilter));
+                         std::to_string(sampler.minFilter));
   }
   return filter;
 }
@@ -482,8 +484,11 @@ UvTransform GltfUvTransform(const tinygltf::TextureInfo& info, const std::string
 void ReadGltfTexture(const tinygltf::Model& model, const tinygltf::TextureInfo& info,
                      const std::filesystem::path& base_dir, const std::string& where, TextureSource& texture) {
   GltfTextureImage(model, info, base_dir, where, texture);
-  texture.wraps = GltfTextureWraps(model, info, where);
-  texture.filter = GltfTextureFilter(model, info, where);
+  std::string sampler_field;
+  if (const tinygltf::Sampler* sampler = GltfSampler(model, info, where, sampler_field)) {
+    texture.wraps = GltfTextureWraps(*sampler, sampler_field, where);
+    texture.filter = GltfTextureFilter(*sampler, sampler_field, where);
+  }
   texture.uv_transform = GltfUvTransform(info, where, texture.field);
 }
 

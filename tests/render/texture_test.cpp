@@ -606,7 +606,7 @@ TEST(AlbedoTexture, AKhrTextureTransformPhosCannotFollowIsOneLineNamingItsField)
 }
 
 // A glTF sampler's filters (scene.h, TextureFilter). The checker as a 2 x 2
-// image, moved by a quarter texel less than half (KHR_texture_transform
+// image (texels 0.5 wide), moved by 0.3 of a texel (KHR_texture_transform
 // offset 0.15 in u): each quadrant's centre then reads u' = 0.4 or 0.9.
 // NEAREST shows the closest texel whole, the quadrant's own colour; LINEAR
 // (the default) blends 30% of the neighbouring texel in.
