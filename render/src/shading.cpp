@@ -26,6 +26,7 @@ Shading::Shading(const SceneGeometry& geometry, const CoupledSolver* solver, con
     Bands a(nb_);
     for (int b = 0; b < nb_; ++b) a[b] = static_cast<float>(object.albedo[b]);
     albedo_.push_back(a);
+    albedo_reflects_.push_back(std::any_of(object.albedo.begin(), object.albedo.begin() + nb_, [](double v) { return v > 0; }));
   }
   for (const Light& light : scene_.lights) {
     const double level = light.schedule.LevelAt(t);

@@ -208,17 +208,19 @@ class Shading {
   struct Surface {
     const Bands* albedo;
     const Gloss* gloss;
+    bool reflects;  // glossy, or some band of the albedo above 0: the path goes on
   };
   Surface SurfaceAt(const Hit& hit, const Vec3f& origin, const RayDifferential& differential, Bands& texture_albedo,
                     Gloss& texture_gloss) const {
     const auto& gloss = scene_.objects[hit.object].gloss;
-    Surface surface{&albedo_[hit.object], gloss ? &*gloss : nullptr};
+    Surface surface{&albedo_[hit.object], gloss ? &*gloss : nullptr, gloss || albedo_reflects_[hit.object]};
     if (!textures_ || !textures_->any_textured(hit.object)) return surface;
     const UvFootprint footprint = Footprint(hit, origin, differential);
     if (textures_->textured(hit.object)) {
       texture_albedo.resize(nb_);
       textures_->Albedo(hit.object, footprint, texture_albedo.data());
       surface.albedo = &texture_albedo;
+      surface.reflects = gloss || texture_albedo.maxCoeff() > 0;
     }
     if (gloss && textures_->gloss_textured(hit.object)) {
       texture_gloss = textures_->GlossAt(hit.object, footprint, *gloss);
@@ -269,6 +271,10 @@ class Shading {
   std::vector<LitLight> area_lights_;
   std::vector<int> emitter_of_object_;  // per object: its emissive light in lights_, or -1 (empty: none)
   std::vector<Bands> albedo_;           // per object
+  // Per object: some band of its albedo is above 0 (a path hitting it goes
+  // on), known once rather than found by a reduction over the bands at
+  // every path vertex.
+  std::vector<char> albedo_reflects_;
   const SurfaceTextures* textures_ = nullptr;
   float sky_level_ = 0;
   Bands sky_L_;

@@ -518,7 +518,7 @@ class PathTransport final : public FrameTransport {
         hit, lane.origin, depth == 0 ? lane.differential : RayDifferential{}, lane.texture_albedo, lane.texture_gloss);
     lane.albedo = surface.albedo;
     lane.gloss = surface.gloss;
-    lane.scatters = lane.gloss || lane.albedo->maxCoeff() > 0;  // a glossy coat reflects on black too
+    lane.scatters = surface.reflects;  // a glossy coat reflects on black too
     lane.emitter = nullptr;
     if (lane.scatters && !emitters_.empty()) {
       lane.emitter = &emitters_.Pick(random.Next());
@@ -545,13 +545,18 @@ class PathTransport final : public FrameTransport {
       const float u1 = random.UniformFloat();
       SampleUniformTriangle(u1, random.UniformFloat(), b1, b2);
       const Vec3f q = entry.v0 + b1 * entry.e1 + b2 * entry.e2;
-      lane.wi = q - hit.position;
-      const float distance2 = lane.wi.squaredNorm();
-      lane.emitter_distance = std::sqrt(distance2);
-      lane.wi *= 1.0f / lane.emitter_distance;
-      const float cos_s = n_s.dot(lane.wi), cos_front = -entry.normal.dot(lane.wi);
-      const float cos_l = emitters_.two_sided[entry.slot] ? std::abs(cos_front) : cos_front;  // the side facing us
-      if (cos_s > 0 && cos_l > 0) {
+      // Which sides face each other is decided on the unnormalized
+      // direction, so that the branch (taken at random) waits for no square
+      // root and a point facing away costs none.
+      const Vec3f d = q - hit.position;
+      const float d_s = n_s.dot(d), d_front = -entry.normal.dot(d);
+      const float d_l = emitters_.two_sided[entry.slot] ? std::abs(d_front) : d_front;  // the side facing us
+      if (d_s > 0 && d_l > 0) {
+        const float distance2 = d.squaredNorm();
+        lane.emitter_distance = std::sqrt(distance2);
+        const float inverse_distance = 1.0f / lane.emitter_distance;
+        lane.wi = d * inverse_distance;
+        const float cos_s = d_s * inverse_distance, cos_l = d_l * inverse_distance;
         lane.glow_there = GlowAt(entry.slot, entry.Texel(solver_->atlas(), b1, b2));
         // f cos / p_light with MIS (power heuristic) against the BSDF's
         // cosine sampling, f = albedo / pi: with p_light = a d^2 / cos_l
