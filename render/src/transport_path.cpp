@@ -36,6 +36,46 @@ void SampleUniformTriangle(float u1, float u2, float& b1, float& b2) {
   b2 = u2 - half_min;
 }
 
+// The solver keeps Lp band-major ([band][texel], for its batch kernel), so
+// one texel's bands lie a texel count apart: a cache miss per band for
+// every path vertex that meets or samples a glow. The path tracer reads a
+// texel-major copy made once per frame instead (in parallel, by texel),
+// over the span of bands from the first emission band to the last (a band
+// inside it that the phosphor does not emit holds 0), so a glow adds to
+// consecutive bands, indexed directly. Through the list of emission bands,
+// the two loops that add a glow held a tenth of TracePaths's samples (perf,
+// bench_render --benchmark_filter=PathFrameDark1spp); indexed directly, the
+// dark path/bare ratio is 0.988 of what it was (PathAgainstBareEmbree/40,
+// eight alternated pairs).
+struct GlowByTexel {
+  int first_band = 0, band_count = 0;  // the span of emission bands
+  LargeTable<float> Lp;                // [texel * band_count + i]: band first_band + i
+};
+std::vector<GlowByTexel> CopyGlowByTexel(const CoupledSolver* solver) {
+  std::vector<GlowByTexel> glow_by_texel;
+  if (!solver) return glow_by_texel;
+  const TexelAtlas& atlas = solver->atlas();
+  glow_by_texel.resize(atlas.objects().size());
+  for (std::size_t s = 0; s < atlas.objects().size(); ++s) {
+    const int slot = static_cast<int>(s);
+    GlowByTexel& glow = glow_by_texel[s];
+    const std::vector<int>& bands = solver->emission_bands(slot);
+    if (bands.empty()) continue;
+    glow.first_band = bands.front();
+    glow.band_count = bands.back() - bands.front() + 1;
+    const std::size_t n = atlas.objects()[s].count, span = static_cast<std::size_t>(glow.band_count);
+    glow.Lp.resize(n * span);  // not zeroed: each is written below
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 16384), [&](const tbb::blocked_range<std::size_t>& r) {
+      std::fill(glow.Lp.begin() + r.begin() * span, glow.Lp.begin() + r.end() * span, 0.0f);
+      for (int b : bands)
+        for (std::size_t k = r.begin(); k < r.end(); ++k)  // a masked texel glows by the share its paint covers
+          glow.Lp[k * span + static_cast<std::size_t>(b - glow.first_band)] =
+              atlas.Coverage(slot, k) * solver->Lp(slot, b, k);
+    });
+  }
+  return glow_by_texel;
+}
+
 // The glowing triangles of this moment, for next-event estimation: chosen in
 // proportion to their emitted power (texel Lp summed over bands, times area),
 // in O(1) from an alias table (Walker 1977; Vose 1991's construction, as
@@ -80,14 +120,15 @@ struct EmitterDistribution {
   // parallel), and the alias table. On one thread it held a 1.3M-triangle
   // glowing sphere's frame for longer than bare Embree took to trace it
   // (bench_render, BM_PathAgainstBareEmbreeGlowingBySize/8).
-  EmitterDistribution(const SceneGeometry& geometry, const CoupledSolver* solver) {
+  EmitterDistribution(const SceneGeometry& geometry, const CoupledSolver* solver,
+                      const std::vector<GlowByTexel>& glow_by_texel) {
     pdf.resize(geometry.object_count());
     if (!solver) return;
     const TexelAtlas& atlas = solver->atlas();
     PHOS_CHECK(atlas.objects().size() <= 32767);
     for (const TexelAtlas::ObjectTexels& texels : atlas.objects())
       two_sided.push_back(geometry.scene().objects[texels.object].two_sided);
-    const Glowing glowing = FindGlowing(geometry, *solver);
+    const Glowing glowing = FindGlowing(geometry, *solver, glow_by_texel);
     if (glowing.triangles.empty()) return;
     for (std::size_t s = 0; s < atlas.objects().size(); ++s)
       if (glowing.slot_glows[s]) {
@@ -123,12 +164,13 @@ struct EmitterDistribution {
     double total = 0;
     std::vector<char> slot_glows;  // per slot: any of its triangles
   };
-  static Glowing FindGlowing(const SceneGeometry& geometry, const CoupledSolver& solver) {
+  static Glowing FindGlowing(const SceneGeometry& geometry, const CoupledSolver& solver,
+                             const std::vector<GlowByTexel>& glow_by_texel) {
     Glowing glowing;
     glowing.slot_glows.assign(solver.atlas().objects().size(), 0);
     for (std::size_t s = 0; s < solver.atlas().objects().size(); ++s) {
       const int slot = static_cast<int>(s);
-      const LargeTable<double> power = TrianglePower(geometry, solver, slot);
+      const LargeTable<double> power = TrianglePower(geometry, solver, glow_by_texel[s], slot);
       glowing.triangles.reserve(glowing.triangles.size() + power.size());
       glowing.power.reserve(glowing.power.size() + power.size());
       for (std::size_t t = 0; t < power.size(); ++t) {
@@ -142,17 +184,21 @@ struct EmitterDistribution {
     return glowing;
   }
   // Per triangle of a slot: the mean Lp (summed over bands) of its texels,
-  // times its area. An auto atlas's triangles own their texels, one chunk
-  // each, so they are summed in parallel; a UV atlas's texels fall on
-  // triangles in any order, so they are summed in texel order.
-  static LargeTable<double> TrianglePower(const SceneGeometry& geometry, const CoupledSolver& solver, int slot) {
+  // times its area. An auto atlas's triangles own consecutive texels (m^2
+  // from first), so they are summed in parallel from the texel-major copy
+  // (`glow`, whose bands outside the emission ones hold 0 and add nothing):
+  // read from the solver's band-major table, a band a texel count away from
+  // the next, this was the frame's largest set-up stage. A UV atlas's texels
+  // fall on triangles in any order, so they are summed in texel order.
+  static LargeTable<double> TrianglePower(const SceneGeometry& geometry, const CoupledSolver& solver,
+                                          const GlowByTexel& glow, int slot) {
     const TexelAtlas& atlas = solver.atlas();
     const TexelAtlas::ObjectTexels& texels = atlas.objects()[slot];
     const int object = texels.object;
     const int triangles = geometry.triangle_count(object);
-    const std::vector<int>& bands = solver.emission_bands(slot);
     LargeTable<double> power;
     if (texels.uv()) {
+      const std::vector<int>& bands = solver.emission_bands(slot);
       power.assign(triangles, 0.0);
       std::vector<std::size_t> count(triangles, 0);
       atlas.ForEachTexel(slot, [&](std::size_t k, int t, float, float) {
@@ -163,15 +209,14 @@ struct EmitterDistribution {
         power[t] = count[t] ? power[t] / static_cast<double>(count[t]) * geometry.Area(object, t) : 0.0;
       return power;
     }
+    const std::size_t span = static_cast<std::size_t>(glow.band_count);
     power.resize(triangles);  // not zeroed: each is written below
     tbb::parallel_for(tbb::blocked_range<int>(0, triangles, 4096), [&](const tbb::blocked_range<int>& r) {
       for (int t = r.begin(); t < r.end(); ++t) {
+        const std::size_t count = std::size_t{texels.m[t]} * texels.m[t];
+        const float* Lp = glow.Lp.data() + std::size_t{texels.first[t]} * span;
         double sum = 0;
-        std::size_t count = 0;
-        atlas.ForEachTexelInChunk(slot, static_cast<std::size_t>(t), [&](std::size_t k, int, float, float) {
-          for (int b : bands) sum += solver.Lp(slot, b, k);
-          ++count;
-        });
+        for (std::size_t i = 0; i < count * span; ++i) sum += Lp[i];
         power[t] = count ? sum / static_cast<double>(count) * geometry.Area(object, t) : 0.0;
       }
     });
@@ -236,8 +281,8 @@ class PathTransport final : public FrameTransport {
         media_(shading.media()),
         options_(shading.options()),
         nb_(shading.band_count()),
-        emitters_(geometry_, solver_) {
-    if (solver_) CopyGlowByTexel();
+        glow_by_texel_(CopyGlowByTexel(solver_)),
+        emitters_(geometry_, solver_, glow_by_texel_) {
     prefetch_emitters_ = emitters_.outgrows_cache();
   }
 
@@ -648,43 +693,6 @@ class PathTransport final : public FrameTransport {
   }
 
 
-  // The solver keeps Lp band-major ([band][texel], for its batch kernel), so
-  // one texel's bands lie a texel count apart: a cache miss per band for
-  // every path vertex that meets or samples a glow. The path tracer reads a
-  // texel-major copy made once per frame instead (in parallel, by texel),
-  // over the span of bands from the first emission band to the last (a band
-  // inside it that the phosphor does not emit holds 0), so a glow adds to
-  // consecutive bands, indexed directly. Through the list of emission bands,
-  // the two loops that add a glow held a tenth of TracePaths's samples (perf,
-  // bench_render --benchmark_filter=PathFrameDark1spp); indexed directly, the
-  // dark path/bare ratio is 0.988 of what it was (PathAgainstBareEmbree/40,
-  // eight alternated pairs).
-  struct GlowByTexel {
-    int first_band = 0, band_count = 0;  // the span of emission bands
-    LargeTable<float> Lp;                // [texel * band_count + i]: band first_band + i
-  };
-  void CopyGlowByTexel() {
-    const TexelAtlas& atlas = solver_->atlas();
-    glow_by_texel_.resize(atlas.objects().size());
-    for (std::size_t s = 0; s < atlas.objects().size(); ++s) {
-      const int slot = static_cast<int>(s);
-      GlowByTexel& glow = glow_by_texel_[s];
-      const std::vector<int>& bands = solver_->emission_bands(slot);
-      if (bands.empty()) continue;
-      glow.first_band = bands.front();
-      glow.band_count = bands.back() - bands.front() + 1;
-      const std::size_t n = atlas.objects()[s].count, span = static_cast<std::size_t>(glow.band_count);
-      glow.Lp.resize(n * span);  // not zeroed: each is written below
-      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 16384), [&](const tbb::blocked_range<std::size_t>& r) {
-        std::fill(glow.Lp.begin() + r.begin() * span, glow.Lp.begin() + r.end() * span, 0.0f);
-        for (int b : bands)
-          for (std::size_t k = r.begin(); k < r.end(); ++k)  // a masked texel glows by the share its paint covers
-            glow.Lp[k * span + static_cast<std::size_t>(b - glow.first_band)] =
-                atlas.Coverage(slot, k) * solver_->Lp(slot, b, k);
-      });
-    }
-  }
-  std::vector<GlowByTexel> glow_by_texel_;  // per slot
 
   // A thread's row state, kept from row to row.
   struct PathRow {
@@ -700,7 +708,8 @@ class PathTransport final : public FrameTransport {
   const VolumeMedia* media_;
   const FrameOptions& options_;
   int nb_;
-  EmitterDistribution emitters_;
+  std::vector<GlowByTexel> glow_by_texel_;  // per slot
+  EmitterDistribution emitters_;  // after the glow, which it reads
   bool prefetch_emitters_ = false;  // PrefetchEmitterPicks
   tbb::enumerable_thread_specific<PathRow> rows_;
 };
