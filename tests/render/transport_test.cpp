@@ -130,6 +130,65 @@ TEST(Transport, ClosedGlowingLargeMeshIsLpOverOneMinusAlbedo) {
   ExpectEnclosureRadiosity(image, kr * r0, albedo);
 }
 
+// A sphere's inside is the one enclosure with a closed form for any glow:
+// each surface element sees each other in proportion to its area (form
+// factor dA / A), so the radiosity is B(x) = Le(x) + rho mean_A(Le) /
+// (1 - rho). Here only the half x > 0 glows, in proportion to x (the glow
+// set texel by texel through a solver state), so the emitter table's
+// triangles differ in power, within its blocks and across them, and the
+// dark half's pixels must show rho mean_A(Le) / (1 - rho). Next-event
+// estimation that chose triangles by another distribution than the pdf it
+// divides by would miss that; a uniform glow (the test above) cannot tell.
+TEST(Transport, SphereGlowingUnevenlyShowsTheMeanGlowOnItsDarkHalf) {
+  const double albedo = 0.5, kr = 0.2, r0 = 0.5;
+  Scene scene = EmptyScene(24, 24);
+  scene.camera.keys = {{0, Vec3(0, 0, 0.3), Vec3(0, 0, -1)}};
+  scene.objects.push_back(MakeObject("sphere", MakeSphere(1.0, 6, /*inward=*/true), albedo,
+                                     UniformPhosphor(kr, std::vector<double>(8, 0.1), {0, 0, 1, 2, 1, 0, 0, 0})));
+  scene.objects[0].initial = {InitialState::Kind::kUniform, r0};
+  scene.texel_size_m = 0.1;
+  SceneGeometry geometry(scene);
+  CoupledSolver solver(scene, geometry);
+  SolverCheckpoint state = solver.Checkpoint(0);
+  const TexelAtlas::ObjectTexels& texels = solver.atlas().objects()[0];
+  ASSERT_FALSE(texels.uv());
+  std::vector<float>& Lp = state.arrays[1];  // [emission band][texel]
+  ASSERT_EQ(Lp.size() % texels.count, 0u);
+  const std::size_t emission_bands = Lp.size() / texels.count;
+  double glow_area = 0, area = 0;  // the integral of the glow's scale over the sphere, and its area
+  for (int t = 0; t < geometry.triangle_count(0); ++t) {
+    const float x = (geometry.Vertex(0, t, 0) + geometry.Vertex(0, t, 1) + geometry.Vertex(0, t, 2)).x() / 3;
+    const float scale = std::max(0.0f, x);
+    glow_area += scale * geometry.Area(0, t);
+    area += geometry.Area(0, t);
+    const std::size_t texel_count = std::size_t{texels.m[t]} * texels.m[t];
+    for (std::size_t e = 0; e < emission_bands; ++e)
+      for (std::size_t k = texels.first[t]; k < texels.first[t] + texel_count; ++k) Lp[e * texels.count + k] *= scale;
+  }
+  EXPECT_NEAR(glow_area / area, 0.25, 0.01);  // the mean of max(0, x) over a unit sphere
+  solver.Restore(state, "test");
+  FrameOptions path;
+  path.transport = Transport::kPath;
+  path.spp = 64;
+  path.max_depth = 200;
+  const Image image = RenderBands(geometry, &solver, path);
+  // The camera looks down -z from x = 0: its columns left of centre see x < 0.
+  for (int band : {2, 3, 4}) {
+    double sum = 0, sum2 = 0;
+    int n = 0;
+    for (int y = 0; y < image.height; ++y)
+      for (int x = 0; x < 10; ++x, ++n) {
+        const double v = image.at(x, y)[band];
+        sum += v;
+        sum2 += v * v;
+      }
+    const double mean = sum / n, standard_error = std::sqrt(std::max(0.0, sum2 / n - mean * mean) / n);
+    const double expected = albedo / (1 - albedo) * (band == 3 ? 2 : 1) * kr * r0 * glow_area / area;
+    EXPECT_NEAR(mean, expected, 5 * standard_error + 2e-3 * expected) << "band " << band;
+    EXPECT_LT(standard_error, 0.02 * expected) << "band " << band;
+  }
+}
+
 TEST(Transport, OpenPlaneDirectIsAlbedoTimesIrradianceOverPiAndPathAgrees) {
   const double albedo = 0.6, intensity = 0.8, height = 1.0;
   Scene scene = EmptyScene(32, 32);
