@@ -39,41 +39,136 @@ void SampleUniformTriangle(float u1, float u2, float& b1, float& b2) {
 // The solver keeps Lp band-major ([band][texel], for its batch kernel), so
 // one texel's bands lie a texel count apart: a cache miss per band for
 // every path vertex that meets or samples a glow. The path tracer reads a
-// texel-major copy made once per frame instead (in parallel, by texel),
-// over the span of bands from the first emission band to the last (a band
-// inside it that the phosphor does not emit holds 0), so a glow adds to
-// consecutive bands, indexed directly. Through the list of emission bands,
-// the two loops that add a glow held a tenth of TracePaths's samples (perf,
-// bench_render --benchmark_filter=PathFrameDark1spp); indexed directly, the
-// dark path/bare ratio is 0.988 of what it was (PathAgainstBareEmbree/40,
-// eight alternated pairs).
+// texel-major copy made once per frame instead (in parallel), over the span
+// of bands from the first emission band to the last (a band inside it that
+// the phosphor does not emit holds 0), so a glow adds to consecutive bands,
+// indexed directly. Through the list of emission bands, the two loops that
+// add a glow held a tenth of TracePaths's samples (perf, bench_render
+// --benchmark_filter=PathFrameDark1spp); indexed directly, the dark
+// path/bare ratio is 0.988 of what it was (PathAgainstBareEmbree/40, eight
+// alternated pairs).
 struct GlowByTexel {
   int first_band = 0, band_count = 0;  // the span of emission bands
   LargeTable<float> Lp;                // [texel * band_count + i]: band first_band + i
 };
-std::vector<GlowByTexel> CopyGlowByTexel(const CoupledSolver* solver) {
-  std::vector<GlowByTexel> glow_by_texel;
-  if (!solver) return glow_by_texel;
-  const TexelAtlas& atlas = solver->atlas();
-  glow_by_texel.resize(atlas.objects().size());
-  for (std::size_t s = 0; s < atlas.objects().size(); ++s) {
-    const int slot = static_cast<int>(s);
-    GlowByTexel& glow = glow_by_texel[s];
-    const std::vector<int>& bands = solver->emission_bands(slot);
-    if (bands.empty()) continue;
-    glow.first_band = bands.front();
-    glow.band_count = bands.back() - bands.front() + 1;
-    const std::size_t n = atlas.objects()[s].count, span = static_cast<std::size_t>(glow.band_count);
-    glow.Lp.resize(n * span);  // not zeroed: each is written below
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 16384), [&](const tbb::blocked_range<std::size_t>& r) {
-      std::fill(glow.Lp.begin() + r.begin() * span, glow.Lp.begin() + r.end() * span, 0.0f);
-      for (int b : bands)
-        for (std::size_t k = r.begin(); k < r.end(); ++k)  // a masked texel glows by the share its paint covers
-          glow.Lp[k * span + static_cast<std::size_t>(b - glow.first_band)] =
-              atlas.Coverage(slot, k) * solver->Lp(slot, b, k);
-    });
+// The frame's glow: the copy, and for the emitter table each triangle's
+// power (the mean Lp of its texels, summed over bands, times its area) and
+// the glowing triangles counted and their power summed in fixed chunks of a
+// slot (kChunk), so that the total, the chunks' sums in order, rounds the
+// same on any number of threads.
+constexpr int kChunk = 16384;
+struct GlowingChunk {
+  int slot = 0, begin = 0, end = 0;  // triangles [begin, end) of the slot
+  std::size_t glowing = 0;           // of them, those with power
+  std::size_t first_entry = 0;       // the emitter entry of its first glowing triangle
+  double power = 0;                  // theirs, summed in order
+  // Counts and sums a triangle's power (in triangle order).
+  void Add(double p) {
+    if (p > 0) {
+      ++glowing;
+      power += p;
+    }
   }
-  return glow_by_texel;
+};
+struct FrameGlow {
+  std::vector<GlowByTexel> by_texel;      // per slot
+  std::vector<LargeTable<double>> power;  // per slot, per triangle
+  std::vector<GlowingChunk> chunks;       // every slot's, in slot order
+  std::size_t glowing = 0;                // glowing triangles
+  double total = 0;                       // their power
+};
+// Texels [k0, k1) of a slot into its copy: band by band, a run of
+// consecutive texels each.
+void CopyTexels(const CoupledSolver& solver, int slot, std::size_t k0, std::size_t k1, GlowByTexel& glow) {
+  const TexelAtlas& atlas = solver.atlas();
+  const std::size_t span = static_cast<std::size_t>(glow.band_count);
+  std::fill(glow.Lp.begin() + k0 * span, glow.Lp.begin() + k1 * span, 0.0f);
+  for (int b : solver.emission_bands(slot))
+    for (std::size_t k = k0; k < k1; ++k)  // a masked texel glows by the share its paint covers
+      glow.Lp[k * span + static_cast<std::size_t>(b - glow.first_band)] = atlas.Coverage(slot, k) * solver.Lp(slot, b, k);
+}
+// An auto atlas's triangles own consecutive texels (m^2 from first, in
+// triangle order), so the copy goes by runs of triangles and sums each
+// one's power from its texels while the run's copy is in the cache: summed
+// in a pass of its own, it read the whole copy back from memory. A UV
+// atlas's texels fall on triangles in any order: copied by texel, then
+// summed in texel order.
+void CopyGlowOfAutoAtlas(const SceneGeometry& geometry, const CoupledSolver& solver, GlowingChunk* chunks,
+                         std::size_t chunk_count, GlowByTexel& glow, LargeTable<double>& power) {
+  const int slot = chunks[0].slot;
+  const TexelAtlas::ObjectTexels& texels = solver.atlas().objects()[slot];
+  const std::size_t span = static_cast<std::size_t>(glow.band_count);
+  const int triangles = geometry.triangle_count(texels.object);
+  power.resize(triangles);  // not zeroed: each is written below
+  tbb::parallel_for(std::size_t{0}, chunk_count, [&](std::size_t c) {
+    GlowingChunk& chunk = chunks[c];
+    const std::size_t k1 = chunk.end < triangles ? texels.first[chunk.end] : texels.count;
+    CopyTexels(solver, slot, texels.first[chunk.begin], k1, glow);
+    for (int t = chunk.begin; t < chunk.end; ++t) {
+      const std::size_t count = std::size_t{texels.m[t]} * texels.m[t];
+      const float* Lp = glow.Lp.data() + std::size_t{texels.first[t]} * span;
+      double sum = 0;  // the bands outside the emission ones hold 0 and add nothing
+      for (std::size_t i = 0; i < count * span; ++i) sum += Lp[i];
+      power[t] = count ? sum / static_cast<double>(count) * geometry.Area(texels.object, t) : 0.0;
+      chunk.Add(power[t]);
+    }
+  });
+}
+void CopyGlowOfUvAtlas(const SceneGeometry& geometry, const CoupledSolver& solver, GlowingChunk* chunks,
+                       std::size_t chunk_count, GlowByTexel& glow, LargeTable<double>& power) {
+  const int slot = chunks[0].slot;
+  const TexelAtlas& atlas = solver.atlas();
+  const TexelAtlas::ObjectTexels& texels = atlas.objects()[slot];
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, texels.count, 16384),
+                    [&](const tbb::blocked_range<std::size_t>& r) { CopyTexels(solver, slot, r.begin(), r.end(), glow); });
+  const std::vector<int>& bands = solver.emission_bands(slot);
+  const int object = texels.object, triangles = geometry.triangle_count(object);
+  power.assign(triangles, 0.0);
+  std::vector<std::size_t> count(triangles, 0);
+  atlas.ForEachTexel(slot, [&](std::size_t k, int t, float, float) {
+    for (int b : bands) power[t] += solver.Lp(slot, b, k);
+    ++count[t];
+  });
+  for (int t = 0; t < triangles; ++t)
+    power[t] = count[t] ? power[t] / static_cast<double>(count[t]) * geometry.Area(object, t) : 0.0;
+  tbb::parallel_for(std::size_t{0}, chunk_count, [&](std::size_t c) {
+    for (int t = chunks[c].begin; t < chunks[c].end; ++t) chunks[c].Add(power[t]);
+  });
+}
+FrameGlow CopyGlow(const SceneGeometry& geometry, const CoupledSolver* solver) {
+  FrameGlow glow;
+  if (!solver) return glow;
+  const TexelAtlas& atlas = solver->atlas();
+  glow.by_texel.resize(atlas.objects().size());
+  glow.power.resize(atlas.objects().size());
+  for (std::size_t s = 0; s < atlas.objects().size(); ++s) {
+    const int slot = static_cast<int>(s), triangles = geometry.triangle_count(atlas.objects()[s].object);
+    const std::size_t first_chunk = glow.chunks.size();
+    for (int begin = 0; begin < triangles; begin += kChunk)
+      glow.chunks.push_back({slot, begin, std::min(triangles, begin + kChunk)});
+    GlowByTexel& by_texel = glow.by_texel[s];
+    const std::vector<int>& bands = solver->emission_bands(slot);
+    if (bands.empty()) {
+      glow.power[s].assign(triangles, 0.0);
+      continue;
+    }
+    by_texel.first_band = bands.front();
+    by_texel.band_count = bands.back() - bands.front() + 1;
+    by_texel.Lp.resize(atlas.objects()[s].count * static_cast<std::size_t>(by_texel.band_count));  // each written
+    if (triangles == 0) continue;
+    GlowingChunk* chunks = glow.chunks.data() + first_chunk;
+    const std::size_t chunk_count = glow.chunks.size() - first_chunk;
+    if (atlas.objects()[s].uv())
+      CopyGlowOfUvAtlas(geometry, *solver, chunks, chunk_count, by_texel, glow.power[s]);
+    else
+      CopyGlowOfAutoAtlas(geometry, *solver, chunks, chunk_count, by_texel, glow.power[s]);
+  }
+  for (GlowingChunk& chunk : glow.chunks) {
+    chunk.first_entry = glow.glowing;
+    glow.glowing += chunk.glowing;
+    glow.total += chunk.power;
+  }
+  return glow;
 }
 
 // The glowing triangles of this moment, for next-event estimation: chosen in
@@ -133,118 +228,38 @@ struct EmitterDistribution {
   // worth fetching as soon as its random word is known.
   bool outgrows_cache() const { return entries.size() * (sizeof(Entry) + sizeof(Column)) > kCoreCacheBytes; }
 
-  // Built for every frame, as the glow changes, in stages, each in parallel
-  // but for sums over chunks and blocks: each triangle's power, the glowing
-  // triangles counted and their power summed by chunk, their entries, and
-  // the alias tables. On one thread it held a 1.3M-triangle glowing sphere's
-  // frame for longer than bare Embree took to trace it (bench_render,
+  // Built for every frame, as the glow changes, from each triangle's power
+  // (summed with the frame's glow copy) in stages, each in parallel but for
+  // sums over chunks and blocks: the glowing triangles counted and their
+  // power summed by chunk, their entries, and the alias tables. On one
+  // thread it held a 1.3M-triangle glowing sphere's frame for longer than
+  // bare Embree took to trace it (bench_render,
   // BM_PathAgainstBareEmbreeGlowingBySize/8).
-  EmitterDistribution(const SceneGeometry& geometry, const CoupledSolver* solver,
-                      const std::vector<GlowByTexel>& glow_by_texel) {
+  EmitterDistribution(const SceneGeometry& geometry, const CoupledSolver* solver, const FrameGlow& glow) {
     pdf.resize(geometry.object_count());
     if (!solver) return;
     const TexelAtlas& atlas = solver->atlas();
     PHOS_CHECK(atlas.objects().size() <= 32767);
     for (const TexelAtlas::ObjectTexels& texels : atlas.objects())
       two_sided.push_back(geometry.scene().objects[texels.object].two_sided);
-    std::vector<LargeTable<double>> power;  // per slot, per triangle
-    for (std::size_t s = 0; s < atlas.objects().size(); ++s)
-      power.push_back(TrianglePower(geometry, *solver, glow_by_texel[s], static_cast<int>(s)));
-    const Glowing glowing = CountGlowing(power);
-    if (glowing.count == 0) return;
-    const LargeTable<double> entry_power = WriteEntries(geometry, atlas, power, glowing);
+    if (glow.glowing == 0) return;
+    const LargeTable<double> entry_power = WriteEntries(geometry, atlas, glow);
     BuildAliasTables(entry_power);
-  }
-  // Triangles are counted in fixed chunks of a slot (kChunk), so that the
-  // total, the chunks' sums in order, rounds the same on any number of threads.
-  static constexpr int kChunk = 16384;
-  struct Chunk {
-    int slot = 0, begin = 0, end = 0;  // triangles [begin, end) of the slot
-    std::size_t glowing = 0;           // of them, those with power
-    std::size_t first_entry = 0;       // the entry of its first glowing triangle
-    double power = 0;                  // theirs, summed in order
-  };
-  struct Glowing {
-    std::vector<Chunk> chunks;
-    std::size_t count = 0;  // glowing triangles
-    double total = 0;       // their power
-  };
-  static Glowing CountGlowing(const std::vector<LargeTable<double>>& power) {
-    Glowing glowing;
-    for (std::size_t s = 0; s < power.size(); ++s) {
-      const int triangles = static_cast<int>(power[s].size());
-      for (int begin = 0; begin < triangles; begin += kChunk)
-        glowing.chunks.push_back({static_cast<int>(s), begin, std::min(triangles, begin + kChunk)});
-    }
-    tbb::parallel_for(std::size_t{0}, glowing.chunks.size(), [&](std::size_t c) {
-      Chunk& chunk = glowing.chunks[c];
-      const LargeTable<double>& p = power[chunk.slot];
-      for (int t = chunk.begin; t < chunk.end; ++t)
-        if (p[t] > 0) {
-          ++chunk.glowing;
-          chunk.power += p[t];
-        }
-    });
-    for (Chunk& chunk : glowing.chunks) {
-      chunk.first_entry = glowing.count;
-      glowing.count += chunk.glowing;
-      glowing.total += chunk.power;
-    }
-    return glowing;
-  }
-  // Per triangle of a slot: the mean Lp (summed over bands) of its texels,
-  // times its area. An auto atlas's triangles own consecutive texels (m^2
-  // from first), so they are summed in parallel from the texel-major copy
-  // (`glow`, whose bands outside the emission ones hold 0 and add nothing):
-  // read from the solver's band-major table, a band a texel count away from
-  // the next, this was the frame's largest set-up stage. A UV atlas's texels
-  // fall on triangles in any order, so they are summed in texel order.
-  static LargeTable<double> TrianglePower(const SceneGeometry& geometry, const CoupledSolver& solver,
-                                          const GlowByTexel& glow, int slot) {
-    const TexelAtlas& atlas = solver.atlas();
-    const TexelAtlas::ObjectTexels& texels = atlas.objects()[slot];
-    const int object = texels.object;
-    const int triangles = geometry.triangle_count(object);
-    LargeTable<double> power;
-    if (texels.uv()) {
-      const std::vector<int>& bands = solver.emission_bands(slot);
-      power.assign(triangles, 0.0);
-      std::vector<std::size_t> count(triangles, 0);
-      atlas.ForEachTexel(slot, [&](std::size_t k, int t, float, float) {
-        for (int b : bands) power[t] += solver.Lp(slot, b, k);
-        ++count[t];
-      });
-      for (int t = 0; t < triangles; ++t)
-        power[t] = count[t] ? power[t] / static_cast<double>(count[t]) * geometry.Area(object, t) : 0.0;
-      return power;
-    }
-    const std::size_t span = static_cast<std::size_t>(glow.band_count);
-    power.resize(triangles);  // not zeroed: each is written below
-    tbb::parallel_for(tbb::blocked_range<int>(0, triangles, 4096), [&](const tbb::blocked_range<int>& r) {
-      for (int t = r.begin(); t < r.end(); ++t) {
-        const std::size_t count = std::size_t{texels.m[t]} * texels.m[t];
-        const float* Lp = glow.Lp.data() + std::size_t{texels.first[t]} * span;
-        double sum = 0;
-        for (std::size_t i = 0; i < count * span; ++i) sum += Lp[i];
-        power[t] = count ? sum / static_cast<double>(count) * geometry.Area(object, t) : 0.0;
-      }
-    });
-    return power;
   }
   // The glowing triangles' entries, chunk by chunk in parallel, and every
   // triangle's area pdf (0 where it does not glow) in the objects that
   // glow; returns the entries' power.
-  LargeTable<double> WriteEntries(const SceneGeometry& geometry, const TexelAtlas& atlas,
-                                  const std::vector<LargeTable<double>>& power, const Glowing& glowing) {
+  LargeTable<double> WriteEntries(const SceneGeometry& geometry, const TexelAtlas& atlas, const FrameGlow& glow) {
+    const std::vector<LargeTable<double>>& power = glow.power;
     std::vector<char> slot_glows(atlas.objects().size(), 0);
-    for (const Chunk& chunk : glowing.chunks) slot_glows[chunk.slot] |= chunk.glowing > 0;
+    for (const GlowingChunk& chunk : glow.chunks) slot_glows[chunk.slot] |= chunk.glowing > 0;
     for (std::size_t s = 0; s < slot_glows.size(); ++s)
       if (slot_glows[s]) pdf[atlas.objects()[s].object].resize(power[s].size());  // not zeroed: each is written below
-    entries.resize(glowing.count);  // not zeroed: each is written below
+    entries.resize(glow.glowing);  // not zeroed: each is written below
     LargeTable<double> entry_power;
-    entry_power.resize(glowing.count);
-    tbb::parallel_for(std::size_t{0}, glowing.chunks.size(), [&](std::size_t c) {
-      const Chunk& chunk = glowing.chunks[c];
+    entry_power.resize(glow.glowing);
+    tbb::parallel_for(std::size_t{0}, glow.chunks.size(), [&](std::size_t c) {
+      const GlowingChunk& chunk = glow.chunks[c];
       if (!slot_glows[chunk.slot]) return;  // its object has no pdf table
       const TexelAtlas::ObjectTexels& texels = atlas.objects()[chunk.slot];
       const int object = texels.object;
@@ -261,7 +276,7 @@ struct EmitterDistribution {
         entry.e1 = geometry.Vertex(object, t, 1) - entry.v0;
         entry.e2 = geometry.Vertex(object, t, 2) - entry.v0;
         entry.normal = geometry.FrontNormal(object, t);
-        entry.area_pdf = static_cast<float>(p[t] / glowing.total / geometry.Area(object, t));
+        entry.area_pdf = static_cast<float>(p[t] / glow.total / geometry.Area(object, t));
         entry.triangle = static_cast<std::uint32_t>(t);
         entry.slot = static_cast<std::int16_t>(chunk.slot);
         entry.m = texels.uv() ? 0 : texels.m[t];
@@ -386,8 +401,9 @@ class PathTransport final : public FrameTransport {
         media_(shading.media()),
         options_(shading.options()),
         nb_(shading.band_count()),
-        glow_by_texel_(CopyGlowByTexel(solver_)),
-        emitters_(geometry_, solver_, glow_by_texel_) {
+        glow_(CopyGlow(geometry_, solver_)),
+        emitters_(geometry_, solver_, glow_) {
+    glow_.power = {};  // the emitter table's alone
     prefetch_emitters_ = emitters_.outgrows_cache();
   }
 
@@ -439,13 +455,13 @@ class PathTransport final : public FrameTransport {
     explicit operator bool() const { return Lp != nullptr; }
   };
   GlowTexel GlowAt(const Hit& hit) const {
-    if (glow_by_texel_.empty() || !shading_.ShowsGlow(hit)) return {};
+    if (glow_.by_texel.empty() || !shading_.ShowsGlow(hit)) return {};
     const int slot = solver_->atlas().SlotOf(hit.object);
     if (slot < 0) return {};
     return GlowAt(slot, solver_->atlas().TexelOf(slot, hit.triangle, hit.b1, hit.b2));
   }
   GlowTexel GlowAt(int slot, std::size_t texel) const {
-    const GlowByTexel& glow = glow_by_texel_[slot];
+    const GlowByTexel& glow = glow_.by_texel[slot];
     if (glow.band_count == 0 || texel == TexelAtlas::kNoTexel) return {};
     const float* Lp = &glow.Lp[texel * static_cast<std::size_t>(glow.band_count)];
     Prefetch(Lp);
@@ -813,7 +829,7 @@ class PathTransport final : public FrameTransport {
   const VolumeMedia* media_;
   const FrameOptions& options_;
   int nb_;
-  std::vector<GlowByTexel> glow_by_texel_;  // per slot
+  FrameGlow glow_;
   EmitterDistribution emitters_;  // after the glow, which it reads
   bool prefetch_emitters_ = false;  // PrefetchEmitterPicks
   tbb::enumerable_thread_specific<PathRow> rows_;
