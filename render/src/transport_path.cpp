@@ -121,12 +121,15 @@ void CopyGlowOfUvAtlas(const SceneGeometry& geometry, const CoupledSolver& solve
   const TexelAtlas::ObjectTexels& texels = atlas.objects()[slot];
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, texels.count, 16384),
                     [&](const tbb::blocked_range<std::size_t>& r) { CopyTexels(solver, slot, r.begin(), r.end(), glow); });
-  const std::vector<int>& bands = solver.emission_bands(slot);
+  // From the copy, as an auto atlas's: a masked texel's power is the share
+  // its paint covers (the solver's Lp is the paint's own).
+  const std::size_t span = static_cast<std::size_t>(glow.band_count);
   const int object = texels.object, triangles = geometry.triangle_count(object);
   power.assign(triangles, 0.0);
   std::vector<std::size_t> count(triangles, 0);
   atlas.ForEachTexel(slot, [&](std::size_t k, int t, float, float) {
-    for (int b : bands) power[t] += solver.Lp(slot, b, k);
+    const float* Lp = glow.Lp.data() + k * span;
+    for (std::size_t i = 0; i < span; ++i) power[t] += Lp[i];
     ++count[t];
   });
   for (int t = 0; t < triangles; ++t)
