@@ -141,6 +141,26 @@ nlohmann::json WarnNeverCharged(const render::Scene& scene, const render::Couple
   return names;
 }
 
+// Once per object, on stderr: the parts of its glTF material that phos does
+// not draw (render::Mesh::unread_material: a normal map, emission, alpha),
+// so that a surface drawn without them is no surprise; and the same by
+// object name, for --json.
+nlohmann::json WarnUnreadMaterial(const render::Scene& scene) {
+  nlohmann::json unread = nlohmann::json::object();
+  for (const render::Object& object : scene.objects) {
+    if (!object.mesh || object.mesh->unread_material.empty()) continue;
+    const std::vector<std::string>& parts = object.mesh->unread_material;
+    unread[object.name] = parts;
+    std::string list;
+    for (const std::string& part : parts) list += (list.empty() ? "" : ", ") + part;
+    std::fprintf(stderr,
+                 "phos render: warning: '%s' (%s): not drawn: %s (phos draws a glTF material's base colour and "
+                 "metallic-roughness)\n",
+                 object.name.c_str(), object.mesh->source.c_str(), list.c_str());
+  }
+  return unread;
+}
+
 // --exposure: "auto" or a positive number, into exposure_auto and exposure.
 void ParseExposureOption(RenderArgs* args) {
   if (!args->exposure_given) return;
@@ -471,6 +491,7 @@ void Run(const RenderArgs& args) {
                   "; measured: " + costs;
   }
 
+  const nlohmann::json unread_material = WarnUnreadMaterial(scene);
   nlohmann::json frames = nlohmann::json::array();
   ContactSheet sheet;
   // "auto": the views wait for the exposure, which needs every metered frame.
@@ -545,6 +566,7 @@ void Run(const RenderArgs& args) {
       {"scene", args.scene},         {"transport", TransportName(transport)}, {"phosphorescence", solver != nullptr},
       {"width", scene.camera.width}, {"height", scene.camera.height},         {"frames", frames}};
   if (choose) result["transport_choice"] = choice_json;
+  result["unread_material"] = unread_material;
   result["exposure"] = exposure;
   if (scene.camera.exposure_auto)
     result["exposure_auto"] = {{"metered", metered.after_dark ? "after dark" : "all frames"},

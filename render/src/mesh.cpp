@@ -543,6 +543,30 @@ std::optional<GlossTexture> GltfGlossTexture(const tinygltf::Model& model, int i
   return gloss;
 }
 
+// The parts of glTF material `index` that phos does not draw, each named by
+// the field that holds it ("materials[0].normalTexture"), added to `unread`
+// once: normal, occlusion and emissive maps, an emissive factor, alpha
+// blending or masking, double-sidedness (a scene object's "two_sided" says
+// that for a phosphor) and the material's extensions. A render names them in
+// a warning rather than drawing the surface otherwise in silence.
+void NoteUnreadGltfMaterial(const tinygltf::Model& model, int index, std::vector<std::string>& unread) {
+  if (index < 0 || index >= static_cast<int>(model.materials.size())) return;
+  const tinygltf::Material& material = model.materials[index];
+  const std::string field = "materials[" + std::to_string(index) + "].";
+  std::vector<std::string> parts;
+  if (material.normalTexture.index >= 0) parts.push_back(field + "normalTexture");
+  if (material.occlusionTexture.index >= 0) parts.push_back(field + "occlusionTexture");
+  if (material.emissiveTexture.index >= 0) parts.push_back(field + "emissiveTexture");
+  if (std::any_of(material.emissiveFactor.begin(), material.emissiveFactor.end(), [](double v) { return v != 0; }))
+    parts.push_back(field + "emissiveFactor");
+  if (material.alphaMode == "BLEND" || material.alphaMode == "MASK")
+    parts.push_back(field + "alphaMode " + material.alphaMode);
+  if (material.doubleSided) parts.push_back(field + "doubleSided");
+  for (const auto& extension : material.extensions) parts.push_back(field + "extensions." + extension.first);
+  for (std::string& part : parts)
+    if (std::find(unread.begin(), unread.end(), part) == unread.end()) unread.push_back(std::move(part));
+}
+
 // The extensions phos reads: a file that requires any other is refused,
 // since it would be drawn wrong (glTF 2.0 spec, 3.12: a loader must not load
 // an asset whose required extension it does not support).
@@ -621,6 +645,7 @@ Mesh ParseGltf(std::string_view data, bool binary, const std::filesystem::path& 
         if (primitive.mode != TINYGLTF_MODE_TRIANGLES && primitive.mode != -1)
           continue;  // points and lines carry no surface
         MergeBaseColour(mesh, GltfBaseColour(model, primitive.material, base_dir, file_where), first_primitive);
+        NoteUnreadGltfMaterial(model, primitive.material, mesh.unread_material);
         if (first_primitive) {
           mesh.gloss = GltfGloss(model, primitive.material, file_where);
           mesh.gloss_texture = GltfGlossTexture(model, primitive.material, base_dir, file_where);

@@ -117,6 +117,24 @@ TEST(RenderCommand, TimesPastTheScenesEndAreRenderedWithAWarning) {
 // A phosphor tile under a lamp that is on for 10 s: facing it, wound the
 // other way round (its back towards the lamp), or under a roof. Only the
 // first charges; the others are named, once each, with the reason.
+// A 16 x 16 scene of `objects` under a violet lamp 1 m above the origin,
+// on for the first 10 of its 20 s, seen from `camera` looking at the origin.
+nlohmann::json LampLitScene(const std::string& name, const nlohmann::json& objects, const nlohmann::json& camera) {
+  return {{"schema", "phos.scene/1"},
+          {"name", name},
+          {"time", {{"start_s", 0}, {"end_s", 20}, {"fps", 0.1}}},
+          {"texel_size_m", 0.1},
+          {"camera", {{"position", camera}, {"look_at", {0, 0, 0}}, {"fov_deg", 60}, {"width", 16}, {"height", 16}}},
+          {"objects", objects},
+          {"lights",
+           {{{"name", "lamp"},
+             {"type", "point"},
+             {"position", {0, 1, 0}},
+             {"intensity", 0.5},
+             {"spectrum", {{"type", "led"}, {"center_nm", 405}, {"fwhm_nm", 15}}},
+             {"schedule", {{{"t_s", 0}, {"level", 1}}, {{"t_s", 10}, {"level", 0}}}}}}}};
+}
+
 CommandResult RenderTile(const TempDir& dir, bool flipped, bool roof, bool two_sided = false) {
   nlohmann::json tile = {{"name", "sign"},
                          {"shape", {{"type", "quad"}, {"size", {1, 1}}}},
@@ -130,24 +148,44 @@ CommandResult RenderTile(const TempDir& dir, bool flipped, bool roof, bool two_s
                        {"shape", {{"type", "box"}, {"size", {3, 0.05, 3}}}},
                        {"transform", {{"translate", {0, 0.5, 0}}}},
                        {"albedo", 0.5}});
-  const nlohmann::json scene = {
-      {"schema", "phos.scene/1"},
-      {"name", "tile"},
-      {"time", {{"start_s", 0}, {"end_s", 20}, {"fps", 0.1}}},
-      {"texel_size_m", 0.1},
-      {"camera", {{"position", {0, 0.3, 2}}, {"look_at", {0, 0, 0}}, {"fov_deg", 60}, {"width", 16}, {"height", 16}}},
-      {"objects", objects},
-      {"lights",
-       {{{"name", "lamp"},
-         {"type", "point"},
-         {"position", {0, 1, 0}},
-         {"intensity", 0.5},
-         {"spectrum", {{"type", "led"}, {"center_nm", 405}, {"fwhm_nm", 15}}},
-         {"schedule", {{{"t_s", 0}, {"level", 1}}, {{"t_s", 10}, {"level", 0}}}}}}}};
+  const nlohmann::json scene = LampLitScene("tile", objects, {0, 0.3, 2});
   const std::filesystem::path path = dir / (std::string(flipped ? "flipped" : "facing") + (roof ? "-roof" : "") +
                                             (two_sided ? "-two-sided" : "") + ".json");
   WriteText(path, scene.dump());
   return RunPhos("render " + path.string() + " --out " + (dir / path.stem()).string() + " --times 5,15 --json");
+}
+
+// A glTF whose material has a normal map and emission: the render draws it
+// without them and says so, one line naming the object, its file and the
+// fields, and the same under "unread_material" in --json; a scene whose
+// meshes have nothing unread gets no line and an empty object.
+TEST(RenderCommand, GltfMaterialPartsNotDrawnAreNamedOnce) {
+  TempDir dir;
+  std::filesystem::copy_file(Fixture("scenes/textured/checker.png"), dir / "checker.png");
+  nlohmann::json gltf = nlohmann::json::parse(ReadText(Fixture("scenes/textured/plane.gltf")));
+  gltf["materials"][0]["normalTexture"] = {{"index", 0}};
+  gltf["materials"][0]["emissiveFactor"] = {1, 1, 1};
+  WriteText(dir / "board.gltf", gltf.dump());
+  const nlohmann::json scene = LampLitScene(
+      "board", {{{"name", "board"}, {"mesh", "board.gltf"}, {"phosphor", Fixture("materials/blue.json").string()}}},
+      {0, 2, 0.01});
+  WriteText(dir / "board.json", scene.dump());
+  const CommandResult r = RunPhos("render " + (dir / "board.json").string() + " --out " + (dir / "out").string() +
+                                  " --times 5,15 --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;  // once, for two frames
+  EXPECT_NE(r.err.find("warning: 'board' ("), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("board.gltf): not drawn: materials[0].normalTexture, materials[0].emissiveFactor"),
+            std::string::npos)
+      << r.err;
+  EXPECT_EQ(nlohmann::json::parse(r.out)["unread_material"],
+            nlohmann::json({{"board", {"materials[0].normalTexture", "materials[0].emissiveFactor"}}}));
+
+  const CommandResult cornell = RunPhos("render " + kCornell + " --out " + (dir / "cornell").string() +
+                                        " --times 40 --width 16 --height 16 --json");
+  ASSERT_EQ(cornell.exit_code, 0) << cornell.err;
+  EXPECT_EQ(cornell.err, "");
+  EXPECT_EQ(nlohmann::json::parse(cornell.out)["unread_material"], nlohmann::json::object());
 }
 
 TEST(RenderCommand, APhosphorThatNoLightChargesIsNamedOnceWithTheReason) {

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <fstream>
 #include <random>
 #include <set>
 
@@ -112,6 +113,43 @@ TEST(Meshes, GltfNodeTransformsAreApplied) {
     const Eigen::Vector3f a = mesh.positions[t[0]], b = mesh.positions[t[1]], c = mesh.positions[t[2]];
     EXPECT_GT((b - a).cross(c - a).dot((a + b + c) / 3 - Eigen::Vector3f(0, 0.5f, 0)), 0);
   }
+}
+
+// What of a glTF material phos does not draw is listed by field, once each
+// however many primitives share the material (phos render warns of it); a
+// material of base colour and metallic-roughness alone lists nothing.
+TEST(Meshes, GltfMaterialPartsPhosDoesNotDrawAreListedOnce) {
+  const std::filesystem::path dir = std::filesystem::path(::testing::TempDir()) / "unread";
+  std::filesystem::create_directories(dir);
+  std::filesystem::copy_file(Fixture("scenes/textured/checker.png"), dir / "checker.png",
+                             std::filesystem::copy_options::overwrite_existing);
+  nlohmann::json gltf = ReadJsonFile(Fixture("scenes/textured/plane.gltf"));
+  std::ofstream(dir / "plain.gltf") << gltf.dump();
+  EXPECT_TRUE(LoadMesh(dir / "plain.gltf", "", "test").unread_material.empty());
+  nlohmann::json& material = gltf["materials"][0];
+  material["normalTexture"] = {{"index", 0}, {"scale", 0.5}};
+  material["occlusionTexture"] = {{"index", 0}};
+  material["emissiveTexture"] = {{"index", 0}};
+  material["emissiveFactor"] = {1, 0.5, 0};
+  material["alphaMode"] = "MASK";
+  material["doubleSided"] = true;
+  material["extensions"] = {{"KHR_materials_emissive_strength", {{"emissiveStrength", 5}}}};
+  gltf["extensionsUsed"] = {"KHR_materials_emissive_strength"};
+  gltf["meshes"][0]["primitives"].push_back(gltf["meshes"][0]["primitives"][0]);  // the same material twice
+  std::ofstream(dir / "rich.gltf") << gltf.dump();
+  const Mesh mesh = LoadMesh(dir / "rich.gltf", "", "test");
+  EXPECT_EQ(mesh.unread_material,
+            (std::vector<std::string>{"materials[0].normalTexture", "materials[0].occlusionTexture",
+                                      "materials[0].emissiveTexture", "materials[0].emissiveFactor",
+                                      "materials[0].alphaMode MASK", "materials[0].doubleSided",
+                                      "materials[0].extensions.KHR_materials_emissive_strength"}));
+  // A black emissive factor and an opaque alpha are what glTF means by none.
+  material = ReadJsonFile(Fixture("scenes/textured/plane.gltf"))["materials"][0];
+  material["emissiveFactor"] = {0, 0, 0};
+  material["alphaMode"] = "OPAQUE";
+  gltf.erase("extensionsUsed");
+  std::ofstream(dir / "opaque.gltf") << gltf.dump();
+  EXPECT_TRUE(LoadMesh(dir / "opaque.gltf", "", "test").unread_material.empty());
 }
 
 TEST(Scenes, EveryFixtureLoads) {

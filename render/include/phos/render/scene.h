@@ -146,6 +146,9 @@ struct Mesh {
   bool v_up = false;  // OBJ: v = 0 is an image's bottom row; glTF and built-in shapes: its top row
   std::optional<Gloss> gloss;  // glTF: its first material's metallic-roughness, when glossy
   std::optional<GlossTexture> gloss_texture;  // glTF: its first material's metallicRoughnessTexture
+  // glTF: the parts of its materials phos does not draw, by field
+  // ("materials[0].normalTexture"); phos render warns of them.
+  std::vector<std::string> unread_material;
   bool has_uvs() const { return !uv_triangles.empty() && uv_triangles.size() == triangles.size(); }
 };
 
