@@ -72,8 +72,8 @@ struct GlowingChunk {
 };
 struct FrameGlow {
   std::vector<GlowByTexel> by_texel;      // per slot
-  std::vector<LargeTable<double>> power;  // per slot, per triangle
-  std::vector<GlowingChunk> chunks;       // every slot's, in slot order
+  std::vector<LargeTable<double>> power;  // per slot, per triangle (empty: the slot emits no band)
+  std::vector<GlowingChunk> chunks;       // every emitting slot's, in slot order
   std::size_t glowing = 0;                // glowing triangles
   double total = 0;                       // their power
 };
@@ -146,19 +146,15 @@ FrameGlow CopyGlow(const SceneGeometry& geometry, const CoupledSolver* solver) {
   glow.power.resize(atlas.objects().size());
   for (std::size_t s = 0; s < atlas.objects().size(); ++s) {
     const int slot = static_cast<int>(s), triangles = geometry.triangle_count(atlas.objects()[s].object);
-    const std::size_t first_chunk = glow.chunks.size();
-    for (int begin = 0; begin < triangles; begin += kChunk)
-      glow.chunks.push_back({slot, begin, std::min(triangles, begin + kChunk)});
-    GlowByTexel& by_texel = glow.by_texel[s];
     const std::vector<int>& bands = solver->emission_bands(slot);
-    if (bands.empty()) {
-      glow.power[s].assign(triangles, 0.0);
-      continue;
-    }
+    if (bands.empty() || triangles == 0) continue;  // it glows nowhere: no copy, no chunks, no power
+    GlowByTexel& by_texel = glow.by_texel[s];
     by_texel.first_band = bands.front();
     by_texel.band_count = bands.back() - bands.front() + 1;
     by_texel.Lp.resize(atlas.objects()[s].count * static_cast<std::size_t>(by_texel.band_count));  // each written
-    if (triangles == 0) continue;
+    const std::size_t first_chunk = glow.chunks.size();
+    for (int begin = 0; begin < triangles; begin += kChunk)
+      glow.chunks.push_back({slot, begin, std::min(triangles, begin + kChunk)});
     GlowingChunk* chunks = glow.chunks.data() + first_chunk;
     const std::size_t chunk_count = glow.chunks.size() - first_chunk;
     if (atlas.objects()[s].uv())
@@ -180,9 +176,10 @@ FrameGlow CopyGlow(const SceneGeometry& geometry, const CoupledSolver* solver) {
 // pbrt-v4's AliasTable): a binary search of a CDF over thousands of triangles
 // was a tenth of the path tracer's time.
 //
-// The table is two-level, so that a frame builds it in parallel: the
-// entries in blocks of kBlock, each block an alias table of its own over its
-// entries, and a small one over the blocks by their power. Choosing a block
+// A table of more than kOneBlock entries is two-level, so that a frame
+// builds it in parallel: the entries in blocks of kBlock, each block an
+// alias table of its own over its entries, and a small one over the blocks
+// by their power. Choosing a block
 // by its share W_b / W and an entry of it by p_e / W_b chooses the entry by
 // p_e / W, as one table over all would.
 struct EmitterDistribution {
