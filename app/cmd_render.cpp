@@ -526,6 +526,7 @@ void Run(const RenderArgs& args) {
                             {"seconds", seconds},
                             {"solver_seconds", solver_s},
                             {"render_seconds", render_s},
+                            {"setup_seconds", stats.setup_s},
                             {"rays", stats.rays}};
     if (!scene.camera.exposure_auto)
       WriteFrameViews(args, scene, f, t, scene.camera.exposure, rgb, bands, &entry, &sheet);

@@ -48,6 +48,7 @@ FrameOptions DefaultFrameOptions(const Scene& scene, Transport transport) {
 
 Image RenderBands(const SceneGeometry& geometry, const CoupledSolver* solver, const FrameOptions& options,
                   FrameStats* stats) {
+  const auto start = std::chrono::steady_clock::now();
   const Scene& scene = geometry.scene();
   const int nb = scene.bands.band_count();
   if (nb > kMaxBands) ThrowUserError(scene.source, "bands_nm", "more than " + std::to_string(kMaxBands) + " bands");
@@ -67,6 +68,7 @@ Image RenderBands(const SceneGeometry& geometry, const CoupledSolver* solver, co
       options.transport == Transport::kPath  ? MakePathTransport(shading, camera)
       : options.transport == Transport::kDss ? MakeDssTransport(shading, camera)
                                              : MakeDirectTransport(shading, camera);
+  if (stats) stats->setup_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   std::atomic<std::uint64_t> total_rays{0};
   tbb::parallel_for(0, height, [&](int y) {
     std::uint64_t rays = 0;

@@ -32,6 +32,10 @@ TEST(RenderCommand, JsonFramesFollowTheContract) {
   EXPECT_EQ(json["frames"][0]["t"].get<double>(), 20.0);  // in the order given
   for (const auto& frame : json["frames"]) {
     EXPECT_GT(frame["seconds"].get<double>(), 0.0);
+    // The set-up is part of the frame's render time, which is part of its time.
+    EXPECT_GT(frame["setup_seconds"].get<double>(), 0.0);
+    EXPECT_LE(frame["setup_seconds"].get<double>(), frame["render_seconds"].get<double>());
+    EXPECT_LE(frame["render_seconds"].get<double>(), frame["seconds"].get<double>());
     const render::Image exr = render::ReadImage(frame["exr"].get<std::string>());
     EXPECT_EQ(exr.width, 40);
     EXPECT_EQ(exr.height, 30);

@@ -98,6 +98,10 @@ TransportChoice ChooseTransport(std::vector<TransportCandidate> candidates, doub
 
 struct FrameStats {
   std::uint64_t rays = 0;  // every ray cast (primary, shadow, bounce)
+  // Wall time before the first row: the frame's shading and its transport's
+  // set-up (the path tracer's glow copy and emitter table), which grows
+  // with the scene, not with the samples.
+  double setup_s = 0;
 };
 
 // Radiance per band at every pixel at the geometry's and solver's current
