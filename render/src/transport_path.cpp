@@ -13,6 +13,7 @@
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
+#include "phos/render/alias_table.h"
 #include "phos/render/bsdf.h"
 #include "phos/util/error.h"
 #include "phos/util/large_table.h"
@@ -171,17 +172,8 @@ FrameGlow CopyGlow(const SceneGeometry& geometry, const CoupledSolver* solver) {
 }
 
 // The glowing triangles of this moment, for next-event estimation: chosen in
-// proportion to their emitted power (texel Lp summed over bands, times area),
-// in O(1) from an alias table (Walker 1977; Vose 1991's construction, as
-// pbrt-v4's AliasTable): a binary search of a CDF over thousands of triangles
-// was a tenth of the path tracer's time.
-//
-// A table of more than kOneBlock entries is two-level, so that a frame
-// builds it in parallel: the entries in blocks of kBlock, each block an
-// alias table of its own over its entries, and a small one over the blocks
-// by their power. Choosing a block
-// by its share W_b / W and an entry of it by p_e / W_b chooses the entry by
-// p_e / W, as one table over all would.
+// proportion to their emitted power (texel Lp summed over bands, times area)
+// by an alias table (alias_table.h).
 struct EmitterDistribution {
   // Everything a sample needs of its triangle in one cache line: sampling
   // walked from the entry to the mesh's indices, its vertices and the atlas's
@@ -199,39 +191,24 @@ struct EmitterDistribution {
                    : atlas.TexelOf(slot, static_cast<int>(triangle), b1, b2);
     }
   };
-  struct Column {
-    float keep;  // probability of keeping this column's entry (or block) over its alias
-    std::uint32_t alias;
-  };
-  // A table of up to kOneBlock entries (an 82k-triangle glowing mesh) is
-  // one block, built in 0.3 ms on one core, and picks without the blocks'
-  // extra step, which cost such a mesh 3% of the path/bare ratio with blocks
-  // of 4096 (bench_render, BM_PathAgainstBareEmbreeGlowingBySize/6, three
-  // alternated pairs). A larger one has blocks of kBlock: a power of 2, so
-  // that a block's columns are chosen exactly uniformly from random bits;
-  // small enough that a block's Vose works in a core's L1 and L2 caches
-  // (with blocks of 2^17, a 1.3M-triangle mesh's tables took 2.2 ms to
-  // build instead of 1.7).
-  static constexpr std::size_t kOneBlock = std::size_t{1} << 17;
-  static constexpr int kBlockBits = 12;
-  static constexpr std::size_t kBlock = std::size_t{1} << kBlockBits;
   // Large tables (large_table.h): a 1.3M-triangle glowing mesh has 83 MB of
   // entries, and zeroing that on one thread before filling it on two was
   // most of a frame's set-up.
   LargeTable<Entry> entries;
-  LargeTable<Column> columns;  // [entry]: its column in its block's table (alias: an entry)
-  std::vector<Column> blocks;  // the table over the blocks (alias: a block)
+  AliasTable table;                    // over the entries, by power
   std::vector<LargeTable<float>> pdf;  // per object, per triangle: probability of choosing it, per m^2 of it
   std::vector<std::uint8_t> two_sided;  // per texel slot: the object glows from both faces
   bool empty() const { return entries.empty(); }
   // The table outgrows a core's cache: a pick's column is then a cache miss,
   // worth fetching as soon as its random word is known.
-  bool outgrows_cache() const { return entries.size() * (sizeof(Entry) + sizeof(Column)) > kCoreCacheBytes; }
+  bool outgrows_cache() const {
+    return entries.size() * (sizeof(Entry) + sizeof(AliasTable::Column)) > kCoreCacheBytes;
+  }
 
   // Built for every frame, as the glow changes, from each triangle's power
   // (summed with the frame's glow copy) in stages, each in parallel but for
   // sums over chunks and blocks: the glowing triangles counted and their
-  // power summed by chunk, their entries, and the alias tables. On one
+  // power summed by chunk, their entries, and the alias table. On one
   // thread it held a 1.3M-triangle glowing sphere's frame for longer than
   // bare Embree took to trace it (bench_render,
   // BM_PathAgainstBareEmbreeGlowingBySize/8).
@@ -244,7 +221,7 @@ struct EmitterDistribution {
       two_sided.push_back(geometry.scene().objects[texels.object].two_sided);
     if (glow.glowing == 0) return;
     const LargeTable<double> entry_power = WriteEntries(geometry, atlas, glow);
-    BuildAliasTables(entry_power);
+    table = AliasTable(entry_power.data(), entry_power.size());
   }
   // The glowing triangles' entries, chunk by chunk in parallel, and every
   // triangle's area pdf (0 where it does not glow) in the objects that
@@ -287,107 +264,12 @@ struct EmitterDistribution {
     });
     return entry_power;
   }
-  // Every block's table (in parallel), then the one over the blocks. A
-  // table of up to kOneBlock entries is one block, of as many columns; a
-  // larger one has blocks of kBlock columns, the last block's columns past
-  // the entries weighing 0 (so each is its alias), and a column is chosen
-  // from random bits by a shift alone.
-  void BuildAliasTables(const LargeTable<double>& power) {
-    const std::size_t n = power.size();
-    const std::size_t block_size = n <= kOneBlock ? n : kBlock, block_count = (n + block_size - 1) / block_size;
-    columns.resize(block_count * block_size);  // not zeroed: each is written below
-    std::vector<double> block_power(block_count);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, block_count, 1), [&](const tbb::blocked_range<std::size_t>& r) {
-      VoseScratch scratch;
-      for (std::size_t b = r.begin(); b < r.end(); ++b) {
-        const std::size_t begin = b * block_size, size = std::min(block_size, n - begin);
-        double sum = 0;
-        for (std::size_t e = begin; e < begin + size; ++e) sum += power[e];
-        block_power[b] = sum;
-        BuildAliasTable(power.data() + begin, size, block_size, sum, static_cast<std::uint32_t>(begin),
-                        columns.data() + begin, scratch);
-      }
-    });
-    double total = 0;
-    for (double w : block_power) total += w;
-    blocks.resize(block_count);
-    VoseScratch scratch;
-    BuildAliasTable(block_power.data(), block_count, block_count, total, 0, blocks.data(), scratch);
-  }
-  // Vose over `weight[0, n)` (summing to `total`) and `padded - n` more
-  // columns of weight 0, into `columns[0, padded)`, aliases numbered from
-  // `first`: weights scaled so the mean is 1; each under-full column is
-  // topped up by an over-full one, its alias.
-  struct VoseScratch {
-    std::vector<double> scaled;
-    std::vector<std::uint32_t> small, large;
-  };
-  static void BuildAliasTable(const double* weight, std::size_t n, std::size_t padded, double total,
-                              std::uint32_t first, Column* columns, VoseScratch& scratch) {
-    std::vector<double>& scaled = scratch.scaled;
-    std::vector<std::uint32_t>&small = scratch.small, &large = scratch.large;
-    scaled.resize(padded);
-    small.clear();
-    large.clear();
-    for (std::size_t e = 0; e < padded; ++e) {
-      scaled[e] = e < n ? weight[e] / total * static_cast<double>(padded) : 0.0;
-      (scaled[e] < 1.0 ? small : large).push_back(static_cast<std::uint32_t>(e));
-      columns[e] = {1.0f, first + static_cast<std::uint32_t>(e)};
-    }
-    std::uint32_t heavy = large.empty() ? 0 : large.back();  // some column of weight
-    while (!small.empty() && !large.empty()) {
-      const std::uint32_t under = small.back(), over = large.back();
-      small.pop_back();
-      columns[under] = {static_cast<float>(scaled[under]), first + over};
-      scaled[over] -= 1.0 - scaled[under];
-      heavy = over;
-      if (scaled[over] < 1.0) {
-        large.pop_back();
-        small.push_back(over);
-      }
-    }
-    // What remains is full up to rounding: kept with probability 1, but for
-    // a column of no weight (possible only by rounding), never kept.
-    for (std::uint32_t e : small)
-      if (!(scaled[e] > 0)) columns[e] = {0.0f, first + heavy};
-  }
   // Probability per unit area of sampling a point of (object, triangle).
   float AreaPdf(int object, int triangle) const {
     const auto& p = pdf[object];
     return p.empty() ? 0.0f : p[triangle];
   }
-  // One 64-bit random word. One block: its high half picks a column by
-  // multiply-shift (Lemire), its low 24 bits decide between the column and
-  // its alias. Blocks: its high half picks a block likewise, the product's
-  // low 32 bits, uniform, deciding between the block and its alias, and its
-  // low half picks a column of the block by its top kBlockBits and the
-  // column or its alias by the other 20 (a keep rounded by at most 2^-20,
-  // where one table's multiply-shift over 1.3M columns favoured some by
-  // 3e-4). Masks, not branches: the choices are
-  // random, so a branch was mispredicted at every other sample; whether
-  // there are blocks goes the same way all frame.
-  struct Choice {
-    std::size_t column;
-    float u;  // uniform in [0, 1): keep the column's entry when below its keep
-  };
-  static std::uint32_t Select(std::uint32_t column, const Column& c, float u) {
-    const std::uint32_t keep = 0u - static_cast<std::uint32_t>(u < c.keep);
-    return (column & keep) | (c.alias & ~keep);
-  }
-  static float Unit24(std::uint32_t bits) { return static_cast<float>(bits & 0xFFFFFFu) * (1.0f / 16777216.0f); }
-  Choice ColumnOf(std::uint64_t random) const {
-    if (blocks.size() == 1)
-      return {static_cast<std::size_t>(((random >> 32) * columns.size()) >> 32), Unit24(static_cast<std::uint32_t>(random))};
-    const std::uint64_t top = (random >> 32) * blocks.size();
-    const std::uint32_t top_column = static_cast<std::uint32_t>(top >> 32);
-    const std::uint32_t block = Select(top_column, blocks[top_column], Unit24(static_cast<std::uint32_t>(top) >> 8));
-    const std::uint32_t low = static_cast<std::uint32_t>(random);
-    return {(std::size_t{block} << kBlockBits) + (low >> (32 - kBlockBits)), Unit24((low << kBlockBits) >> 8)};
-  }
-  const Entry& Pick(std::uint64_t random) const {
-    const Choice choice = ColumnOf(random);
-    return entries[Select(static_cast<std::uint32_t>(choice.column), columns[choice.column], choice.u)];
-  }
+  const Entry& Pick(std::uint64_t random) const { return entries[table.Pick(random)]; }
 };
 
 class PathTransport final : public FrameTransport {
@@ -628,7 +510,7 @@ class PathTransport final : public FrameTransport {
   // Only when the table outgrows a core's cache (prefetch_emitters_).
   void PrefetchEmitterPicks(const std::vector<PathLane>& lanes, const std::vector<int>& live, int depth) const {
     const int skip = depth == 0 && media_ ? 1 : 0;
-    for (int i : live) Prefetch(&emitters_.columns[emitters_.ColumnOf(lanes[i].random->Peek(skip)).column]);
+    for (int i : live) Prefetch(&emitters_.table.columns()[emitters_.table.ColumnOf(lanes[i].random->Peek(skip)).column]);
   }
 
   // A lane's vertex is BeginVertex then ShadeVertex, one lane after another.
