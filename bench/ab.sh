@@ -23,16 +23,25 @@ for binary in "$a" "$b"; do
 done
 [[ "$pairs" =~ ^[1-9][0-9]*$ ]] || { echo "ab.sh: N: expected a count of pairs from 1 up, not '$pairs'" >&2; exit 2; }
 
-# One run of a binary: "name=value" for each benchmark, the counter's column
-# found by its name in the CSV header.
+# One run of a binary: "name=value" for each benchmark, from its JSON
+# output (the CSV reporter stops at a benchmark whose counters differ from
+# the first one's, as the glowing spheres' do from the box's).
 counters() {
-  "$1" --benchmark_filter="$filter" --benchmark_format=csv 2>/dev/null |
-    awk -F, -v counter="\"$counter\"" '
-      /^name,/ { for (i = 1; i <= NF; ++i) if ($i == counter) column = i; next }
-      column && /^"/ { name = $1; gsub(/"/, "", name); sub(/\/min_time.*|\/real_time.*/, "", name); printf "%s=%s  ", name, $column }
-      END { if (!column) { print "ab.sh: no counter " counter > "/dev/stderr"; exit 2 } }'
+  "$1" --benchmark_filter="$filter" --benchmark_format=json 2>/dev/null |
+    python3 -c '
+import json, re, sys
+counter = sys.argv[1]
+runs = json.load(sys.stdin)["benchmarks"]
+if any(counter not in run for run in runs):
+    sys.exit("ab.sh: no counter \"%s\"" % counter)
+print("  ".join("%s=%.6g" % (re.sub(r"/(min_time|real_time).*", "", run["name"]), run[counter]) for run in runs))
+' "$counter"
 }
 for ((pair = 1; pair <= pairs; ++pair)); do
-  echo "pair $pair A: $(counters "$a")"
-  echo "pair $pair B: $(counters "$b")"
+  for side in A B; do
+    binary=$a
+    [ "$side" = B ] && binary=$b
+    line=$(counters "$binary") || exit 2  # the counter is missing: said on stderr
+    echo "pair $pair $side: $line"
+  done
 done
