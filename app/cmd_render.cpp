@@ -431,6 +431,9 @@ void Run(const RenderArgs& args) {
   std::unique_ptr<CoupledSolver> solver;
   if (!args.no_phosphorescence && scene.HasPhosphors()) solver = std::make_unique<CoupledSolver>(scene, geometry);
   if (args.solve_only) {
+    // Said at the solve too: on a cluster it is the first task to run, and
+    // its log the first a user reads.
+    WarnUnreadMaterial(scene);
     SolveOnly(args, scene, solver.get(), times);
     return;
   }

@@ -184,6 +184,12 @@ TEST(RenderCommand, GltfMaterialPartsNotDrawnAreNamedOnce) {
       << r.err;
   EXPECT_EQ(nlohmann::json::parse(r.out)["unread_material"],
             nlohmann::json({{"board", {"materials[0].normalTexture", "materials[0].emissiveFactor"}}}));
+  // The cluster's solve pass, which renders nothing, says it as well.
+  const CommandResult solve = RunPhos("render " + (dir / "board.json").string() + " --times 5,15 --solve-only" +
+                                      " --checkpoints " + (dir / "states").string());
+  ASSERT_EQ(solve.exit_code, 0) << solve.err;
+  EXPECT_EQ(std::count(solve.err.begin(), solve.err.end(), '\n'), 1) << solve.err;
+  EXPECT_NE(solve.err.find("board.gltf): not drawn: materials[0].normalTexture"), std::string::npos) << solve.err;
 
   const CommandResult cornell = RunPhos("render " + kCornell + " --out " + (dir / "cornell").string() +
                                         " --times 40 --width 16 --height 16 --json");
