@@ -53,7 +53,7 @@ Image RenderBands(const SceneGeometry& geometry, const CoupledSolver* solver, co
   const int nb = scene.bands.band_count();
   if (nb > kMaxBands) ThrowUserError(scene.source, "bands_nm", "more than " + std::to_string(kMaxBands) + " bands");
   const int width = scene.camera.width, height = scene.camera.height;
-  Image image(width, height, nb);
+  Image image = Image::ForOverwrite(width, height, nb);  // every row sets each of its pixels
   // The media: the solver's (with the phosphorescent voxels' states), or this frame's own.
   std::unique_ptr<VolumeMedia> own_media;
   VolumeMedia* media = solver ? solver->media() : nullptr;

@@ -16,8 +16,8 @@ namespace phos::testing {
 namespace {
 
 // The pixels of every frame-NNNN.exr of a folder, by name.
-std::map<std::string, std::vector<float>> Frames(const std::filesystem::path& dir) {
-  std::map<std::string, std::vector<float>> frames;
+std::map<std::string, LargeTable<float>> Frames(const std::filesystem::path& dir) {
+  std::map<std::string, LargeTable<float>> frames;
   for (const auto& entry : std::filesystem::directory_iterator(dir))
     if (entry.path().extension() == ".exr") frames[entry.path().filename().string()] = render::ReadImage(entry.path()).pixels;
   return frames;

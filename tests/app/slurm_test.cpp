@@ -175,8 +175,8 @@ class OneNodeSlurm {
   std::vector<fs::path> pid_files_;
 };
 
-std::map<std::string, std::vector<float>> Images(const fs::path& dir, const std::string& extension) {
-  std::map<std::string, std::vector<float>> images;
+std::map<std::string, LargeTable<float>> Images(const fs::path& dir, const std::string& extension) {
+  std::map<std::string, LargeTable<float>> images;
   for (const auto& entry : fs::directory_iterator(dir))
     if (entry.path().extension() == extension)
       images[entry.path().filename().string()] = render::ReadImage(entry.path()).pixels;

@@ -396,6 +396,38 @@ TEST(Regression, CornellPathTracedAfterLightsOutWithinNoise) {
                          "cornell-path-t40", 0.15);
 }
 
+// A frame's image is not zeroed first (Image::ForOverwrite): every
+// transport must set every pixel. Rendered into the storage of a bright
+// frame just freed (a block of 2 MiB, 256 x 256 x 8 bands, kept for the
+// next of its size, large_table.h), a frame with the lights off and no
+// phosphorescence must be exactly black: a pixel a transport skipped would
+// show the bright frame.
+TEST(Transport, EveryTransportSetsEveryPixelOfItsFrame) {
+  Scene scene = LoadScene(Fixture("scenes/cornell-phosphor.json"));
+  scene.camera.width = scene.camera.height = 256;
+  SceneGeometry geometry(scene);
+  CoupledSolver solver(scene, geometry);
+  for (Transport transport : {Transport::kDirect, Transport::kPath, Transport::kDss}) {
+    FrameOptions options = DefaultFrameOptions(scene, transport);
+    options.spp = 1;
+    geometry.SetTime(20);  // the LED on
+    const float* storage = nullptr;
+    {
+      const Image lit = RenderBands(geometry, nullptr, options);
+      double sum = 0;
+      for (float v : lit.pixels) sum += v;
+      ASSERT_GT(sum, 0.0);
+      storage = lit.pixels.data();
+    }
+    geometry.SetTime(40);  // the LED off since 30 s, and no glow: black
+    const Image dark = RenderBands(geometry, nullptr, options);
+    EXPECT_EQ(dark.pixels.data(), storage) << "not the lit frame's storage: this test would prove nothing";
+    std::size_t set = 0;
+    for (float v : dark.pixels) set += v == 0.0f;
+    EXPECT_EQ(set, dark.pixels.size()) << static_cast<int>(transport);
+  }
+}
+
 // Deep screen space adds the one bounce direct transport lacks: after
 // lights-out the glowing walls light the white blocks. Against the stored
 // path-traced reference (the truth up to its noise), the dss frame must be
