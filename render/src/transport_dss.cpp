@@ -8,6 +8,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include "phos/render/bsdf.h"
 #include "phos/render/dss.h"
 #include "phos/render/subsurface.h"
 #include "phos/render/volume.h"
@@ -124,12 +125,25 @@ class DssTransport final : public FrameTransport {
     const int nb = shading_.band_count(), width = image.width;
     const bool sky = shading_.sky_level() > 0, media = shading_.media() != nullptr;
     tbb::parallel_for(0, image.height, [&](int y) {
-      Bands texture_albedo;
+      Bands texture_albedo, directional_albedo(nb);
+      Gloss texture_gloss;
       for (int x = 0; x < width; ++x) {
         const std::size_t p = static_cast<std::size_t>(y) * width + x;
         if (g.object[p] < 0) continue;
-        const Bands& albedo = shading_.AlbedoAt(g.SeenHit(p), camera_.origin(),
-                                                CameraDifferential(shading_, camera_, camera_.Through(x + 0.5f, y + 0.5f)), texture_albedo);
+        const Hit hit = g.SeenHit(p);
+        const Shading::Surface surface =
+            shading_.SurfaceAt(hit, camera_.origin(), CameraDifferential(shading_, camera_, camera_.Through(x + 0.5f, y + 0.5f)),
+                               texture_albedo, texture_gloss);
+        // A glossy surface reflects the bounce and the sky, light from every
+        // side, by its directional albedo toward the camera: exact for a
+        // uniform incident radiance, as direct transport reflects the sky
+        // (Shading::GlossyReflection). Its Lambertian albedo alone left a
+        // dark glossy floor at half the sky the other transports show.
+        if (surface.gloss) {
+          const Vec3f wo = (camera_.origin() - hit.position).normalized();
+          GlossyBsdf(*surface.gloss, surface.albedo->data(), nb).DirectionalAlbedo(hit.normal.dot(wo), directional_albedo.data());
+        }
+        const Bands& albedo = surface.gloss ? directional_albedo : *surface.albedo;
         const float T = media ? intervals.T_end[p] : 1.0f;
         float* out = image.at(x, y);
         for (int b = 0; b < nb; ++b) out[b] += T * albedo[b] * indirect.irradiance[p * nb + b] / kPiF;
