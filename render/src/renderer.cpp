@@ -195,11 +195,17 @@ void WriteExr(const std::filesystem::path& path, const Image& rgb, const Image& 
     edges += FormatDouble(e);
   }
   spec.attribute("phos:bands_nm", edges);
-  std::vector<float> data(std::size_t(rgb.width) * rgb.height * (3 + nb));
-  for (std::size_t p = 0; p < std::size_t(rgb.width) * rgb.height; ++p) {
-    std::copy_n(&rgb.pixels[3 * p], 3, &data[p * (3 + nb)]);
-    std::copy_n(&bands.pixels[p * nb], nb, &data[p * (3 + nb) + 3]);
-  }
+  // Interleaved into a table not zeroed first (each value is written),
+  // rows in parallel.
+  LargeTable<float> data;
+  data.resize(std::size_t(rgb.width) * rgb.height * (3 + nb));
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, std::size_t(rgb.width) * rgb.height, 16384),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      for (std::size_t p = r.begin(); p < r.end(); ++p) {
+                        std::copy_n(&rgb.pixels[3 * p], 3, &data[p * (3 + nb)]);
+                        std::copy_n(&bands.pixels[p * nb], nb, &data[p * (3 + nb) + 3]);
+                      }
+                    });
   WriteImageAtomically(path, spec, OIIO::TypeDesc::FLOAT, data.data());
 }
 
