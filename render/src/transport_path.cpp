@@ -78,6 +78,11 @@ struct FrameGlow {
   std::size_t glowing = 0;                // glowing triangles
   double total = 0;                       // their power
 };
+// A triangle's power: the mean over its `count` texels of their Lp summed
+// over bands (`Lp_sum`), times its area; 0 for a triangle without texels.
+double TrianglePower(double Lp_sum, std::size_t count, double area_m2) {
+  return count ? Lp_sum / static_cast<double>(count) * area_m2 : 0.0;
+}
 // Texels [k0, k1) of a slot into its copy: band by band, a run of
 // consecutive texels each.
 void CopyTexels(const CoupledSolver& solver, int slot, std::size_t k0, std::size_t k1, GlowByTexel& glow) {
@@ -110,7 +115,7 @@ void CopyGlowOfAutoAtlas(const SceneGeometry& geometry, const CoupledSolver& sol
       const float* Lp = glow.Lp.data() + std::size_t{texels.first[t]} * span;
       double sum = 0;  // the bands outside the emission ones hold 0 and add nothing
       for (std::size_t i = 0; i < count * span; ++i) sum += Lp[i];
-      power[t] = count ? sum / static_cast<double>(count) * geometry.Area(texels.object, t) : 0.0;
+      power[t] = TrianglePower(sum, count, geometry.Area(texels.object, t));
       chunk.Add(power[t]);
     }
   });
@@ -134,7 +139,7 @@ void CopyGlowOfUvAtlas(const SceneGeometry& geometry, const CoupledSolver& solve
     ++count[t];
   });
   for (int t = 0; t < triangles; ++t)
-    power[t] = count[t] ? power[t] / static_cast<double>(count[t]) * geometry.Area(object, t) : 0.0;
+    power[t] = TrianglePower(power[t], count[t], geometry.Area(object, t));
   tbb::parallel_for(std::size_t{0}, chunk_count, [&](std::size_t c) {
     for (int t = chunks[c].begin; t < chunks[c].end; ++t) chunks[c].Add(power[t]);
   });
