@@ -149,23 +149,35 @@ std::vector<double> BandToXyzWeights(const SpectralGrid& grid) {
   return w;
 }
 
+namespace {
+
+// pixel(p) for every pixel p in [0, count), in parallel by blocks of
+// pixels: the per-pixel passes over a whole frame (its colour, its tone
+// map, its EXR's channels), each a sizeable share of a large frame's time
+// on one thread.
+template <typename PerPixel>
+void ForEachPixel(std::size_t count, const PerPixel& pixel) {
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 16384), [&](const tbb::blocked_range<std::size_t>& r) {
+    for (std::size_t p = r.begin(); p < r.end(); ++p) pixel(p);
+  });
+}
+
+}  // namespace
+
 Image BandsToLinearSrgb(const Image& bands, const SpectralGrid& grid) {
   const int nb = grid.band_count();
   PHOS_CHECK(bands.channels == nb);
   const std::vector<double> w = BandToXyzWeights(grid);
-  // Pixel by pixel, rows in parallel: on one thread it cost a 1920 x 1080
-  // frame two thirds of its direct render (perf, phos render --width 1920).
+  // In parallel: on one thread it cost a 1920 x 1080 frame two thirds of
+  // its direct render (perf, phos render --width 1920).
   Image rgb = Image::ForOverwrite(bands.width, bands.height, 3);  // each pixel set below
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, std::size_t(bands.width) * bands.height, 16384),
-                    [&](const tbb::blocked_range<std::size_t>& r) {
-                      for (std::size_t p = r.begin(); p < r.end(); ++p) {
-                        Tristimulus xyz = {0, 0, 0};
-                        for (int c = 0; c < 3; ++c)
-                          for (int b = 0; b < nb; ++b) xyz[c] += w[c * nb + b] * bands.pixels[p * nb + b];
-                        const Tristimulus linear = XyzToLinearSrgb(xyz);
-                        for (int c = 0; c < 3; ++c) rgb.pixels[3 * p + c] = static_cast<float>(linear[c]);
-                      }
-                    });
+  ForEachPixel(std::size_t(bands.width) * bands.height, [&](std::size_t p) {
+    Tristimulus xyz = {0, 0, 0};
+    for (int c = 0; c < 3; ++c)
+      for (int b = 0; b < nb; ++b) xyz[c] += w[c * nb + b] * bands.pixels[p * nb + b];
+    const Tristimulus linear = XyzToLinearSrgb(xyz);
+    for (int c = 0; c < 3; ++c) rgb.pixels[3 * p + c] = static_cast<float>(linear[c]);
+  });
   return rgb;
 }
 
@@ -195,39 +207,31 @@ void WriteExr(const std::filesystem::path& path, const Image& rgb, const Image& 
     edges += FormatDouble(e);
   }
   spec.attribute("phos:bands_nm", edges);
-  // Interleaved into a table not zeroed first (each value is written),
-  // rows in parallel.
+  // Interleaved in parallel into a table not zeroed first (each value is written).
   LargeTable<float> data;
   data.resize(std::size_t(rgb.width) * rgb.height * (3 + nb));
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, std::size_t(rgb.width) * rgb.height, 16384),
-                    [&](const tbb::blocked_range<std::size_t>& r) {
-                      for (std::size_t p = r.begin(); p < r.end(); ++p) {
-                        std::copy_n(&rgb.pixels[3 * p], 3, &data[p * (3 + nb)]);
-                        std::copy_n(&bands.pixels[p * nb], nb, &data[p * (3 + nb) + 3]);
-                      }
-                    });
+  ForEachPixel(std::size_t(rgb.width) * rgb.height, [&](std::size_t p) {
+    std::copy_n(&rgb.pixels[3 * p], 3, &data[p * (3 + nb)]);
+    std::copy_n(&bands.pixels[p * nb], nb, &data[p * (3 + nb) + 3]);
+  });
   WriteImageAtomically(path, spec, OIIO::TypeDesc::FLOAT, data.data());
 }
 
 Image ToneMap(const Image& rgb, double exposure) {
   PHOS_CHECK(rgb.channels == 3);
   Image display = Image::ForOverwrite(rgb.width, rgb.height, 3);  // each pixel set below
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, rgb.pixels.size() / 3, 16384),
-                    [&](const tbb::blocked_range<std::size_t>& r) {
-                      for (std::size_t p = r.begin(); p < r.end(); ++p) {
-                        // Reinhard's global operator on luminance (Reinhard et al. 2002): a glow
-                        // a hundred times dimmer than the lit scene stays visible, and lit
-                        // highlights roll off instead of clipping. Hue is kept.
-                        const float* c = &rgb.pixels[3 * p];
-                        const double Y = std::max(0.0, exposure * LinearSrgbLuminance(c[0], c[1], c[2]));
-                        const double scale = exposure / (1 + Y);
-                        for (int k = 0; k < 3; ++k) {
-                          const double v = std::clamp(c[k] * scale, 0.0, 1.0);
-                          display.pixels[3 * p + k] =
-                              static_cast<float>(v <= 0.0031308 ? 12.92 * v : 1.055 * std::pow(v, 1 / 2.4) - 0.055);
-                        }
-                      }
-                    });
+  ForEachPixel(rgb.pixels.size() / 3, [&](std::size_t p) {
+    // Reinhard's global operator on luminance (Reinhard et al. 2002): a glow
+    // a hundred times dimmer than the lit scene stays visible, and lit
+    // highlights roll off instead of clipping. Hue is kept.
+    const float* c = &rgb.pixels[3 * p];
+    const double Y = std::max(0.0, exposure * LinearSrgbLuminance(c[0], c[1], c[2]));
+    const double scale = exposure / (1 + Y);
+    for (int k = 0; k < 3; ++k) {
+      const double v = std::clamp(c[k] * scale, 0.0, 1.0);
+      display.pixels[3 * p + k] = static_cast<float>(v <= 0.0031308 ? 12.92 * v : 1.055 * std::pow(v, 1 / 2.4) - 0.055);
+    }
+  });
   return display;
 }
 
