@@ -497,11 +497,8 @@ std::vector<std::pair<std::string, std::string>> LightsNamed(const std::string& 
 void CheckLightsExist(const Plan& plan, const Devices& devices) {
   const std::vector<std::string> channels = devices.lights->channels();
   for (const auto& [option, channel] : LightsNamed(plan.protocol, plan.settings))
-    if (std::find(channels.begin(), channels.end(), channel) == channels.end()) {
-      std::string known;
-      for (const std::string& c : channels) known += (known.empty() ? "" : ", ") + c;
-      ThrowUserError("", option, "unknown channel '" + channel + "' (this lab has: " + known + ")");
-    }
+    if (std::find(channels.begin(), channels.end(), channel) == channels.end())
+      ThrowUserError("", option, "unknown channel '" + channel + "' (this lab has: " + JoinComma(channels) + ")");
 }
 
 void RunNewSession(const Plan& plan, CaptureArgs& args) {

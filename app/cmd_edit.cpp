@@ -53,10 +53,9 @@ void Run(const EditSolveArgs& args) {
   std::printf("%d state(s), cost %s, solved in %s ms\n", problem.states, FormatShort(solution.cost, 4).c_str(),
               FormatShort(solution.seconds * 1e3, 3).c_str());
   for (const ExcitedState& s : solution.material.states) {
-    std::string ke, Lambda;
     // Unknown where no light reaches the point (the look says nothing of it), as in the file: null.
-    for (const auto& k : s.ke) ke += (ke.empty() ? "" : ", ") + (k ? FormatShort(*k, 3) : std::string("unknown"));
-    for (double l : s.Lambda) Lambda += (Lambda.empty() ? "" : ", ") + FormatShort(l, 3);
+    const std::string ke = JoinComma(s.ke, [](const auto& k) { return k ? FormatShort(*k, 3) : std::string("unknown"); });
+    const std::string Lambda = JoinComma(s.Lambda, [](double l) { return FormatShort(l, 3); });
     std::printf("  kr %s /s  ke [%s]  Lambda [%s]\n", FormatShort(s.kr, 4).c_str(), ke.c_str(), Lambda.c_str());
   }
   for (const editor::ConstraintResult& c : solution.constraints)

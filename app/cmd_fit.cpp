@@ -140,15 +140,12 @@ void PrintSessionFit(const SessionArgs& args, const SessionFit& fit) {
 }
 
 void PrintComparison(const std::string& compare, const MaterialComparison& c) {
-  std::string kr_text;
-  for (double e : c.kr_relative_error)
-    kr_text.append(kr_text.empty() ? "" : ", ").append(FormatShort(100 * e)).append("%");
+  const std::string kr_text = JoinComma(c.kr_relative_error, [](double e) { return FormatShort(100 * e) + "%"; });
   std::printf("  against %s: kr off by %s; emission spectrum L1 %s\n", compare.c_str(), kr_text.c_str(),
               FormatShort(c.spectrum_l1).c_str());
   for (std::size_t i = 0; i < c.ke_relative_error_per_state.size(); ++i) {
-    std::string ke_text;
-    for (const auto& e : c.ke_relative_error_per_state[i])
-      ke_text.append(ke_text.empty() ? "" : ", ").append(e ? FormatShort(100 * *e) + "%" : "-");
+    const std::string ke_text =
+        JoinComma(c.ke_relative_error_per_state[i], [](const auto& e) { return e ? FormatShort(100 * *e) + "%" : "-"; });
     std::printf("    state %zu: ke off by %s\n", i + 1, ke_text.c_str());
   }
 }
@@ -674,8 +671,7 @@ void RunFitBatch(const BatchArgs& args) {
     RemoveTemporaries(args.out, names);
   }
   if (args.merge && !todo.empty()) {
-    std::string missing;
-    for (std::size_t i : todo) missing += (missing.empty() ? "" : ", ") + rows[i].name;
+    const std::string missing = JoinComma(todo, [&](std::size_t i) { return rows[i].name; });
     ThrowUserError(args.out, "--merge", "item(s) not fitted yet: " + missing + " (nothing merged)");
   }
   ProgressBar progress("fit batch", todo.size());

@@ -151,8 +151,7 @@ nlohmann::json WarnUnreadMaterial(const render::Scene& scene) {
     if (!object.mesh || object.mesh->unread_material.empty()) continue;
     const std::vector<std::string>& parts = object.mesh->unread_material;
     unread[object.name] = parts;
-    std::string list;
-    for (const std::string& part : parts) list += (list.empty() ? "" : ", ") + part;
+    const std::string list = JoinComma(parts);
     std::fprintf(stderr,
                  "phos render: warning: '%s' (%s): not drawn: %s (phos draws a glTF material's base colour and "
                  "metallic-roughness)\n",

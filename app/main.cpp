@@ -25,6 +25,7 @@
 #include <CLI/CLI.hpp>
 
 #include "commands.h"
+#include "phos/util/format.h"
 #include "phos/util/version.h"
 
 namespace {
@@ -76,9 +77,8 @@ int main(int argc, char** argv) {
     return 2;
   }
   if (argv[1][0] != '-') {
-    std::string names;
-    for (const phos::app::CommandSummary& c : phos::app::kCommands)
-      names += (names.empty() ? "" : ", ") + std::string(c.name);
+    const std::string names =
+        phos::JoinComma(phos::app::kCommands, [](const phos::app::CommandSummary& c) { return std::string(c.name); });
     std::fprintf(stderr, "phos: unknown command '%s' (commands: %s; see 'phos --help')\n", argv[1], names.c_str());
     return 2;
   }

@@ -128,10 +128,8 @@ std::vector<std::string> AravisCamera::available_pixel_formats() const {
 void AravisCamera::SetPixelFormat(const std::string& name) {
   const std::vector<std::string> formats = available_pixel_formats();
   if (std::find(formats.begin(), formats.end(), name) == formats.end()) {
-    std::string known;
-    for (const std::string& f : formats) known += (known.empty() ? "" : ", ") + f;
     ThrowUserError("camera '" + impl_->id + "'", "pixel format",
-                   "does not offer '" + name + "' (it has: " + known + ")");
+                   "does not offer '" + name + "' (it has: " + JoinComma(formats) + ")");
   }
   GError* error = nullptr;
   arv_camera_set_pixel_format_from_string(impl_->camera, name.c_str(), &error);
@@ -222,10 +220,8 @@ void AravisCamera::SetTrigger(Trigger trigger, const std::string& source) {
       ThrowUserError("camera '" + impl_->id + "'", "trigger", "the camera has no software trigger");
     const std::vector<std::string> sources = available_trigger_sources();
     if (std::find(sources.begin(), sources.end(), wanted) == sources.end()) {
-      std::string known;
-      for (const std::string& f : sources) known += (known.empty() ? "" : ", ") + f;
       ThrowUserError("camera '" + impl_->id + "'", "trigger",
-                     "has no trigger source '" + wanted + "' (it has: " + known + ")");
+                     "has no trigger source '" + wanted + "' (it has: " + JoinComma(sources) + ")");
     }
     // FrameStart on the rising edge of `wanted`, acquisition continuous (armed).
     arv_camera_set_trigger(impl_->camera, wanted.c_str(), &error);

@@ -10,6 +10,7 @@
 #include "phos/model/material.h"
 #include "phos/util/csv.h"
 #include "phos/util/error.h"
+#include "phos/util/format.h"
 #include "phos/util/json.h"
 
 namespace phos {
@@ -239,8 +240,7 @@ void GpiodLights::Set(const std::string& channel, bool on) {
     events_.push_back({clock_.now_s(), channel, on});
     return;
   }
-  std::string known;
-  for (const LabChannel& c : impl_->channels) known += (known.empty() ? "" : ", ") + c.name;
+  const std::string known = JoinComma(impl_->channels, &LabChannel::name);
   ThrowUserError("", "light", "unknown channel '" + channel + "' (this lab has: " + known + ")");
 }
 

@@ -14,6 +14,7 @@
 #include <mutex>
 
 #include "phos/util/error.h"
+#include "phos/util/format.h"
 
 namespace phos {
 
@@ -28,9 +29,7 @@ RecordingLights::RecordingLights(std::vector<std::string> channels, const Clock&
 void RecordingLights::Set(const std::string& channel, bool on) {
   auto it = std::find(channels_.begin(), channels_.end(), channel);
   if (it == channels_.end()) {
-    std::string known;
-    for (const std::string& c : channels_) known += (known.empty() ? "" : ", ") + c;
-    ThrowUserError("", "light", "unknown channel '" + channel + "' (this lab has: " + known + ")");
+    ThrowUserError("", "light", "unknown channel '" + channel + "' (this lab has: " + JoinComma(channels_) + ")");
   }
   if (before_change) before_change(channel, on);
   state_[static_cast<std::size_t>(it - channels_.begin())] = on;

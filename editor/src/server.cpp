@@ -22,6 +22,7 @@
 #include <nlohmann/json.hpp>
 
 #include "phos/util/error.h"
+#include "phos/util/format.h"
 #include "phos/util/json.h"
 
 namespace phos::editor {
@@ -100,8 +101,7 @@ double QueryNumber(const httplib::Request& request, const std::string& key) {
 void RejectUnknownParameters(const httplib::Request& request, std::initializer_list<std::string> known) {
   for (const auto& [key, value] : request.params) {
     if (std::find(known.begin(), known.end(), key) == known.end()) {
-      std::string list;
-      for (const std::string& k : known) list += (list.empty() ? "" : ", ") + k;
+      const std::string list = JoinComma(known);
       ThrowUserError("request", key.substr(0, 40),
                      "unknown parameter (expected " + (list.empty() ? "none" : list) + ")");
     }

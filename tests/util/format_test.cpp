@@ -49,5 +49,17 @@ TEST(ParseDoubleList, SplitsOnCommasAndNamesTheBadItem) {
   EXPECT_EQ(bad, "x");
 }
 
+TEST(JoinComma, JoinsItemsAsTextWithCommas) {
+  EXPECT_EQ(JoinComma(std::vector<std::string>{}), "");
+  EXPECT_EQ(JoinComma(std::vector<std::string>{"uv"}), "uv");
+  EXPECT_EQ(JoinComma(std::vector<std::string>{"uv", "blue", "white"}), "uv, blue, white");
+  // Through a projection, as the messages list numbers and fields of records.
+  EXPECT_EQ(JoinComma(std::vector<double>{0.5, 12, 1e-3}, [](double v) { return FormatShort(v); }), "0.5, 12, 0.001");
+  struct Channel {
+    std::string name;
+  };
+  EXPECT_EQ(JoinComma(std::vector<Channel>{{"a"}, {"b"}}, &Channel::name), "a, b");
+}
+
 }  // namespace
 }  // namespace phos

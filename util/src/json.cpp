@@ -211,8 +211,7 @@ void JsonField::RejectUnknownKeys(std::initializer_list<std::string_view> known)
     bool found = false;
     for (std::string_view k : known) found = found || it.key() == k;
     if (!found) {
-      std::string list;
-      for (std::string_view k : known) list += (list.empty() ? "" : ", ") + std::string(k);
+      const std::string list = JoinComma(known, [](std::string_view k) { return std::string(k); });
       std::string child = path_.empty() ? it.key() : path_ + "." + it.key();
       ThrowUserError(source_, child, "unknown field (expected one of: " + list + ")");
     }

@@ -2,6 +2,7 @@
 // Numbers as text: the shortest form that reads back to the same double, so
 // CSV and JSON output lose nothing and stay readable (0.1, not 0.10000000000000001).
 
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -13,6 +14,17 @@ std::string FormatShort(double value, int digits = 4);
 // The largest number with `digits` significant digits that is <= value (> 0),
 // e.g. 0.4649 -> 0.46: a limit to suggest that is safely inside the true one.
 double RoundDownSignificant(double value, int digits = 2);
+// "a, b, c" for messages: each item of `items` as text (`to_text`, the item
+// itself by default) joined by ", " ("" for no items).
+template <class Items, class ToText = std::identity>
+std::string JoinComma(const Items& items, ToText to_text = {}) {
+  std::string list;
+  for (const auto& item : items) {
+    if (!list.empty()) list += ", ";
+    list += std::invoke(to_text, item);
+  }
+  return list;
+}
 // Parses a whole string as a finite double; false if it is not one.
 bool ParseDouble(const std::string& text, double* value);
 // Parses "a" or "a,b,c" into numbers; false (and *bad = offending item) on error.
