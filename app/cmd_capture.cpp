@@ -724,7 +724,7 @@ void RunCaptureResume(const std::string& dir_text, bool json) {
   std::vector<std::string> notes;
   std::unique_ptr<SessionWriter> session = SessionWriter::Reopen(dir, true, &notes);
   for (const std::string& note : notes) Say("phos capture resume: %s\n", note.c_str());
-  Devices devices(start_json, dir, 1);
+  Devices devices(start_json, dir, session->run());  // new noise on every resume, not the first one's again
   RunProtocol({protocol, start.settings}, devices, *session, true);
   PrintSession(protocol, dir);
   Previews(protocol, dir, dir);

@@ -56,22 +56,25 @@ inline std::vector<nlohmann::json> ReadJsonLines(const std::filesystem::path& pa
   return lines;
 }
 
-// An excitation session's measurements: per charge (a light and its
-// light-off time) the charge time and how many frames (first and tail) it
-// recorded, in frames.jsonl's order of light-off times.
+// An excitation session's measurements: per charge (its run, a light and
+// its light-off time on that run's clock) the charge time and how many
+// frames (first and tail) it recorded, in frames.jsonl's order.
 struct ExcitationCharge {
   std::string light;
   double light_off_s = 0, charge_s = 0;
   int frames = 0;
+  int run = 0;
 };
 inline std::vector<ExcitationCharge> ExcitationCharges(const std::filesystem::path& frames_jsonl) {
   std::vector<ExcitationCharge> charges;
   for (const nlohmann::json& line : ReadJsonLines(frames_jsonl)) {
     const std::string light = line["light"].get<std::string>();
     const double off = line["light_off_s"].get<double>();
-    auto it = std::find_if(charges.begin(), charges.end(),
-                           [&](const ExcitationCharge& c) { return c.light == light && c.light_off_s == off; });
-    if (it == charges.end()) it = charges.insert(charges.end(), {light, off, line["charge_s"].get<double>(), 0});
+    const int run = line.value("run", 0);
+    auto it = std::find_if(charges.begin(), charges.end(), [&](const ExcitationCharge& c) {
+      return c.run == run && c.light == light && c.light_off_s == off;
+    });
+    if (it == charges.end()) it = charges.insert(charges.end(), {light, off, line["charge_s"].get<double>(), 0, run});
     ++it->frames;
   }
   return charges;

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <map>
 #include <set>
+#include <tuple>
 
 #include "phos/util/error.h"
 #include "phos/util/format.h"
@@ -262,14 +263,14 @@ ExcitationProtocolResult RunExcitationProtocol(Camera& camera, Lights& lights, C
 }
 
 ExcitationDone ReadExcitationDone(const std::filesystem::path& session_dir) {
-  // Per charge (light, light-off time): its last frame's response per
-  // second (what the doubling compares) and how many of its frames were
-  // recorded.
+  // Per charge (run, light, light-off time: each run's clock starts anew)
+  // its last frame's response per second (what the doubling compares) and
+  // how many of its frames were recorded.
   struct Measurement {
     double charge_s = 0, response = -1;
     int frames = 0, expected = 1;
   };
-  std::map<std::pair<std::string, double>, Measurement> measurements;
+  std::map<std::tuple<int, std::string, double>, Measurement> measurements;
   for (const FrameRecord& frame : ReadFrameRecords(session_dir).frames) {
     const nlohmann::json& line = frame.protocol;
     if (!line.contains("light") || !line.contains("charge_s") || !line.contains("mean_signal_dn")) continue;
@@ -283,7 +284,7 @@ ExcitationDone ReadExcitationDone(const std::filesystem::path& session_dir) {
     // Sessions from before the decay tail have one frame per charge and no light_off_s.
     const double off = line.contains("light_off_s") ? RequiredKey<double>(line, "light_off_s", where)
                                                     : static_cast<double>(measurements.size());
-    Measurement& m = measurements[{RequiredKey<std::string>(line, "light", where), off}];
+    Measurement& m = measurements[{frame.run, RequiredKey<std::string>(line, "light", where), off}];
     m.charge_s = RequiredKey<double>(line, "charge_s", where);
     m.expected = (line.contains("tail_frames") ? RequiredKey<int>(line, "tail_frames", where) : 0) + 1;
     ++m.frames;
@@ -292,7 +293,7 @@ ExcitationDone ReadExcitationDone(const std::filesystem::path& session_dir) {
   }
   ExcitationDone done;
   for (const auto& [key, m] : measurements)
-    if (m.frames == m.expected && m.response >= 0) done[{key.first, m.charge_s}] = m.response;
+    if (m.frames == m.expected && m.response >= 0) done[{std::get<1>(key), m.charge_s}] = m.response;
   return done;
 }
 

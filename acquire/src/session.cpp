@@ -210,6 +210,11 @@ SessionWriter::SessionWriter(ReopenTag, std::filesystem::path dir, bool set_asid
   // Number on from the highest frame recorded or present on disk.
   for (const FrameRecord& frame : ReadFrameRecords(dir_).frames) frames_ = std::max(frames_, frame.seq);
   frames_ = std::max(frames_, HighestFrameFile(dir_));
+  // This run: one more than the reopenings before it (their resume events,
+  // which alone carry resumed_utc; a protocol's own resume event does not).
+  run_ = 1;
+  for (const nlohmann::json& event : ReadEventRecords(dir_))
+    run_ += event.value("event", "") == "resume" && event.contains("resumed_utc");
   nlohmann::json resume = {{"event", "resume"}, {"resumed_utc", UtcNow()}, {"previous_stop", previous_stop}};
   if (!repairs.empty()) resume["repairs"] = repairs;
   Event(resume);
@@ -296,6 +301,7 @@ std::string SessionWriter::WriteFrame(const Frame& frame, nlohmann::json extra) 
   record.camera_timestamp_ns = frame.camera_timestamp_ns;
   record.packets_resent = frame.packets_resent;
   record.retakes = frame.retakes;
+  record.run = run_;
   record.size_bytes = digest.size_bytes;
   record.xxh3 = digest.xxh3;
   record.protocol = std::move(extra);

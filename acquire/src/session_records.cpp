@@ -260,6 +260,7 @@ const char* const kFrameKeys[] = {"file",
                                   "adc_bits",
                                   "sensor_temperature_c",
                                   "camera_timestamp_ns",
+                                  "run",
                                   "size_bytes",
                                   "xxh3",
                                   "packets_resent",
@@ -337,6 +338,7 @@ nlohmann::json FrameRecord::ToJson() const {
   j["retakes"] = retakes;
   if (size_bytes) j["size_bytes"] = *size_bytes;
   if (!xxh3.empty()) j["xxh3"] = xxh3;
+  if (run != 0) j["run"] = run;
   return j;
 }
 
@@ -384,6 +386,11 @@ FrameRecord FrameRecord::FromJson(const nlohmann::json& j, const std::string& wh
     if (r.xxh3.size() != 16 || r.xxh3.find_first_not_of("0123456789abcdef") != std::string::npos)
       KeyError(where, "xxh3", "expected 16 hex digits, got " + DescribeJson(j["xxh3"]));
   }
+  if (j.contains("run")) {
+    if (!j["run"].is_number_integer() || j["run"].get<std::int64_t>() < 0 || j["run"].get<std::int64_t>() > 100000)
+      KeyError(where, "run", "expected an integer from 0 to 100000, got " + DescribeJson(j["run"]));
+    r.run = j["run"].get<int>();
+  }
   r.protocol = j;
   for (const char* key : kFrameKeys) r.protocol.erase(key);
   CheckProtocolFields(r.protocol, where);
@@ -396,7 +403,8 @@ FrameRecords ReadFrameRecords(const fs::path& session_dir) {
   FrameRecords records;
   records.torn = file.torn;
   std::set<int> seen;
-  int last = 0;
+  int last = 0, last_run = 0;
+  double last_t_s = -std::numeric_limits<double>::infinity();
   for (const JsonLine& line : file.records) {
     const std::string where = path.string() + ":" + std::to_string(line.line);
     FrameRecord frame = FrameRecord::FromJson(line.value, where);
@@ -404,7 +412,16 @@ FrameRecords ReadFrameRecords(const fs::path& session_dir) {
       ThrowUserError(where, "seq", "frame " + std::to_string(frame.seq) + " is listed twice");
     if (frame.seq < last)
       ThrowUserError(where, "seq", "frame " + std::to_string(frame.seq) + " comes after frame " + std::to_string(last));
+    // A record from before runs were counted has none: its run is told by
+    // its clock, which started anew at each resume (a frame earlier than the
+    // one before it began the next run).
+    if (!line.value.contains("run")) frame.run = last_run + (frame.t_start_s < last_t_s);
+    if (frame.run < last_run)
+      ThrowUserError(where, "run",
+                     "run " + std::to_string(frame.run) + " comes after run " + std::to_string(last_run));
     last = frame.seq;
+    last_run = frame.run;
+    last_t_s = frame.t_start_s;
     records.frames.push_back(std::move(frame));
     records.lines.push_back(line.line);
   }

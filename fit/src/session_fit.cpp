@@ -7,6 +7,7 @@
 #include <cmath>
 #include <map>
 #include <numeric>
+#include <tuple>
 
 #include "phos/acquire/session_records.h"
 #include "phos/model/rate_equation.h"
@@ -426,14 +427,16 @@ std::vector<ExcitationMeasurement> ReadExcitationMeasurements(const fs::path& pa
     ExcitationMeasurement measurement;
     int expected = 1, clipped = 0;
   };
-  std::map<std::pair<std::string, double>, Group> groups;
+  std::map<std::tuple<int, std::string, double>, Group> groups;  // (run, light, light-off time)
   std::size_t order = 0;
   for (const nlohmann::json& line : SessionFrames(part, notes)) {
     if (!line.contains("light") || !line.contains("mean_signal_dn") || !line.contains("charge_s")) continue;
     const std::string light = line["light"].get<std::string>();
     const double off = line.value("light_off_s", static_cast<double>(order++));
-    Group& group = groups[{light, off}];
+    const int run = line.value("run", 0);
+    Group& group = groups[{run, light, off}];
     group.measurement.light = light;
+    group.measurement.run = run;
     group.measurement.charge_s = line["charge_s"].get<double>();
     if (line.contains("light_off_s")) group.measurement.light_off_s = line["light_off_s"].get<double>();
     group.expected = line.value("tail_frames", 0) + 1;

@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <utility>
 #include <memory>
 
 #include <Eigen/Dense>
@@ -277,11 +278,12 @@ void CarryOverStartStates(std::vector<ExcitationMeasurement>& measurements,
     if (std::isfinite(m.light_off_s)) order.push_back(&m);
   }
   std::sort(order.begin(), order.end(), [](const ExcitationMeasurement* x, const ExcitationMeasurement* y) {
-    return x->light_off_s < y->light_off_s;
+    return std::pair(x->run, x->light_off_s) < std::pair(y->run, y->light_off_s);
   });
   for (std::size_t k = 1; k < order.size(); ++k) {
     const ExcitationMeasurement& before = *order[k - 1];
     ExcitationMeasurement& m = *order[k];
+    if (before.run != m.run) continue;  // times of another clock: nothing carried over
     const auto rates = a.find(before.light);
     if (rates == a.end()) continue;
     const double dark_s = m.light_off_s - m.charge_s - before.light_off_s;

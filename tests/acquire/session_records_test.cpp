@@ -105,6 +105,8 @@ TEST(SessionRecords, FrameRecordsRoundTripAndNameWhatIsWrong) {
       {"retakes", 1.5, "retakes: expected an integer from 0 to 1000"},
       {"packets_resent", "3", "packets_resent: expected a non-negative integer"},
       {"packets_resent", -2, "packets_resent: expected a non-negative integer"},
+      {"run", -1, "run: expected an integer from 0 to 100000"},
+      {"run", 1.5, "run: expected an integer from 0 to 100000"},
   };
   for (const Case& c : cases) {
     nlohmann::json bad = good;
@@ -119,6 +121,64 @@ TEST(SessionRecords, FrameRecordsRoundTripAndNameWhatIsWrong) {
       EXPECT_NE(std::string(e.what()).find(c.expected), std::string::npos) << e.what();
       EXPECT_EQ(std::string(e.what()).rfind("s/frames.jsonl:1", 0), 0u) << e.what();
     }
+  }
+}
+
+// Keeps the first `keep` lines of frames.jsonl and their files, as a kill would.
+void CutFrames(const fs::path& dir, std::size_t keep) {
+  const std::vector<nlohmann::json> lines = ReadJsonLines(dir / "frames.jsonl");
+  std::ofstream out(dir / "frames.jsonl", std::ios::trunc);
+  for (std::size_t i = 0; i < lines.size(); ++i) {
+    if (i < keep)
+      out << lines[i].dump() << "\n";
+    else
+      fs::remove(dir / lines[i]["file"].get<std::string>());
+  }
+  fs::remove(dir / "stop.json");
+}
+
+TEST(SessionRecords, EachResumeIsARunWhoseClockStartsAnew) {
+  testing::TempDir dir;
+  CaptureExcitation(dir / "s");
+  CutFrames(dir / "s", 4);
+  ResumeExcitation(dir / "s");
+  const std::size_t after_first = ReadFrameRecords(dir / "s").frames.size();
+  CutFrames(dir / "s", after_first - 2);
+  ResumeExcitation(dir / "s");
+  const FrameRecords records = ReadFrameRecords(dir / "s");
+  for (std::size_t i = 0; i < records.frames.size(); ++i) {
+    const int expected = i < 4 ? 0 : i < after_first - 2 ? 1 : 2;
+    EXPECT_EQ(records.frames[i].run, expected) << i;
+    // The first frame of each run is earlier on its clock than the last of the run before.
+    if (i > 0 && records.frames[i].run != records.frames[i - 1].run) {
+      EXPECT_LT(records.frames[i].t_start_s, records.frames[i - 1].t_start_s) << i;
+    }
+  }
+  // Written as a session from before runs were counted, the clock tells them.
+  std::vector<nlohmann::json> lines = ReadJsonLines(dir / "s" / "frames.jsonl");
+  {
+    std::ofstream out(dir / "s" / "frames.jsonl", std::ios::trunc);
+    for (nlohmann::json line : lines) {
+      line.erase("run");
+      out << line.dump() << "\n";
+    }
+  }
+  const FrameRecords inferred = ReadFrameRecords(dir / "s");
+  ASSERT_EQ(inferred.frames.size(), records.frames.size());
+  for (std::size_t i = 0; i < records.frames.size(); ++i) EXPECT_EQ(inferred.frames[i].run, records.frames[i].run) << i;
+  // A run listed before an earlier one is refused, naming the line.
+  lines[3]["run"] = 1;
+  lines[4]["run"] = 0;
+  {
+    std::ofstream out(dir / "s" / "frames.jsonl", std::ios::trunc);
+    for (const nlohmann::json& line : lines) out << line.dump() << "\n";
+  }
+  try {
+    ReadFrameRecords(dir / "s");
+    ADD_FAILURE() << "runs out of order accepted";
+  } catch (const UserError& e) {
+    EXPECT_NE(std::string(e.what()).find("frames.jsonl:5: run: run 0 comes after run 1"), std::string::npos)
+        << e.what();
   }
 }
 

@@ -95,6 +95,9 @@ class SessionWriter {
   // Stop that never throws (for error paths, where the first error is the one to report).
   void StopQuietly(const std::string& how, const std::string& why) noexcept;
   int frame_count() const { return frames_; }
+  // 0 for a new session, n for its n-th reopening: every frame it writes
+  // records it (FrameRecord::run), since each run's clock starts anew.
+  int run() const { return run_; }
   const nlohmann::json& start_record() const { return start_record_; }
 
  private:
@@ -109,6 +112,7 @@ class SessionWriter {
   std::filesystem::path dir_;
   nlohmann::json start_record_;
   int frames_ = 0;  // the highest frame number used
+  int run_ = 0;
   bool stopped_ = false;
   int abort_slot_ = -1;
 };

@@ -100,6 +100,11 @@ struct FrameRecord {
   // presence and, in resume and verify, its decoding are checked).
   std::optional<std::uint64_t> size_bytes;
   std::string xxh3;
+  // The run of the session that took it: 0 for the first, n after its n-th
+  // resume. Each run's clock (t_start_s, and a protocol's light_off_s)
+  // starts anew, so times compare within a run only. Written when not 0;
+  // absent in sessions recorded before runs were counted (read as 0).
+  int run = 0;
   // Everything the protocol added (light, charge_s, delay_after_light_off_s,
   // tail, kind, mean_signal_dn, ...), read by the fits with these records.
   nlohmann::json protocol = nlohmann::json::object();

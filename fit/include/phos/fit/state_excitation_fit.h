@@ -53,6 +53,10 @@ struct ExcitationMeasurement {
   // after 900 s, a bias at the noise of a frame's mean); the fit carries
   // each state over from the charge before, in the order of these times.
   double light_off_s = std::nan("");
+  // The session's run that measured it (0, then one more per resume): each
+  // run's clock starts anew, so light_off_s orders measurements within a
+  // run only, and nothing is carried over into a run's first measurement.
+  int run = 0;
   std::vector<double> start_state = {};  // r_i at the charge's start (empty: 0); the fit sets it
 };
 
@@ -89,9 +93,11 @@ double ExcitationFrameSignal(const std::vector<double>& S, const std::vector<dou
                              const std::vector<double>& start_state = {});
 
 // Sets every measurement's start_state from the one before it in time (by
-// light_off_s; the first, and any without a time, start at 0): its state
-// at light-off under `a` (per light, per state), decayed in the dark until
-// this charge began.
+// light_off_s within its run; the first of a run, and any without a time,
+// start at 0): its state at light-off under `a` (per light, per state),
+// decayed in the dark until this charge began. A resumed run's first
+// measurement starts at 0 because the sample rested in the dark between the
+// interruption and the resume, and its reset then came on top of that.
 void CarryOverStartStates(std::vector<ExcitationMeasurement>& measurements,
                           const std::map<std::string, std::vector<double>>& a, const std::vector<double>& kr);
 
