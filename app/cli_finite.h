@@ -33,11 +33,43 @@ inline std::string NonFiniteOptionValue(const std::string& text) {
 
 inline const CLI::Validator kFinite(NonFiniteOptionValue, "FINITE", "finite");
 
+// Bounds on a floating-point option, said as a person would: CLI11's own
+// PositiveNumber printed "Value 0 not in range 0.000000 to " and DBL_MAX in
+// 309 digits, and its Range(1e-9, 1) read "not in range 0.000000 to
+// 1.000000" for 0, as if 0 were inside. Text that is no number is left to
+// CLI11's conversion.
+inline std::string OptionValueAbove(const std::string& text, double lower, double upper, const char* expected) {
+  const char* begin = text.c_str();
+  char* end = nullptr;
+  const double value = std::strtod(begin, &end);
+  if (end == begin) return "";
+  return value > lower && value <= upper ? "" : std::string("expected ") + expected + ", got " + text;
+}
+// > 0.
+inline const CLI::Validator kPositive(
+    [](const std::string& text) { return OptionValueAbove(text, 0, HUGE_VAL, "a number > 0"); }, "POSITIVE",
+    "positive");
+// In (0, 1].
+inline const CLI::Validator kFraction(
+    [](const std::string& text) { return OptionValueAbove(text, 0, 1, "a number above 0 and at most 1"); },
+    "(0,1]", "fraction");
+
+// Whether an option already has kFinite (given where it was declared), so
+// that --help does not list it twice ("FLOAT:FINITE:FINITE").
+inline bool ChecksFinite(CLI::Option& option) {
+  try {
+    option.get_validator(kFinite.get_name());
+    return true;
+  } catch (const CLI::OptionNotFound&) {
+    return false;
+  }
+}
+
 // kFinite on every floating-point option of a command and its subcommands
 // (CLI11's type name FLOAT), so a command added later cannot forget one.
 inline void RequireFiniteNumbers(CLI::App& app) {
   for (CLI::Option* option : app.get_options())
-    if (option->get_type_name().find("FLOAT") != std::string::npos) option->check(kFinite);
+    if (option->get_type_name().find("FLOAT") != std::string::npos && !ChecksFinite(*option)) option->check(kFinite);
   for (CLI::App* sub : app.get_subcommands([](CLI::App*) { return true; })) RequireFiniteNumbers(*sub);
 }
 

@@ -642,10 +642,10 @@ void RegisterRender(CLI::App& app) {
                   "expected quality that fits is used (direct, dss, path 4 to 1024 spp; the qualities are the\n"
                   "trade study's SSIM against the path tracer, docs/dss-trade.md)")
       ->check(kFinite)
-      ->check(CLI::PositiveNumber);
+      ->check(kPositive);
   cmd->add_option("--quality", args->quality,
                   "Pick the cheapest transport whose expected SSIM reaches this (0 to 1; e.g. 0.9)")
-      ->check(CLI::Range(1e-9, 1.0));
+      ->check(kFraction);
   cmd->add_flag("--no-phosphorescence", args->no_phosphorescence,
                 "Render phosphors as plain diffuse surfaces (no states, no glow)");
   cmd->add_option("--spp", args->spp, "Samples per pixel (default: the scene's render.spp or direct_spp)")
@@ -662,7 +662,7 @@ void RegisterRender(CLI::App& app) {
                   "Also write frame-NNNN-night.png as a dark-adapted eye sees it (Thompson et al. 2002:\n"
                   "blue shift, loss of acuity, grain); the value is the luminance in cd/m^2 of radiance 1")
       ->check(kFinite)
-      ->check(CLI::PositiveNumber);
+      ->check(kPositive);
   cmd->add_option("--contact-sheet", args->contact_sheet,
                   "Also write every frame side by side, labelled with its time, to this PNG");
   cmd->add_option("--material", args->materials,

@@ -251,6 +251,16 @@ TEST(RenderCommand, BadInputIsOneLineAndExitTwo) {
   EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + kCornell + out + " --budget-s 1 --transport dss"), "--budget-s"));
   EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + kCornell + out + " --budget-s 1 --quality 0.5"), "not both"));
   EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + kCornell + out + " --quality 2"), "--quality"));
+  // Bounds said as a person would (CLI11's own said "Value 0 not in range
+  // 0.000000 to 1.000000", and DBL_MAX in 309 digits for a positive number).
+  EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + kCornell + out + " --quality 0"),
+                                 "--quality: expected a number above 0 and at most 1, got 0"));
+  EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + kCornell + out + " --budget-s 0"),
+                                 "--budget-s: expected a number > 0, got 0"));
+  EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + kCornell + out + " --night-vision -1"),
+                                 "--night-vision: expected a number > 0, got -1"));
+  // --help lists each check once.
+  EXPECT_EQ(RunPhos("render --help").out.find("FINITE:FINITE"), std::string::npos);
   WriteText(dir / "bad.json", R"({"schema": "phos.scene/1", "camera": {"position": [0,0,0], "look_at": [0,0,1]},
     "objects": [{"shape": {"type": "cone"}, "albedo": 0.5}], "lights": []})");
   EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + (dir / "bad.json").string() + out), "objects[0].shape.type"));
