@@ -363,8 +363,8 @@ void Run(const RenderArgs& args) {
         std::find_if(scene.objects.begin(), scene.objects.end(), [&](const Object& o) { return o.name == name; });
     if (object == scene.objects.end()) ThrowUserError("", "--material", "the scene has no object '" + name + "'");
     auto material = std::make_shared<Material>(LoadMaterial(file));
-    if (!(material->bands == scene.bands))
-      ThrowUserError(file, "bands_nm", "differ from the scene's; the renderer needs one band grid");
+    if (const std::string mismatch = render::BandGridMismatch(material->bands, scene.bands); !mismatch.empty())
+      ThrowUserError(file, "bands_nm", mismatch);
     object->phosphor = material;
     object->phosphor_path = file;
   }

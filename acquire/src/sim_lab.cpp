@@ -119,8 +119,10 @@ SimulatedLab::SimulatedLab(Material material, std::vector<double> albedo, std::v
     for (std::size_t s = 0; s < sources_.size(); ++s)
       if (sources_[s].name == channel)
         for (std::size_t b = 0; b < E.size(); ++b) E[b] += source_E_[s][b];
-    ExcitationRates(material_, E, "simulated sample '" + material_.name + "' under '" + channel + "'");
-    if (inset_) ExcitationRates(*inset_, E, "simulated inset '" + inset_->name + "' under '" + channel + "'");
+    // The simulated sample is all the user chose of it: the remedy is another light.
+    const std::string remedy = "charge it with a light outside that band (--light, or the protocol's light options)";
+    ExcitationRates(material_, E, "simulated sample '" + material_.name + "' under '" + channel + "'", remedy);
+    if (inset_) ExcitationRates(*inset_, E, "simulated inset '" + inset_->name + "' under '" + channel + "'", remedy);
   };
   r_.assign(static_cast<std::size_t>(material_.state_count()), 0.0);
   t_state_ = clock_.now_s();

@@ -343,7 +343,8 @@ void EditSession::SetPreset(const std::string& object, const std::string& preset
   const auto it = presets_.find(preset);
   if (it == presets_.end()) ThrowUserError("", "preset", "no preset '" + Shorten(preset) + "'");
   auto material = std::make_shared<Material>(LoadMaterial(it->second));
-  if (!(material->bands == scene_.bands)) ThrowUserError(it->second.string(), "bands_nm", "differ from the scene's");
+  if (const std::string mismatch = render::BandGridMismatch(material->bands, scene_.bands); !mismatch.empty())
+    ThrowUserError(it->second.string(), "bands_nm", mismatch);
   base_[o] = material;
   Resolve();
 }

@@ -216,7 +216,7 @@ template <typename Real>
 BatchCoefficients<Real> BatchCoefficients<Real>::Compile(const Material& material,
                                                          const std::vector<int>& excitation_bands,
                                                          const std::vector<int>& emission_bands,
-                                                         const std::string& where) {
+                                                         const std::string& where, const std::string& remedy) {
   BatchCoefficients<Real> c;
   c.nc = material.state_count();
   c.n_exc = static_cast<int>(excitation_bands.size());
@@ -230,7 +230,7 @@ BatchCoefficients<Real> BatchCoefficients<Real>::Compile(const Material& materia
       // Reuse the one check of unknown ke: probe with unit irradiance in that band.
       std::vector<double> probe(static_cast<std::size_t>(material.band_count()), 0.0);
       probe[band] = 1.0;
-      c.ke.push_back(static_cast<Real>(ExcitationRates(material, probe, where)[i]));
+      c.ke.push_back(static_cast<Real>(ExcitationRates(material, probe, where, remedy)[i]));
     }
   }
   for (int band : emission_bands)

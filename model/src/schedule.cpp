@@ -29,7 +29,8 @@ double IrradianceSchedule::total_s() const {
   return total;
 }
 
-std::vector<double> ExcitationRates(const Material& material, const std::vector<double>& E, const std::string& where) {
+std::vector<double> ExcitationRates(const Material& material, const std::vector<double>& E, const std::string& where,
+                                    const std::string& remedy) {
   PHOS_CHECK(static_cast<int>(E.size()) == material.band_count());
   std::vector<double> a(material.states.size(), 0.0);
   for (size_t i = 0; i < material.states.size(); ++i) {
@@ -40,7 +41,7 @@ std::vector<double> ExcitationRates(const Material& material, const std::vector<
         ThrowUserError(where, "states[" + std::to_string(i) + "].ke[" + std::to_string(b) + "]",
                        "unknown (not measured) for band " + material.bands.BandName(b) + ": material '" +
                            material.name + "' cannot be charged by irradiance " + FormatDouble(E[b]) +
-                           " there; give 0 irradiance in that band");
+                           " there; " + remedy);
       a[i] += *s.ke[b] * E[b];
     }
   }

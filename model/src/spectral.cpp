@@ -22,6 +22,13 @@ std::string SpectralGrid::BandName(int b) const {
   return FormatDouble(lower_nm(b)) + "-" + FormatDouble(upper_nm(b)) + " nm";
 }
 
+std::string SpectralGrid::EdgesName() const {
+  std::string name = "[";  // appended, not "[" + ...: GCC 12 warns falsely of an overlap there (its bug 105329)
+  name += JoinComma(edges_nm, FormatDouble);
+  name += "] nm";
+  return name;
+}
+
 double SampledSpectrum::Evaluate(double nm) const {
   const auto& w = wavelength_nm;
   if (w.empty() || nm < w.front() || nm > w.back()) return 0.0;

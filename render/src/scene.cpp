@@ -315,10 +315,25 @@ Light ReadEmission(const JsonField& f, const std::string& object_name, std::size
 // "schedule": ...}: the KHR_lights_punctual lights of a glTF file, each with
 // the entry's spectrum, times its glTF intensity times s, times its glTF
 // colour upsampled to the bands (render/spectral_upsampling.h).
+// A file a scene names (`what`: "mesh", "phosphor", ...), relative to the
+// scene's folder; one that is not there fails at its field, saying which
+// folder it was looked in (a scene copied elsewhere loses its files).
+std::filesystem::path SceneFile(const JsonField& f, const std::filesystem::path& base_dir, const char* what) {
+  const std::filesystem::path file = base_dir / f.NonEmptyString();
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(file, ec)) {
+    const std::filesystem::path folder = std::filesystem::absolute(base_dir.empty() ? "." : base_dir, ec);
+    f.Fail(std::string(what) + " file '" + file.string() +
+           "' does not exist or is not a regular file (a scene's paths are relative to its own folder, " +
+           folder.lexically_normal().string() + ")");
+  }
+  return file;
+}
+
 std::vector<Light> ReadGltfLights(const JsonField& l, const SpectralGrid& bands,
                                   const std::filesystem::path& base_dir) {
   l.RejectUnknownKeys({"type", "file", "spectrum", "intensity_scale", "schedule"});
-  const std::filesystem::path file = base_dir / l["file"].NonEmptyString();
+  const std::filesystem::path file = SceneFile(l["file"], base_dir, "glTF");
   std::vector<PunctualLight> punctual = LoadGltfLights(file, l["file"].source() + ": " + l["file"].path());
   if (punctual.empty()) l["file"].Fail("'" + file.string() + "' has no KHR_lights_punctual light in its scene");
   const double scale = l.Has("intensity_scale") ? l["intensity_scale"].NumberInRange(0, kMaxIrradiance) : 1.0;
@@ -343,11 +358,11 @@ std::vector<Light> ReadGltfLights(const JsonField& l, const SpectralGrid& bands,
 void ReadPhosphor(const JsonField& o, const std::filesystem::path& base_dir, const SpectralGrid& bands,
                   MaterialCache& materials, std::shared_ptr<const Material>& phosphor, std::string& path) {
   if (!o.Has("phosphor")) return;
-  const std::filesystem::path file = base_dir / o["phosphor"].NonEmptyString();
+  const std::filesystem::path file = SceneFile(o["phosphor"], base_dir, "phosphor");
   auto& material = materials[file.string()];
   if (!material) material = std::make_shared<Material>(LoadMaterial(file));
-  if (!(material->bands == bands))
-    o["phosphor"].Fail("the material's bands_nm differ from the scene's; the renderer needs one band grid");
+  if (const std::string mismatch = BandGridMismatch(material->bands, bands); !mismatch.empty())
+    o["phosphor"].Fail("the material's bands_nm " + mismatch);
   phosphor = material;
   path = file.string();
 }
@@ -370,10 +385,7 @@ void ReadPhosphorMapField(const JsonField& f, const std::filesystem::path& base_
     f.Fail("the map lies on the mesh's UV map, and the mesh (" + object.mesh->source + ") has none");
   if (object.texels == "auto") f.Fail("a mapped phosphor's texels are its UV map's: use \"texels\": \"uv\"");
   RequireOneToOneUvMap(f, *object.mesh);
-  const std::filesystem::path file = base_dir / f.NonEmptyString();
-  std::error_code ec;
-  if (!std::filesystem::is_regular_file(file, ec))
-    f.Fail("map file '" + file.string() + "' does not exist or is not a regular file");
+  const std::filesystem::path file = SceneFile(f, base_dir, "map");
   auto map = std::make_shared<PhosphorMap>(ReadPhosphorMap(file, f.source(), f.path()));
   const int nc = object.phosphor->state_count();
   if (map->states != nc)
@@ -552,6 +564,14 @@ bool Scene::AnyLightOnAt(double t_s) const {
          (environment && environment->schedule.LevelAt(t_s) > 0);
 }
 
+std::string BandGridMismatch(const SpectralGrid& material_bands, const SpectralGrid& scene_bands) {
+  if (material_bands == scene_bands) return "";
+  return material_bands.EdgesName() + " differ from the scene's " +
+         scene_bands.EdgesName() +
+         "; the renderer needs one band grid: give the scene the material's bands_nm, or make the material "
+         "on the scene's";
+}
+
 Scene LoadScene(const std::filesystem::path& path) {
   return SceneFromJson(ReadJsonFile(path), path.parent_path(), path.string());
 }
@@ -652,7 +672,7 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
     object.name = o.Has("name") ? o["name"].NonEmptyString() : "object " + std::to_string(i);
     if (o.Has("mesh") == o.Has("shape")) o.Fail("give exactly one of 'mesh' (a file) or 'shape'");
     if (o.Has("mesh")) {
-      const std::filesystem::path file = base_dir / o["mesh"].NonEmptyString();
+      const std::filesystem::path file = SceneFile(o["mesh"], base_dir, "mesh");
       const std::string group = o.Has("group") ? o["group"].NonEmptyString() : "";
       const std::string key = file.string() + "#" + group;
       auto& mesh = meshes[key];
@@ -734,10 +754,7 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
         f->Fail("the mask lies on the mesh's UV map, and the mesh (" + object.mesh->source + ") has none");
       if (object.texels == "auto") f->Fail("a masked phosphor's texels are its UV map's: use \"texels\": \"uv\"");
       RequireOneToOneUvMap(*f, *object.mesh);
-      const std::filesystem::path file = base_dir / f->NonEmptyString();
-      std::error_code ec;
-      if (!std::filesystem::is_regular_file(file, ec))
-        f->Fail("mask file '" + file.string() + "' does not exist or is not a regular file");
+      const std::filesystem::path file = SceneFile(*f, base_dir, "mask");
       object.phosphor_mask = file;
       object.texels = "uv";
     }

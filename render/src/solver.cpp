@@ -84,7 +84,7 @@ CoupledSolver::CoupledSolver(const Scene& scene, SceneGeometry& geometry)
       }
     }
     g.coefficients = BatchCoefficients<float>::Compile(material, g.excitation_bands, g.emission_bands,
-                                                       where + " lit by the scene's lights");
+                                                       where + " lit by the scene's lights", kUnknownKeRemedy);
     if (object.phosphor_map) ApplyPhosphorMap(*object.phosphor_map, material, texels.map_pixel, g.coefficients, where);
     g.states = StateBatch<float>(material.state_count(), texels.count, 0.0f);
     g.Lp.assign(g.emission_bands.size() * texels.count, 0.0f);

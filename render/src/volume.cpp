@@ -140,7 +140,8 @@ VolumeMedia::VolumeMedia(const Scene& scene, const SceneGeometry& geometry, Marc
     }
     p->coefficients = BatchCoefficients<float>::Compile(
         material, p->excitation_bands, p->emission_bands,
-        scene.source + ": volume '" + v.name + "' (" + v.phosphor_path + ") lit by the scene's lights");
+        scene.source + ": volume '" + v.name + "' (" + v.phosphor_path + ") lit by the scene's lights",
+        kUnknownKeRemedy);
     const std::size_t n = p->voxels.size();
     p->states = StateBatch<float>(material.state_count(), n, 0.0f);
     p->E.assign(p->excitation_bands.size() * n, 0.0f);

@@ -106,6 +106,8 @@ TEST(CaptureDecayCommand, ALightTheSampleCannotTakeFailsTheSessionWithTheReason)
   nlohmann::json stop = ReadJsonFile(dir / "s" / "stop.json");
   EXPECT_EQ(stop["how"], "failed");
   EXPECT_NE(stop["why"].get<std::string>().find("unknown (not measured)"), std::string::npos) << stop.dump();
+  // What to do is choose another light: the user sets no irradiance here.
+  EXPECT_NE(result.err.find("charge it with a light outside that band (--light"), std::string::npos) << result.err;
 }
 
 using testing::ReadJsonLines;

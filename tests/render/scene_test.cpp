@@ -310,11 +310,22 @@ TEST(Scenes, BadInputNamesTheFileAndField) {
       std::string::npos);
   EXPECT_NE(ErrorAfterEdit([](nlohmann::json& j) {
               j["bands_nm"] = {400, 500, 600, 700};
-            }).find("bands_nm differ from the scene's"),
+            }).find("the material's bands_nm [400, 437.5, 475, 512.5, 550, 587.5, 625, 662.5, 700] nm differ from "
+                    "the scene's [400, 500, 600, 700] nm; the renderer needs one band grid: give the scene the "
+                    "material's bands_nm, or make the material on the scene's"),
             std::string::npos);
+  // A file that is not there is named at its field, with the folder it was looked in.
+  const std::string no_material = ErrorAfterEdit([](nlohmann::json& j) { j["objects"][2]["phosphor"] = "../materials/none.json"; });
+  EXPECT_NE(no_material.find("objects[2].phosphor: phosphor file '"), std::string::npos) << no_material;
+  EXPECT_NE(no_material.find("none.json' does not exist or is not a regular file (a scene's paths are relative to "
+                             "its own folder, "),
+            std::string::npos)
+      << no_material;
+  EXPECT_NE(no_material.find((testing::Fixture("scenes").lexically_normal().string() + ")")), std::string::npos)
+      << no_material;
   EXPECT_NE(ErrorAfterEdit([](nlohmann::json& j) {
-              j["objects"][2]["phosphor"] = "../materials/none.json";
-            }).find("none.json"),
+              j["objects"][0]["mesh"] = "meshes/nothing.obj";
+            }).find("objects[0].mesh: mesh file '"),
             std::string::npos);
 }
 

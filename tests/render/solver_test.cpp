@@ -178,6 +178,8 @@ TEST(CoupledSolver, KeepsOnlyTheBandsTheSceneUses) {
   const std::string error = phos::testing::ErrorOfType<UserError>([&] { CoupledSolver s(scene, geometry2); });
   EXPECT_NE(error.find("object 'wall'"), std::string::npos) << error;
   EXPECT_NE(error.find("512.5"), std::string::npos) << error;
+  // ... and saying what a scene can do about it (not "give 0 irradiance", which a scene cannot).
+  EXPECT_NE(error.find("say \"unknown_ke\": \"zero\" on the object"), std::string::npos) << error;
   scene.objects[0].unknown_ke_as_zero = true;
   SceneGeometry geometry3(scene);
   CoupledSolver assumed(scene, geometry3);

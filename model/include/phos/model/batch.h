@@ -15,6 +15,7 @@
 
 #include "phos/model/material.h"
 #include "phos/model/rate_equation.h"
+#include "phos/model/schedule.h"
 
 namespace phos {
 
@@ -36,9 +37,11 @@ struct BatchCoefficients {
   bool per_point() const { return !kr_per_point.empty(); }
 
   // excitation_bands / emission_bands index the material's grid. A band in
-  // excitation_bands whose ke is unknown is a UserError (naming `where`).
+  // excitation_bands whose ke is unknown is a UserError (naming `where`,
+  // ending with `remedy`, as ExcitationRates).
   static BatchCoefficients Compile(const Material& material, const std::vector<int>& excitation_bands,
-                                   const std::vector<int>& emission_bands, const std::string& where);
+                                   const std::vector<int>& emission_bands, const std::string& where,
+                                   const std::string& remedy = kGiveZeroIrradiance);
 };
 
 // States of n points, state-major: r[i * n + j] is state i of point j.

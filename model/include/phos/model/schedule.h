@@ -32,7 +32,10 @@ class IrradianceSchedule {
 
 // The excitation rate a_i = sum_b ke_i[b] E[b] of every state (Eq. 8.1), in 1/s.
 // Irradiance in a band where some ke is unknown is a UserError naming the
-// state, the band and `where`: such a material may decay but not be charged there.
-std::vector<double> ExcitationRates(const Material& material, const std::vector<double>& E, const std::string& where);
+// state, the band and `where`: such a material may decay but not be charged
+// there. `remedy` ends the message: what the caller's user can do about it.
+inline constexpr const char* kGiveZeroIrradiance = "give 0 irradiance in that band";
+std::vector<double> ExcitationRates(const Material& material, const std::vector<double>& E, const std::string& where,
+                                    const std::string& remedy = kGiveZeroIrradiance);
 
 }  // namespace phos

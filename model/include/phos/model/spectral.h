@@ -24,6 +24,8 @@ struct SpectralGrid {
   double width_nm(int b) const { return edges_nm[b + 1] - edges_nm[b]; }
   // "512.5-550 nm", for messages.
   std::string BandName(int b) const;
+  // "[400, 550, 700] nm": the edges, for messages.
+  std::string EdgesName() const;
   bool operator==(const SpectralGrid&) const = default;
 };
 

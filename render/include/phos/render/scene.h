@@ -370,6 +370,18 @@ struct Scene {
   bool AnyLightOnAt(double t_s) const;
 };
 
+// The end of the error for a phosphor whose ke is unknown in a band the
+// scene's lights reach: what a scene can do about it.
+inline constexpr const char* kUnknownKeRemedy =
+    "measure ke there, or say \"unknown_ke\": \"zero\" on the object to take it as not charging there "
+    "(docs/render.md), or keep the lights out of that band";
+
+// What is wrong when a phosphor material's bands_nm are not the scene's:
+// "[...] nm differ from the scene's [...] nm; ..." with the two ways out
+// ("" when they agree). The renderer keeps one
+// grid for every spectrum it holds.
+std::string BandGridMismatch(const SpectralGrid& material_bands, const SpectralGrid& scene_bands);
+
 // Loads and validates a scene. Paths inside it are relative to its folder.
 // Any problem is a UserError naming the file and the field.
 Scene LoadScene(const std::filesystem::path& path);
