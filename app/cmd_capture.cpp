@@ -985,6 +985,9 @@ void RegisterCapture(CLI::App& app) {
       ThrowUserError(verify_args->dir, "", std::to_string(problems) + " problem(s) found (listed above)");
   });
   RequireFiniteNumbers(*capture);
+  // Each progress line out as it is said, also into a pipe or a log: a
+  // signal ends capture with _Exit, which would drop what a full buffer held.
+  capture->preparse_callback([](std::size_t) { std::setvbuf(stdout, nullptr, _IOLBF, 0); });
 }
 
 }  // namespace phos::app

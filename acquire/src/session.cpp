@@ -50,6 +50,7 @@ struct AbortRecord {
   char events_path[4096];
   char sigint[512];
   char sigterm[512];
+  char resume_hint[4600];  // for the person at the terminal: what happened and how to go on
 };
 constexpr int kAbortSlots = 4;
 AbortRecord g_abort_records[kAbortSlots];
@@ -64,6 +65,16 @@ void WriteAll(int fd, const char* text, std::size_t size) {
 }
 
 void WriteAbortRecords(int signal_number, const char* const* switched_off, int switched_off_count) {
+  // One line on stderr for the outermost open session (the lowest slot: an
+  // `all` folder opens before its part), since the process ends without a word otherwise.
+  for (AbortRecord& record : g_abort_records) {
+    if (!record.armed.load()) continue;
+    const char* signal_name =
+        signal_number == SIGINT ? "phos capture: interrupted (SIGINT)" : "phos capture: terminated (SIGTERM)";
+    WriteAll(STDERR_FILENO, signal_name, std::strlen(signal_name));
+    WriteAll(STDERR_FILENO, record.resume_hint, std::strlen(record.resume_hint));
+    break;
+  }
   for (AbortRecord& record : g_abort_records) {
     if (!record.armed.load()) continue;
     // The lights the handler switched off, one whole line each (no time: the
@@ -108,6 +119,10 @@ int ArmAbortRecord(const std::filesystem::path& dir) {
     std::snprintf(record.sigterm, sizeof record.sigterm,
                   "{\n  \"how\": \"aborted\",\n  \"why\": \"SIGTERM (terminated); lights switched off; frames.jsonl "
                   "lists every frame kept\"\n}\n");
+    std::snprintf(record.resume_hint, sizeof record.resume_hint,
+                  ": the lights are off and every frame listed is kept; 'phos capture resume %s' goes on where it "
+                  "can\n",
+                  dir.string().c_str());
     record.armed.store(true);
     SetSignalCleanup(WriteAbortRecords);
     return slot;

@@ -5,6 +5,7 @@
 #include "phos/acquire/session.h"
 #include "phos/util/json.h"
 
+#include <fcntl.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -92,6 +93,8 @@ void ExpectSignalSwitchesOff(int signal_number, const std::string& name) {
   pid_t child = fork();
   ASSERT_GE(child, 0);
   if (child == 0) {
+    const int err = ::open((dir / "stderr").c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    ::dup2(err, STDERR_FILENO);
     SessionWriter session(dir / "session", {{"protocol", "decay"}});
     FileLights lights(state);
     LightsOffGuard guard(lights);
@@ -118,6 +121,11 @@ void ExpectSignalSwitchesOff(int signal_number, const std::string& name) {
   EXPECT_EQ(events.back()["channel"], "lamp");
   EXPECT_EQ(events.back()["on"], false);
   EXPECT_EQ(events.back()["by"], "signal handler");
+  // The person at the terminal is told what happened and how to go on, in one line.
+  const std::string said = testing::ReadText(dir / "stderr");
+  EXPECT_EQ(said, "phos capture: " + std::string(signal_number == SIGINT ? "interrupted" : "terminated") + " (" + name +
+                      "): the lights are off and every frame listed is kept; 'phos capture resume " +
+                      (dir / "session").string() + "' goes on where it can\n");
 }
 
 // kill -9 reaches no handler: the guardian process switches the lamp off
