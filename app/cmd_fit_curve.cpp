@@ -51,8 +51,10 @@ struct LoadedCurve {
   std::vector<std::string> warnings;
 };
 
-// First column: time in seconds; every further column: one channel. The
-// window (--from, --to) is applied first, then the samples are sorted by time.
+// First column: time, in seconds unless its name says another unit ("t_min":
+// converted, and said in a warning); every further column: one channel. The
+// window (--from, --to, in seconds) is applied first, then the samples are
+// sorted by time.
 LoadedCurve LoadCurve(const std::string& path, const CurveArgs& args) {
   CsvTable table = ReadCsv(path);
   if (table.header.size() < 2)
@@ -62,6 +64,13 @@ LoadedCurve LoadCurve(const std::string& path, const CurveArgs& args) {
   loaded.file = path;
   Curve& curve = loaded.curve;
   curve.t_s = table.columns[0];
+  // A time column in minutes or milliseconds read as seconds gave a rate 60
+  // times too high or 1000 times too low, with exit 0.
+  if (const std::optional<TimeUnit> unit = TimeUnitOfColumn(table.header[0], path); unit && unit->seconds != 1) {
+    for (double& t : curve.t_s) t *= unit->seconds;
+    loaded.warnings.push_back(path + ": time column '" + table.header[0] + "' read in " + unit->name + " (" +
+                              FormatDouble(unit->seconds) + " s each) and converted to seconds");
+  }
   for (std::size_t c = 1; c < table.header.size(); ++c) {
     curve.channels.push_back(table.columns[c]);
     curve.names.push_back(table.header[c]);
@@ -69,9 +78,10 @@ LoadedCurve LoadCurve(const std::string& path, const CurveArgs& args) {
   loaded.samples_in_file = curve.size();
   if (args.from_s || args.to_s) {
     const double from = args.from_s.value_or(-HUGE_VAL), to = args.to_s.value_or(HUGE_VAL);
+    const std::vector<double> times_s = curve.t_s;
     KeepTimeWindow(&curve, from, to);
     if (curve.size() == 0 && loaded.samples_in_file > 0) {
-      const auto [lo, hi] = std::minmax_element(table.columns[0].begin(), table.columns[0].end());
+      const auto [lo, hi] = std::minmax_element(times_s.begin(), times_s.end());
       ThrowUserError(path, args.from_s ? "--from" : "--to",
                      "no sample in the window (the file's times run from " + FormatDouble(*lo) + " to " +
                          FormatDouble(*hi) + " s)");
@@ -419,7 +429,9 @@ void AddCurveOptions(CLI::App* command, const std::shared_ptr<CurveArgs>& args, 
 constexpr const char* kCurveFiles =
     "Curve files: a header line naming the columns (t, then one per channel), then rows of numbers.\n"
     "Separators are detected from the first line: comma, semicolon, tab or whitespace. A first line of\n"
-    "numbers is taken as data (columns named 'column 1', ...). Times in seconds, >= 0, in any order;\n"
+    "numbers is taken as data (columns named 'column 1', ...). Times >= 0, in any order, in seconds\n"
+    "unless the time column's name gives a unit (t_min, 'time (ms)', 'Time [h]': converted, with a\n"
+    "warning; --from and --to stay in seconds);\n"
     "repeated times (replicates) are kept, and the samples are sorted by time (stably), which the output\n"
     "says. A file that cannot be fitted is one line on stderr; the others are fitted, and the exit\n"
     "code is 2.\n";

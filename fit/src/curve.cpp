@@ -2,7 +2,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cctype>
 #include <numeric>
+#include <string>
 
 #include "phos/fit/curve.h"
 #include "phos/util/error.h"
@@ -51,6 +53,39 @@ TimeOrder SortByTime(Curve* curve, const std::string& where) {
     j = end;
   }
   return order;
+}
+
+std::optional<TimeUnit> TimeUnitOfColumn(std::string_view column, const std::string& where) {
+  struct Unit {
+    const char* word;
+    double seconds;
+  };
+  static constexpr Unit kUnits[] = {
+      {"s", 1},          {"sec", 1},        {"secs", 1},       {"second", 1},     {"seconds", 1},
+      {"ms", 1e-3},      {"msec", 1e-3},    {"millisecond", 1e-3}, {"milliseconds", 1e-3},
+      {"us", 1e-6},      {"microsecond", 1e-6}, {"microseconds", 1e-6},
+      {"min", 60},       {"mins", 60},      {"minute", 60},    {"minutes", 60},
+      {"h", 3600},       {"hr", 3600},      {"hrs", 3600},     {"hour", 3600},    {"hours", 3600},
+      {"d", 86400},      {"day", 86400},    {"days", 86400},
+  };
+  std::optional<TimeUnit> found;
+  std::size_t i = 0;
+  while (i < column.size()) {
+    // Words: runs of letters (so "t_min", "t(ms)", "time/h" and "t [s]" split alike).
+    while (i < column.size() && !std::isalpha(static_cast<unsigned char>(column[i]))) ++i;
+    const std::size_t begin = i;
+    while (i < column.size() && std::isalpha(static_cast<unsigned char>(column[i]))) ++i;
+    std::string word(column.substr(begin, i - begin));
+    std::transform(word.begin(), word.end(), word.begin(), [](unsigned char c) { return std::tolower(c); });
+    for (const Unit& unit : kUnits) {
+      if (word != unit.word) continue;
+      if (found && found->seconds != unit.seconds)
+        ThrowUserError(where, std::string(column),
+                       "names two units of time ('" + found->name + "' and '" + word + "'); give one");
+      found = TimeUnit{unit.seconds, word};
+    }
+  }
+  return found;
 }
 
 void KeepTimeWindow(Curve* curve, double from_s, double to_s) {

@@ -250,6 +250,50 @@ TEST(FitCurveFiles, AWindowFitsLikeTheCutFile) {
   EXPECT_NE(text.out.find("  window 2.5 s to 20 s: 176 of 300 samples"), std::string::npos) << text.out;
 }
 
+// A time column whose name gives its unit is read in it: the same curve in
+// minutes or milliseconds fits the rates of the file in seconds, and says
+// that it converted. (Read as seconds, minutes gave rates 60 times too high.)
+TEST(FitCurveFiles, ATimeColumnInMinutesOrMillisecondsIsReadInIt) {
+  testing::TempDir dir;
+  const std::string fixture = testing::Fixture("curves/decay-two-components.csv").string();
+  const nlohmann::json seconds = FitJson("fit decay-curve " + fixture);
+  const std::vector<std::string> rows = Lines(testing::ReadText(fixture));
+  struct Case {
+    const char* header;
+    double per_second;  // the file's number for one second
+  } cases[] = {{"time_min", 1.0 / 60}, {"t (ms)", 1000}, {"Time [Hours]", 1.0 / 3600}, {"t/s", 1}};
+  for (const Case& c : cases) {
+    std::vector<std::string> scaled = {std::string(c.header) + ",value"};
+    for (std::size_t j = 1; j < rows.size(); ++j) {
+      const std::size_t comma = rows[j].find(',');
+      char t[64];
+      std::snprintf(t, sizeof t, "%.17g", std::stod(rows[j].substr(0, comma)) * c.per_second);
+      scaled.push_back(t + rows[j].substr(comma));
+    }
+    const std::filesystem::path file = dir / "scaled.csv";
+    testing::WriteText(file, Join(scaled));
+    auto result = RunPhos("fit decay-curve " + file.string() + " --json");
+    ASSERT_EQ(result.exit_code, 0) << c.header << ": " << result.err;
+    const nlohmann::json fit = nlohmann::json::parse(result.out);
+    ASSERT_EQ(Rates(fit).size(), Rates(seconds).size()) << c.header;
+    for (std::size_t i = 0; i < Rates(fit).size(); ++i)
+      EXPECT_NEAR(Rates(fit)[i], Rates(seconds)[i], 1e-6 * Rates(seconds)[i]) << c.header;
+    if (c.per_second == 1) {
+      EXPECT_EQ(fit["warnings"].size(), 0u) << c.header;  // seconds: nothing to say
+      continue;
+    }
+    ASSERT_EQ(fit["warnings"].size(), 1u) << c.header;
+    EXPECT_NE(fit["warnings"][0].get<std::string>().find("time column '" + std::string(c.header) + "' read in "),
+              std::string::npos)
+        << fit["warnings"];
+    EXPECT_NE(result.err.find("phos: warning: "), std::string::npos) << result.err;
+  }
+  // Two units in one name: which one is meant is not guessed.
+  testing::WriteText(dir / "two.csv", "t_s_min,value\n0,1\n1,0.5\n2,0.25\n");
+  EXPECT_TRUE(testing::IsOneLineUserError(RunPhos("fit decay-curve " + (dir / "two.csv").string()),
+                                          "names two units of time ('s' and 'min'); give one"));
+}
+
 TEST(FitCurveFiles, EverySeparatorGivesTheCommaResult) {
   testing::TempDir dir;
   const std::string comma = testing::ReadText(testing::Fixture("curves/decay-tab.txt"));

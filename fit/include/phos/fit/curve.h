@@ -52,6 +52,17 @@ struct TimeOrder {
 // Non-finite times are UserErrors naming `where` (they cannot be ordered).
 TimeOrder SortByTime(Curve* curve, const std::string& where);
 
+// The time unit a curve table's time column names, as seconds per unit: a
+// word of its header ("time_min", "t (ms)", "Time [hours]") that is a unit
+// of time: s, sec, second(s); ms, msec, millisecond(s); us, microsecond(s);
+// min, minute(s); h, hr, hour(s); d, day(s). None: no unit word (read as
+// seconds). Two different units in one name are a UserError naming `where`.
+struct TimeUnit {
+  double seconds = 1;
+  std::string name;  // as written
+};
+std::optional<TimeUnit> TimeUnitOfColumn(std::string_view column, const std::string& where);
+
 // Keeps the samples with from_s <= t <= to_s.
 void KeepTimeWindow(Curve* curve, double from_s, double to_s);
 
