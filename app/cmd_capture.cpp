@@ -461,9 +461,36 @@ void RunProtocol(const Plan& plan, Devices& devices, SessionWriter& session, boo
 bool Resumable(const std::string& protocol) { return protocol == "excitation" || protocol == "lvf-calibration"; }
 
 // What the user sees at the end of a session: where it is and what it holds.
+// A decay whose frames hold no glow: a charge light the sample does not take
+// up (led365 on a paint charged in the blue), or no sample. The capture is
+// complete, and its fit would fit the noise; one warning line on stderr says
+// so. "No glow": no frame's brightest channel above 1% of the ADC's range,
+// where the exposure control keeps a glowing sample's frames at 15-70%.
+void WarnIfNoGlow(const std::string& protocol, const fs::path& dir) {
+  if (protocol != "decay") return;
+  double best_fraction = -1, brightest = 0, range = 0;  // of the range; the frame's mean and range, DN
+  for (const FrameRecord& frame : ReadFrameRecords(dir).frames) {
+    const double frame_range = std::ldexp(1.0, frame.adc_bits) - 1 - frame.black_level_dn;
+    for (const nlohmann::json& mean : frame.protocol.value("mean_signal_dn", nlohmann::json::array()))
+      if (mean.is_number() && mean.get<double>() / frame_range > best_fraction) {
+        best_fraction = mean.get<double>() / frame_range;
+        brightest = mean.get<double>();
+        range = frame_range;
+      }
+  }
+  if (best_fraction < 0 || best_fraction >= 0.01) return;
+  const nlohmann::json settings = ReadSessionRecord(dir).settings;
+  std::fprintf(stderr,
+               "phos capture: warning: %s: no decay frame rose above 1%% of the camera's range (the brightest: %s "
+               "of %s DN): the sample hardly glows; does '%s' charge it?\n",
+               dir.string().c_str(), FormatShort(brightest, 3).c_str(), FormatShort(range, 5).c_str(),
+               settings.value("charge_light", std::string("the charge light")).c_str());
+}
+
 void PrintSession(const std::string& protocol, const fs::path& dir) {
   const std::vector<nlohmann::json> lines = FrameLines(dir);
   Say("phos capture %s: %zu frames -> %s\n", protocol.c_str(), lines.size(), dir.string().c_str());
+  WarnIfNoGlow(protocol, dir);
 }
 
 void Previews(const std::string& protocol, const fs::path& session_dir, const fs::path& into) {
@@ -591,6 +618,7 @@ void RunAllParts(const fs::path& dir, const nlohmann::json& parts, Devices& devi
     SessionWriter session(part, start);
     RunProtocol(plan, devices, session, false);
     Say("  %-16s %d frames\n", protocol.c_str(), static_cast<int>(ReadFrameRecords(part).frames.size()));
+    WarnIfNoGlow(protocol, part);
   }
 }
 

@@ -48,6 +48,25 @@ TEST(CaptureDecayCommand, WritesACompleteSession) {
   EXPECT_EQ(nlohmann::json::parse(verify.out)["clean"], true);
 }
 
+// A light that does not charge the sample (orange takes up blue, not 365 nm)
+// makes a complete session of dark frames: said in one warning, exit 0.
+TEST(CaptureDecayCommand, FramesWithoutGlowAreWarnedAbout) {
+  testing::TempDir dir;
+  const std::string orange = " --sim-material " + testing::Fixture("materials/orange.json").string();
+  auto dark = RunPhos("capture decay" + orange + " --out " + (dir / "uv").string() +
+                      " --light led365 --charge-s 600 --duration-s 30");
+  ASSERT_EQ(dark.exit_code, 0) << dark.err;
+  EXPECT_EQ(testing::LineCount(dark.err), 1) << dark.err;
+  EXPECT_NE(dark.err.find("phos capture: warning: " + (dir / "uv").string() +
+                          ": no decay frame rose above 1% of the camera's range"),
+            std::string::npos)
+      << dark.err;
+  EXPECT_NE(dark.err.find("does 'led365' charge it?"), std::string::npos) << dark.err;
+  auto glowing = RunPhos("capture decay" + orange + " --out " + (dir / "blue").string() + " --charge-s 600 --duration-s 30");
+  ASSERT_EQ(glowing.exit_code, 0) << glowing.err;
+  EXPECT_EQ(glowing.err, "");
+}
+
 TEST(CaptureExcitationCommand, WritesACompleteSession) {
   testing::TempDir dir;
   auto result = RunPhos("capture excitation --sim-material " + testing::Fixture("materials/orange.json").string() +
