@@ -160,6 +160,32 @@ nlohmann::json WarnUnreadMaterial(const render::Scene& scene) {
   return unread;
 }
 
+// On stderr: lights that put nothing in the scene's bands (a spectrum
+// outside them lights nothing), and a scene with no light and no sky whose
+// phosphors all start uncharged: its frames are black, which it rendered
+// without a word.
+void WarnDarkLights(const render::Scene& scene) {
+  const std::string bands = FormatDouble(scene.bands.edges_nm.front()) + "-" +
+                            FormatDouble(scene.bands.edges_nm.back()) + " nm";
+  for (const render::Light& light : scene.lights)
+    if (std::all_of(light.E_per_band.begin(), light.E_per_band.end(), [](double e) { return e == 0; }))
+      std::fprintf(stderr,
+                   "phos render: warning: light '%s' puts nothing in the scene's bands (%s): its spectrum lies "
+                   "outside them, so it lights nothing\n",
+                   light.name.c_str(), bands.c_str());
+  if (!scene.lights.empty() || scene.environment) return;
+  const auto charged = [](const render::InitialState& s) { return s.kind != render::InitialState::Kind::kZero; };
+  const bool any_charged =
+      std::any_of(scene.objects.begin(), scene.objects.end(),
+                  [&](const render::Object& o) { return o.phosphor && charged(o.initial); }) ||
+      std::any_of(scene.volumes.begin(), scene.volumes.end(),
+                  [&](const render::Volume& v) { return v.phosphor && charged(v.initial); });
+  if (!any_charged)
+    std::fprintf(stderr,
+                 "phos render: warning: the scene has no light and no sky, and no phosphor starts charged "
+                 "(\"initial\"): every frame is black\n");
+}
+
 // --exposure: "auto" or a positive number, into exposure_auto and exposure.
 void ParseExposureOption(RenderArgs* args) {
   if (!args->exposure_given) return;
@@ -362,6 +388,13 @@ void Run(const RenderArgs& args) {
     auto object =
         std::find_if(scene.objects.begin(), scene.objects.end(), [&](const Object& o) { return o.name == name; });
     if (object == scene.objects.end()) ThrowUserError("", "--material", "the scene has no object '" + name + "'");
+    // Two objects of one name would both take it, silently.
+    if (const auto count = std::count_if(scene.objects.begin(), scene.objects.end(),
+                                         [&](const Object& o) { return o.name == name; });
+        count > 1)
+      ThrowUserError("", "--material",
+                     std::to_string(count) + " objects are named '" + name +
+                         "'; give them names of their own in the scene to pick one");
     auto material = std::make_shared<Material>(LoadMaterial(file));
     if (const std::string mismatch = render::BandGridMismatch(material->bands, scene.bands); !mismatch.empty())
       ThrowUserError(file, "bands_nm", mismatch);
@@ -433,6 +466,7 @@ void Run(const RenderArgs& args) {
     // Said at the solve too: on a cluster it is the first task to run, and
     // its log the first a user reads.
     WarnUnreadMaterial(scene);
+    WarnDarkLights(scene);
     SolveOnly(args, scene, solver.get(), times);
     return;
   }
@@ -494,6 +528,7 @@ void Run(const RenderArgs& args) {
   }
 
   const nlohmann::json unread_material = WarnUnreadMaterial(scene);
+  WarnDarkLights(scene);
   nlohmann::json frames = nlohmann::json::array();
   ContactSheet sheet;
   // "auto": the views wait for the exposure, which needs every metered frame.

@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <filesystem>
 #include <fstream>
 
@@ -305,11 +306,12 @@ double MidGreyExposureOf(const std::vector<std::string>& exrs) {
   return ::testing::AssertionSuccess();
 }
 
-// The Cornell fixture with another camera.exposure, written into `dir` (its
-// meshes' and materials' paths made absolute, so the copy finds them).
-std::string CornellWithExposure(const TempDir& dir, const std::string& name, const nlohmann::json& exposure) {
+// The Cornell fixture changed by `edit`, written into `dir` (its meshes' and
+// materials' paths made absolute, so the copy finds them).
+std::string CornellEdited(const TempDir& dir, const std::string& name,
+                          const std::function<void(nlohmann::json&)>& edit) {
   nlohmann::json scene = nlohmann::json::parse(ReadText(kCornell));
-  scene["camera"]["exposure"] = exposure;
+  edit(scene);
   for (auto& object : scene["objects"])
     for (const char* key : {"mesh", "phosphor"})
       if (object.contains(key))
@@ -317,6 +319,48 @@ std::string CornellWithExposure(const TempDir& dir, const std::string& name, con
   const std::filesystem::path path = dir / (name + ".json");
   WriteText(path, scene.dump());
   return path.string();
+}
+// The Cornell fixture with another camera.exposure.
+std::string CornellWithExposure(const TempDir& dir, const std::string& name, const nlohmann::json& exposure) {
+  return CornellEdited(dir, name, [&](nlohmann::json& scene) { scene["camera"]["exposure"] = exposure; });
+}
+
+// What would render black without a word is said: a light whose spectrum
+// misses the scene's bands, a scene with nothing to charge or show its
+// phosphors; and --material refuses a name two objects share.
+TEST(RenderCommand, ADarkSceneIsWarnedAboutAndAnAmbiguousMaterialRefused) {
+  TempDir dir;
+  const std::string out = " --out " + dir.path().string() + " --times 40 --width 16 --height 12";
+  const std::string infrared = CornellEdited(dir, "infrared", [](nlohmann::json& s) {
+    s["lights"][0]["spectrum"]["center_nm"] = 1000;  // the scene's bands end at 700 nm
+  });
+  CommandResult r = RunPhos("render " + infrared + out);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.err, "phos render: warning: light 'uv led' puts nothing in the scene's bands (400-700 nm): its "
+                   "spectrum lies outside them, so it lights nothing\n");
+  const std::string unlit = CornellEdited(dir, "unlit", [](nlohmann::json& s) { s["lights"] = nlohmann::json::array(); });
+  r = RunPhos("render " + unlit + out);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.err.find("the scene has no light and no sky, and no phosphor starts charged"), std::string::npos)
+      << r.err;
+  // Charged from the start, it glows without a light: nothing to warn of.
+  const std::string precharged = CornellEdited(dir, "precharged", [](nlohmann::json& s) {
+    s["lights"] = nlohmann::json::array();
+    for (auto& object : s["objects"])
+      if (object.contains("phosphor")) object["initial"] = 0.3;
+  });
+  r = RunPhos("render " + precharged + out);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.err, "");
+  r = RunPhos("render " + kCornell + out);
+  EXPECT_EQ(r.err, "");
+  const std::string twins = CornellEdited(dir, "twins", [](nlohmann::json& s) {
+    s["objects"][1]["name"] = s["objects"][0]["name"];
+  });
+  const std::string name = nlohmann::json::parse(ReadText(kCornell))["objects"][0]["name"];
+  EXPECT_TRUE(IsOneLineUserError(
+      RunPhos("render " + twins + out + " --material \"" + name + "=" + Fixture("materials/orange.json").string() + "\""),
+      "--material: 2 objects are named '" + name + "'"));
 }
 
 TEST(RenderCommand, AutoExposureMetersTheFramesAfterDark) {
