@@ -260,7 +260,10 @@ MapFrames ReadMapFrames(const MapArgs& args, int index, int count) {
   const SessionRecord session = ReadSessionRecord(dir);
   const std::string& protocol = session.protocol;
   if (protocol != "decay")
-    ThrowUserError(dir.string(), "", "is a '" + protocol + "' session; a decay map needs a decay session");
+    ThrowUserError(dir.string(), "",
+                   "is a '" + protocol + "' session; a decay map needs a decay session" +
+                       (protocol == "all" ? " (this folder's decay part: phos fit map " + (dir / "decay").string() + ")"
+                                          : ""));
   // Typed records, every frame checked against its size and checksum first:
   // a map is never built on a bad frame.
   const FrameRecords records = ReadFrameRecords(dir);

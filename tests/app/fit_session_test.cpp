@@ -354,6 +354,15 @@ TEST(FitMapCommand, MapsASpatiallyVaryingSample) {
   EXPECT_TRUE(
       testing::IsOneLineUserError(RunPhos("fit map " + (dir / "nothing").string() + " --out " + (dir / "m2").string()),
                                   "is not a capture session"));
+  // An `all` folder is pointed to its decay part.
+  std::filesystem::copy(dir / "s", dir / "all", std::filesystem::copy_options::recursive);
+  nlohmann::json start = ReadJsonFile(dir / "all" / "session.json");
+  start["protocol"] = "all";
+  testing::WriteText(dir / "all" / "session.json", start.dump());
+  EXPECT_TRUE(
+      testing::IsOneLineUserError(RunPhos("fit map " + (dir / "all").string() + " --out " + (dir / "m6").string()),
+                                  "is a 'all' session; a decay map needs a decay session (this folder's decay part: "
+                                  "phos fit map " + (dir / "all" / "decay").string() + ")"));
 
   // Downstream readers check frames as resume does (docs/capture.md): a torn
   // last record is left out with a note; a truncated frame is refused in one

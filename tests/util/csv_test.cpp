@@ -36,6 +36,32 @@ TEST(ReadCsv, BadCellsNameTheLineAndColumn) {
   EXPECT_THROW(ReadCsv(dir / "c.csv"), UserError);
 }
 
+// A spreadsheet's export quotes a header that holds the separator.
+TEST(ReadCsv, AQuotedFieldMayHoldTheSeparator) {
+  CsvTable table = ParseCsv("\"time, s\",\"value, \"\"counts\"\"\" , plain\n0,1,2\n1,\"0.5\",3\n", "q.csv");
+  EXPECT_EQ(table.header, (std::vector<std::string>{"time, s", "value, \"counts\"", "plain"}));
+  ASSERT_EQ(table.row_count(), 2u);
+  EXPECT_EQ(table.columns[1][1], 0.5);
+  table = ParseCsv("\"t\";\"L; cd/m2\"\n0;1\n", "semicolon.csv");
+  EXPECT_EQ(table.header, (std::vector<std::string>{"t", "L; cd/m2"}));
+  // An unclosed quote is plain text, as it was.
+  table = ParseCsv("\"t,value\n0,1\n", "open.csv");
+  EXPECT_EQ(table.header, (std::vector<std::string>{"\"t", "value"}));
+}
+
+// A header column without a name (a trailing separator) is one line naming it,
+// not "column : expected a finite number" at the first row.
+TEST(ReadCsv, EveryHeaderColumnHasAName) {
+  try {
+    ParseCsv("t,value,\n0,1,\n", "trailing.csv");
+    FAIL();
+  } catch (const UserError& e) {
+    EXPECT_EQ(std::string(e.what()),
+              "trailing.csv: line 1: header: column 3 of 3 has no name (a separator at the end of the line?)");
+  }
+  EXPECT_THROW(ParseCsv("t,,value\n0,1,2\n", "middle.csv"), UserError);
+}
+
 TEST(ReadCsv, DetectsTheSeparator) {
   testing::TempDir dir;
   struct Case {

@@ -41,11 +41,34 @@ std::vector<std::string> SplitFields(const std::string& line, char separator) {
   }
   std::size_t start = 0;
   while (true) {
-    std::size_t end = line.find(separator, start);
-    std::string field = line.substr(start, end == std::string::npos ? std::string::npos : end - start);
-    // Trim spaces and a trailing carriage return (files from Windows instruments).
-    std::size_t a = field.find_first_not_of(kBlank), b = field.find_last_not_of(kBlank);
-    fields.push_back(a == std::string::npos ? "" : field.substr(a, b - a + 1));
+    // A field in double quotes (RFC 4180, as spreadsheets write a header
+    // such as "time, s") may hold the separator; "" inside it is one quote.
+    const std::size_t first = line.find_first_not_of(kBlank, start);
+    std::string quoted;
+    std::size_t after_quote = std::string::npos;
+    if (first != std::string::npos && line[first] == '"') {
+      std::size_t i = first + 1;
+      for (; i < line.size(); ++i) {
+        if (line[i] != '"') {
+          quoted += line[i];
+        } else if (i + 1 < line.size() && line[i + 1] == '"') {
+          quoted += '"';
+          ++i;
+        } else {
+          break;
+        }
+      }
+      if (i < line.size()) after_quote = i + 1;  // an unclosed quote is read as plain text
+    }
+    std::size_t end = line.find(separator, after_quote == std::string::npos ? start : after_quote);
+    if (after_quote != std::string::npos) {
+      fields.push_back(quoted);
+    } else {
+      std::string field = line.substr(start, end == std::string::npos ? std::string::npos : end - start);
+      // Trim spaces and a trailing carriage return (files from Windows instruments).
+      std::size_t a = field.find_first_not_of(kBlank), b = field.find_last_not_of(kBlank);
+      fields.push_back(a == std::string::npos ? "" : field.substr(a, b - a + 1));
+    }
     if (end == std::string::npos || fields.size() > kMaxCsvColumns) return fields;
     start = end + 1;
   }
@@ -83,6 +106,12 @@ CsvTable ParseCsv(const std::string& text, const std::string& source) {
     if (table.header.empty()) {
       table.columns.resize(fields.size());
       if (!AllNumbers(fields)) {
+        for (std::size_t c = 0; c < fields.size(); ++c)
+          if (fields[c].empty())
+            ThrowUserError(table.source, "line " + std::to_string(line_number),
+                           "header: column " + std::to_string(c + 1) + " of " + std::to_string(fields.size()) +
+                               " has no name" +
+                               (c + 1 == fields.size() ? " (a separator at the end of the line?)" : ""));
         table.header = fields;
         continue;
       }

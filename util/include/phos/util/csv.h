@@ -28,8 +28,10 @@ struct CsvTable {
 // the most frequent of comma, semicolon and tab (ties in that order), or runs
 // of whitespace when it has none of them. The first line names the columns;
 // when every field of it is a number it is data instead, and the columns are
-// named "column 1", "column 2", ... Decimal commas are not read ("0,5" with
-// ';' is an error that says so).
+// named "column 1", "column 2", ... A field in double quotes may hold the
+// separator ("time, s"; "" is a quote inside it), and every column of a
+// header needs a name. Decimal commas are not read ("0,5" with ';' is an
+// error that says so).
 // The file is read whole first (ReadFileText: a regular file, at most
 // kMaxInputFileBytes); a table has at most kMaxCsvColumns columns and
 // kMaxCsvRows rows of data (a curve's samples).
