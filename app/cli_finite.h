@@ -37,18 +37,27 @@ inline const CLI::Validator kFinite(NonFiniteOptionValue, "FINITE", "finite");
 // PositiveNumber printed "Value 0 not in range 0.000000 to " and DBL_MAX in
 // 309 digits, and its Range(1e-9, 1) read "not in range 0.000000 to
 // 1.000000" for 0, as if 0 were inside. Text that is no number is left to
-// CLI11's conversion.
+// CLI11's conversion, and NaN to kFinite.
 inline std::string OptionValueAbove(const std::string& text, double lower, double upper, const char* expected) {
   const char* begin = text.c_str();
   char* end = nullptr;
   const double value = std::strtod(begin, &end);
-  if (end == begin) return "";
+  if (end == begin || std::isnan(value)) return "";  // no number, or NaN: kFinite and CLI11 say so
   return value > lower && value <= upper ? "" : std::string("expected ") + expected + ", got " + text;
 }
 // > 0.
 inline const CLI::Validator kPositive(
     [](const std::string& text) { return OptionValueAbove(text, 0, HUGE_VAL, "a number > 0"); }, "POSITIVE",
     "positive");
+// >= 0.
+inline const CLI::Validator kNonNegative(
+    [](const std::string& text) {
+      const char* begin = text.c_str();
+      char* end = nullptr;
+      const double value = std::strtod(begin, &end);
+      return end == begin || std::isnan(value) || value >= 0 ? std::string() : "expected a number >= 0, got " + text;
+    },
+    "NONNEGATIVE", "non-negative");
 // In (0, 1].
 inline const CLI::Validator kFraction(
     [](const std::string& text) { return OptionValueAbove(text, 0, 1, "a number above 0 and at most 1"); },

@@ -874,16 +874,16 @@ void RegisterCapture(CLI::App& app) {
   decay->add_option("--light", decay_args->light,
                     "light channel to charge with (default led405, or the lab's charge_light). It must only reach\n"
                     "bands whose ke the material knows");
-  decay->add_option("--charge-s", decay_args->decay.charge_s, "seconds of charging (default 5400, 90 min)");
-  decay->add_option("--interval-s", decay_args->decay.interval_s, "seconds between frames (default 5)");
-  decay->add_option("--duration-s", decay_args->decay.duration_s, "seconds of decay to record (default 180)");
+  decay->add_option("--charge-s", decay_args->decay.charge_s, "seconds of charging (default 5400, 90 min)")->check(kNonNegative);
+  decay->add_option("--interval-s", decay_args->decay.interval_s, "seconds between frames (default 5)")->check(kPositive);
+  decay->add_option("--duration-s", decay_args->decay.duration_s, "seconds of decay to record (default 180)")->check(kPositive);
   decay->add_option("--first-delay-s", decay_args->decay.first_delay_s,
-                    "light-off to the first exposure (default 0.005)");
+                    "light-off to the first exposure (default 0.005)")->check(kNonNegative);
   decay->add_option("--early-frames", decay_args->decay.early_frames,
                     "frames between the first two slots, at delays halving from --interval-s / 2, so a state\n"
                     "that decays in under a second is seen by several frames (default 6; 0: none)");
-  decay->add_option("--initial-exposure-s", decay_args->decay.initial_exposure_s, "first exposure (default 0.05)");
-  decay->add_option("--max-exposure-s", decay_args->decay.max_exposure_s, "longest exposure (default 4)");
+  decay->add_option("--initial-exposure-s", decay_args->decay.initial_exposure_s, "first exposure (default 0.05)")->check(kPositive);
+  decay->add_option("--max-exposure-s", decay_args->decay.max_exposure_s, "longest exposure (default 4)")->check(kPositive);
   decay->callback([decay_args] {
     DecayArgs args = *decay_args;
     args.decay.charge_light = args.light.empty() ? "led405" : args.light;
@@ -902,12 +902,12 @@ void RegisterCapture(CLI::App& app) {
   AddDeviceOptions(excitation, *excitation_args);
   excitation->add_option("--light", excitation_args->excitation.lights,
                          "light channel(s) to measure, one after the other (default led405)");
-  excitation->add_option("--reset-s", excitation_args->excitation.reset_s, "darkness before each charge (default 900)");
+  excitation->add_option("--reset-s", excitation_args->excitation.reset_s, "darkness before each charge (default 900)")->check(kNonNegative);
   excitation->add_option("--first-charge-s", excitation_args->excitation.first_charge_s,
-                         "first charge time (default 1)");
-  excitation->add_option("--max-charge-s", excitation_args->excitation.max_charge_s, "longest charge (default 4096)");
-  excitation->add_option("--delay-s", excitation_args->excitation.delay_s, "light-off to the exposure (default 0.05)");
-  excitation->add_option("--exposure-s", excitation_args->excitation.exposure_s, "exposure (default 1)");
+                         "first charge time (default 1)")->check(kPositive);
+  excitation->add_option("--max-charge-s", excitation_args->excitation.max_charge_s, "longest charge (default 4096)")->check(kPositive);
+  excitation->add_option("--delay-s", excitation_args->excitation.delay_s, "light-off to the exposure (default 0.05)")->check(kNonNegative);
+  excitation->add_option("--exposure-s", excitation_args->excitation.exposure_s, "exposure (default 1)")->check(kPositive);
   excitation->add_option("--tail-frames", excitation_args->excitation.tail_frames,
                          "frames of decay tail after each charge's first frame, each --tail-growth times longer;\n"
                          "they split the response into the excited states (default 6; 0: one frame per charge)");
@@ -930,9 +930,9 @@ void RegisterCapture(CLI::App& app) {
       "turns columns into wavelengths.");
   AddDeviceOptions(spectrum, *spectrum_args);
   spectrum->add_option("--light", spectrum_args->light, "light channel to charge with (default led405)");
-  spectrum->add_option("--charge-s", spectrum_args->spectrum.charge_s, "seconds of the first charge (default 600)");
+  spectrum->add_option("--charge-s", spectrum_args->spectrum.charge_s, "seconds of the first charge (default 600)")->check(kNonNegative);
   spectrum->add_option("--recharge-s", spectrum_args->spectrum.recharge_s,
-                       "seconds of each later charge (default 300)");
+                       "seconds of each later charge (default 300)")->check(kNonNegative);
   spectrum->add_option("--frames", spectrum_args->spectrum.frames, "well-exposed frames to average (default 4)");
   spectrum->callback([spectrum_args] {
     SpectrumArgs args = *spectrum_args;
@@ -978,10 +978,10 @@ void RegisterCapture(CLI::App& app) {
   all->add_option("--excite", all_args->excite,
                   "lights to measure excitation with, one per band (default: led420 led456 led494 in the\n"
                   "simulated lab; the lab's charge_light on a bench)");
-  all->add_option("--charge-s", all_args->charge_s, "decay: seconds of charging (default 5400)");
-  all->add_option("--duration-s", all_args->duration_s, "decay: seconds recorded (default 180)");
-  all->add_option("--interval-s", all_args->interval_s, "decay: seconds between frames (default 5)");
-  all->add_option("--reset-s", all_args->reset_s, "excitation: darkness before each charge (default 900)");
+  all->add_option("--charge-s", all_args->charge_s, "decay: seconds of charging (default 5400)")->check(kNonNegative);
+  all->add_option("--duration-s", all_args->duration_s, "decay: seconds recorded (default 180)")->check(kPositive);
+  all->add_option("--interval-s", all_args->interval_s, "decay: seconds between frames (default 5)")->check(kPositive);
+  all->add_option("--reset-s", all_args->reset_s, "excitation: darkness before each charge (default 900)")->check(kNonNegative);
   all->add_option("--tail-frames", all_args->tail_frames,
                   "excitation: frames of decay tail after each charge, which split the response into the\n"
                   "excited states (default 6; 0: one frame per charge)");

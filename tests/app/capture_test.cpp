@@ -77,6 +77,9 @@ TEST(CaptureExcitationCommand, WritesACompleteSession) {
   EXPECT_EQ(ReadJsonFile(dir / "s" / "stop.json")["how"], "complete");
   auto bad = RunPhos("capture excitation --sim-material " + testing::Fixture("materials/orange.json").string() +
                      " --out " + (dir / "t").string() + " --first-charge-s 0");
+  EXPECT_TRUE(testing::IsOneLineUserError(bad, "--first-charge-s: expected a number > 0, got 0"));
+  bad = RunPhos("capture excitation --sim-material " + testing::Fixture("materials/orange.json").string() + " --out " +
+                (dir / "t").string() + " --first-charge-s 100 --max-charge-s 10");
   EXPECT_TRUE(testing::IsOneLineUserError(bad, "need 0 < first charge <= max charge"));
 }
 
@@ -96,7 +99,11 @@ TEST(CaptureDecayCommand, BadInputGivesOneLineAndExitCode2) {
       {"capture decay" + orange + " --out " + (dir / "full").string(), "already holds files"},
       {"capture decay" + orange + " --out " + (dir / "d").string() + " --light uv", "unknown channel 'uv'"},
       {"capture decay" + orange + " --out " + (dir / "e").string() + " --interval-s 0",
-       "interval and duration must be > 0"},
+       "--interval-s: expected a number > 0, got 0"},
+      {"capture decay" + orange + " --out " + (dir / "e").string() + " --charge-s -5",
+       "--charge-s: expected a number >= 0, got -5"},
+      {"capture excitation" + orange + " --out " + (dir / "e").string() + " --reset-s -1",
+       "--reset-s: expected a number >= 0, got -1"},
       {"capture decay" + orange + " --out " + (dir / "e").string() + " --charge-s inf",
        "--charge-s: expected a finite number, got inf"},
       {"capture excitation" + orange + " --out " + (dir / "e").string() + " --reset-s nan",
