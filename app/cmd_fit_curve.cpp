@@ -330,15 +330,22 @@ void RunDecayCurve(const CurveArgs& args) {
 }
 
 CurveResult FitChargeFile(const std::string& file, const CurveArgs& args, const ChargeFitOptions& options) {
-  const LoadedCurve loaded = LoadCurve(file, args);
+  LoadedCurve loaded = LoadCurve(file, args);
   const Curve& curve = loaded.curve;
   const ChargeFitSummary fit = FitCharge(curve, options, file);
+  // The charge model fits a fall as well (Linf below L0): a decay given to
+  // the wrong command, whose one rate would pass for a charging speed.
+  if (std::all_of(fit.levels.begin(), fit.levels.end(), [](const ChargeLevels& l) { return l.Linf < l.L0; }))
+    loaded.warnings.push_back(file + ": the fitted curve falls (Linf below L0" +
+                              std::string(curve.channel_count() > 1 ? " in every channel" : "") +
+                              "): a decay? 'phos fit decay-curve' fits a decay with its components");
   auto model = [&](int c, double t) {
     return fit.levels[c].Linf - (fit.levels[c].Linf - fit.levels[c].L0) * std::exp(-fit.rate * t);
   };
   if (!args.plot.empty()) WritePlot(args.plot, curve, model, "Charge fit", false);
 
   CurveResult result;
+  result.warnings = loaded.warnings;
   result.json = {{"L0", fit.L0},
                  {"Linf", fit.Linf},
                  {"rate", fit.rate},

@@ -294,6 +294,21 @@ TEST(FitCurveFiles, ATimeColumnInMinutesOrMillisecondsIsReadInIt) {
                                           "names two units of time ('s' and 'min'); give one"));
 }
 
+// A decay given to charge-curve fits (the model falls as well as it rises),
+// and says it looks like a decay; a charge does not.
+TEST(FitCurveFiles, AFallingChargeCurveIsWarnedAbout) {
+  const std::string decay = testing::Fixture("curves/decay-two-components.csv").string();
+  auto result = RunPhos("fit charge-curve " + decay + " --json");
+  ASSERT_EQ(result.exit_code, 0) << result.err;
+  EXPECT_EQ(result.err, "phos: warning: " + decay +
+                            ": the fitted curve falls (Linf below L0): a decay? 'phos fit decay-curve' fits a decay "
+                            "with its components\n");
+  EXPECT_EQ(nlohmann::json::parse(result.out)["warnings"].size(), 1u);
+  result = RunPhos("fit charge-curve " + testing::Fixture("curves/charge.csv").string());
+  ASSERT_EQ(result.exit_code, 0) << result.err;
+  EXPECT_EQ(result.err, "");
+}
+
 TEST(FitCurveFiles, EverySeparatorGivesTheCommaResult) {
   testing::TempDir dir;
   const std::string comma = testing::ReadText(testing::Fixture("curves/decay-tab.txt"));
