@@ -1,6 +1,7 @@
 // phos.constraints/1 (DESIGN.md): the irradiance at one point over time, the
 // surface's albedo, how many states to solve for, and the constraints.
 
+#include <algorithm>
 #include <nlohmann/json.hpp>
 
 #include "phos/editor/solve.h"
@@ -30,8 +31,14 @@ Problem ProblemFromJson(const nlohmann::json& json, const std::string& source) {
   if (irradiance.ArraySize() == 0) irradiance.Fail("expected at least one frame");
   if (irradiance.ArraySize() > 1000000) irradiance.Fail("more than a million frames");
   Point point;
-  for (std::size_t f = 0; f < irradiance.ArraySize(); ++f)
+  bool lit = false;
+  for (std::size_t f = 0; f < irradiance.ArraySize(); ++f) {
     point.irradiance.push_back(irradiance.At(f).NumberArray(nb, 0.0));
+    for (double e : point.irradiance.back()) lit = lit || e > 0;
+  }
+  // As the editor page refuses such a point: nothing charges it, and every
+  // target could only be met with Lambda = 0.
+  if (!lit) irradiance.Fail("zero at every frame: nothing charges the point, so no glow can be designed there");
   point.albedo = root["albedo"].NumberArray(nb, 0.0);
   for (std::size_t b = 0; b < nb; ++b)
     if (point.albedo[b] > 1)
@@ -53,6 +60,12 @@ Problem ProblemFromJson(const nlohmann::json& json, const std::string& source) {
                : f.Has("at_least") ? Constraint::Kind::kAtLeast
                                    : Constraint::Kind::kAtMost;
     con.radiance = f[key].NumberArray(nb, 0.0);
+    // A target's weight is 1 / |T|^2, and a zero target is met with Lambda =
+    // 0: the material would not glow at all (the editor page refuses it too).
+    if (con.kind == Constraint::Kind::kTarget &&
+        std::all_of(con.radiance.begin(), con.radiance.end(), [](double v) { return v == 0; }))
+      f[key].Fail("a target of zero in every band would give Lambda = 0 (no glow at all); give the radiance it "
+                  "should have, or say \"at_most\" for a time it should be dark");
     con.until_s = con.t_s;
     if (f.Has("until_s")) {
       if (con.kind == Constraint::Kind::kTarget)

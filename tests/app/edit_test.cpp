@@ -61,6 +61,18 @@ TEST(EditCommand, BadInputIsOneLineAndExitTwo) {
     "irradiance": [[1, 1, 1]], "albedo": [0.5, 0.5, 0.5], "constraints": []})");
   EXPECT_TRUE(IsOneLineUserError(RunPhos("edit solve " + (dir / "c.json").string()), "constraints"));
   EXPECT_TRUE(IsOneLineUserError(RunPhos("edit"), "edit"));
+  // What the editor page refuses, the file is refused for too: a zero target
+  // and a point no light reaches (each could only be met with Lambda = 0).
+  WriteText(dir / "zero.json", R"({"schema": "phos.constraints/1", "bands_nm": [380, 490, 580, 720], "dt_s": 0.5,
+    "irradiance": [[1, 1, 1], [0, 0, 0]], "albedo": [0.5, 0.5, 0.5],
+    "constraints": [{"t_s": 0.5, "radiance": [0, 0, 0]}, {"t_s": 0.5, "at_most": [0, 0, 0]}]})");
+  EXPECT_TRUE(IsOneLineUserError(RunPhos("edit solve " + (dir / "zero.json").string()),
+                                 "constraints[0].radiance: a target of zero in every band would give Lambda = 0"));
+  WriteText(dir / "dark.json", R"({"schema": "phos.constraints/1", "bands_nm": [380, 490, 580, 720], "dt_s": 0.5,
+    "irradiance": [[0, 0, 0], [0, 0, 0]], "albedo": [0.5, 0.5, 0.5],
+    "constraints": [{"t_s": 0.5, "radiance": [0.1, 0.1, 0.1]}]})");
+  EXPECT_TRUE(IsOneLineUserError(RunPhos("edit solve " + (dir / "dark.json").string()),
+                                 "irradiance: zero at every frame: nothing charges the point"));
 }
 
 TEST(EditorCommand, APortInUseIsRefusedWithExitTwo) {
