@@ -56,7 +56,10 @@ void Run(const EditSolveArgs& args) {
     // Unknown where no light reaches the point (the look says nothing of it), as in the file: null.
     const std::string ke = JoinComma(s.ke, [](const auto& k) { return k ? FormatShort(*k, 3) : std::string("unknown"); });
     const std::string Lambda = JoinComma(s.Lambda, [](double l) { return FormatShort(l, 3); });
-    std::printf("  kr %s /s  ke [%s]  Lambda [%s]\n", FormatShort(s.kr, 4).c_str(), ke.c_str(), Lambda.c_str());
+    // With their units (docs/formats.md, the material file): ke per unit of
+    // band irradiance, Lambda the radiance per unit of kr r.
+    std::printf("  kr %s /s  ke [%s] /s per unit irradiance  Lambda [%s] radiance per unit kr r\n",
+                FormatShort(s.kr, 4).c_str(), ke.c_str(), Lambda.c_str());
   }
   for (const editor::ConstraintResult& c : solution.constraints)
     std::printf("  %-24s residual %s\n", c.label.c_str(), FormatShort(c.residual, 3).c_str());
