@@ -743,6 +743,13 @@ void RunCaptureResume(const std::string& dir_text, bool json) {
                          " frame cannot be measured again (the glow it saw is gone); "
                          "the session stays incomplete: capture it anew into a new folder");
     }
+    // Stopped before its first frame (a light the sample cannot take, a
+    // camera that never delivered): no glow was watched fading; say why it stopped.
+    if (check.frames == 0)
+      ThrowUserError(dir.string(), "resume",
+                     "a " + protocol + " cannot be continued, and this one stopped before its first frame" +
+                         (check.stop && !check.stop->why.empty() ? " (" + check.stop->why + ")" : std::string()) +
+                         ": run 'phos capture " + protocol + "' again into a new folder");
     ThrowUserError(dir.string(), "resume",
                    "a " + protocol +
                        " cannot be continued: the glow kept fading while nothing watched; its frames are "

@@ -134,6 +134,10 @@ TEST(CaptureDecayCommand, ALightTheSampleCannotTakeFailsTheSessionWithTheReason)
   EXPECT_NE(stop["why"].get<std::string>().find("unknown (not measured)"), std::string::npos) << stop.dump();
   // What to do is choose another light: the user sets no irradiance here.
   EXPECT_NE(result.err.find("charge it with a light outside that band (--light"), std::string::npos) << result.err;
+  // Resume says it stopped before its first frame, and why (no glow faded unwatched).
+  EXPECT_TRUE(testing::IsOneLineUserError(RunPhos("capture resume " + (dir / "s").string()),
+                                          "a decay cannot be continued, and this one stopped before its first frame "
+                                          "(simulated sample 'green' under 'white'"));
 }
 
 using testing::ReadJsonLines;
