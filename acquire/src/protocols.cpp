@@ -207,8 +207,13 @@ ExcitationProtocolResult RunExcitationProtocol(Camera& camera, Lights& lights, C
     // times come from doublings and square roots of the same numbers, so
     // they repeat exactly; a relative tolerance guards the last bit.
     for (auto it = done.lower_bound({light, charge_s * (1 - 1e-9)});
-         it != done.end() && it->first.first == light && it->first.second <= charge_s * (1 + 1e-9); ++it)
-      return it->second;
+         it != done.end() && it->first.first == light && it->first.second <= charge_s * (1 + 1e-9); ++it) {
+      const ExcitationMeasured& measured = it->second;
+      if (!first_exposure.count(light)) first_exposure[light] = options.exposure_s;
+      if (measured.first_saturated || measured.first_brightest > options.high_fraction / 2)
+        first_exposure[light] = std::max(first_exposure[light] / 2, 1e-4);
+      return measured.response;
+    }
     lights.AllOff();
     clock.SleepFor(options.reset_s);
     RecordLight(session, lights, clock, light, true);
@@ -269,6 +274,8 @@ ExcitationDone ReadExcitationDone(const std::filesystem::path& session_dir) {
   struct Measurement {
     double charge_s = 0, response = -1;
     int frames = 0, expected = 1;
+    bool first_saturated = false;
+    double first_brightest = 0;
   };
   std::map<std::tuple<int, std::string, double>, Measurement> measurements;
   for (const FrameRecord& frame : ReadFrameRecords(session_dir).frames) {
@@ -290,10 +297,15 @@ ExcitationDone ReadExcitationDone(const std::filesystem::path& session_dir) {
     ++m.frames;
     const int tail = line.contains("tail") ? RequiredKey<int>(line, "tail", where) : 0;
     if (tail == m.expected - 1) m.response = brightest / frame.exposure_s;
+    if (tail == 0) {
+      m.first_saturated = line.value("saturated_fraction", 0.0) > 0;
+      m.first_brightest = brightest;
+    }
   }
   ExcitationDone done;
   for (const auto& [key, m] : measurements)
-    if (m.frames == m.expected && m.response >= 0) done[{std::get<1>(key), m.charge_s}] = m.response;
+    if (m.frames == m.expected && m.response >= 0)
+      done[{std::get<1>(key), m.charge_s}] = {m.response, m.first_saturated, m.first_brightest};
   return done;
 }
 

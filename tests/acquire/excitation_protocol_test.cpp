@@ -107,9 +107,11 @@ TEST(ExcitationProtocol, AMeasurementCutInItsTailIsMeasuredAgain) {
   }
   const ExcitationDone done = ReadExcitationDone(dir / "s");
   EXPECT_EQ(done.size(), 2u);
-  for (const auto& [key, response] : done) {
+  for (const auto& [key, measured] : done) {
     ASSERT_TRUE(whole.count(key));
-    EXPECT_DOUBLE_EQ(response, whole.at(key));
+    EXPECT_DOUBLE_EQ(measured.response, whole.at(key).response);
+    EXPECT_EQ(measured.first_saturated, whole.at(key).first_saturated);
+    EXPECT_DOUBLE_EQ(measured.first_brightest, whole.at(key).first_brightest);
   }
   auto session = SessionWriter::Reopen(dir / "s");
   RunExcitationProtocol(lab, lab.lights(), clock, *session, options, done);
@@ -117,6 +119,51 @@ TEST(ExcitationProtocol, AMeasurementCutInItsTailIsMeasuredAgain) {
   EXPECT_EQ(ReadExcitationDone(dir / "s").size(), whole.size());
   // 10 frames kept, and every measurement but the two whole ones taken again.
   EXPECT_EQ(testing::ReadJsonLines(dir / "s" / "frames.jsonl").size(), 10 + (whole.size() - 2) * 4);
+}
+
+// A light's first exposure halves after a bright first frame. Resumed, the
+// replay of the kept measurements halves it where the run did, so the next
+// first frame is exposed as in a whole run; before, it started again from
+// --exposure-s and clipped (a frame the fit leaves out).
+TEST(ExcitationProtocol, AResumedLightKeepsItsHalvedFirstExposure) {
+  Material orange = LoadMaterial(testing::Fixture("materials/orange.json"));
+  ExcitationProtocolOptions options;
+  options.lights = {"led405"};
+  options.exposure_s = 4;  // bright enough to halve from the third charge on
+  options.tail_frames = 3;
+  testing::TempDir dir;
+  {
+    VirtualClock clock;
+    SimulatedLab lab(orange, std::vector<double>(8, 0.8), DefaultLights(), DefaultCameraModel(), clock);
+    SessionWriter session(dir / "s", {{"protocol", "excitation"}});
+    RunExcitationProtocol(lab, lab.lights(), clock, session, options);
+  }
+  const std::vector<nlohmann::json> all = testing::ReadJsonLines(dir / "s" / "frames.jsonl");
+  std::map<double, double> first_exposure;  // charge -> the whole run's first-frame exposure
+  for (const nlohmann::json& line : all)
+    if (line["tail"] == 0) first_exposure[line["charge_s"].get<double>()] = line["exposure_s"].get<double>();
+  {
+    std::ofstream out(dir / "s" / "frames.jsonl", std::ios::trunc);
+    for (int i = 0; i < 22; ++i) out << all[i].dump() << "\n";  // five whole charges and two frames of the sixth
+    std::filesystem::remove(dir / "s" / "stop.json");
+  }
+  {
+    VirtualClock clock;
+    SimulatedLab lab(orange, std::vector<double>(8, 0.8), DefaultLights(), DefaultCameraModel(), clock);
+    auto session = SessionWriter::Reopen(dir / "s");
+    RunExcitationProtocol(lab, lab.lights(), clock, *session, options, ReadExcitationDone(dir / "s"));
+  }
+  const std::vector<nlohmann::json> resumed = testing::ReadJsonLines(dir / "s" / "frames.jsonl");
+  int compared = 0, halved = 0;
+  for (std::size_t i = 22; i < resumed.size(); ++i) {
+    if (resumed[i]["tail"] != 0) continue;
+    const double whole = first_exposure.at(resumed[i]["charge_s"].get<double>());
+    EXPECT_DOUBLE_EQ(resumed[i]["exposure_s"].get<double>(), whole) << "charge " << resumed[i]["charge_s"];
+    ++compared;
+    halved += whole < options.exposure_s;
+  }
+  EXPECT_GT(compared, 3);
+  EXPECT_GT(halved, 0);  // the test has teeth: the run did halve before the cut
 }
 
 TEST(ExcitationProtocol, BadOptionsAreClearErrors) {

@@ -120,7 +120,17 @@ struct ExcitationProtocolResult {
 // measurement cut off inside its tail is measured again. Resuming replays the schedule
 // against it and measures only what is missing (each measurement starts with
 // its own reset in darkness, so nothing earlier is needed).
-using ExcitationDone = std::map<std::pair<std::string, double>, double>;
+struct ExcitationMeasured {
+  double response = 0;  // the last frame's brightest channel, per second of exposure
+  // Its first frame: clipped pixels, and its brightest channel's mean as a
+  // fraction of the ADC's range. The replay applies the protocol's own rule
+  // to them, so a resumed light's first exposure is the one the run would
+  // have had (halved after a bright first frame), not the default again,
+  // which clipped the next first frame.
+  bool first_saturated = false;
+  double first_brightest = 0;
+};
+using ExcitationDone = std::map<std::pair<std::string, double>, ExcitationMeasured>;
 
 ExcitationProtocolResult RunExcitationProtocol(Camera& camera, Lights& lights, Clock& clock, SessionWriter& session,
                                                const ExcitationProtocolOptions& options,
