@@ -156,7 +156,6 @@ void RunFitSession(const SessionArgs& args) {
   options.max_components = args.max_components;
   options.weighting = ParseWeightsOption(args.weights);
   options.joint = !args.sequential;
-  if (options.components < 0 || options.components > 4) ThrowUserError("", "--components", "expected 1 to 4");
   std::optional<Material> truth;
   if (!args.compare.empty()) truth = LoadMaterial(args.compare);  // a bad file fails before any work
   const SessionFit fit = FitSession(args.dir, options);
@@ -796,8 +795,11 @@ void RegisterFit(CLI::App& app) {
   f->add_option("DIR", session->dir, "the capture folder")->required();
   f->add_option("--out", session->out, "material file to write (phos.material/1)")->required();
   f->add_option("--report", session->report, "HTML report: data against fit, residuals, uncertainties, nc and why");
-  auto fixed_nc = f->add_option("--components", session->components, "fix the number of states (1-4)");
-  auto chosen_nc = f->add_option("--max-components", session->max_components, "choose nc by BIC up to N (default 3)");
+  auto fixed_nc = f->add_option("--components", session->components, "fix the number of states (1-4; default: BIC)")
+                      ->check(CLI::Range(1, 4));
+  auto chosen_nc =
+      f->add_option("--max-components", session->max_components, "choose nc by BIC up to N, 1-4 (default 3)")
+          ->check(CLI::Range(1, 4));
   fixed_nc->excludes(chosen_nc);
   f->add_option("--weights", session->weights, "poisson (default: photon counting) or none");
   f->add_option("--compare", session->compare,
@@ -847,8 +849,10 @@ void RegisterFit(CLI::App& app) {
       "fails is said and kept out; the others go on (exit code 2 if any failed).");
   b->add_option("INPUT", batch->inputs, "capture folders, or folders holding them")->required();
   b->add_option("--out", batch->out, "output folder")->required();
-  b->add_option("--jobs", batch->jobs, "items fitted at once (default: the number of cores)");
-  b->add_option("--components", batch->components, "fix the number of states (1-4; default: BIC)");
+  b->add_option("--jobs", batch->jobs, "items fitted at once, 1 to 1024 (default: the number of cores)")
+      ->check(CLI::Range(1, 1024));
+  b->add_option("--components", batch->components, "fix the number of states (1-4; default: BIC)")
+      ->check(CLI::Range(1, 4));
   b->add_option("--weights", batch->weights, "poisson (default) or none");
   b->add_flag("--json", batch->json, "print one JSON object (the rows of the summary table) instead of the table");
   b->add_option("--task", batch->task,

@@ -743,7 +743,13 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
     if (o.Has("metallic") || o.Has("roughness")) {
       Gloss gloss = object.gloss.value_or(Gloss{});
       if (auto f = o.Optional("metallic")) gloss.metallic = static_cast<float>(f->NumberInRange(0, 1));
-      if (auto f = o.Optional("roughness")) gloss.roughness = static_cast<float>(f->NumberInRange(kMinRoughness, 1));
+      if (auto f = o.Optional("roughness")) {
+        // The bound as a person writes it: kMinRoughness is a float, and
+        // promoted it read "expected a number in [0.019999999552965164, 1]".
+        constexpr double kMinRoughnessAsWritten = 0.02;
+        static_assert(static_cast<float>(kMinRoughnessAsWritten) == kMinRoughness);
+        gloss.roughness = std::max(kMinRoughness, static_cast<float>(f->NumberInRange(kMinRoughnessAsWritten, 1)));
+      }
       object.gloss = gloss;
     }
     if (object.gloss && object.subsurface)

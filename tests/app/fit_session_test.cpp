@@ -210,6 +210,14 @@ TEST(FitSessionCommand, PartialSessionsAndBadInput) {
       testing::IsOneLineUserError(RunPhos("fit session " + (dir / "c").string() + " --out " +
                                           (dir / "x.json").string() + " --compare " + (dir / "nothing.json").string()),
                                   "cannot open"));
+  // The component counts checked as options, alike in session and batch (0
+  // went through as BIC, and a batch failed every item with it).
+  const std::string c = (dir / "c").string(), x = " --out " + (dir / "x").string();
+  EXPECT_TRUE(testing::IsOneLineUserError(RunPhos("fit session " + c + x + " --components 0"), "--components"));
+  EXPECT_TRUE(testing::IsOneLineUserError(RunPhos("fit session " + c + x + " --max-components 0"), "--max-components"));
+  EXPECT_TRUE(testing::IsOneLineUserError(RunPhos("fit batch " + c + x + " --components 9"), "--components"));
+  EXPECT_TRUE(testing::IsOneLineUserError(RunPhos("fit batch " + c + x + " --jobs 0"), "--jobs"));
+  EXPECT_FALSE(std::filesystem::exists(dir / "x"));
 }
 
 TEST(FitBatchCommand, FitsInParallelResumesAndSummarizes) {

@@ -249,6 +249,9 @@ TEST(RenderCommand, BadInputIsOneLineAndExitTwo) {
   EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + kCornell + out + " --times 30,0"),
                                  "--times: expected times in increasing order, got 0 after 30"));
   EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + kCornell + out + " --spp 0"), "--spp"));
+  // Each within its own range, together over the scene file's pixel limit (it took 12.7 GB).
+  EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + kCornell + out + " --width 16384 --height 16384"),
+                                 "--width: 16384 x 16384 pixels is more than the limit"));
   EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + kCornell + out + " --budget-s 1 --transport dss"), "--budget-s"));
   EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + kCornell + out + " --budget-s 1 --quality 0.5"), "not both"));
   EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + kCornell + out + " --quality 2"), "--quality"));

@@ -314,6 +314,12 @@ TEST(Scenes, BadInputNamesTheFileAndField) {
                     "the scene's [400, 500, 600, 700] nm; the renderer needs one band grid: give the scene the "
                     "material's bands_nm, or make the material on the scene's"),
             std::string::npos);
+  // Bounds as written (the float bound read [0.019999999552965164, 1]).
+  EXPECT_NE(ErrorAfterEdit([](nlohmann::json& j) {
+              j["objects"][0]["roughness"] = 0.01;
+            }).find("objects[0].roughness: expected a number in [0.02, 1], got 0.01"),
+            std::string::npos);
+  EXPECT_EQ(ErrorAfterEdit([](nlohmann::json& j) { j["objects"][0]["roughness"] = 0.02; }), "(no error)");
   // A file that is not there is named at its field, with the folder it was looked in.
   const std::string no_material = ErrorAfterEdit([](nlohmann::json& j) { j["objects"][2]["phosphor"] = "../materials/none.json"; });
   EXPECT_NE(no_material.find("objects[2].phosphor: phosphor file '"), std::string::npos) << no_material;
