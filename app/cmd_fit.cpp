@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <memory>
+#include <numeric>
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -546,15 +547,19 @@ struct BatchArgs {
 
 // <item>.done.json: an item of a batch is done. Written last (after the
 // material and the report), through a rename; a record that does not parse
-// or lacks a field means "not done", so the item is fitted again.
+// or lacks a field means "not done", so the item is fitted again, as does
+// one made from other inputs (BatchItemInputs: the data or the options).
 struct BatchDoneRecord {
   std::string item;
   int n_components = 0;
-  double kr_per_s = 0, seconds = 0;
+  double kr_per_s = 0, seconds = 0;  // kr: the first state's
+  std::vector<double> kr_by_state_per_s;  // every state's (absent before it was recorded: just kr)
   std::vector<std::string> notes;
+  std::string inputs;  // BatchItemInputs of the fit ("" in records from before it was recorded)
 
   nlohmann::json ToJson() const {
-    return {{"item", item}, {"n_components", n_components}, {"kr", kr_per_s}, {"seconds", seconds}, {"notes", notes}};
+    return {{"item", item},   {"n_components", n_components}, {"kr", kr_per_s}, {"kr_by_state", kr_by_state_per_s},
+            {"seconds", seconds}, {"notes", notes},          {"inputs", inputs}};
   }
   // nullopt (and why) when the record is not a whole one.
   static std::optional<BatchDoneRecord> FromJson(const nlohmann::json& j, std::string* why) {
@@ -575,9 +580,38 @@ struct BatchDoneRecord {
     if (j.contains("notes") && j["notes"].is_array())
       for (const nlohmann::json& note : j["notes"])
         if (note.is_string()) r.notes.push_back(note.get<std::string>());
+    if (j.contains("kr_by_state") && j["kr_by_state"].is_array())
+      for (const nlohmann::json& kr : j["kr_by_state"])
+        if (kr.is_number()) r.kr_by_state_per_s.push_back(kr.get<double>());
+    if (r.kr_by_state_per_s.empty()) r.kr_by_state_per_s = {r.kr_per_s};
+    if (j.contains("inputs") && j["inputs"].is_string()) r.inputs = j["inputs"].get<std::string>();
     return r;
   }
 };
+
+// What an item's fit is made from, so that a rerun refits an item whose
+// data or options changed and keeps only a fit of these inputs (a folder
+// replaced by another capture, or --components given, kept the old fit).
+// The data: the XXH3 of every session.json and frames.jsonl of the folder
+// and its parts (frames.jsonl holds each frame's own size and checksum).
+std::string BatchItemInputs(const std::filesystem::path& item, const SessionFitOptions& options) {
+  namespace fs = std::filesystem;
+  nlohmann::json data = nlohmann::json::object();
+  std::vector<fs::path> folders = {item};
+  std::error_code ec;
+  for (const auto& entry : fs::directory_iterator(item, ec))
+    if (entry.is_directory() && fs::is_regular_file(entry.path() / "session.json")) folders.push_back(entry.path());
+  std::sort(folders.begin() + 1, folders.end());
+  for (const fs::path& folder : folders)
+    for (const char* name : {"session.json", "frames.jsonl"})
+      if (fs::is_regular_file(folder / name, ec))
+        data[fs::relative(folder / name, item, ec).generic_string()] = DigestFile(folder / name).xxh3;
+  return nlohmann::json({{"components", options.components},
+                         {"weights", WeightingName(options.weighting)},
+                         {"joint", options.joint},
+                         {"data", data}})
+      .dump();
+}
 
 // The done record of an item, if whole ("why" says what is wrong otherwise).
 std::optional<BatchDoneRecord> ReadBatchDone(const std::filesystem::path& path, std::string* why) {
@@ -644,24 +678,31 @@ void RunFitBatch(const BatchArgs& args) {
   // atomically, after the material and the report) exists: a crash
   // mid-batch leaves the unfinished items without one, and only they rerun.
   struct Row {
-    std::string name, status, detail;
+    std::string name, status, detail, inputs;
     int nc = 0;
     double kr = 0, seconds = 0;
+    std::vector<double> kr_by_state;
   };
   std::vector<Row> rows(items.size());
   std::vector<std::size_t> todo;
   for (std::size_t i = 0; i < items.size(); ++i) {
     rows[i].name = items[i].filename().string();
+    rows[i].inputs = BatchItemInputs(items[i], options);
     const fs::path done = fs::path(args.out) / (rows[i].name + ".done.json");
     std::string why;
-    if (const std::optional<BatchDoneRecord> record = ReadBatchDone(done, &why)) {
+    const std::optional<BatchDoneRecord> record = ReadBatchDone(done, &why);
+    if (record && record->inputs == rows[i].inputs) {
       rows[i].status = "kept";
       rows[i].nc = record->n_components;
       rows[i].kr = record->kr_per_s;
+      rows[i].kr_by_state = record->kr_by_state_per_s;
       rows[i].seconds = record->seconds;
       rows[i].detail = "done in an earlier run";
     } else {
-      if (!why.empty()) rows[i].detail = "its .done.json " + why + ": fitted again";
+      if (record)
+        rows[i].detail = "its .done.json was made from other inputs (the data or the options): fitted again";
+      else if (!why.empty())
+        rows[i].detail = "its .done.json " + why + ": fitted again";
       todo.push_back(i);
     }
   }
@@ -691,11 +732,14 @@ void RunFitBatch(const BatchArgs& args) {
         row.status = "fitted";
         row.nc = fit.decay->n_components;
         row.kr = fit.material.states[0].kr;
+        row.kr_by_state.clear();
+        for (const ExcitedState& state : fit.material.states) row.kr_by_state.push_back(state.kr);
         row.seconds = fit.seconds;
         const std::string earlier = row.detail;
         row.detail = fit.notes.empty() ? "" : std::to_string(fit.notes.size()) + " note(s): " + fit.notes.front();
         if (!earlier.empty()) row.detail = earlier + (row.detail.empty() ? "" : "; " + row.detail);
-        const BatchDoneRecord done{items[i].string(), row.nc, row.kr, row.seconds, fit.notes};
+        const BatchDoneRecord done{items[i].string(), row.nc,    row.kr, row.seconds, row.kr_by_state,
+                                   fit.notes,         row.inputs};
         WriteFileAtomically(base.string() + ".done.json", done.ToJson().dump(2) + "\n");
         fs::remove(base.string() + ".failed.txt", ec);
       } catch (const std::exception& e) {
@@ -715,8 +759,10 @@ void RunFitBatch(const BatchArgs& args) {
   progress.Finish();
 
   // One summary table, on screen and as CSV.
-  std::string csv = "item,status,n_components,kr_per_s,seconds,detail\n";
-  if (!args.json) std::printf("%-24s %-7s %3s %12s %8s  %s\n", "item", "status", "nc", "kr (1/s)", "s", "detail");
+  // kr_per_s is the first state's (as before); kr_by_state_per_s every
+  // state's, ';'-separated, last so that readers of the older columns go on.
+  std::string csv = "item,status,n_components,kr_per_s,seconds,detail,kr_by_state_per_s\n";
+  if (!args.json) std::printf("%-24s %-7s %3s %16s %8s  %s\n", "item", "status", "nc", "kr (1/s)", "s", "detail");
   int failed = 0;
   nlohmann::json json_rows = nlohmann::json::array();
   for (const Row& row : rows) {
@@ -725,11 +771,13 @@ void RunFitBatch(const BatchArgs& args) {
                          {"status", row.status},
                          {"n_components", row.nc},
                          {"kr_per_s", row.kr},
+                         {"kr_by_state_per_s", row.kr_by_state},
                          {"seconds", row.seconds},
                          {"detail", row.detail}});
+    const std::string kr_text = JoinComma(row.kr_by_state, [](double kr) { return FormatShort(kr); });
     if (!args.json)
-      std::printf("%-24s %-7s %3d %12s %8s  %s\n", row.name.c_str(), row.status.c_str(), row.nc,
-                  row.status == "failed" ? "-" : FormatShort(row.kr).c_str(), FormatShort(row.seconds).c_str(),
+      std::printf("%-24s %-7s %3d %16s %8s  %s\n", row.name.c_str(), row.status.c_str(), row.nc,
+                  row.status == "failed" ? "-" : kr_text.c_str(), FormatShort(row.seconds).c_str(),
                   row.detail.c_str());
     std::string detail = row.detail;
     std::replace(detail.begin(), detail.end(), '"', '\'');
@@ -744,7 +792,12 @@ void RunFitBatch(const BatchArgs& args) {
         .append(FormatDouble(row.seconds))
         .append(",\"")
         .append(detail)
-        .append("\"\n");
+        .append("\",")
+        .append(std::accumulate(row.kr_by_state.begin(), row.kr_by_state.end(), std::string(),
+                                [](const std::string& list, double kr) {
+                                  return list + (list.empty() ? "" : ";") + FormatDouble(kr);
+                                }))
+        .append("\n");
   }
   if (args.task.empty()) WriteFileAtomically(fs::path(args.out) / "summary.csv", csv);
   if (args.json)

@@ -9,6 +9,7 @@
 
 #include <OpenImageIO/imageio.h>
 #include <gtest/gtest.h>
+#include <map>
 
 #include <algorithm>
 #include <atomic>
@@ -263,6 +264,32 @@ TEST(FitBatchCommand, FitsInParallelResumesAndSummarizes) {
   EXPECT_NE(third.out.find("1 fitted now, 1 kept, 2 failed"), std::string::npos) << third.out;
   EXPECT_NE(testing::ReadText(dir / "out" / "orange.failed.txt").find("decay/frames/000003.tif: is 100 bytes"),
             std::string::npos);
+
+  // A record is kept only for the inputs it was made from: other options,
+  // or another capture in an item's folder, fit again (both kept the old fit).
+  auto fourth = RunPhos(command + " --components 1 --json");
+  const nlohmann::json rows = nlohmann::json::parse(fourth.out)["items"];
+  for (const nlohmann::json& row : rows) {
+    if (row["item"] == "broken" || row["item"] == "orange") continue;
+    EXPECT_EQ(row["status"], "fitted") << row;
+    EXPECT_NE(row["detail"].get<std::string>().find("made from other inputs (the data or the options)"),
+              std::string::npos)
+        << row;
+    // Every state's kr, in the JSON and in summary.csv's last column.
+    EXPECT_EQ(row["kr_by_state_per_s"].size(), row["n_components"].get<std::size_t>()) << row;
+  }
+  std::filesystem::remove_all(dir / "captures" / "yellow");
+  std::filesystem::copy(dir / "captures" / "white", dir / "captures" / "yellow",
+                        std::filesystem::copy_options::recursive);
+  auto fifth = RunPhos(command + " --components 1 --json");
+  const nlohmann::json fifth_json = nlohmann::json::parse(fifth.out);
+  std::map<std::string, nlohmann::json> by_item;
+  for (const nlohmann::json& row : fifth_json["items"]) by_item[row["item"].get<std::string>()] = row;
+  EXPECT_EQ(by_item["white"]["status"], "kept");
+  EXPECT_EQ(by_item["yellow"]["status"], "fitted");
+  EXPECT_EQ(by_item["yellow"]["kr_per_s"], by_item["white"]["kr_per_s"]);  // white's data now: white's rate
+  const std::string csv = testing::ReadText(dir / "out" / "summary.csv");
+  EXPECT_EQ(csv.substr(0, csv.find('\n')), "item,status,n_components,kr_per_s,seconds,detail,kr_by_state_per_s");
 }
 
 TEST(FitMapCommand, TwoStatesMapATwoStateSampleWithAOneStateInset) {
