@@ -27,6 +27,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include "phos/util/digest.h"
+
 namespace phos {
 
 // ---- JSON Lines ------------------------------------------------------------
@@ -59,19 +61,6 @@ std::filesystem::path SetAsideTornLine(const std::filesystem::path& path, const 
 // half-way (a full disk) is cut back off, so the file ends with its last
 // whole record; the UserError names path.
 void AppendJsonLine(const std::filesystem::path& path, const nlohmann::json& record);
-
-// ---- checksums -------------------------------------------------------------
-
-// XXH3-64 of a file's bytes, as 16 hex digits, and its size. XXH3 because
-// the records guard against accidents (a torn write, a truncated copy, a
-// flipped bit on a failing disk), not against an adversary, and it hashes
-// at memory speed: verifying a session costs no more than reading it.
-struct FileDigest {
-  std::uint64_t size_bytes = 0;
-  std::string xxh3;
-};
-FileDigest DigestFile(const std::filesystem::path& path);
-std::string Xxh3Hex(const void* data, std::size_t size);
 
 // ---- frames.jsonl ----------------------------------------------------------
 
