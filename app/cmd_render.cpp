@@ -15,6 +15,7 @@
 #include <iostream>
 #include <memory>
 #include <regex>
+#include <set>
 #include <string>
 
 #include <CLI/CLI.hpp>
@@ -25,10 +26,12 @@
 #include "phos/model/material.h"
 #include "phos/render/exposure.h"
 #include "phos/render/night_vision.h"
+#include "phos/render/phosphor_map.h"
 #include "phos/render/renderer.h"
 #include "phos/render/scene.h"
 #include "phos/render/solver.h"
 #include "phos/render/volume.h"
+#include "phos/util/digest.h"
 #include "phos/util/error.h"
 #include "phos/util/format.h"
 #include "phos/util/progress.h"
@@ -88,11 +91,41 @@ FrameRange SelectFrames(const RenderArgs& args, std::size_t frame_count) {
   return range;
 }
 
-// What a range's frames are made from: a done record for other inputs is not this range's.
-std::string RangeInputs(const RenderArgs& a, const FrameRange& range) {
+// The files a scene was read from, by content: the scene file, its meshes,
+// phosphor materials, masks, maps and texture files, and --material's
+// files, each with its XXH3 (util/digest.h). A path may name a file that is
+// not there any more (an embedded image's name): it counts as absent.
+nlohmann::json SceneFileDigests(const RenderArgs& a, const render::Scene& scene) {
+  std::set<std::string> files = {a.scene};
+  auto add = [&](const std::filesystem::path& file) {
+    if (!file.empty()) files.insert(file.string());
+  };
+  for (const render::Object& object : scene.objects) {
+    if (object.mesh) add(object.mesh->source);
+    add(object.phosphor_path);
+    if (object.phosphor_mask) add(*object.phosphor_mask);
+    if (object.phosphor_map) add(object.phosphor_map->file);
+    if (object.albedo_texture && !object.albedo_texture->embedded) add(object.albedo_texture->texture);
+    if (object.gloss_texture && !object.gloss_texture->embedded) add(object.gloss_texture->texture);
+  }
+  for (const render::Volume& volume : scene.volumes) add(volume.phosphor_path);
+  nlohmann::json digests = nlohmann::json::object();
+  for (const std::string& file : files) {
+    std::error_code ec;
+    digests[file] = std::filesystem::is_regular_file(file, ec) ? DigestFile(file).xxh3 : "absent";
+  }
+  return digests;
+}
+
+// What a range's frames are made from: the options and the content of every
+// file the scene reads (an artist's edit to the scene or a material between
+// runs makes them another range's inputs). A done record for other inputs
+// is not this range's.
+std::string RangeInputs(const RenderArgs& a, const render::Scene& scene, const FrameRange& range) {
   std::string materials;
   for (const std::string& m : a.materials) materials += m + ";";
-  return "scene=" + a.scene + " times=" + a.times + " transport=" + a.transport + " spp=" + std::to_string(a.spp) +
+  return "files=" + SceneFileDigests(a, scene).dump() + " scene=" + a.scene + " times=" + a.times +
+         " transport=" + a.transport + " spp=" + std::to_string(a.spp) +
          " size=" + std::to_string(a.width) + "x" + std::to_string(a.height) + " exposure=" + FormatDouble(a.exposure) +
          " night=" + FormatDouble(a.night_vision_cd) + " no_phosphorescence=" + std::to_string(a.no_phosphorescence) +
          " indirect_visibility=" + std::to_string(a.indirect_visibility) + " materials=" + materials +
@@ -291,7 +324,7 @@ void SolveOnly(const RenderArgs& args, const render::Scene& scene, render::Coupl
   const auto start = std::chrono::steady_clock::now();
   const std::filesystem::path dir = args.checkpoints, done = dir / "done.json";
   const std::string inputs =
-      RangeInputs(args, {0, times.size(), true, ""}) + " tasks=" + std::to_string(args.solve_tasks);
+      RangeInputs(args, scene, {0, times.size(), true, ""}) + " tasks=" + std::to_string(args.solve_tasks);
   nlohmann::json result = {{"scene", args.scene}, {"frames", times.size()}, {"tasks", args.solve_tasks}};
   if (TaskIsDone(done, inputs)) {
     result["done_before"] = true;
@@ -448,7 +481,7 @@ void Run(const RenderArgs& args) {
   if (!args.solve_only && args.out.empty()) ThrowUserError("", "--out", "is required (except with --solve-only)");
   const std::filesystem::path done =
       range.whole ? std::filesystem::path() : std::filesystem::path(args.out) / "done" / range.done_name;
-  const std::string inputs = range.whole ? "" : RangeInputs(args, range);
+  const std::string inputs = range.whole ? "" : RangeInputs(args, scene, range);
   if (!range.whole && !args.solve_only && TaskIsDone(done, inputs)) {
     // A rerun of a finished range (Slurm's requeue, a resubmitted array) does nothing.
     if (args.json)

@@ -113,6 +113,41 @@ TEST(RenderRanges, AFinishedRangeIsNotRenderedAgain) {
   EXPECT_EQ(render::ReadImage(dir / "frame-0002.exr").width, 10);
 }
 
+// The same options on an edited scene, or with an edited material, are
+// another range's inputs: it runs (it said "nothing to do" and kept the
+// frames of the scene before the edit).
+TEST(RenderRanges, AnEditedSceneOrMaterialIsRenderedAgain) {
+  TempDir dir, out;
+  nlohmann::json scene = nlohmann::json::parse(ReadText(Fixture("scenes/cornell-phosphor.json")));
+  for (auto& object : scene["objects"])
+    if (object.contains("mesh"))
+      object["mesh"] = (Fixture("scenes") / object["mesh"].get<std::string>()).lexically_normal().string();
+  std::filesystem::copy_file(Fixture("materials/green.json"), dir / "paint.json");
+  for (auto& object : scene["objects"])
+    if (object.contains("phosphor")) object["phosphor"] = (dir / "paint.json").string();
+  WriteText(dir / "scene.json", scene.dump());
+  const std::string command =
+      "render " + (dir / "scene.json").string() + " --out " + out.path().string() + " --times 10,40 --height 12 --frames 1:2";
+  ASSERT_EQ(RunPhos(command).exit_code, 0);
+  const CommandResult again = RunPhos(command);
+  EXPECT_NE(again.out.find("nothing to do"), std::string::npos) << again.out;
+  // The scene edited: a darker floor.
+  for (auto& object : scene["objects"])
+    if (!object.contains("phosphor")) object["albedo"] = 0.1;
+  WriteText(dir / "scene.json", scene.dump());
+  const CommandResult edited = RunPhos(command);
+  ASSERT_EQ(edited.exit_code, 0) << edited.err;
+  EXPECT_EQ(edited.out.find("nothing to do"), std::string::npos) << edited.out;
+  EXPECT_NE(RunPhos(command).out.find("nothing to do"), std::string::npos);
+  // The material edited: a slower paint.
+  nlohmann::json paint = nlohmann::json::parse(ReadText(dir / "paint.json"));
+  paint["states"][0]["kr"] = paint["states"][0]["kr"].get<double>() / 2;
+  WriteText(dir / "paint.json", paint.dump());
+  const CommandResult repainted = RunPhos(command);
+  ASSERT_EQ(repainted.exit_code, 0) << repainted.err;
+  EXPECT_EQ(repainted.out.find("nothing to do"), std::string::npos) << repainted.out;
+}
+
 TEST(RenderRanges, BadRangesAndStatesAreOneLineErrors) {
   TempDir dir, states;
   const std::string scene = Fixture("scenes/cornell-phosphor.json").string();
