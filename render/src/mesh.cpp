@@ -103,16 +103,42 @@ std::string MtllibName(std::string_view text) {
   return "";
 }
 
+// A vertex line's three coordinates ("v x y z [w]"), each a finite number:
+// tinyobjloader reads "nan", "inf" or "1e999" as 0 or infinity without a
+// word, so a mesh with such a vertex rendered as if it were at the origin.
+void CheckVertexLine(std::string_view line, std::size_t line_number, const std::string& where,
+                     const std::string& name) {
+  std::size_t i = 1;
+  for (int k = 0; k < 3; ++k) {
+    while (i < line.size() && (line[i] == ' ' || line[i] == '\t')) ++i;
+    std::size_t j = i;
+    while (j < line.size() && line[j] != ' ' && line[j] != '\t' && line[j] != '\r') ++j;
+    const std::string token(line.substr(i, j - i));
+    double value = 0;
+    if (token.empty())
+      ThrowUserError(where, "", "OBJ '" + name + "' line " + std::to_string(line_number) +
+                                    ": a vertex has fewer than 3 coordinates");
+    if (!ParseDouble(token, &value))
+      ThrowUserError(where, "", "OBJ '" + name + "' line " + std::to_string(line_number) + ": vertex coordinate '" +
+                                    token.substr(0, 40) + "' is not a finite number");
+    i = j;
+  }
+}
+
 Mesh ParseObj(std::string_view text, const std::filesystem::path& base_dir, const std::string& name,
               const std::string& group, const std::string& where) {
   // Counts before allocation: a vertex is a line "v ...", and a face of k
   // corners "f ..." gives k - 2 triangles, fewer than its fields.
-  std::size_t vertex_lines = 0, face_fields = 0;
+  std::size_t vertex_lines = 0, face_fields = 0, line_number = 0;
   for (std::size_t a = 0; a < text.size();) {
     std::size_t b = text.find('\n', a);
     if (b == std::string_view::npos) b = text.size();
     const std::string_view line = text.substr(a, b - a);
-    if (line.size() >= 2 && line[0] == 'v' && (line[1] == ' ' || line[1] == '\t')) ++vertex_lines;
+    ++line_number;
+    if (line.size() >= 2 && line[0] == 'v' && (line[1] == ' ' || line[1] == '\t')) {
+      ++vertex_lines;
+      CheckVertexLine(line, line_number, where, name);
+    }
     if (line.size() >= 2 && line[0] == 'f' && (line[1] == ' ' || line[1] == '\t'))
       face_fields += static_cast<std::size_t>(std::count(line.begin(), line.end(), ' ') +
                                               std::count(line.begin(), line.end(), '\t'));

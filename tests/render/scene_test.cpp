@@ -541,6 +541,25 @@ TEST(Meshes, CraftedGltfFilesAreRefusedInOneLine) {
   EXPECT_TRUE(has(GltfError(j), "has a vertex beyond the limit of 1e+06 m"));
 }
 
+// tinyobjloader reads "nan", "inf", "1e999" or a word as 0 or infinity without
+// a word: the vertex moved to the origin and the mesh rendered, exit 0.
+TEST(Meshes, AnObjVertexThatIsNotAFiniteNumberIsRefused) {
+  for (const std::string token : {"nan", "inf", "-inf", "1e999", "x"}) {
+    const std::string obj = "v 0 0 0\nv 1 0 " + token + "\nv 0 1 0\nf 1 2 3\n";
+    const std::string error =
+        ErrorOfType<UserError>([&] { ParseMesh(obj, ".obj", ".", "crafted.obj", "", "s.json: objects[0].mesh"); });
+    EXPECT_EQ(error, "s.json: objects[0].mesh: OBJ 'crafted.obj' line 2: vertex coordinate '" + token +
+                         "' is not a finite number")
+        << token;
+  }
+  EXPECT_NE(ErrorOfType<UserError>([&] {
+              ParseMesh("v 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", ".obj", ".", "short.obj", "", "s.json");
+            }).find("line 1: a vertex has fewer than 3 coordinates"),
+            std::string::npos);
+  // A fourth coordinate (w) and a carriage return are as before.
+  EXPECT_NO_THROW(ParseMesh("v 0 0 0 1\r\nv 1 0 0\r\nv 0 1 0\r\nf 1 2 3\r\n", ".obj", ".", "w.obj", "", "s.json"));
+}
+
 // Issue 16: 92 mesh-loader rejections printed several lines.
 TEST(Meshes, ObjRejectionsAreOneLine) {
   const std::string bad[] = {"v 0 0 0\nv 1 0 0\nf 1 2 7\n", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nv 1e39 0 0\n",
