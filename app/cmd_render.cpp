@@ -511,8 +511,10 @@ void Run(const RenderArgs& args) {
     return;
   }
   PositionSolver(solver.get(), args.checkpoints, times, range.first);
-  if (!range.whole) {
-    // A killed run of this range left the temporary of the frame it was writing: gone first.
+  {
+    // A killed run of these frames (a range, or the whole run: an 82 MB
+    // frame-0000.exr.tmp.<pid>.exr outlived a timeout) left the temporary of
+    // the frame it was writing: gone first.
     std::vector<std::string> names;
     for (std::size_t f = range.first; f < range.last; ++f) {
       char name[32];
@@ -769,6 +771,9 @@ void RegisterRender(CLI::App& app) {
     ParseExposureOption(args.get());
     Run(*args);
   });
+  // Each frame's line out as it is printed, into a pipe or a log too: a
+  // killed render left an empty log, its lines still in the stdio buffer.
+  cmd->preparse_callback([](std::size_t) { std::setvbuf(stdout, nullptr, _IOLBF, 0); });
 }
 
 }  // namespace phos::app

@@ -328,6 +328,19 @@ std::string CornellWithExposure(const TempDir& dir, const std::string& name, con
   return CornellEdited(dir, name, [&](nlohmann::json& scene) { scene["camera"]["exposure"] = exposure; });
 }
 
+// A killed run leaves the temporary of the frame it was writing; the next
+// run of those frames removes it (it stayed, 82 MB, after a timeout).
+TEST(RenderCommand, ARunRemovesTheTemporariesAKilledRunLeft) {
+  TempDir dir;
+  WriteText(dir / "frame-0000.exr.tmp.4242.exr", "half a frame");
+  WriteText(dir / "other.exr.tmp.4242.exr", "not ours");
+  const CommandResult r = RunPhos("render " + kCornell + " --out " + dir.path().string() + " --times 40 --width 8 --height 6");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_FALSE(std::filesystem::exists(dir / "frame-0000.exr.tmp.4242.exr"));
+  EXPECT_TRUE(std::filesystem::exists(dir / "other.exr.tmp.4242.exr"));  // not a file this run writes
+  EXPECT_TRUE(std::filesystem::exists(dir / "frame-0000.exr"));
+}
+
 // What would render black without a word is said: a light whose spectrum
 // misses the scene's bands, a scene with nothing to charge or show its
 // phosphors; and --material refuses a name two objects share.
