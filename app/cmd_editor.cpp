@@ -48,8 +48,9 @@ void RegisterEditor(CLI::App& app) {
                          "Serve the material editor page: the scene at any time, a timeline, and constraints placed\n"
                          "by clicking the image; every edit re-solves the material (Sec. 8.6). Listens on 127.0.0.1.");
   cmd->add_option("--scene", args->scene, "Scene file (phos.scene/1); default: the still life fixture");
-  cmd->add_option("--presets", args->presets, "Folder of phos.material/1 presets");
-  cmd->add_option("--port", args->port, "Port (0: any free port)")->check(CLI::Range(0, 65535));
+  cmd->add_option("--presets", args->presets, "Folder of phos.material/1 presets")
+      ->capture_default_str();
+  cmd->add_option("--port", args->port, "Port (0: any free port)")->check(CLI::Range(0, 65535))->capture_default_str();
   cmd->add_option("--bind", args->bind, "Address to listen on (default 127.0.0.1)");
   cmd->add_flag("--allow-remote", args->allow_remote, "Allow --bind to an address other machines can reach");
   cmd->callback([args] { RunEditor(*args); });

@@ -705,7 +705,14 @@ void RegisterRender(CLI::App& app) {
   cmd->add_option("--out", args->out, "Folder for frame-NNNN.exr and frame-NNNN.png (required unless --solve-only)");
   cmd->add_option("--times", args->times,
                   "Comma-separated frame times in seconds, in increasing order (default: the scene's time range\n"
-                  "at its fps); times past the scene's end are rendered with a warning");
+                  "at its fps); times past the scene's end are rendered with a warning")
+      // Given empty (a script's unset variable), it meant every frame of the scene, silently.
+      ->check(CLI::Validator(
+          [](const std::string& text) {
+            return text.empty() ? std::string("expected a comma-separated list of seconds, got nothing")
+                                : std::string();
+          },
+          "", "non-empty"));
   cmd->add_option("--transport", args->transport,
                   "direct (fast, no interreflection), path (the reference: a spectral path tracer) or dss\n"
                   "(direct plus one diffuse bounce through deep screen space; docs/render.md)")

@@ -245,6 +245,9 @@ TEST(RenderCommand, BadInputIsOneLineAndExitTwo) {
       IsOneLineUserError(RunPhos("render " + kCornell + out + " --transport magic"), "unknown transport 'magic'"));
   EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + kCornell + out + " --times 5,x"), "--times"));
   EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + kCornell + out + " --times -1"), "before the scene's start"));
+  // Given empty (a script's unset variable), not every frame of the scene.
+  EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + kCornell + out + " --times \"\""),
+                                 "--times: expected a comma-separated list of seconds, got nothing"));
   // Out of order is refused, not re-sorted (frames are numbered as given).
   EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + kCornell + out + " --times 30,0"),
                                  "--times: expected times in increasing order, got 0 after 30"));
