@@ -428,13 +428,7 @@ void Run(const RenderArgs& args) {
     auto object =
         std::find_if(scene.objects.begin(), scene.objects.end(), [&](const Object& o) { return o.name == name; });
     if (object == scene.objects.end()) ThrowUserError("", "--material", "the scene has no object '" + name + "'");
-    // Two objects of one name would both take it, silently.
-    if (const auto count = std::count_if(scene.objects.begin(), scene.objects.end(),
-                                         [&](const Object& o) { return o.name == name; });
-        count > 1)
-      ThrowUserError("", "--material",
-                     std::to_string(count) + " objects are named '" + name +
-                         "'; give them names of their own in the scene to pick one");
+    // One object: a scene's names are its objects' own (LoadScene refuses two alike).
     auto material = std::make_shared<Material>(LoadMaterial(file));
     if (const std::string mismatch = render::BandGridMismatch(material->bands, scene.bands); !mismatch.empty())
       ThrowUserError(file, "bands_nm", mismatch);

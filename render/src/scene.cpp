@@ -670,6 +670,13 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
                          "two_sided", "emission", "phosphor_mask", "phosphor_map", "metallic", "roughness"});
     Object object;
     object.name = o.Has("name") ? o["name"].NonEmptyString() : "object " + std::to_string(i);
+    // Names pick objects (--material, the editor, the warnings): two objects
+    // of one name were both given a --material, silently.
+    for (std::size_t k = 0; k < scene.objects.size(); ++k)
+      if (scene.objects[k].name == object.name)
+        (o.Has("name") ? o["name"] : o)
+            .Fail("'" + object.name + "' is the name of objects[" + std::to_string(k) +
+                  "] too; give each object a name of its own");
     if (o.Has("mesh") == o.Has("shape")) o.Fail("give exactly one of 'mesh' (a file) or 'shape'");
     if (o.Has("mesh")) {
       const std::filesystem::path file = SceneFile(o["mesh"], base_dir, "mesh");

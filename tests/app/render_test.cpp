@@ -346,7 +346,8 @@ TEST(RenderCommand, ARunRemovesTheTemporariesAKilledRunLeft) {
 
 // What would render black without a word is said: a light whose spectrum
 // misses the scene's bands, a scene with nothing to charge or show its
-// phosphors; and --material refuses a name two objects share.
+// phosphors; and a scene whose objects share a name, which --material gave
+// to both silently, is refused.
 TEST(RenderCommand, ADarkSceneIsWarnedAboutAndAnAmbiguousMaterialRefused) {
   TempDir dir;
   const std::string out = " --out " + dir.path().string() + " --times 40 --width 16 --height 12";
@@ -379,7 +380,7 @@ TEST(RenderCommand, ADarkSceneIsWarnedAboutAndAnAmbiguousMaterialRefused) {
   const std::string name = nlohmann::json::parse(ReadText(kCornell))["objects"][0]["name"];
   EXPECT_TRUE(IsOneLineUserError(
       RunPhos("render " + twins + out + " --material \"" + name + "=" + Fixture("materials/orange.json").string() + "\""),
-      "--material: 2 objects are named '" + name + "'"));
+      "objects[1].name: '" + name + "' is the name of objects[0] too; give each object a name of its own"));
 }
 
 TEST(RenderCommand, AutoExposureMetersTheFramesAfterDark) {
