@@ -8,7 +8,12 @@
 // (--task i/N or --frames A:B, from the latest state at or before A), each
 // writing a done record last (util/task_record.h).
 
+#include <unistd.h>
+
 #include <algorithm>
+#include <csignal>
+#include <cstdlib>
+#include <cstring>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -395,6 +400,26 @@ void PositionSolver(render::CoupledSolver* solver, const std::string& checkpoint
   for (std::size_t f = from; f < first; ++f) solver->AdvanceTo(times[f]);
 }
 
+// SIGINT and SIGTERM (Ctrl-C, a Slurm cancel or time limit) ended a render
+// with exit 130 or 143 and no word. One line, written with write(2) (all a
+// signal handler may do), says what is left; then the usual exit code.
+extern "C" void SayInterruptedAndExit(int signal_number) {
+  const char* line = signal_number == SIGINT
+                         ? "phos render: interrupted (SIGINT): every frame written is whole; the temporary of the one "
+                           "being written is removed by the next run\n"
+                         : "phos render: terminated (SIGTERM): every frame written is whole; the temporary of the one "
+                           "being written is removed by the next run\n";
+  const ssize_t ignored = ::write(STDERR_FILENO, line, std::strlen(line));
+  (void)ignored;
+  std::_Exit(128 + signal_number);
+}
+void SayWhenInterrupted() {
+  struct sigaction action {};
+  action.sa_handler = SayInterruptedAndExit;
+  sigemptyset(&action.sa_mask);
+  for (int signal_number : {SIGINT, SIGTERM}) sigaction(signal_number, &action, nullptr);
+}
+
 void Run(const RenderArgs& args) {
   using namespace phos::render;
   Transport transport = ParseTransport(args.transport);
@@ -574,6 +599,7 @@ void Run(const RenderArgs& args) {
   ProgressBar progress("render " + scene.name,
                        (range.last - range.first) * static_cast<std::size_t>(scene.camera.height));
   options.progress_rows = &progress;
+  SayWhenInterrupted();
   for (std::size_t f = range.first; f < range.last; ++f) {
     const double t = times[f];
     options.frame = f;  // the path tracer's seed: pixel, frame and sample

@@ -344,6 +344,21 @@ TEST(RenderCommand, ARunRemovesTheTemporariesAKilledRunLeft) {
   EXPECT_TRUE(std::filesystem::exists(dir / "frame-0000.exr"));
 }
 
+// Ctrl-C (or a Slurm cancel's SIGTERM) mid-render: one line says what is
+// left, with the usual exit code (it ended with 130 and no word).
+TEST(RenderCommand, AnInterruptedRenderSaysWhatIsLeft) {
+  TempDir dir;
+  const std::string command = "timeout --preserve-status -s INT 5 " + std::string(PHOS_BINARY) + " render " + kCornell + " --out " +
+                              dir.path().string() +
+                              " --transport path --spp 1024 --width 256 --height 256 --times 40,41,42,43 >" +
+                              (dir / "out.txt").string() + " 2>" + (dir / "err.txt").string();
+  const int status = std::system(command.c_str());
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 130);
+  const std::string err = ReadText(dir / "err.txt");
+  EXPECT_NE(err.find("phos render: interrupted (SIGINT): every frame written is whole"), std::string::npos) << err;
+}
+
 // What would render black without a word is said: a light whose spectrum
 // misses the scene's bands, a scene with nothing to charge or show its
 // phosphors; and a scene whose objects share a name, which --material gave
