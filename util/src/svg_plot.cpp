@@ -290,7 +290,13 @@ std::string PlotSvg(const std::vector<PlotSeries>& series, const PlotOptions& op
           pen_down = false;
           continue;
         }
-        path += (pen_down ? "L" : "M") + Num(px(s.x[i])) + " " + Num(py(s.y[i])) + " ";
+        // Appended piece by piece: "L" + std::string trips GCC 12's false
+        // -Wrestrict (its bug 105329) in Release builds.
+        path += pen_down ? 'L' : 'M';
+        path += Num(px(s.x[i]));
+        path += ' ';
+        path += Num(py(s.y[i]));
+        path += ' ';
         pen_down = true;
       }
       if (!path.empty())
