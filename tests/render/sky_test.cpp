@@ -55,6 +55,46 @@ TEST(Sky, AnOpenFloorReceivesTheClosedForm) {
   }
 }
 
+// A floor of albedo `base` and `gloss` under FloorUnderSky's sky, seen
+// `view_rad` off the zenith through a narrow camera; and rho(w_o) of band 2,
+// its BSDF's directional albedo toward that camera.
+Scene GlossyFloorUnderSky(double gradient, double view_rad, double base, Gloss gloss) {
+  Scene scene = FloorUnderSky(gradient);
+  scene.camera.keys = {{0.0, Vec3(0, std::cos(view_rad), std::sin(view_rad) + 0.0001), Vec3(0, 0, 0)}};
+  scene.camera.fov_deg = 10;
+  scene.objects[0].albedo.assign(8, base);
+  scene.objects[0].gloss = gloss;
+  return scene;
+}
+double DirectionalAlbedoTowardCamera(const Scene& scene, double view_rad) {
+  const std::vector<float> albedo(scene.objects[0].albedo.begin(), scene.objects[0].albedo.end());
+  float rho[8];
+  GlossyBsdf(*scene.objects[0].gloss, albedo.data(), 8).DirectionalAlbedo(static_cast<float>(std::cos(view_rad)), rho);
+  return rho[2];
+}
+// Band 2 at the frame's centre (the mean of its 3 x 3 middle pixels) is
+// `expected` in direct transport and dss (1%) and, when `path`, in the path
+// tracer (3%, 1024 spp).
+void ExpectTransportsShow(const SceneGeometry& geometry, double expected, bool path, const std::string& at) {
+  auto centre = [](const Image& image) {
+    double sum = 0;
+    for (int y = 4; y <= 6; ++y)
+      for (int x = 4; x <= 6; ++x) sum += image.at(x, y)[2];
+    return sum / 9;
+  };
+  FrameOptions options;
+  options.transport = Transport::kDirect;
+  options.sky_rays = 256;
+  EXPECT_NEAR(centre(RenderBands(geometry, nullptr, options)) / expected, 1.0, 0.01) << at;
+  options.transport = Transport::kDss;
+  EXPECT_NEAR(centre(RenderBands(geometry, nullptr, options)) / expected, 1.0, 0.01) << at;
+  if (!path) return;
+  options.transport = Transport::kPath;
+  options.spp = 1024;
+  options.max_depth = 2;
+  EXPECT_NEAR(centre(RenderBands(geometry, nullptr, options)) / expected, 1.0, 0.03) << at;
+}
+
 // A dark glossy floor under an open sky, seen straight down and at 60
 // degrees: its radiance is rho(w_o) E / pi, rho the BSDF's directional
 // albedo toward the camera, in direct transport and in dss (before, dss
@@ -66,36 +106,14 @@ TEST(Sky, AnOpenFloorReceivesTheClosedForm) {
 TEST(Sky, AGlossyFloorReflectsTheOpenSkyAlikeInEveryTransport) {
   for (double gradient : {0.0, 0.6})
     for (double view_deg : {0.0, 60.0}) {
-      Scene scene = FloorUnderSky(gradient);
       const double a = view_deg * kPi / 180;
-      scene.camera.keys = {{0.0, Vec3(0, std::cos(a), std::sin(a) + 0.0001), Vec3(0, 0, 0)}};
-      scene.camera.fov_deg = 10;
-      scene.objects[0].albedo.assign(8, 0.05);
-      scene.objects[0].gloss = Gloss{0.0f, 0.3f};
+      const Scene scene = GlossyFloorUnderSky(gradient, a, 0.05, Gloss{0.0f, 0.3f});
       SceneGeometry geometry(scene);
-      const std::vector<float> albedo(8, 0.05f);
-      float rho[8];
-      GlossyBsdf(*scene.objects[0].gloss, albedo.data(), 8).DirectionalAlbedo(static_cast<float>(std::cos(a)), rho);
-      const double expected = rho[2] * 2.0 * (kPi + 2 * kPi / 3 * gradient) / kPi;
-      ASSERT_GT(rho[2], 1.5 * 0.05);  // what the test tells apart
-      auto centre = [](const Image& image) {
-        double sum = 0;
-        for (int y = 4; y <= 6; ++y)
-          for (int x = 4; x <= 6; ++x) sum += image.at(x, y)[2];
-        return sum / 9;
-      };
-      const std::string at = "gradient " + std::to_string(gradient) + ", view " + std::to_string(view_deg);
-      FrameOptions options;
-      options.transport = Transport::kDirect;
-      options.sky_rays = 256;
-      EXPECT_NEAR(centre(RenderBands(geometry, nullptr, options)) / expected, 1.0, 0.01) << at;
-      options.transport = Transport::kDss;
-      EXPECT_NEAR(centre(RenderBands(geometry, nullptr, options)) / expected, 1.0, 0.01) << at;
-      if (gradient != 0) continue;
-      options.transport = Transport::kPath;
-      options.spp = 1024;
-      options.max_depth = 2;
-      EXPECT_NEAR(centre(RenderBands(geometry, nullptr, options)) / expected, 1.0, 0.03) << at;
+      const double rho = DirectionalAlbedoTowardCamera(scene, a);
+      ASSERT_GT(rho, 1.5 * 0.05);  // what the test tells apart
+      const double expected = rho * 2.0 * (kPi + 2 * kPi / 3 * gradient) / kPi;
+      ExpectTransportsShow(geometry, expected, gradient == 0,
+                           "gradient " + std::to_string(gradient) + ", view " + std::to_string(view_deg));
     }
 }
 
@@ -109,34 +127,13 @@ TEST(Sky, RandomGlossyFloorsReflectTheUniformSkyAlikeInEveryTransport) {
     const float base = 0.02f + 0.88f * random.UniformFloat(), metallic = random.UniformFloat(),
                 roughness = 0.15f + 0.75f * random.UniformFloat();
     const double a = 70 * kPi / 180 * random.UniformDouble();
-    Scene scene = FloorUnderSky(0.0);
-    scene.camera.keys = {{0.0, Vec3(0, std::cos(a), std::sin(a) + 0.0001), Vec3(0, 0, 0)}};
-    scene.camera.fov_deg = 10;
-    scene.objects[0].albedo.assign(8, base);
-    scene.objects[0].gloss = Gloss{metallic, roughness};
+    const Scene scene = GlossyFloorUnderSky(0.0, a, base, Gloss{metallic, roughness});
     SceneGeometry geometry(scene);
-    const std::vector<float> albedo(8, base);
-    float rho[8];
-    GlossyBsdf(*scene.objects[0].gloss, albedo.data(), 8).DirectionalAlbedo(static_cast<float>(std::cos(a)), rho);
-    const double expected = rho[2] * 2.0;  // E / pi = 2 under a uniform sky of radiance 2
-    auto centre = [](const Image& image) {
-      double sum = 0;
-      for (int y = 4; y <= 6; ++y)
-        for (int x = 4; x <= 6; ++x) sum += image.at(x, y)[2];
-      return sum / 9;
-    };
-    const std::string at = "base " + std::to_string(base) + ", metallic " + std::to_string(metallic) + ", roughness " +
-                           std::to_string(roughness) + ", view " + std::to_string(a * 180 / kPi);
-    FrameOptions options;
-    options.transport = Transport::kDirect;
-    options.sky_rays = 256;
-    EXPECT_NEAR(centre(RenderBands(geometry, nullptr, options)) / expected, 1.0, 0.01) << at;
-    options.transport = Transport::kDss;
-    EXPECT_NEAR(centre(RenderBands(geometry, nullptr, options)) / expected, 1.0, 0.01) << at;
-    options.transport = Transport::kPath;
-    options.spp = 1024;
-    options.max_depth = 2;
-    EXPECT_NEAR(centre(RenderBands(geometry, nullptr, options)) / expected, 1.0, 0.03) << at;
+    // E / pi = 2 under a uniform sky of radiance 2.
+    const double expected = DirectionalAlbedoTowardCamera(scene, a) * 2.0;
+    ExpectTransportsShow(geometry, expected, true,
+                         "base " + std::to_string(base) + ", metallic " + std::to_string(metallic) + ", roughness " +
+                             std::to_string(roughness) + ", view " + std::to_string(a * 180 / kPi));
   }
 }
 
