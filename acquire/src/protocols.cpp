@@ -201,6 +201,15 @@ ExcitationProtocolResult RunExcitationProtocol(Camera& camera, Lights& lights, C
   // double the glow; the first frame, the brightest and most informative,
   // is then not lost to clipping on a bright sample.
   std::map<std::string, double> first_exposure;
+  auto first_exposure_of = [&](const std::string& light) -> double& {
+    return first_exposure.try_emplace(light, options.exposure_s).first->second;
+  };
+  // The rule, after a charge's first frame: one taken now, or one of an
+  // interrupted run replayed, so a resumed light goes on as the run would.
+  auto after_first_frame = [&](const std::string& light, bool saturated, double brightest) {
+    if (saturated || brightest > options.high_fraction / 2)
+      first_exposure_of(light) = std::max(first_exposure_of(light) / 2, 1e-4);
+  };
   // One charge-then-measure experiment; returns the brightest channel's signal.
   auto measure = [&](const std::string& light, double charge_s) {
     // Already measured before an interruption: replay its response. Charge
@@ -209,9 +218,7 @@ ExcitationProtocolResult RunExcitationProtocol(Camera& camera, Lights& lights, C
     for (auto it = done.lower_bound({light, charge_s * (1 - 1e-9)});
          it != done.end() && it->first.first == light && it->first.second <= charge_s * (1 + 1e-9); ++it) {
       const ExcitationMeasured& measured = it->second;
-      if (!first_exposure.count(light)) first_exposure[light] = options.exposure_s;
-      if (measured.first_saturated || measured.first_brightest > options.high_fraction / 2)
-        first_exposure[light] = std::max(first_exposure[light] / 2, 1e-4);
+      after_first_frame(light, measured.first_saturated, measured.first_brightest);
       return measured.response;
     }
     lights.AllOff();
@@ -221,8 +228,7 @@ ExcitationProtocolResult RunExcitationProtocol(Camera& camera, Lights& lights, C
     RecordLight(session, lights, clock, light, false);
     const double off = clock.now_s();
     clock.SleepUntil(off + options.delay_s);
-    if (!first_exposure.count(light)) first_exposure[light] = options.exposure_s;
-    double response = 0, exposure = first_exposure[light];
+    double response = 0, exposure = first_exposure_of(light);
     for (int tail = 0; tail <= options.tail_frames; ++tail) {
       Frame frame = camera.Capture(std::min(exposure, camera.max_exposure_s()), options.gain);
       ++result.frames;
@@ -238,8 +244,7 @@ ExcitationProtocolResult RunExcitationProtocol(Camera& camera, Lights& lights, C
       // its plateau (a fast, bright state plateaus first and would stop
       // the doubling while a slow one is still rising).
       if (tail == options.tail_frames) response = brightest / frame.exposure_s;
-      if (tail == 0 && (frame.SaturatedFraction() > 0 || brightest > options.high_fraction / 2))
-        first_exposure[light] = std::max(first_exposure[light] / 2, 1e-4);
+      if (tail == 0) after_first_frame(light, frame.SaturatedFraction() > 0, brightest);
       // The next frame exposes longer, unless this one came close to clipping.
       if (frame.SaturatedFraction() > 0)
         exposure /= options.tail_growth;
