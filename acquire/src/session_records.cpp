@@ -199,6 +199,14 @@ namespace {
 double OptionalNumber(const nlohmann::json& j, const char* key, double fallback, const std::string& where) {
   return j.contains(key) ? RequiredKey<double>(j, key, where) : fallback;
 }
+// An optional count in [0, upper]: `fallback` when absent (older records).
+int OptionalCount(const nlohmann::json& j, const char* key, int upper, int fallback, const std::string& where) {
+  if (!j.contains(key)) return fallback;
+  const nlohmann::json& v = j[key];
+  if (!v.is_number_integer() || v.get<std::int64_t>() < 0 || v.get<std::int64_t>() > upper)
+    KeyError(where, key, "expected an integer from 0 to " + std::to_string(upper) + ", got " + DescribeJson(v));
+  return v.get<int>();
+}
 double NumberInRange(const nlohmann::json& j, const char* key, double lower, double upper, const std::string& where) {
   const double v = RequiredKey<double>(j, key, where);
   if (!(v >= lower && v <= upper))
@@ -330,12 +338,7 @@ FrameRecord FrameRecord::FromJson(const nlohmann::json& j, const std::string& wh
       KeyError(where, "packets_resent", "expected a non-negative integer, got " + DescribeJson(j["packets_resent"]));
     r.packets_resent = j["packets_resent"].get<std::uint64_t>();
   }
-  if (j.contains("retakes")) {
-    if (!j["retakes"].is_number_integer() || j["retakes"].get<std::int64_t>() < 0 ||
-        j["retakes"].get<std::int64_t>() > 1000)
-      KeyError(where, "retakes", "expected an integer from 0 to 1000, got " + DescribeJson(j["retakes"]));
-    r.retakes = j["retakes"].get<int>();
-  }
+  r.retakes = OptionalCount(j, "retakes", 1000, 0, where);
   if (j.contains("size_bytes")) {
     if (!j["size_bytes"].is_number_unsigned())
       KeyError(where, "size_bytes", "expected a non-negative integer, got " + DescribeJson(j["size_bytes"]));
@@ -346,11 +349,7 @@ FrameRecord FrameRecord::FromJson(const nlohmann::json& j, const std::string& wh
     if (r.xxh3.size() != 16 || r.xxh3.find_first_not_of("0123456789abcdef") != std::string::npos)
       KeyError(where, "xxh3", "expected 16 hex digits, got " + DescribeJson(j["xxh3"]));
   }
-  if (j.contains("run")) {
-    if (!j["run"].is_number_integer() || j["run"].get<std::int64_t>() < 0 || j["run"].get<std::int64_t>() > 100000)
-      KeyError(where, "run", "expected an integer from 0 to 100000, got " + DescribeJson(j["run"]));
-    r.run = j["run"].get<int>();
-  }
+  r.run = OptionalCount(j, "run", 100000, 0, where);
   r.protocol = j;
   for (const char* key : kFrameKeys) r.protocol.erase(key);
   CheckProtocolFields(r.protocol, where);
