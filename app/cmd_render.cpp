@@ -106,7 +106,7 @@ nlohmann::json SceneFileDigests(const RenderArgs& a, const render::Scene& scene)
     if (!file.empty()) files.insert(file.string());
   };
   for (const render::Object& object : scene.objects) {
-    if (object.mesh) add(object.mesh->source);
+    if (object.mesh) add(object.mesh->file);  // not its source: "cornell.obj#left" names no file
     add(object.phosphor_path);
     if (object.phosphor_mask) add(*object.phosphor_mask);
     if (object.phosphor_map) add(object.phosphor_map->file);

@@ -925,7 +925,9 @@ Mesh LoadMesh(const std::filesystem::path& path, const std::string& group, const
   } catch (const UserError& e) {
     ThrowUserError(where, "", std::string("mesh ") + e.what());
   }
-  return ParseMesh(data, extension, path.parent_path(), path.string(), group, where);
+  Mesh mesh = ParseMesh(data, extension, path.parent_path(), path.string(), group, where);
+  mesh.file = path;
+  return mesh;
 }
 
 }  // namespace phos::render

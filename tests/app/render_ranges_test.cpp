@@ -119,9 +119,15 @@ TEST(RenderRanges, AFinishedRangeIsNotRenderedAgain) {
 TEST(RenderRanges, AnEditedSceneOrMaterialIsRenderedAgain) {
   TempDir dir, out;
   nlohmann::json scene = nlohmann::json::parse(ReadText(Fixture("scenes/cornell-phosphor.json")));
+  // The box's walls are groups of one OBJ (cornell.obj#left, ...), copied here to be edited.
+  std::string mesh;
   for (auto& object : scene["objects"])
-    if (object.contains("mesh"))
-      object["mesh"] = (Fixture("scenes") / object["mesh"].get<std::string>()).lexically_normal().string();
+    if (object.contains("mesh")) {
+      mesh = object["mesh"].get<std::string>();
+      object["mesh"] = (dir / "box.obj").string();
+    }
+  ASSERT_FALSE(mesh.empty());
+  std::filesystem::copy_file(Fixture("scenes") / mesh, dir / "box.obj");
   std::filesystem::copy_file(Fixture("materials/green.json"), dir / "paint.json");
   for (auto& object : scene["objects"])
     if (object.contains("phosphor")) object["phosphor"] = (dir / "paint.json").string();
@@ -146,6 +152,11 @@ TEST(RenderRanges, AnEditedSceneOrMaterialIsRenderedAgain) {
   const CommandResult repainted = RunPhos(command);
   ASSERT_EQ(repainted.exit_code, 0) << repainted.err;
   EXPECT_EQ(repainted.out.find("nothing to do"), std::string::npos) << repainted.out;
+  // The mesh edited (a comment added): its groups' file is read by content too.
+  WriteText(dir / "box.obj", ReadText(dir / "box.obj") + "# moved nothing, but the file changed\n");
+  const CommandResult remeshed = RunPhos(command);
+  ASSERT_EQ(remeshed.exit_code, 0) << remeshed.err;
+  EXPECT_EQ(remeshed.out.find("nothing to do"), std::string::npos) << remeshed.out;
 }
 
 TEST(RenderRanges, BadRangesAndStatesAreOneLineErrors) {

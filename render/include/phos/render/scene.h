@@ -138,7 +138,8 @@ struct Mesh {
   // The mesh's own UV map, if it has one: per triangle, indices into uvs.
   std::vector<Eigen::Vector2f> uvs;
   std::vector<Eigen::Vector3i> uv_triangles;
-  std::string source;  // file it came from, or the built-in shape
+  std::string source;  // file it came from, or the built-in shape (for messages: "file.obj#group")
+  std::filesystem::path file;  // the file LoadMesh read (empty: a built-in shape or parsed text)
   // The base colour of the mesh's material, when the file gives one; a mesh
   // whose triangles have different ones keeps none and says so.
   std::optional<BaseColour> base_colour;
