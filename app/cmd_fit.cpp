@@ -5,7 +5,6 @@
 #include <cmath>
 #include <cstdio>
 #include <memory>
-#include <numeric>
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -793,10 +792,7 @@ void RunFitBatch(const BatchArgs& args) {
         .append(",\"")
         .append(detail)
         .append("\",")
-        .append(std::accumulate(row.kr_by_state.begin(), row.kr_by_state.end(), std::string(),
-                                [](const std::string& list, double kr) {
-                                  return list + (list.empty() ? "" : ";") + FormatDouble(kr);
-                                }))
+        .append(Join(row.kr_by_state, ";", FormatDouble))
         .append("\n");
   }
   if (args.task.empty()) WriteFileAtomically(fs::path(args.out) / "summary.csv", csv);

@@ -59,6 +59,8 @@ TEST(JoinComma, JoinsItemsAsTextWithCommas) {
     std::string name;
   };
   EXPECT_EQ(JoinComma(std::vector<Channel>{{"a"}, {"b"}}, &Channel::name), "a, b");
+  // Any separator (summary.csv's list of rates).
+  EXPECT_EQ(Join(std::vector<double>{0.3, 0.015}, ";", [](double v) { return FormatShort(v); }), "0.3;0.015");
 }
 
 }  // namespace

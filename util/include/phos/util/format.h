@@ -4,6 +4,7 @@
 
 #include <functional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 namespace phos {
@@ -14,16 +15,21 @@ std::string FormatShort(double value, int digits = 4);
 // The largest number with `digits` significant digits that is <= value (> 0),
 // e.g. 0.4649 -> 0.46: a limit to suggest that is safely inside the true one.
 double RoundDownSignificant(double value, int digits = 2);
-// "a, b, c" for messages: each item of `items` as text (`to_text`, the item
-// itself by default) joined by ", " ("" for no items).
+// Each item of `items` as text (`to_text`, the item itself by default),
+// joined by `separator` ("" for no items).
 template <class Items, class ToText = std::identity>
-std::string JoinComma(const Items& items, ToText to_text = {}) {
+std::string Join(const Items& items, std::string_view separator, ToText to_text = {}) {
   std::string list;
   for (const auto& item : items) {
-    if (!list.empty()) list += ", ";
+    if (!list.empty()) list += separator;
     list += std::invoke(to_text, item);
   }
   return list;
+}
+// "a, b, c", for messages.
+template <class Items, class ToText = std::identity>
+std::string JoinComma(const Items& items, ToText to_text = {}) {
+  return Join(items, ", ", to_text);
 }
 // Parses a whole string as a finite double; false if it is not one.
 bool ParseDouble(const std::string& text, double* value);
