@@ -28,6 +28,12 @@
 //     per vertex stays the same (the fixture itself has 30 triangles).
 //   BM_PathAgainstBareEmbreeGlowingBySize/s: the same with the sphere painted
 //     with the back wall's phosphor, so its glow is looked up and sampled.
+//   BM_GlowChoiceByBlocks/s: that scene's glowing sphere's triangles chosen by
+//     blocks (FrameOptions::emitter_blocks_above_triangles) against one by one, at
+//     1 spp over 8 seeds each: counters `variance_ratio` (the pixels' variance
+//     by blocks over one by one), `mean_ratio` (their images' means: 1 but
+//     for noise), `time_ratio` and `efficiency_ratio` (1 / (variance x time),
+//     by blocks over one by one).
 //
 // Run: build/bin/bench_render (make bench saves the output in docs/bench/).
 
@@ -35,6 +41,7 @@
 
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <memory>
 #include <random>
 
@@ -339,6 +346,69 @@ BENCHMARK(BM_PathAgainstBareEmbreeGlowingBySize4spp)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime()
     ->MinTime(2.0);
+
+// The noise and the time of choosing the glowing triangles by blocks, against
+// one by one, on the glowing sphere after dark (its glow uneven: the LED lit
+// it from one side). Each way renders 8 frames at 1 spp with seeds 1 to 8,
+// alternated; a pixel's variance is estimated over its 8 values in each
+// band. Counters also: `mean_difference_se`, the images' means' difference
+// in standard errors, and each way's first frame (first_frame_ms_*).
+void BM_GlowChoiceByBlocks(benchmark::State& state) {
+  Cornell c(0.0, static_cast<int>(state.range(0)), /*glowing_sphere=*/true);
+  c.solver->AdvanceTo(40);
+  constexpr int kSeeds = 8;
+  struct Way {
+    std::size_t above;
+    double variance = 0, mean = 0, seconds = 0;
+  };
+  // By blocks: the sphere alone (the walls, two triangles each, stay chosen one by one).
+  const std::size_t sphere_triangles = c.scene.objects.back().mesh->triangles.size();
+  Way ways[2] = {{sphere_triangles - 1}, {~std::size_t{0}}};  // by blocks, one by one
+  FrameOptions options[2];
+  std::vector<double> sum[2], sum2[2];
+  for (int w = 0; w < 2; ++w) {
+    options[w] = DefaultFrameOptions(c.scene, Transport::kPath);
+    options[w].spp = 1;
+    options[w].emitter_blocks_above_triangles = ways[w].above;
+  }
+  for (auto _ : state) {
+    // A frame each way first, not counted: the blocks' tables are built
+    // once for the geometry, at the first frame by blocks (first_frame_ms).
+    for (int w = 0; w < 2; ++w) {
+      const double start = Now();
+      RenderBands(*c.geometry, c.solver.get(), options[w]);
+      state.counters[w == 0 ? "first_frame_ms_blocks" : "first_frame_ms_one_by_one"] = (Now() - start) * 1e3;
+    }
+    for (int seed = 1; seed <= kSeeds; ++seed)
+      for (int w = 0; w < 2; ++w) {  // alternated, so that the machine's noise hits both alike
+        options[w].seed = static_cast<unsigned>(seed);
+        const double start = Now();
+        const Image image = RenderBands(*c.geometry, c.solver.get(), options[w]);
+        ways[w].seconds += Now() - start;
+        sum[w].resize(image.pixels.size(), 0.0);
+        sum2[w].resize(image.pixels.size(), 0.0);
+        for (std::size_t i = 0; i < image.pixels.size(); ++i) {
+          sum[w][i] += image.pixels[i];
+          sum2[w][i] += static_cast<double>(image.pixels[i]) * image.pixels[i];
+        }
+      }
+    for (int w = 0; w < 2; ++w)
+      for (std::size_t i = 0; i < sum[w].size(); ++i) {
+        const double mean = sum[w][i] / kSeeds;
+        ways[w].mean += mean;
+        ways[w].variance += (sum2[w][i] - kSeeds * mean * mean) / (kSeeds - 1);
+      }
+  }
+  state.counters["variance_ratio"] = ways[0].variance / ways[1].variance;
+  state.counters["mean_ratio"] = ways[0].mean / ways[1].mean;
+  // The means' difference in standard errors (pixels independent): within a
+  // few for two unbiased estimates.
+  state.counters["mean_difference_se"] =
+      (ways[0].mean - ways[1].mean) / std::sqrt((ways[0].variance + ways[1].variance) / kSeeds);
+  state.counters["time_ratio"] = ways[0].seconds / ways[1].seconds;
+  state.counters["efficiency_ratio"] = (ways[1].variance * ways[1].seconds) / (ways[0].variance * ways[0].seconds);
+}
+BENCHMARK(BM_GlowChoiceByBlocks)->Arg(6)->Arg(8)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(1);
 
 // A frame of an animation at 30 fps while the LED is on: the coupled step for
 // 1/30 s and the direct render, against the render alone of the same scene

@@ -53,13 +53,17 @@ void BuildBlock(const double* weight, std::size_t n, std::size_t padded, double 
 
 }  // namespace
 
-AliasTable::AliasTable(const double* weight, std::size_t n) : size_(n) {
+AliasTable::AliasTable(const double* weight, std::size_t n, Levels levels, int block_bits)
+    : size_(n), block_bits_(block_bits) {
+  PHOS_CHECK(block_bits >= 1 && block_bits <= kBlockBits && (levels == Levels::kBlocks || block_bits == kBlockBits));
   PHOS_CHECK(n > 0 && n < std::numeric_limits<std::uint32_t>::max() - kBlock);
   // A table of up to kOneBlock weights is one block, of as many columns; a
   // larger one has blocks of kBlock columns, the last block's columns past
   // the weights weighing 0 (so each is its alias), and a column is chosen
   // from random bits by a shift alone.
-  const std::size_t block_size = n <= kOneBlock ? n : kBlock, block_count = (n + block_size - 1) / block_size;
+  blocked_ = n > kOneBlock || levels == Levels::kBlocks;
+  const std::size_t block_size = blocked_ ? std::size_t{1} << block_bits : n;
+  const std::size_t block_count = (n + block_size - 1) / block_size;
   columns_.resize(block_count * block_size);  // not zeroed: each is written below
   std::vector<double> block_weight(block_count);
   std::vector<char> valid(block_count);
@@ -86,21 +90,38 @@ AliasTable::AliasTable(const double* weight, std::size_t n) : size_(n) {
     total += block_weight[b];
   }
   PHOS_CHECK(total > 0 && std::isfinite(total));
-  blocks_.resize(block_count);
-  VoseScratch scratch;
-  BuildBlock(block_weight.data(), block_count, block_count, total, 0, blocks_.data(), scratch);
+  blocks_ = BlockTable(block_weight.data(), block_count);
+  block_sums_ = std::move(block_weight);
 }
 
-std::vector<double> AliasTable::Probabilities() const {
-  std::vector<double> p(size_, 0.0);
-  const std::size_t block_size = blocks_.size() == 1 ? columns_.size() : kBlock;
-  // The blocks' probabilities, then each block's columns' shares of its own.
-  std::vector<double> block_p(blocks_.size(), 0.0);
-  for (std::size_t b = 0; b < blocks_.size(); ++b) {
-    const double share = 1.0 / static_cast<double>(blocks_.size());
-    block_p[b] += share * blocks_[b].keep;
-    block_p[blocks_[b].alias] += share * (1.0 - static_cast<double>(blocks_[b].keep));
+std::vector<AliasTable::Column> AliasTable::BlockTable(const double* weight, std::size_t count) {
+  PHOS_CHECK(count > 0 && count < std::numeric_limits<std::uint32_t>::max());
+  double total = 0;  // in order: the same on any number of threads
+  for (std::size_t b = 0; b < count; ++b) {
+    PHOS_CHECK(weight[b] >= 0 && std::isfinite(weight[b]));
+    total += weight[b];
   }
+  PHOS_CHECK(total > 0 && std::isfinite(total));
+  std::vector<Column> items(count);
+  VoseScratch scratch;
+  BuildBlock(weight, count, count, total, 0, items.data(), scratch);
+  return items;
+}
+
+std::vector<double> AliasTable::Probabilities(const std::vector<Column>& items) const {
+  PHOS_CHECK(items.size() >= blocks_.size());
+  const std::size_t extra = items.size() - blocks_.size();
+  std::vector<double> p(size_ + extra, 0.0);
+  PHOS_CHECK(extra == 0 || blocked_);
+  const std::size_t block_size = blocked_ ? std::size_t{1} << block_bits_ : columns_.size();
+  // The blocks' (and items') probabilities, then each block's columns' shares of its own.
+  std::vector<double> block_p(items.size(), 0.0);
+  for (std::size_t b = 0; b < items.size(); ++b) {
+    const double share = 1.0 / static_cast<double>(items.size());
+    block_p[b] += share * items[b].keep;
+    block_p[items[b].alias] += share * (1.0 - static_cast<double>(items[b].keep));
+  }
+  for (std::size_t j = 0; j < extra; ++j) p[size_ + j] = block_p[blocks_.size() + j];
   for (std::size_t c = 0; c < columns_.size(); ++c) {
     const double share = block_p[c / block_size] / static_cast<double>(block_size);
     const double keep = std::clamp(static_cast<double>(columns_[c].keep), 0.0, 1.0);

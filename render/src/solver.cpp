@@ -9,6 +9,7 @@
 #include <cstring>
 #include <fstream>
 #include <set>
+#include <utility>
 
 #include <nlohmann/json.hpp>
 
@@ -519,6 +520,17 @@ SolverCheckpoint ReadSolverCheckpoint(const std::filesystem::path& path) {
   }
   if (offset != bytes.size()) ThrowUserError(path.string(), "", "is longer than its header says");
   return c;
+}
+
+std::shared_ptr<const void> CoupledSolver::DerivedTables() const {
+  const std::lock_guard<std::mutex> lock(derived_mutex_);
+  return derived_version_ == geometry_.version() ? derived_tables_ : nullptr;
+}
+
+void CoupledSolver::KeepDerivedTables(std::shared_ptr<const void> tables) const {
+  const std::lock_guard<std::mutex> lock(derived_mutex_);
+  derived_tables_ = std::move(tables);
+  derived_version_ = geometry_.version();
 }
 
 SolverCheckpoint CoupledSolver::Checkpoint(int frame) const {

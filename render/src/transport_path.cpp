@@ -4,6 +4,7 @@
 // sampling (power heuristic), so the glow of one surface lights the others
 // (Fig. 8.15).
 #include <algorithm>
+#include <climits>
 #include <cmath>
 #include <memory>
 #include <utility>
@@ -52,6 +53,133 @@ struct GlowByTexel {
   int first_band = 0, band_count = 0;  // the span of emission bands
   LargeTable<float> Lp;                // [texel * band_count + i]: band first_band + i
 };
+// Everything a sample needs of its triangle in one cache line: sampling
+// walked from the entry to the mesh's indices, its vertices and the atlas's
+// per-triangle tables, a cache miss at each step.
+struct alignas(64) EmitterEntry {
+  Vec3f v0, e1, e2;  // the triangle: v0 + b1 e1 + b2 e2
+  Vec3f normal;      // front
+  float area_pdf;    // probability per m^2 of a point on it (by triangle; by blocks, see PickedAreaPdf)
+  std::uint32_t triangle;
+  std::uint32_t first_texel;  // auto atlas: its first texel
+  std::int16_t slot;          // the object's texel slot
+  std::uint16_t m;            // auto atlas: subdivisions (0: UV atlas, ask TexelOf)
+  std::size_t Texel(const TexelAtlas& atlas, float b1, float b2) const {
+    return m > 0 ? first_texel + static_cast<std::size_t>(SubTriangleIndex(m, b1, b2))
+                 : atlas.TexelOf(slot, static_cast<int>(triangle), b1, b2);
+  }
+};
+
+// A triangle's entry, written from the geometry and the atlas.
+EmitterEntry MakeEmitterEntry(const SceneGeometry& geometry, const TexelAtlas::ObjectTexels& texels, int slot, int t) {
+  EmitterEntry entry;
+  const int object = texels.object;
+  entry.v0 = geometry.Vertex(object, t, 0);
+  entry.e1 = geometry.Vertex(object, t, 1) - entry.v0;
+  entry.e2 = geometry.Vertex(object, t, 2) - entry.v0;
+  entry.normal = geometry.FrontNormal(object, t);
+  entry.area_pdf = 0;
+  entry.triangle = static_cast<std::uint32_t>(t);
+  entry.slot = static_cast<std::int16_t>(slot);
+  entry.m = texels.uv() ? 0 : texels.m[t];
+  entry.first_texel = texels.uv() ? 0 : texels.first[t];
+  return entry;
+}
+
+// The glowing triangles of a large mesh, chosen by blocks: each object with
+// more phosphorescent triangles than FrameOptions::emitter_blocks_above_triangles.
+// Choosing each triangle by its power needs every triangle's power, entry
+// and alias column anew every frame: with a 1.3M-triangle glowing mesh,
+// about 7 ms of set-up in a frame whose rays bare Embree traces in 72
+// (bench_render, BM_PathAgainstBareEmbreeGlowingBySize/8). Here the entries
+// and, per block of kSize consecutive triangles of one object, a table
+// choosing one by its area are built once and kept by the solver while
+// nothing moves (CoupledSolver::DerivedTables); a frame only sums each
+// block's power, with its glow's copy, and builds a table over the blocks
+// and the other objects' glowing triangles. Block b is picked by W_b / W,
+// then its triangle t by a_t / A_b: the area pdf of a point on t is
+// W_b / (W A_b), the same all over the block. Unbiased, as the choice by
+// triangle; its variance is that choice's where the glow is even over a
+// block. Small objects stay chosen triangle by triangle: a Cornell box's
+// wall is two triangles whose glow differs, and choosing them by area
+// added 6% to the variance of a frame (BM_GlowChoiceByBlocks).
+struct EmitterBlocks {
+  static constexpr std::size_t kNone = ~std::size_t{0};
+  static constexpr int kBits = 8;
+  static constexpr std::size_t kSize = std::size_t{1} << kBits;  // triangles to a block
+  std::size_t above_triangles = 0;               // the option it was built for
+  std::vector<std::size_t> slot_first_column;    // per texel slot: a multiple of kSize; kNone: not by blocks
+  std::vector<std::size_t> object_first_column;  // per object, likewise
+  LargeTable<EmitterEntry> entries;              // per column; a padding column's is never picked
+  AliasTable table;                              // over the columns by area, blocks of kSize
+  bool By(int slot) const { return slot_first_column[slot] != kNone; }
+};
+// The texel slots chosen by blocks: those that emit, with more triangles than `above`.
+std::vector<char> SlotsByBlocks(const SceneGeometry& geometry, const CoupledSolver& solver, std::size_t above) {
+  const TexelAtlas& atlas = solver.atlas();
+  std::vector<char> by(atlas.objects().size(), 0);
+  for (std::size_t s = 0; s < by.size(); ++s)
+    by[s] = !solver.emission_bands(static_cast<int>(s)).empty() &&
+            static_cast<std::size_t>(geometry.triangle_count(atlas.objects()[s].object)) > above;
+  return by;
+}
+std::shared_ptr<const EmitterBlocks> BuildEmitterBlocks(const SceneGeometry& geometry, const CoupledSolver& solver,
+                                                        const std::vector<char>& by_blocks, std::size_t above) {
+  auto blocks = std::make_shared<EmitterBlocks>();
+  blocks->above_triangles = above;
+  const TexelAtlas& atlas = solver.atlas();
+  blocks->slot_first_column.assign(atlas.objects().size(), EmitterBlocks::kNone);
+  blocks->object_first_column.assign(geometry.object_count(), EmitterBlocks::kNone);
+  std::size_t columns = 0;
+  std::vector<std::pair<std::size_t, int>> firsts;  // (first column, slot) of each slot by blocks, ascending
+  for (std::size_t s = 0; s < atlas.objects().size(); ++s) {
+    if (!by_blocks[s]) continue;
+    const int object = atlas.objects()[s].object;
+    blocks->slot_first_column[s] = blocks->object_first_column[object] = columns;
+    firsts.emplace_back(columns, static_cast<int>(s));
+    const std::size_t triangles = static_cast<std::size_t>(geometry.triangle_count(object));
+    columns += (triangles + EmitterBlocks::kSize - 1) / EmitterBlocks::kSize * EmitterBlocks::kSize;
+  }
+  std::vector<double> area(columns, 0.0);
+  blocks->entries.resize(columns);  // not zeroed: each is written below
+  tbb::parallel_for(std::size_t{0}, columns / EmitterBlocks::kSize, [&](std::size_t b) {
+    const std::size_t c0 = b * EmitterBlocks::kSize;
+    const auto [first, slot] = *(std::upper_bound(firsts.begin(), firsts.end(), std::make_pair(c0, INT_MAX)) - 1);
+    const TexelAtlas::ObjectTexels& texels = atlas.objects()[slot];
+    const std::size_t triangles = static_cast<std::size_t>(geometry.triangle_count(texels.object));
+    for (std::size_t c = c0; c < c0 + EmitterBlocks::kSize; ++c) {
+      const std::size_t t = c - first;
+      if (t < triangles) {
+        blocks->entries[c] = MakeEmitterEntry(geometry, texels, slot, static_cast<int>(t));
+        area[c] = geometry.Area(texels.object, static_cast<int>(t));
+      } else {
+        EmitterEntry& padding = blocks->entries[c];  // weighs 0: never picked
+        padding.v0 = padding.e1 = padding.e2 = padding.normal = Vec3f::Zero();
+        padding.area_pdf = 0;
+        padding.triangle = padding.first_texel = 0;
+        padding.slot = static_cast<std::int16_t>(slot);
+        padding.m = 0;
+      }
+    }
+  });
+  blocks->table = AliasTable(area.data(), columns, AliasTable::Levels::kBlocks, EmitterBlocks::kBits);
+  return blocks;
+}
+// The blocks, when some object is chosen by blocks; null otherwise.
+std::shared_ptr<const EmitterBlocks> EmitterBlocksFor(const SceneGeometry& geometry, const CoupledSolver* solver,
+                                                      const FrameOptions& options) {
+  if (!solver) return nullptr;
+  const std::size_t above = options.emitter_blocks_above_triangles;
+  const std::vector<char> by_blocks = SlotsByBlocks(geometry, *solver, above);
+  if (std::find(by_blocks.begin(), by_blocks.end(), 1) == by_blocks.end()) return nullptr;
+  if (auto kept = std::static_pointer_cast<const EmitterBlocks>(solver->DerivedTables());
+      kept && kept->above_triangles == above)
+    return kept;
+  std::shared_ptr<const EmitterBlocks> blocks = BuildEmitterBlocks(geometry, *solver, by_blocks, above);
+  solver->KeepDerivedTables(blocks);
+  return blocks;
+}
+
 // The frame's glow: the copy, and for the emitter table each triangle's
 // power (the mean Lp of its texels, summed over bands, times its area) and
 // the glowing triangles counted and their power summed in fixed chunks of a
@@ -60,6 +188,7 @@ struct GlowByTexel {
 constexpr int kChunk = 16384;
 struct GlowingChunk {
   int slot = 0, begin = 0, end = 0;  // triangles [begin, end) of the slot
+  bool by_blocks = false;            // its slot is chosen by blocks (EmitterBlocks): it has no entries
   std::size_t glowing = 0;           // of them, those with power
   std::size_t first_entry = 0;       // the emitter entry of its first glowing triangle
   double power = 0;                  // theirs, summed in order
@@ -73,50 +202,79 @@ struct GlowingChunk {
 };
 struct FrameGlow {
   std::vector<GlowByTexel> by_texel;      // per slot
-  std::vector<LargeTable<double>> power;  // per slot, per triangle (empty: the slot emits no band)
+  std::vector<LargeTable<double>> power;  // per slot, per triangle (empty: the slot emits no band, or by blocks)
+  std::vector<double> block_power;        // by blocks (EmitterBlocks): per block of its table
   std::vector<GlowingChunk> chunks;       // every emitting slot's, in slot order
-  std::size_t glowing = 0;                // glowing triangles
-  double total = 0;                       // their power
+  std::size_t glowing = 0;                // glowing triangles chosen one by one (each an entry)
+  std::size_t glowing_by_blocks = 0;      // the others
+  double total = 0;                       // the power of all
 };
 // A triangle's power: the mean over its `count` texels of their Lp summed
 // over bands (`Lp_sum`), times its area; 0 for a triangle without texels.
 double TrianglePower(double Lp_sum, std::size_t count, double area_m2) {
   return count ? Lp_sum / static_cast<double>(count) * area_m2 : 0.0;
 }
-// Texels [k0, k1) of a slot into its copy: band by band, a run of
-// consecutive texels each.
-void CopyTexels(const CoupledSolver& solver, int slot, std::size_t k0, std::size_t k1, GlowByTexel& glow) {
-  const TexelAtlas& atlas = solver.atlas();
-  const std::size_t span = static_cast<std::size_t>(glow.band_count);
-  std::fill(glow.Lp.begin() + k0 * span, glow.Lp.begin() + k1 * span, 0.0f);
-  for (int b : solver.emission_bands(slot))
-    for (std::size_t k = k0; k < k1; ++k)  // a masked texel glows by the share its paint covers
-      glow.Lp[k * span + static_cast<std::size_t>(b - glow.first_band)] = atlas.Coverage(slot, k) * solver.Lp(slot, b, k);
-}
+// A slot's glow as the solver keeps it, band by band: each emission band's
+// Lp of every texel, at its place in the copy's span, and the texels'
+// coverage (null: the paint covers every texel).
+struct BandMajorGlow {
+  std::vector<const float*> Lp;  // per emission band
+  std::vector<int> place;        // its index in the span
+  const float* coverage = nullptr;
+  BandMajorGlow(const CoupledSolver& solver, int slot, const GlowByTexel& glow) {
+    for (int b : solver.emission_bands(slot)) {
+      Lp.push_back(solver.LpOfBand(slot, b));
+      place.push_back(b - glow.first_band);
+    }
+    const std::vector<float>& c = solver.atlas().objects()[slot].coverage;
+    coverage = c.empty() ? nullptr : c.data();
+  }
+  // Texels [k0, k1) into the copy, texel by texel (each texel's span
+  // written once, in order: band by band, every pass over the run wrote
+  // each of its cache lines again); returns their Lp summed over bands.
+  double Copy(std::size_t k0, std::size_t k1, GlowByTexel& glow) const {
+    const std::size_t span = static_cast<std::size_t>(glow.band_count), bands = Lp.size();
+    float* out = glow.Lp.data() + k0 * span;
+    double sum = 0;
+    for (std::size_t k = k0; k < k1; ++k, out += span) {
+      if (bands != span) std::fill(out, out + span, 0.0f);  // a band inside the span not emitted
+      const float cover = coverage ? coverage[k] : 1.0f;  // a masked texel glows by the share its paint covers
+      for (std::size_t e = 0; e < bands; ++e) {
+        const float v = cover * Lp[e][k];
+        out[place[e]] = v;
+        sum += v;
+      }
+    }
+    return sum;
+  }
+};
 // An auto atlas's triangles own consecutive texels (m^2 from first, in
-// triangle order), so the copy goes by runs of triangles and sums each
-// one's power from its texels while the run's copy is in the cache: summed
-// in a pass of its own, it read the whole copy back from memory. A UV
-// atlas's texels fall on triangles in any order: copied by texel, then
-// summed in texel order.
+// triangle order), so the copy goes triangle by triangle and sums each
+// one's power as it writes its texels: summed in a pass of its own, it
+// read the whole copy back from memory. A UV atlas's texels fall on
+// triangles in any order: copied by texel, then summed in texel order.
+// By blocks (block_power not null: the slot's blocks, zeroed), each
+// triangle's power is added to its block's instead of kept: a chunk is
+// whole blocks, so no two threads add to one.
 void CopyGlowOfAutoAtlas(const SceneGeometry& geometry, const CoupledSolver& solver, GlowingChunk* chunks,
-                         std::size_t chunk_count, GlowByTexel& glow, LargeTable<double>& power) {
+                         std::size_t chunk_count, GlowByTexel& glow, LargeTable<double>& power,
+                         double* block_power) {
   const int slot = chunks[0].slot;
   const TexelAtlas::ObjectTexels& texels = solver.atlas().objects()[slot];
-  const std::size_t span = static_cast<std::size_t>(glow.band_count);
   const int triangles = geometry.triangle_count(texels.object);
-  power.resize(triangles);  // not zeroed: each is written below
+  if (!block_power) power.resize(triangles);  // not zeroed: each is written below
+  const BandMajorGlow from(solver, slot, glow);
   tbb::parallel_for(std::size_t{0}, chunk_count, [&](std::size_t c) {
     GlowingChunk& chunk = chunks[c];
-    const std::size_t k1 = chunk.end < triangles ? texels.first[chunk.end] : texels.count;
-    CopyTexels(solver, slot, texels.first[chunk.begin], k1, glow);
     for (int t = chunk.begin; t < chunk.end; ++t) {
-      const std::size_t count = std::size_t{texels.m[t]} * texels.m[t];
-      const float* Lp = glow.Lp.data() + std::size_t{texels.first[t]} * span;
-      double sum = 0;  // the bands outside the emission ones hold 0 and add nothing
-      for (std::size_t i = 0; i < count * span; ++i) sum += Lp[i];
-      power[t] = TrianglePower(sum, count, geometry.Area(texels.object, t));
-      chunk.Add(power[t]);
+      const std::size_t count = std::size_t{texels.m[t]} * texels.m[t], first = texels.first[t];
+      const double sum = from.Copy(first, first + count, glow);
+      const double p = TrianglePower(sum, count, geometry.Area(texels.object, t));
+      if (block_power)
+        block_power[t >> EmitterBlocks::kBits] += p;
+      else
+        power[t] = p;
+      chunk.Add(p);
     }
   });
 }
@@ -125,8 +283,9 @@ void CopyGlowOfUvAtlas(const SceneGeometry& geometry, const CoupledSolver& solve
   const int slot = chunks[0].slot;
   const TexelAtlas& atlas = solver.atlas();
   const TexelAtlas::ObjectTexels& texels = atlas.objects()[slot];
+  const BandMajorGlow from(solver, slot, glow);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, texels.count, 16384),
-                    [&](const tbb::blocked_range<std::size_t>& r) { CopyTexels(solver, slot, r.begin(), r.end(), glow); });
+                    [&](const tbb::blocked_range<std::size_t>& r) { from.Copy(r.begin(), r.end(), glow); });
   // From the copy, as an auto atlas's: a masked texel's power is the share
   // its paint covers (the solver's Lp is the paint's own).
   const std::size_t span = static_cast<std::size_t>(glow.band_count);
@@ -144,9 +303,10 @@ void CopyGlowOfUvAtlas(const SceneGeometry& geometry, const CoupledSolver& solve
     for (int t = chunks[c].begin; t < chunks[c].end; ++t) chunks[c].Add(power[t]);
   });
 }
-FrameGlow CopyGlow(const SceneGeometry& geometry, const CoupledSolver* solver) {
+FrameGlow CopyGlow(const SceneGeometry& geometry, const CoupledSolver* solver, const EmitterBlocks* blocks) {
   FrameGlow glow;
   if (!solver) return glow;
+  if (blocks) glow.block_power.assign(blocks->table.block_sums().size(), 0.0);
   const TexelAtlas& atlas = solver->atlas();
   glow.by_texel.resize(atlas.objects().size());
   glow.power.resize(atlas.objects().size());
@@ -158,19 +318,31 @@ FrameGlow CopyGlow(const SceneGeometry& geometry, const CoupledSolver* solver) {
     by_texel.first_band = bands.front();
     by_texel.band_count = bands.back() - bands.front() + 1;
     by_texel.Lp.resize(atlas.objects()[s].count * static_cast<std::size_t>(by_texel.band_count));  // each written
+    const bool by_blocks = blocks && blocks->By(slot);
     const std::size_t first_chunk = glow.chunks.size();
     for (int begin = 0; begin < triangles; begin += kChunk)
-      glow.chunks.push_back({slot, begin, std::min(triangles, begin + kChunk)});
+      glow.chunks.push_back({slot, begin, std::min(triangles, begin + kChunk), by_blocks});
     GlowingChunk* chunks = glow.chunks.data() + first_chunk;
     const std::size_t chunk_count = glow.chunks.size() - first_chunk;
-    if (atlas.objects()[s].uv())
+    double* block_power =
+        by_blocks ? glow.block_power.data() + (blocks->slot_first_column[s] >> EmitterBlocks::kBits) : nullptr;
+    if (atlas.objects()[s].uv()) {
       CopyGlowOfUvAtlas(geometry, *solver, chunks, chunk_count, by_texel, glow.power[s]);
-    else
-      CopyGlowOfAutoAtlas(geometry, *solver, chunks, chunk_count, by_texel, glow.power[s]);
+      if (block_power) {
+        for (int t = 0; t < triangles; ++t) block_power[t >> EmitterBlocks::kBits] += glow.power[s][t];
+        glow.power[s] = {};
+      }
+    } else {
+      CopyGlowOfAutoAtlas(geometry, *solver, chunks, chunk_count, by_texel, glow.power[s], block_power);
+    }
   }
   for (GlowingChunk& chunk : glow.chunks) {
-    chunk.first_entry = glow.glowing;
-    glow.glowing += chunk.glowing;
+    if (chunk.by_blocks) {
+      glow.glowing_by_blocks += chunk.glowing;
+    } else {
+      chunk.first_entry = glow.glowing;
+      glow.glowing += chunk.glowing;
+    }
     glow.total += chunk.power;
   }
   return glow;
@@ -178,36 +350,32 @@ FrameGlow CopyGlow(const SceneGeometry& geometry, const CoupledSolver* solver) {
 
 // The glowing triangles of this moment, for next-event estimation: chosen in
 // proportion to their emitted power (texel Lp summed over bands, times area)
-// by an alias table (alias_table.h).
+// by an alias table (alias_table.h), one by one or, in a large mesh, by
+// blocks (EmitterBlocks).
 struct EmitterDistribution {
-  // Everything a sample needs of its triangle in one cache line: sampling
-  // walked from the entry to the mesh's indices, its vertices and the atlas's
-  // per-triangle tables, a cache miss at each step.
-  struct alignas(64) Entry {
-    Vec3f v0, e1, e2;  // the triangle: v0 + b1 e1 + b2 e2
-    Vec3f normal;      // front
-    float area_pdf;    // probability per m^2 of a point on it
-    std::uint32_t triangle;
-    std::uint32_t first_texel;  // auto atlas: its first texel
-    std::int16_t slot;          // the object's texel slot
-    std::uint16_t m;            // auto atlas: subdivisions (0: UV atlas, ask TexelOf)
-    std::size_t Texel(const TexelAtlas& atlas, float b1, float b2) const {
-      return m > 0 ? first_texel + static_cast<std::size_t>(SubTriangleIndex(m, b1, b2))
-                   : atlas.TexelOf(slot, static_cast<int>(triangle), b1, b2);
-    }
-  };
+  using Entry = EmitterEntry;
   // Large tables (large_table.h): a 1.3M-triangle glowing mesh has 83 MB of
   // entries, and zeroing that on one thread before filling it on two was
   // most of a frame's set-up.
-  LargeTable<Entry> entries;
-  AliasTable table;                    // over the entries, by power
+  LargeTable<Entry> entries;           // the triangles chosen one by one that glow
+  AliasTable table;                    // over the entries, by power (without blocks)
   std::vector<LargeTable<float>> pdf;  // per object, per triangle: probability of choosing it, per m^2 of it
   std::vector<std::uint8_t> two_sided;  // per texel slot: the object glows from both faces
-  bool empty() const { return entries.empty(); }
+  // With blocks: the kept entries and their table by area; this frame's
+  // table over the blocks and then the entries, by power; each block's area
+  // pdf, W_b / (W A_b). A pick's index below first_entry is a column of the
+  // blocks' table; from first_entry on, entry index - first_entry.
+  std::shared_ptr<const EmitterBlocks> blocks;
+  std::vector<AliasTable::Column> items;
+  std::vector<float> block_pdf;
+  std::uint32_t first_entry = 0;
+
+  bool empty() const { return blocks ? items.empty() : entries.empty(); }
   // The table outgrows a core's cache: a pick's column is then a cache miss,
   // worth fetching as soon as its random word is known.
   bool outgrows_cache() const {
-    return entries.size() * (sizeof(Entry) + sizeof(AliasTable::Column)) > kCoreCacheBytes;
+    const std::size_t n = entries.size() + first_entry;
+    return n * (sizeof(Entry) + sizeof(AliasTable::Column)) > kCoreCacheBytes;
   }
 
   // Built for every frame, as the glow changes, from each triangle's power
@@ -216,25 +384,40 @@ struct EmitterDistribution {
   // power summed by chunk, their entries, and the alias table. On one
   // thread it held a 1.3M-triangle glowing sphere's frame for longer than
   // bare Embree took to trace it (bench_render,
-  // BM_PathAgainstBareEmbreeGlowingBySize/8).
-  EmitterDistribution(const SceneGeometry& geometry, const CoupledSolver* solver, const FrameGlow& glow) {
+  // BM_PathAgainstBareEmbreeGlowingBySize/8). Of the blocks, only a table
+  // over them is built.
+  EmitterDistribution(const SceneGeometry& geometry, const CoupledSolver* solver, const FrameGlow& glow,
+                      std::shared_ptr<const EmitterBlocks> by_blocks)
+      : blocks(std::move(by_blocks)) {
     pdf.resize(geometry.object_count());
     if (!solver) return;
     const TexelAtlas& atlas = solver->atlas();
     PHOS_CHECK(atlas.objects().size() <= 32767);
     for (const TexelAtlas::ObjectTexels& texels : atlas.objects())
       two_sided.push_back(geometry.scene().objects[texels.object].two_sided);
-    if (glow.glowing == 0) return;
+    if (blocks) first_entry = static_cast<std::uint32_t>(blocks->entries.size());
+    if (glow.glowing + glow.glowing_by_blocks == 0) return;
     const LargeTable<double> entry_power = WriteEntries(geometry, atlas, glow);
-    table = AliasTable(entry_power.data(), entry_power.size());
+    if (!blocks) {
+      table = AliasTable(entry_power.data(), entry_power.size());
+      return;
+    }
+    // One table over the blocks, then the entries.
+    std::vector<double> weight(glow.block_power);
+    weight.insert(weight.end(), entry_power.begin(), entry_power.end());
+    items = AliasTable::BlockTable(weight.data(), weight.size());
+    const std::vector<double>& area = blocks->table.block_sums();
+    block_pdf.resize(glow.block_power.size());
+    for (std::size_t b = 0; b < block_pdf.size(); ++b)
+      block_pdf[b] = area[b] > 0 ? static_cast<float>(glow.block_power[b] / glow.total / area[b]) : 0.0f;
   }
-  // The glowing triangles' entries, chunk by chunk in parallel, and every
-  // triangle's area pdf (0 where it does not glow) in the objects that
-  // glow; returns the entries' power.
+  // The glowing triangles' entries (of the objects chosen one by one), chunk
+  // by chunk in parallel, and every triangle's area pdf (0 where it does not
+  // glow) in the objects that glow; returns the entries' power.
   LargeTable<double> WriteEntries(const SceneGeometry& geometry, const TexelAtlas& atlas, const FrameGlow& glow) {
     const std::vector<LargeTable<double>>& power = glow.power;
     std::vector<char> slot_glows(atlas.objects().size(), 0);
-    for (const GlowingChunk& chunk : glow.chunks) slot_glows[chunk.slot] |= chunk.glowing > 0;
+    for (const GlowingChunk& chunk : glow.chunks) slot_glows[chunk.slot] |= !chunk.by_blocks && chunk.glowing > 0;
     for (std::size_t s = 0; s < slot_glows.size(); ++s)
       if (slot_glows[s]) pdf[atlas.objects()[s].object].resize(power[s].size());  // not zeroed: each is written below
     entries.resize(glow.glowing);  // not zeroed: each is written below
@@ -254,15 +437,8 @@ struct EmitterDistribution {
           continue;
         }
         Entry& entry = entries[e];
-        entry.v0 = geometry.Vertex(object, t, 0);
-        entry.e1 = geometry.Vertex(object, t, 1) - entry.v0;
-        entry.e2 = geometry.Vertex(object, t, 2) - entry.v0;
-        entry.normal = geometry.FrontNormal(object, t);
+        entry = MakeEmitterEntry(geometry, texels, chunk.slot, t);
         entry.area_pdf = static_cast<float>(p[t] / glow.total / geometry.Area(object, t));
-        entry.triangle = static_cast<std::uint32_t>(t);
-        entry.slot = static_cast<std::int16_t>(chunk.slot);
-        entry.m = texels.uv() ? 0 : texels.m[t];
-        entry.first_texel = texels.uv() ? 0 : texels.first[t];
         object_pdf[t] = entry.area_pdf;
         entry_power[e++] = p[t];
       }
@@ -271,10 +447,32 @@ struct EmitterDistribution {
   }
   // Probability per unit area of sampling a point of (object, triangle).
   float AreaPdf(int object, int triangle) const {
+    if (blocks && blocks->object_first_column[object] != EmitterBlocks::kNone) {
+      if (block_pdf.empty()) return 0.0f;
+      return block_pdf[(blocks->object_first_column[object] + static_cast<std::size_t>(triangle)) >> EmitterBlocks::kBits];
+    }
     const auto& p = pdf[object];
     return p.empty() ? 0.0f : p[triangle];
   }
-  const Entry& Pick(std::uint64_t random) const { return entries[table.Pick(random)]; }
+  // A pick: the index of its entry.
+  std::uint32_t Pick(std::uint64_t random) const {
+    return blocks ? blocks->table.Pick(random, items) : table.Pick(random);
+  }
+  const Entry& entry(std::uint32_t picked) const {
+    return picked < first_entry ? blocks->entries[picked] : entries[picked - first_entry];
+  }
+  // The area pdf of a point on the picked triangle.
+  float PickedAreaPdf(std::uint32_t picked, const Entry& entry) const {
+    return picked < first_entry ? block_pdf[picked >> EmitterBlocks::kBits] : entry.area_pdf;
+  }
+  // What the word's pick reads first (for its prefetch): its alias column,
+  // or with blocks an entry chosen one by one.
+  const void* FirstRead(std::uint64_t random) const {
+    if (!blocks) return &table.columns()[table.ColumnOf(random).column];
+    const std::size_t column = blocks->table.ColumnOf(random, items).column;
+    return column < first_entry ? static_cast<const void*>(&blocks->table.columns()[column])
+                                : static_cast<const void*>(&entries[column - first_entry]);
+  }
 };
 
 class PathTransport final : public FrameTransport {
@@ -288,8 +486,9 @@ class PathTransport final : public FrameTransport {
         media_(shading.media()),
         options_(shading.options()),
         nb_(shading.band_count()),
-        glow_(CopyGlow(geometry_, solver_)),
-        emitters_(geometry_, solver_, glow_) {
+        blocks_(EmitterBlocksFor(geometry_, solver_, options_)),
+        glow_(CopyGlow(geometry_, solver_, blocks_.get())),
+        emitters_(geometry_, solver_, glow_, blocks_) {
     glow_.power = {};  // the emitter table's alone
     prefetch_emitters_ = emitters_.outgrows_cache();
   }
@@ -377,6 +576,7 @@ class PathTransport final : public FrameTransport {
     GlowTexel glow_here;
     bool scatters = false;
     const EmitterDistribution::Entry* emitter = nullptr;  // the glowing triangle to sample
+    std::uint32_t emitter_index = 0;                        // its pick
     void Start(const Vec3f& camera, const Vec3f& d, const RayDifferential& footprint, SplitMix64& stream, int nb) {
       origin = camera;
       direction = d;
@@ -515,7 +715,7 @@ class PathTransport final : public FrameTransport {
   // Only when the table outgrows a core's cache (prefetch_emitters_).
   void PrefetchEmitterPicks(const std::vector<PathLane>& lanes, const std::vector<int>& live, int depth) const {
     const int skip = depth == 0 && media_ ? 1 : 0;
-    for (int i : live) Prefetch(&emitters_.table.columns()[emitters_.table.ColumnOf(lanes[i].random->Peek(skip)).column]);
+    for (int i : live) Prefetch(emitters_.FirstRead(lanes[i].random->Peek(skip)));
   }
 
   // A lane's vertex is BeginVertex then ShadeVertex, one lane after another.
@@ -574,7 +774,8 @@ class PathTransport final : public FrameTransport {
     lane.scatters = surface.reflects;  // a glossy coat reflects on black too
     lane.emitter = nullptr;
     if (lane.scatters && !emitters_.empty()) {
-      lane.emitter = &emitters_.Pick(random.Next());
+      lane.emitter_index = emitters_.Pick(random.Next());
+      lane.emitter = &emitters_.entry(lane.emitter_index);
       Prefetch(lane.emitter);
     }
     return true;
@@ -615,7 +816,7 @@ class PathTransport final : public FrameTransport {
         // cosine sampling, f = albedo / pi: with p_light = a d^2 / cos_l
         // (a: the area pdf) and p_bsdf = cos_s / pi, the weight over
         // p_light is a d^2 cos_l / ((a d^2)^2 + p_bsdf^2 cos_l^2): one division.
-        const float area_term = entry.area_pdf * distance2;
+        const float area_term = emitters_.PickedAreaPdf(lane.emitter_index, entry) * distance2;
         if (lane.gloss) {  // f cos kept per band; emitter_scale the weight over p_light
           const GlossyBsdf bsdf(*lane.gloss, lane.albedo->data(), nb_);
           const Vec3f wo = -lane.direction;
@@ -716,6 +917,7 @@ class PathTransport final : public FrameTransport {
   const VolumeMedia* media_;
   const FrameOptions& options_;
   int nb_;
+  std::shared_ptr<const EmitterBlocks> blocks_;  // null: the glowing triangles are chosen one by one
   FrameGlow glow_;
   EmitterDistribution emitters_;  // after the glow, which it reads
   bool prefetch_emitters_ = false;  // PrefetchEmitterPicks

@@ -9,6 +9,10 @@
 //  - One weight among zeros (even the least double) is picked every time;
 //    equal weights just past one block are equal; weights of 1e300 and
 //    1e-300 together; the same table on one thread and on two.
+//  - A table of blocks reweighed (BlockTable, the path tracer's large
+//    glowing meshes), with items of its own after the blocks, holds and
+//    draws W'_b / W' * w_i / W_b and W'_j / W', at one block and many,
+//    blocks of 2^12 and 2^8, blocks and items of weight 0 among them.
 //  - Weights that are no distribution (negative, NaN, infinite, all zero)
 //    are a program error, caught before any is picked.
 
@@ -131,6 +135,78 @@ TEST(AliasTable, PicksDrawWhatTheTableHolds) {
       ++by_residue[i % 97];
     }
     EXPECT_LT(ChiSquare(by_block, p_block, kDraws), ChiSquareBound(blocks));
+    EXPECT_LT(ChiSquare(by_residue, p_residue, kDraws), ChiSquareBound(97));
+  }
+}
+
+// What a table of blocks reweighed, with items after the blocks, should
+// hold: W'_b / W' * w_i / W_b for index i of block b, W'_{blocks + j} / W'
+// for item j (at size() + j).
+std::vector<double> Reweighed(const std::vector<double>& w, const AliasTable& table, const std::vector<double>& item_w) {
+  std::vector<double> p(w.size(), 0.0);
+  const double total = Sum(item_w);
+  const std::size_t block = std::size_t{1} << table.block_bits(), blocks = table.block_sums().size();
+  for (std::size_t i = 0; i < w.size(); ++i) {
+    const std::size_t b = i / block;
+    if (item_w[b] > 0) p[i] = item_w[b] / total * w[i] / table.block_sums()[b];
+  }
+  for (std::size_t j = blocks; j < item_w.size(); ++j) p.push_back(item_w[j] / total);
+  return p;
+}
+
+TEST(AliasTable, BlocksReweighedHoldAndDrawTheirNewWeights) {
+  struct Case {
+    std::size_t n;
+    int block_bits;
+    std::size_t items;  // after the blocks
+  };
+  for (const Case& c : {Case{100, AliasTable::kBlockBits, 0}, Case{7 * AliasTable::kBlock + 9, AliasTable::kBlockBits, 0},
+                        Case{3000, 8, 0}, Case{3000, 8, 50}, Case{300, 8, 1}}) {
+    SCOPED_TRACE(std::to_string(c.n) + " weights, blocks of 2^" + std::to_string(c.block_bits) + ", " +
+                 std::to_string(c.items) + " items");
+    const std::size_t n = c.n, block = std::size_t{1} << c.block_bits;
+    SplitMix64 random(n + c.items);
+    std::vector<double> w(n);
+    for (double& v : w) v = random.UniformDouble() < 0.1 ? 0.0 : std::pow(10.0, 3.0 * random.UniformDouble());
+    const AliasTable table(w.data(), n, AliasTable::Levels::kBlocks, c.block_bits);
+    const std::size_t blocks = (n + block - 1) / block;
+    ASSERT_EQ(table.blocks().size(), blocks);
+    ASSERT_EQ(table.block_sums().size(), blocks);
+    ASSERT_EQ(table.columns().size(), blocks * block);
+    // Unreweighed, it is the table of w.
+    ExpectHolds(w, table);
+    std::vector<double> item_w(blocks + c.items);
+    for (double& v : item_w) v = std::pow(10.0, 6.0 * random.UniformDouble());
+    if (blocks > 2) item_w[1] = 0;  // a block never chosen
+    if (c.items > 2) item_w[blocks + 1] = 0;  // an item never chosen
+    const std::vector<AliasTable::Column> items = AliasTable::BlockTable(item_w.data(), item_w.size());
+    const std::vector<double> expected = Reweighed(w, table, item_w), p = table.Probabilities(items);
+    ASSERT_EQ(p.size(), n + c.items);
+    for (std::size_t i = 0; i < p.size(); ++i) {
+      if (expected[i] == 0) ASSERT_EQ(p[i], 0.0) << "index " << i;
+      else ASSERT_NEAR(p[i], expected[i], 1e-5 * expected[i]) << "index " << i;
+    }
+    // Draws: by block (an item its own bin), and by index modulo 97.
+    constexpr int kDraws = 1 << 21;
+    const std::size_t bins = blocks + c.items;
+    auto bin_of = [&](std::size_t i) { return i < n ? i / block : blocks + (i - n); };
+    std::vector<double> by_bin(bins, 0.0), p_bin(bins, 0.0), by_residue(97, 0.0), p_residue(97, 0.0);
+    for (std::size_t i = 0; i < p.size(); ++i) {
+      p_bin[bin_of(i)] += p[i];
+      p_residue[i % 97] += p[i];
+    }
+    SplitMix64 words(n + 1);
+    for (int d = 0; d < kDraws; ++d) {
+      std::uint32_t i = table.Pick(words.Next(), items);
+      if (i >= table.columns().size()) i = static_cast<std::uint32_t>(n + (i - table.columns().size()));  // item j
+      else ASSERT_LT(i, n) << "a padding column was picked";
+      ASSERT_GT(expected[i], 0.0) << "index " << i << " of no probability was picked";
+      ++by_bin[bin_of(i)];
+      ++by_residue[i % 97];
+    }
+    if (bins > 1) {
+      EXPECT_LT(ChiSquare(by_bin, p_bin, kDraws), ChiSquareBound(bins));
+    }
     EXPECT_LT(ChiSquare(by_residue, p_residue, kDraws), ChiSquareBound(97));
   }
 }

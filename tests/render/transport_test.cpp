@@ -62,7 +62,8 @@ void ExpectEnclosureRadiosity(const Image& image, double Lp1, double albedo) {
 // phosphor emitting in bands 2 to 4 (twice in band 3). The path tracer's
 // lanes have a size fixed at compile time on the paper's 8 bands and one
 // set at run time on any other grid: both must give the enclosure's radiosity.
-void ExpectClosedGlowingBoxIsLpOverOneMinusAlbedo(int band_count) {
+void ExpectClosedGlowingBoxIsLpOverOneMinusAlbedo(int band_count,
+                                                   std::size_t emitter_blocks_above_triangles = FrameOptions{}.emitter_blocks_above_triangles) {
   const double albedo = 0.5, kr = 0.2, r0 = 0.5;
   Scene scene = EmptyScene(24, 24);
   scene.bands = SpectralGrid::Uniform(400.0, 700.0, band_count);
@@ -91,12 +92,19 @@ void ExpectClosedGlowingBoxIsLpOverOneMinusAlbedo(int band_count) {
   path.transport = Transport::kPath;
   path.spp = 64;
   path.max_depth = 200;  // rho^200: no truncation bias; Russian roulette ends paths
+  path.emitter_blocks_above_triangles = emitter_blocks_above_triangles;
   const Image image = RenderBands(geometry, &solver, path);
   ExpectEnclosureRadiosity(image, kr * r0, albedo);
   EXPECT_EQ(ChannelMean(image, band_count - 1).mean, 0.0);
 }
 
 TEST(Transport, ClosedGlowingBoxIsLpOverOneMinusAlbedo) { ExpectClosedGlowingBoxIsLpOverOneMinusAlbedo(8); }
+
+// The box's 12 triangles chosen by blocks (one block of 256 columns, 12 of
+// them weighing: the rest padding, never chosen).
+TEST(Transport, ClosedGlowingBoxIsLpOverOneMinusAlbedoWithItsTrianglesChosenByBlocks) {
+  ExpectClosedGlowingBoxIsLpOverOneMinusAlbedo(8, 0);
+}
 
 TEST(Transport, ClosedGlowingBoxIsLpOverOneMinusAlbedoOnAnyBandGrid) {
   for (int band_count : {6, 13}) {
@@ -139,33 +147,57 @@ TEST(Transport, ClosedGlowingLargeMeshIsLpOverOneMinusAlbedo) {
 // dark half's pixels must show rho mean_A(Le) / (1 - rho). Next-event
 // estimation that chose triangles by another distribution than the pdf it
 // divides by would miss that; a uniform glow (the test above) cannot tell.
-// At 81,920 triangles (s = 6) the path tracer's alias table is one block;
-// at 327,680 (s = 7), blocks of 4096 under a table over the blocks.
-void ExpectSphereGlowingUnevenlyShowsTheMeanGlowOnItsDarkHalf(int subdivisions) {
+// At 81,920 triangles (s = 6) the path tracer chooses triangles one by one
+// from an alias table of one block; at 327,680 (s = 7), more than
+// FrameOptions::emitter_blocks_above_triangles, by blocks of 256 triangles
+// (a block by its power, then a triangle of it by its area), whose glow
+// here differs within a block and from block to block. Each size is also
+// rendered the other way: all are unbiased.
+void ExpectSphereGlowingUnevenlyShowsTheMeanGlowOnItsDarkHalf(int subdivisions,
+                                                              std::size_t emitter_blocks_above_triangles,
+                                                              bool split = false) {
   const double albedo = 0.5, kr = 0.2, r0 = 0.5;
   Scene scene = EmptyScene(24, 24);
   scene.camera.keys = {{0, Vec3(0, 0, 0.3), Vec3(0, 0, -1)}};
-  scene.objects.push_back(MakeObject("sphere", MakeSphere(1.0, subdivisions, /*inward=*/true), albedo,
-                                     UniformPhosphor(kr, std::vector<double>(8, 0.1), {0, 0, 1, 2, 1, 0, 0, 0})));
-  scene.objects[0].initial = {InitialState::Kind::kUniform, r0};
+  const Mesh whole = MakeSphere(1.0, subdivisions, /*inward=*/true);
+  auto phosphor = UniformPhosphor(kr, std::vector<double>(8, 0.1), {0, 0, 1, 2, 1, 0, 0, 0});
+  if (!split) {
+    scene.objects.push_back(MakeObject("sphere", whole, albedo, phosphor));
+  } else {  // the same sphere as two objects: its cap x > 0.6, and the rest
+    Mesh cap = whole, rest = whole;
+    cap.triangles.clear();
+    rest.triangles.clear();
+    for (const Eigen::Vector3i& t : whole.triangles)
+      (whole.positions[t[0]].x() + whole.positions[t[1]].x() + whole.positions[t[2]].x() > 1.8f ? cap : rest)
+          .triangles.push_back(t);
+    EXPECT_LT(cap.triangles.size(), 30000u);  // one by one in the test below
+    EXPECT_GT(rest.triangles.size(), 30000u);  // by blocks
+    scene.objects.push_back(MakeObject("cap", cap, albedo, phosphor));
+    scene.objects.push_back(MakeObject("rest", rest, albedo, phosphor));
+  }
+  for (Object& object : scene.objects) object.initial = {InitialState::Kind::kUniform, r0};
   scene.texel_size_m = 0.1;
   SceneGeometry geometry(scene);
   CoupledSolver solver(scene, geometry);
   SolverCheckpoint state = solver.Checkpoint(0);
-  const TexelAtlas::ObjectTexels& texels = solver.atlas().objects()[0];
-  ASSERT_FALSE(texels.uv());
-  std::vector<float>& Lp = state.arrays[1];  // [emission band][texel]
-  ASSERT_EQ(Lp.size() % texels.count, 0u);
-  const std::size_t emission_bands = Lp.size() / texels.count;
   double glow_area = 0, area = 0;  // the integral of the glow's scale over the sphere, and its area
-  for (int t = 0; t < geometry.triangle_count(0); ++t) {
-    const float x = (geometry.Vertex(0, t, 0) + geometry.Vertex(0, t, 1) + geometry.Vertex(0, t, 2)).x() / 3;
-    const float scale = std::max(0.0f, x);
-    glow_area += scale * geometry.Area(0, t);
-    area += geometry.Area(0, t);
-    const std::size_t texel_count = std::size_t{texels.m[t]} * texels.m[t];
-    for (std::size_t e = 0; e < emission_bands; ++e)
-      for (std::size_t k = texels.first[t]; k < texels.first[t] + texel_count; ++k) Lp[e * texels.count + k] *= scale;
+  for (std::size_t slot = 0; slot < solver.atlas().objects().size(); ++slot) {
+    const TexelAtlas::ObjectTexels& texels = solver.atlas().objects()[slot];
+    const int object = texels.object;
+    ASSERT_FALSE(texels.uv());
+    std::vector<float>& Lp = state.arrays[2 * slot + 1];  // [emission band][texel]
+    ASSERT_EQ(Lp.size() % texels.count, 0u);
+    const std::size_t emission_bands = Lp.size() / texels.count;
+    for (int t = 0; t < geometry.triangle_count(object); ++t) {
+      const float x =
+          (geometry.Vertex(object, t, 0) + geometry.Vertex(object, t, 1) + geometry.Vertex(object, t, 2)).x() / 3;
+      const float scale = std::max(0.0f, x);
+      glow_area += scale * geometry.Area(object, t);
+      area += geometry.Area(object, t);
+      const std::size_t texel_count = std::size_t{texels.m[t]} * texels.m[t];
+      for (std::size_t e = 0; e < emission_bands; ++e)
+        for (std::size_t k = texels.first[t]; k < texels.first[t] + texel_count; ++k) Lp[e * texels.count + k] *= scale;
+    }
   }
   EXPECT_NEAR(glow_area / area, 0.25, 0.01);  // the mean of max(0, x) over a unit sphere
   solver.Restore(state, "test");
@@ -173,6 +205,7 @@ void ExpectSphereGlowingUnevenlyShowsTheMeanGlowOnItsDarkHalf(int subdivisions) 
   path.transport = Transport::kPath;
   path.spp = 64;
   path.max_depth = 200;
+  path.emitter_blocks_above_triangles = emitter_blocks_above_triangles;
   const Image image = RenderBands(geometry, &solver, path);
   // The camera looks down -z from x = 0: its columns left of centre see x < 0.
   for (int band : {2, 3, 4}) {
@@ -191,10 +224,21 @@ void ExpectSphereGlowingUnevenlyShowsTheMeanGlowOnItsDarkHalf(int subdivisions) 
   }
 }
 TEST(Transport, SphereGlowingUnevenlyShowsTheMeanGlowOnItsDarkHalf) {
+  const std::size_t by_default = FrameOptions{}.emitter_blocks_above_triangles;
   for (int subdivisions : {6, 7}) {
-    SCOPED_TRACE(std::to_string(20 << (2 * subdivisions)) + " triangles");
-    ExpectSphereGlowingUnevenlyShowsTheMeanGlowOnItsDarkHalf(subdivisions);
+    const std::size_t triangles = std::size_t{20} << (2 * subdivisions);
+    for (std::size_t above : {by_default, triangles > by_default ? SIZE_MAX : std::size_t{0}}) {
+      SCOPED_TRACE(std::to_string(triangles) + " triangles, " + (triangles > above ? "by blocks" : "one by one"));
+      ExpectSphereGlowingUnevenlyShowsTheMeanGlowOnItsDarkHalf(subdivisions, above);
+    }
   }
+}
+
+// The same sphere as two objects, its cap (x > 0.6: a fifth of it, the
+// brightest) and the rest, the rest's triangles chosen by blocks and the
+// cap's one by one, in one table over the blocks and the cap's triangles.
+TEST(Transport, SphereGlowingUnevenlyInTwoPartsChosenTwoWaysShowsTheMeanGlow) {
+  ExpectSphereGlowingUnevenlyShowsTheMeanGlowOnItsDarkHalf(6, 30000, /*split=*/true);
 }
 
 TEST(Transport, OpenPlaneDirectIsAlbedoTimesIrradianceOverPiAndPathAgrees) {
@@ -371,7 +415,8 @@ void ExpectMatchesReference(const Image& image, const std::string& name, double 
   }
 }
 
-Image RenderCornell(Transport transport, double t_s, unsigned seed) {
+Image RenderCornell(Transport transport, double t_s, unsigned seed,
+                    std::size_t emitter_blocks_above_triangles = FrameOptions{}.emitter_blocks_above_triangles) {
   Scene scene = LoadScene(Fixture("scenes/cornell-phosphor.json"));
   scene.camera.width = scene.camera.height = 64;
   SceneGeometry geometry(scene);
@@ -380,6 +425,7 @@ Image RenderCornell(Transport transport, double t_s, unsigned seed) {
   FrameOptions options = DefaultFrameOptions(scene, transport);
   options.spp = 64;
   options.seed = seed;
+  options.emitter_blocks_above_triangles = emitter_blocks_above_triangles;
   return RenderBands(geometry, &solver, options);
 }
 
@@ -396,12 +442,63 @@ TEST(Regression, CornellPathTracedAfterLightsOutWithinNoise) {
                          "cornell-path-t40", 0.15);
 }
 
+// The same with the walls' glowing triangles chosen by blocks (each wall a
+// block of its own, its two triangles' glow uneven): only the noise may differ.
+TEST(Regression, CornellPathTracedAfterLightsOutWithTheGlowChosenByBlocksWithinNoise) {
+  ExpectMatchesReference(RenderCornell(Transport::kPath, 40, 2, 0), "cornell-path-t40", 0.15);
+}
+
 // A frame's image is not zeroed first (Image::ForOverwrite): every
 // transport must set every pixel. Rendered into the storage of a bright
 // frame just freed (a block of 2 MiB, 256 x 256 x 8 bands, kept for the
 // next of its size, large_table.h), a frame with the lights off and no
 // phosphorescence must be exactly black: a pixel a transport skipped would
 // show the bright frame.
+// The box after dark with a glowing sphere of 1280 triangles in it (painted
+// with the back wall's phosphor, lit by the LED from one side), its
+// triangles chosen by blocks and the walls' one by one, in one table: the
+// frame must be the one all chosen one by one gives, but for noise (8 x 8
+// blocks of 64 spp within 15% of a mean block, as the reference's, and the
+// totals within 5 standard errors).
+TEST(Transport, AGlowingMeshByBlocksAmongWallsOneByOneGivesTheSameFrame) {
+  Scene scene = LoadScene(Fixture("scenes/cornell-phosphor.json"));
+  scene.camera.width = scene.camera.height = 64;
+  Mesh sphere = MakeSphere(0.1, 3, /*inward=*/false);  // large, so that its glow weighs in the frame
+  for (Eigen::Vector3f& p : sphere.positions) p += Eigen::Vector3f(0.4f, 0.3f, 0.12f);  // beside the LED
+  Object ball = scene.objects[2];  // the back wall: green phosphor
+  ball.name = "ball";
+  ball.mesh = std::make_shared<Mesh>(std::move(sphere));
+  scene.objects.push_back(std::move(ball));
+  SceneGeometry geometry(scene);
+  CoupledSolver solver(scene, geometry);
+  solver.AdvanceTo(40);
+  Image frames[2];
+  for (int way = 0; way < 2; ++way) {
+    FrameOptions options = DefaultFrameOptions(scene, Transport::kPath);
+    options.spp = 64;
+    options.seed = 3 + way;
+    options.emitter_blocks_above_triangles = way == 0 ? 1000 : SIZE_MAX;  // the sphere by blocks; none
+    frames[way] = RenderBands(geometry, &solver, options);
+  }
+  const int block = 8, nb = frames[0].channels;
+  double total[2] = {0, 0}, worst = 0, variance = 0;
+  for (int by = 0; by < 64; by += block)
+    for (int bx = 0; bx < 64; bx += block) {
+      double sum[2] = {0, 0};
+      for (int y = by; y < by + block; ++y)
+        for (int x = bx; x < bx + block; ++x)
+          for (int way = 0; way < 2; ++way)
+            for (int b = 0; b < nb; ++b) sum[way] += frames[way].at(x, y)[b];
+      worst = std::max(worst, std::abs(sum[0] - sum[1]));
+      for (int way = 0; way < 2; ++way) total[way] += sum[way];
+      variance += (sum[0] - sum[1]) * (sum[0] - sum[1]) / 2;  // each block's sum's variance, estimated by the pair
+    }
+  const double mean_block = total[1] / 64;
+  EXPECT_GT(mean_block, 0);
+  EXPECT_LE(worst, 0.15 * mean_block);
+  EXPECT_LE(std::abs(total[0] - total[1]), 5 * std::sqrt(2 * variance));
+}
+
 TEST(Transport, EveryTransportSetsEveryPixelOfItsFrame) {
   Scene scene = LoadScene(Fixture("scenes/cornell-phosphor.json"));
   scene.camera.width = scene.camera.height = 256;

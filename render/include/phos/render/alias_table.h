@@ -45,8 +45,26 @@ class AliasTable {
   // Over weight[0, n): each finite and >= 0, their sum finite and > 0 (a
   // program error otherwise). Every block's table is built in parallel, then
   // the one over the blocks; the same weights give the same table on any
-  // number of threads.
-  AliasTable(const double* weight, std::size_t n);
+  // number of threads. kBlocks: blocks of kBlock at any n (for reweighing,
+  // below); kAuto: one block up to kOneBlock weights.
+  // block_bits: with kBlocks, blocks of 2^block_bits columns (at most
+  // kBlockBits, so that a keep's bits stay at least 20).
+  enum class Levels { kAuto, kBlocks };
+  AliasTable(const double* weight, std::size_t n, Levels levels = Levels::kAuto, int block_bits = kBlockBits);
+
+  // Reweighing a table of blocks (the path tracer's large glowing meshes,
+  // whose triangles are fixed but whose glow changes every frame): a table
+  // over the blocks by other weights and, after them, over m items of the
+  // caller's own (BlockTable over block_sums().size() + m weights, each
+  // finite and >= 0, their sum W' finite and > 0), used with
+  // Pick(random, items), picks index i of block b with probability
+  // W'_b / W' * w_i / W_b, and the j-th item with W'_{blocks + j} / W'.
+  // Built in O(blocks + m), so a frame pays for its blocks, not for their
+  // columns.
+  static std::vector<Column> BlockTable(const double* weight, std::size_t count);
+  // Each block's sum of weights (W_b), in block order, and the blocks' size.
+  const std::vector<double>& block_sums() const { return block_sums_; }
+  int block_bits() const { return block_bits_; }
 
   std::size_t size() const { return size_; }
   bool empty() const { return size_ == 0; }
@@ -73,25 +91,40 @@ class AliasTable {
   Choice ColumnOf(std::uint64_t random) const {
     if (blocks_.size() == 1)
       return {static_cast<std::size_t>(((random >> 32) * columns_.size()) >> 32), Unit24(static_cast<std::uint32_t>(random))};
-    const std::uint64_t top = (random >> 32) * blocks_.size();
+    return ColumnOf(random, blocks_);
+  }
+  // With a table over the blocks and items of one's own (BlockTable): a
+  // block's column, or columns().size() + j for the j-th item.
+  Choice ColumnOf(std::uint64_t random, const std::vector<Column>& items) const {
+    const std::uint64_t top = (random >> 32) * items.size();
     const std::uint32_t top_column = static_cast<std::uint32_t>(top >> 32);
-    const std::uint32_t block = Select(top_column, blocks_[top_column], Unit24(static_cast<std::uint32_t>(top) >> 8));
+    const std::uint32_t item = Select(top_column, items[top_column], Unit24(static_cast<std::uint32_t>(top) >> 8));
+    const std::size_t blocks = block_sums_.size();
+    if (item >= blocks) return {columns_.size() + (item - blocks), 0.0f};
     const std::uint32_t low = static_cast<std::uint32_t>(random);
-    return {(std::size_t{block} << kBlockBits) + (low >> (32 - kBlockBits)), Unit24((low << kBlockBits) >> 8)};
+    return {(std::size_t{item} << block_bits_) + (low >> (32 - block_bits_)), Unit24((low << block_bits_) >> 8)};
   }
   // The index the word picks.
-  std::uint32_t Pick(std::uint64_t random) const {
-    const Choice choice = ColumnOf(random);
-    return Select(static_cast<std::uint32_t>(choice.column), columns_[choice.column], choice.u);
+  std::uint32_t Pick(std::uint64_t random) const { return Select(ColumnOf(random)); }
+  // An index of this table, or columns().size() + j for the j-th item.
+  std::uint32_t Pick(std::uint64_t random, const std::vector<Column>& items) const {
+    const Choice choice = ColumnOf(random, items);
+    return choice.column < columns_.size() ? Select(choice) : static_cast<std::uint32_t>(choice.column);
   }
 
   // Each index's probability as the table holds it (each column equally
   // likely, its keep as stored): what Pick draws but for the random bits'
   // rounding (at most 2^-20 of a keep, and one table's multiply-shift). For
   // tests; O(n).
-  std::vector<double> Probabilities() const;
+  std::vector<double> Probabilities() const { return Probabilities(blocks_); }
+  // With a table over the blocks and m items (BlockTable): size() + m
+  // probabilities, the items' last.
+  std::vector<double> Probabilities(const std::vector<Column>& items) const;
 
  private:
+  std::uint32_t Select(const Choice& choice) const {
+    return Select(static_cast<std::uint32_t>(choice.column), columns_[choice.column], choice.u);
+  }
   static std::uint32_t Select(std::uint32_t column, const Column& c, float u) {
     const std::uint32_t keep = 0u - static_cast<std::uint32_t>(u < c.keep);
     return (column & keep) | (c.alias & ~keep);
@@ -101,6 +134,9 @@ class AliasTable {
   std::size_t size_ = 0;
   LargeTable<Column> columns_;  // [column]: aliases are indices
   std::vector<Column> blocks_;  // the table over the blocks (aliases are blocks)
+  std::vector<double> block_sums_;
+  int block_bits_ = kBlockBits;
+  bool blocked_ = false;  // blocks of 2^block_bits_ columns (else one block of size_)
 };
 
 }  // namespace phos::render

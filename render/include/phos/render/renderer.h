@@ -80,6 +80,12 @@ struct FrameOptions {
   int interval_layers = 4;           // dss with media: points per pixel of the transmittance interval map
   int sky_rays = 16;                 // direct (and what dss surfels receive): shadow rays per point for the sky
   bool indirect_visibility = false;  // dss: the bounced z-buffer (no leaking, no over-occlusion) instead of blending
+  // path: an object with more phosphorescent triangles than this has them
+  // chosen by blocks (transport_path.cpp, EmitterBlocks), not one by one.
+  // 2^17: where a table choosing them one by one would have two levels
+  // anyway (alias_table.h), so blocks add no step to a pick. Tests set 0
+  // to render a small scene both ways.
+  std::size_t emitter_blocks_above_triangles = std::size_t{1} << 17;
   // Advanced by one for every row of pixels finished (a path-traced frame
   // can take minutes: the bar moves inside it). Null: no progress.
   ProgressBar* progress_rows = nullptr;

@@ -19,6 +19,7 @@
 #include <cstddef>
 #include <filesystem>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <vector>
 
@@ -85,6 +86,13 @@ class CoupledSolver {
     const int e = g.emission_index[band];
     return e < 0 ? 0.0f : g.Lp[static_cast<std::size_t>(e) * g.states.n + texel];
   }
+  // The Lp of every texel of slot s in scene band b, consecutive (band-major
+  // storage); null for a band the material does not emit.
+  const float* LpOfBand(int slot, int band) const {
+    const Group& g = groups_[slot];
+    const int e = g.emission_index[band];
+    return e < 0 ? nullptr : g.Lp.data() + static_cast<std::size_t>(e) * g.states.n;
+  }
   // State i of texel j of object slot s.
   float State(int slot, int i, std::size_t texel) const { return groups_[slot].states.state(i)[texel]; }
   const std::vector<int>& excitation_bands(int slot) const { return groups_[slot].excitation_bands; }
@@ -114,6 +122,15 @@ class CoupledSolver {
     bool NeverCharged() const { return light_on && !received; }
   };
   const ChargeReport& charge_report(int slot) const { return groups_[slot].charge; }
+
+  // A transport's tables derived from this atlas and the geometry alone,
+  // kept from frame to frame while nothing moves: the path transport's
+  // glowing triangles of a large mesh (transport_path.cpp), whose writing
+  // was the largest part of a 1.3M-triangle mesh's frame set-up. One slot,
+  // typed by its one user; null when none is kept for the geometry's
+  // version() now.
+  std::shared_ptr<const void> DerivedTables() const;
+  void KeepDerivedTables(std::shared_ptr<const void> tables) const;
 
   // The irradiance (per scene band) that the lights put on texel j of slot s now.
   std::vector<double> TexelIrradiance(int slot, std::size_t texel);
@@ -185,6 +202,9 @@ class CoupledSolver {
   GlowPatches glow_;
   bool glow_enabled_ = false;
   std::unique_ptr<VolumeMedia> media_;
+  mutable std::mutex derived_mutex_;
+  mutable std::shared_ptr<const void> derived_tables_;
+  mutable std::uint64_t derived_version_ = 0;
 };
 
 }  // namespace phos::render
