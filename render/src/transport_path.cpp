@@ -253,9 +253,10 @@ struct BandMajorGlow {
 // one's power as it writes its texels: summed in a pass of its own, it
 // read the whole copy back from memory. A UV atlas's texels fall on
 // triangles in any order: copied by texel, then summed in texel order.
-// By blocks (block_power not null: the slot's blocks, zeroed), each
-// triangle's power is added to its block's instead of kept: a chunk is
-// whole blocks, so no two threads add to one.
+// By blocks (block_power not null: the slot's blocks), each triangle's
+// power is added to its block's instead of kept: a chunk (kChunk, a
+// multiple of EmitterBlocks::kSize) is whole blocks, so no two threads add
+// to one.
 void CopyGlowOfAutoAtlas(const SceneGeometry& geometry, const CoupledSolver& solver, GlowingChunk* chunks,
                          std::size_t chunk_count, GlowByTexel& glow, LargeTable<double>& power,
                          double* block_power) {
@@ -263,19 +264,38 @@ void CopyGlowOfAutoAtlas(const SceneGeometry& geometry, const CoupledSolver& sol
   const TexelAtlas::ObjectTexels& texels = solver.atlas().objects()[slot];
   const int triangles = geometry.triangle_count(texels.object);
   if (!block_power) power.resize(triangles);  // not zeroed: each is written below
+  static_assert(kChunk % EmitterBlocks::kSize == 0);
   const BandMajorGlow from(solver, slot, glow);
+  const std::uint32_t* first = texels.first.data();
+  const std::uint16_t* m = texels.m.data();
+  const float* area = geometry.Areas(texels.object);
   tbb::parallel_for(std::size_t{0}, chunk_count, [&](std::size_t c) {
     GlowingChunk& chunk = chunks[c];
-    for (int t = chunk.begin; t < chunk.end; ++t) {
-      const std::size_t count = std::size_t{texels.m[t]} * texels.m[t], first = texels.first[t];
-      const double sum = from.Copy(first, first + count, glow);
-      const double p = TrianglePower(sum, count, geometry.Area(texels.object, t));
-      if (block_power)
-        block_power[t >> EmitterBlocks::kBits] += p;
-      else
-        power[t] = p;
-      chunk.Add(p);
+    // The chunk's and each block's sums kept in registers, each in triangle
+    // order: added to in memory, every triangle waited on the last one's
+    // store. A triangle of one texel (most, in a mesh finer than its
+    // texels) has its sum times its area for power, the same number as
+    // TrianglePower's without a division in the way.
+    std::size_t glowing = 0;
+    double chunk_power = 0;
+    for (int b0 = chunk.begin; b0 < chunk.end; b0 += static_cast<int>(EmitterBlocks::kSize)) {
+      const int b1 = std::min(chunk.end, b0 + static_cast<int>(EmitterBlocks::kSize));
+      double block_sum = 0;
+      for (int t = b0; t < b1; ++t) {
+        const std::size_t count = std::size_t{m[t]} * m[t];
+        const double sum = from.Copy(first[t], first[t] + count, glow);
+        const double p = count == 1 ? sum * area[t] : TrianglePower(sum, count, area[t]);
+        if (!block_power) power[t] = p;
+        block_sum += p;
+        if (p > 0) {
+          ++glowing;
+          chunk_power += p;
+        }
+      }
+      if (block_power) block_power[b0 >> EmitterBlocks::kBits] = block_sum;
     }
+    chunk.glowing = glowing;
+    chunk.power = chunk_power;
   });
 }
 void CopyGlowOfUvAtlas(const SceneGeometry& geometry, const CoupledSolver& solver, GlowingChunk* chunks,

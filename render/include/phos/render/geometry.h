@@ -114,6 +114,7 @@ class SceneGeometry {
   // Upload, since every ray hit asks for them.
   const Vec3f& FrontNormal(int object, int triangle) const { return front_normal_[object][triangle]; }
   float Area(int object, int triangle) const { return area_[object][triangle]; }
+  const float* Areas(int object) const { return area_[object].data(); }  // per triangle, m^2
   // An emissive object's (Light::Kind::kMesh): its area and a point on it,
   // uniform in area, at (u1, u2) in [0, 1)^2, with the triangle it lies on.
   float EmitterArea(int object) const { return area_cdf_[object].empty() ? 0.0f : area_cdf_[object].back(); }
