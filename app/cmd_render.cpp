@@ -160,6 +160,35 @@ std::size_t LatestCheckpoint(const std::string& dir, std::size_t frame) {
   return best;
 }
 
+// The summary's first line (and the transport chosen for a budget or a
+// quality, if any): what is rendered, how, and with what states.
+std::string SummaryHead(const render::Scene& scene, const render::CoupledSolver* solver, std::size_t frames,
+                        render::Transport transport, const std::string& choice_line) {
+  std::string states = "no phosphorescence";
+  if (solver) {
+    states = std::to_string(solver->stats().texels) + " phosphor texels";
+    if (solver->media()) states += ", " + std::to_string(solver->media()->stats().phosphor_voxels) + " phosphor voxels";
+  }
+  char line[512];
+  std::snprintf(line, sizeof line, "%s: %zu frame(s), %dx%d, transport %s, %s", scene.name.c_str(), frames,
+                scene.camera.width, scene.camera.height, render::TransportName(transport), states.c_str());
+  std::string head = line;  // appended piece by piece: GCC 12's -Wrestrict misreads a chain of +
+  if (!choice_line.empty()) {
+    head += "\n  transport for the ";
+    head += choice_line;
+  }
+  return head;
+}
+// A frame's line of the summary: its time, its seconds and its PNG.
+std::string FrameLine(const nlohmann::json& frame) {
+  char line[128];
+  std::snprintf(line, sizeof line, "  t = %8s s  %7.3f s  ", FormatDouble(frame["t"].get<double>()).c_str(),
+                frame["seconds"].get<double>());
+  std::string text = line;
+  text += frame["png"].get<std::string>();
+  return text;
+}
+
 // Once per object, on stderr: a phosphor that lights were on for but that
 // never received their irradiance (a winding facing away, or a shadow), so
 // it will not glow; and the names, for --json.
@@ -600,6 +629,13 @@ void Run(const RenderArgs& args) {
                        (range.last - range.first) * static_cast<std::size_t>(scene.camera.height));
   options.progress_rows = &progress;
   SayWhenInterrupted();
+  // With a fixed exposure each frame's line is known as soon as its files
+  // are written, and printed then (flushed): a cluster job's log, or a run
+  // killed half-way, shows the frames done. With "auto" the views wait for
+  // every metered frame, so the lines come at the end.
+  const bool line_per_frame = !args.json && !scene.camera.exposure_auto;
+  if (line_per_frame)
+    progress.Print(stdout, SummaryHead(scene, solver.get(), range.last - range.first, transport, choice_line));
   for (std::size_t f = range.first; f < range.last; ++f) {
     const double t = times[f];
     options.frame = f;  // the path tracer's seed: pixel, frame and sample
@@ -631,6 +667,7 @@ void Run(const RenderArgs& args) {
       WriteFrameViews(args, scene, f, t, scene.camera.exposure, rgb, bands, &entry, &sheet);
     else if (metered.metered[f])
       meter.Add(MeteredFrame(geometry, solver.get(), options, rgb));
+    if (line_per_frame) progress.Print(stdout, FrameLine(entry));
     frames.push_back(entry);
   }
   progress.Finish();
@@ -696,14 +733,8 @@ void Run(const RenderArgs& args) {
     std::cout << result.dump() << "\n";
     return;
   }
-  std::string states = "no phosphorescence";
-  if (solver) {
-    states = std::to_string(solver->stats().texels) + " phosphor texels";
-    if (solver->media()) states += ", " + std::to_string(solver->media()->stats().phosphor_voxels) + " phosphor voxels";
-  }
-  std::printf("%s: %zu frame(s), %dx%d, transport %s, %s\n", scene.name.c_str(), frames.size(), scene.camera.width,
-              scene.camera.height, TransportName(transport), states.c_str());
-  if (choose) std::printf("  transport for the %s\n", choice_line.c_str());
+  if (line_per_frame) return;  // said frame by frame
+  std::printf("%s\n", SummaryHead(scene, solver.get(), frames.size(), transport, choice_line).c_str());
   if (scene.camera.exposure_auto)
     std::printf("  exposure auto: %s, metered on %zu %s%s: the brightest frame's median glowing pixel "
                 "(luminance %s) shown as mid-grey (%s)\n",
@@ -711,9 +742,7 @@ void Run(const RenderArgs& args) {
                 metered.after_dark ? "frame(s) after dark" : "frame(s) (none is after dark)",
                 transport == Transport::kDirect ? "" : " (their direct-transport frames)",
                 FormatShort(chosen.metered_luminance, 4).c_str(), FormatShort(kMeteredDisplayLuminance).c_str());
-  for (const auto& frame : frames)
-    std::printf("  t = %8s s  %7.3f s  %s\n", FormatDouble(frame["t"].get<double>()).c_str(),
-                frame["seconds"].get<double>(), frame["png"].get<std::string>().c_str());
+  for (const auto& frame : frames) std::printf("%s\n", FrameLine(frame).c_str());
 }
 
 }  // namespace

@@ -359,6 +359,43 @@ TEST(RenderCommand, AnInterruptedRenderSaysWhatIsLeft) {
   EXPECT_NE(err.find("phos render: interrupted (SIGINT): every frame written is whole"), std::string::npos) << err;
 }
 
+// With a fixed exposure each frame's line is printed, and flushed, as soon
+// as the frame's files are written: a run cut short (a cluster job out of
+// time, Ctrl-C) has its header and a line for each frame on disk in its
+// log. They used to be printed at the end only, so such a log was empty.
+TEST(RenderCommand, EachFramesLineIsInTheLogAsSoonAsTheFrameIsWritten) {
+  TempDir dir;
+  std::string times;
+  for (int t = 40; t < 140; ++t) {
+    if (!times.empty()) times += ',';
+    times += std::to_string(t);
+  }
+  const std::string command = "timeout --preserve-status -s INT 4 " + std::string(PHOS_BINARY) + " render " + kCornell +
+                              " --out " + dir.path().string() + " --transport path --spp 64 --width 96 --height 96" +
+                              " --times " + times + " >" + (dir / "out.txt").string() + " 2>" +
+                              (dir / "err.txt").string();
+  const int status = std::system(command.c_str());
+  ASSERT_TRUE(WIFEXITED(status));
+  ASSERT_EQ(WEXITSTATUS(status), 130) << "the run was to be cut short: " << ReadText(dir / "err.txt");
+  const std::string out = ReadText(dir / "out.txt");
+  EXPECT_EQ(out.rfind("cornell-phosphor: 100 frame(s), 96x96, transport path, ", 0), 0u) << out;
+  std::size_t pngs = 0, lines = 0;
+  for (int f = 0; f < 100; ++f) {
+    char name[32];
+    std::snprintf(name, sizeof name, "frame-%04d.png", f);
+    const bool written = std::filesystem::exists(dir / name);
+    const bool said = out.find((dir / name).string() + "\n") != std::string::npos;
+    pngs += written;
+    lines += said;
+    if (said) {
+      EXPECT_TRUE(written) << name << " said but not written";
+    }
+  }
+  EXPECT_GE(lines, 1u) << out;
+  // A frame written just as the signal came may miss its line; no more.
+  EXPECT_GE(lines + 1, pngs) << out;
+}
+
 // What would render black without a word is said: a light whose spectrum
 // misses the scene's bands, a scene with nothing to charge or show its
 // phosphors; and a scene whose objects share a name, which --material gave

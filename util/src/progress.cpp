@@ -26,6 +26,19 @@ void ProgressBar::Finish() {
   finished_ = true;
 }
 
+void ProgressBar::Print(std::FILE* stream, const std::string& line) {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (enabled_ && !finished_) {
+      std::fputs("\r\033[K", stderr);  // the bar's line cleared
+      std::fflush(stderr);
+    }
+    std::fprintf(stream, "%s\n", line.c_str());
+    std::fflush(stream);
+  }
+  if (enabled_ && !finished_) Draw(true);
+}
+
 void ProgressBar::Draw(bool force) {
   std::lock_guard<std::mutex> lock(mutex_);
   auto now = std::chrono::steady_clock::now();

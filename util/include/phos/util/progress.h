@@ -6,6 +6,7 @@
 #include <atomic>
 #include <chrono>
 #include <cstddef>
+#include <cstdio>
 #include <mutex>
 #include <string>
 
@@ -17,6 +18,11 @@ class ProgressBar {
   ~ProgressBar();  // finishes the line
   void Advance(std::size_t count = 1);
   void Finish();
+  // Prints a whole line (without its newline) to `stream` and flushes it,
+  // above the bar when there is one (cleared, then drawn again), so that
+  // results can be reported as they come while the bar runs, and a log
+  // (stream not a terminal) has each as soon as it is known.
+  void Print(std::FILE* stream, const std::string& line);
 
  private:
   void Draw(bool force);
