@@ -97,7 +97,8 @@ FrameRange SelectFrames(const RenderArgs& args, std::size_t frame_count) {
 }
 
 // The files a scene was read from, by content: the scene file, its meshes,
-// phosphor materials, masks, maps and texture files, and --material's
+// phosphor materials, masks, maps and texture files, the files the meshes
+// name (an OBJ's .mtl, a glTF's buffers), and --material's
 // files, each with its XXH3 (util/digest.h). A path may name a file that is
 // not there any more (an embedded image's name): it counts as absent.
 nlohmann::json SceneFileDigests(const RenderArgs& a, const render::Scene& scene) {
@@ -106,7 +107,10 @@ nlohmann::json SceneFileDigests(const RenderArgs& a, const render::Scene& scene)
     if (!file.empty()) files.insert(file.string());
   };
   for (const render::Object& object : scene.objects) {
-    if (object.mesh) add(object.mesh->file);  // not its source: "cornell.obj#left" names no file
+    if (object.mesh) {
+      add(object.mesh->file);  // not its source: "cornell.obj#left" names no file
+      for (const std::filesystem::path& file : object.mesh->also_read) add(file);  // its .mtl, its .bin
+    }
     add(object.phosphor_path);
     if (object.phosphor_mask) add(*object.phosphor_mask);
     if (object.phosphor_map) add(object.phosphor_map->file);

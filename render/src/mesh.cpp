@@ -154,8 +154,9 @@ Mesh ParseObj(std::string_view text, const std::filesystem::path& base_dir, cons
   // FIFO or /dev/zero must not hang the load.
   std::string mtl_text;
   const std::string mtllib = MtllibName(text);
+  std::filesystem::path mtl_file;
   if (!mtllib.empty()) {
-    const std::filesystem::path mtl_file = base_dir / mtllib;
+    mtl_file = base_dir / mtllib;
     std::error_code ec;
     if (!std::filesystem::exists(mtl_file, ec))
       ThrowUserError(where, "mtllib", "OBJ '" + name + "' names material file '" + mtl_file.string() +
@@ -170,6 +171,7 @@ Mesh ParseObj(std::string_view text, const std::filesystem::path& base_dir, cons
     ThrowUserError(where, "", "cannot read OBJ '" + name + "': " + OneLine(reader.Error()));
   Mesh mesh;
   mesh.source = name + (group.empty() ? "" : "#" + group);
+  if (!mtl_file.empty()) mesh.also_read.push_back(mtl_file);
   mesh.v_up = true;
   const std::vector<tinyobj::real_t>& v = reader.GetAttrib().vertices;
   CheckCounts(v.size() / 3, 0, where, name);
@@ -328,10 +330,12 @@ bool GltfFileExists(const std::string& path, void*) {
   return std::filesystem::is_regular_file(path, ec);
 }
 std::string GltfExpandPath(const std::string& path, void*) { return path; }
-bool GltfReadFile(std::vector<unsigned char>* out, std::string* err, const std::string& path, void*) {
+// user: null, or the std::vector<std::filesystem::path> of the files read.
+bool GltfReadFile(std::vector<unsigned char>* out, std::string* err, const std::string& path, void* user) {
   try {
     const std::string text = ReadFileText(path);
     out->assign(text.begin(), text.end());
+    if (user) static_cast<std::vector<std::filesystem::path>*>(user)->push_back(path);
     return true;
   } catch (const UserError& e) {
     if (err) *err += std::string(e.what()) + "\n";
@@ -599,13 +603,15 @@ void NoteUnreadGltfMaterial(const tinygltf::Model& model, int index, std::vector
 constexpr const char* kSupportedGltfExtensions[] = {"KHR_lights_punctual", "KHR_texture_transform"};
 
 // The glTF's model through tinygltf, with its limits checked.
+// read: null, or where to add the files the glTF led to (external buffers, images).
 tinygltf::Model ReadGltfModel(std::string_view data, bool binary, const std::filesystem::path& base_dir,
-                              const std::string& name, const std::string& where) {
+                              const std::string& name, const std::string& where,
+                              std::vector<std::filesystem::path>* read = nullptr) {
   if (data.size() > kMaxInputFileBytes)
     ThrowUserError(where, "",
                    "glTF '" + name + "' is more than the limit of " + std::to_string(kMaxInputFileBytes) + " bytes");
   tinygltf::TinyGLTF loader;
-  loader.SetFsCallbacks({&GltfFileExists, &GltfExpandPath, &GltfReadFile, &GltfNoWrite, nullptr});
+  loader.SetFsCallbacks({&GltfFileExists, &GltfExpandPath, &GltfReadFile, &GltfNoWrite, read});
   loader.SetImageLoader(&GltfKeepDataUriImage, nullptr);
   tinygltf::Model model;
   std::string error, warning;
@@ -656,9 +662,11 @@ void VisitGltfNodes(const tinygltf::Model& model, const std::string& file_where,
 
 Mesh ParseGltf(std::string_view data, bool binary, const std::filesystem::path& base_dir, const std::string& name,
                const std::string& group, const std::string& where) {
-  const tinygltf::Model model = ReadGltfModel(data, binary, base_dir, name, where);
+  std::vector<std::filesystem::path> read;
+  const tinygltf::Model model = ReadGltfModel(data, binary, base_dir, name, where, &read);
   Mesh mesh;
   mesh.source = name + (group.empty() ? "" : "#" + group);
+  mesh.also_read = std::move(read);
   bool found = group.empty();
   bool all_uv = true;
   const std::string file_where = where + " (" + name + ")";

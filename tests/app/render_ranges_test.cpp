@@ -159,6 +159,70 @@ TEST(RenderRanges, AnEditedSceneOrMaterialIsRenderedAgain) {
   EXPECT_EQ(remeshed.out.find("nothing to do"), std::string::npos) << remeshed.out;
 }
 
+// RFC 4648 base64 (a glTF data: URI's bytes), for moving a buffer to a file.
+std::string Base64Decode(const std::string& text) {
+  const std::string alphabet = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+  std::string bytes;
+  unsigned bits = 0;
+  int count = 0;
+  for (char c : text) {
+    const std::size_t v = alphabet.find(c);
+    if (v == std::string::npos) break;  // '=' padding ends it
+    bits = (bits << 6) | static_cast<unsigned>(v);
+    count += 6;
+    if (count >= 8) {
+      count -= 8;
+      bytes.push_back(static_cast<char>((bits >> count) & 0xFF));
+    }
+  }
+  return bytes;
+}
+
+// The files a mesh leads to are inputs too: an OBJ's .mtl and a glTF's
+// external buffer (.bin), edited between runs, make the range run again.
+TEST(RenderRanges, AnEditedMtlOrGltfBufferIsRenderedAgain) {
+  TempDir dir, out;
+  nlohmann::json scene = nlohmann::json::parse(ReadText(Fixture("scenes/cornell-phosphor.json")));
+  // The box's OBJ, copied with a material library.
+  for (auto& object : scene["objects"])
+    if (object.contains("mesh")) {
+      WriteText(dir / "box.obj", "mtllib box.mtl\n" + ReadText(Fixture("scenes") / object["mesh"].get<std::string>()));
+      object["mesh"] = (dir / "box.obj").string();
+    }
+  WriteText(dir / "box.mtl", "newmtl white\nKd 0.8 0.8 0.8\n");
+  for (auto& object : scene["objects"])
+    if (object.contains("phosphor"))
+      object["phosphor"] = (Fixture("scenes") / object["phosphor"].get<std::string>()).string();
+  // The still life's pedestal, its buffer moved from a data: URI to a file of its own.
+  nlohmann::json gltf = nlohmann::json::parse(ReadText(Fixture("scenes/meshes/pedestal.gltf")));
+  const std::string uri = gltf["buffers"][0]["uri"].get<std::string>();
+  const std::string prefix = "data:application/octet-stream;base64,";
+  ASSERT_EQ(uri.rfind(prefix, 0), 0u);
+  WriteText(dir / "pedestal.bin", Base64Decode(uri.substr(prefix.size())));
+  gltf["buffers"][0]["uri"] = "pedestal.bin";
+  WriteText(dir / "pedestal.gltf", gltf.dump());
+  nlohmann::json pedestal = {{"name", "pedestal"}, {"mesh", (dir / "pedestal.gltf").string()}, {"albedo", 0.5}};
+  pedestal["transform"] = {{"translate", {0.4, 0.1, 0.2}}, {"scale", 0.1}};
+  scene["objects"].push_back(pedestal);
+  WriteText(dir / "scene.json", scene.dump());
+  const std::string command =
+      "render " + (dir / "scene.json").string() + " --out " + out.path().string() + " --times 10,40 --height 12 --frames 1:2";
+  const CommandResult first = RunPhos(command);
+  ASSERT_EQ(first.exit_code, 0) << first.err;
+  EXPECT_NE(RunPhos(command).out.find("nothing to do"), std::string::npos);
+  WriteText(dir / "box.mtl", "newmtl white\nKd 0.7 0.7 0.7\n");
+  const CommandResult remtl = RunPhos(command);
+  ASSERT_EQ(remtl.exit_code, 0) << remtl.err;
+  EXPECT_EQ(remtl.out.find("nothing to do"), std::string::npos) << remtl.out;
+  EXPECT_NE(RunPhos(command).out.find("nothing to do"), std::string::npos);
+  std::string buffer = ReadText(dir / "pedestal.bin");
+  buffer[3] = static_cast<char>(buffer[3] ^ 1);  // its first vertex's x: -0.5 to -0.125
+  WriteText(dir / "pedestal.bin", buffer);
+  const CommandResult rebuffered = RunPhos(command);
+  ASSERT_EQ(rebuffered.exit_code, 0) << rebuffered.err;
+  EXPECT_EQ(rebuffered.out.find("nothing to do"), std::string::npos) << rebuffered.out;
+}
+
 TEST(RenderRanges, BadRangesAndStatesAreOneLineErrors) {
   TempDir dir, states;
   const std::string scene = Fixture("scenes/cornell-phosphor.json").string();

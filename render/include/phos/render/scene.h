@@ -140,6 +140,9 @@ struct Mesh {
   std::vector<Eigen::Vector3i> uv_triangles;
   std::string source;  // file it came from, or the built-in shape (for messages: "file.obj#group")
   std::filesystem::path file;  // the file LoadMesh read (empty: a built-in shape or parsed text)
+  // The other files it led to: an OBJ's .mtl, a glTF's external buffers and
+  // images (a render range's inputs include their content).
+  std::vector<std::filesystem::path> also_read;
   // The base colour of the mesh's material, when the file gives one; a mesh
   // whose triangles have different ones keeps none and says so.
   std::optional<BaseColour> base_colour;
