@@ -211,7 +211,10 @@ struct FrameGlow {
 };
 // A triangle's power: the mean over its `count` texels of their Lp summed
 // over bands (`Lp_sum`), times its area; 0 for a triangle without texels.
+// One texel (most triangles of a mesh finer than its texels): the sum times
+// the area, the same number without a division in the way of every triangle.
 double TrianglePower(double Lp_sum, std::size_t count, double area_m2) {
+  if (count == 1) return Lp_sum * area_m2;
   return count ? Lp_sum / static_cast<double>(count) * area_m2 : 0.0;
 }
 // A slot's glow as the solver keeps it, band by band: each emission band's
@@ -271,31 +274,25 @@ void CopyGlowOfAutoAtlas(const SceneGeometry& geometry, const CoupledSolver& sol
   const float* area = geometry.Areas(texels.object);
   tbb::parallel_for(std::size_t{0}, chunk_count, [&](std::size_t c) {
     GlowingChunk& chunk = chunks[c];
-    // The chunk's and each block's sums kept in registers, each in triangle
-    // order: added to in memory, every triangle waited on the last one's
-    // store. A triangle of one texel (most, in a mesh finer than its
-    // texels) has its sum times its area for power, the same number as
-    // TrianglePower's without a division in the way.
-    std::size_t glowing = 0;
-    double chunk_power = 0;
+    // The chunk's and each block's sums kept in locals (registers), each in
+    // triangle order: added to in memory, every triangle waited on the last
+    // one's store.
+    GlowingChunk sums;
     for (int b0 = chunk.begin; b0 < chunk.end; b0 += static_cast<int>(EmitterBlocks::kSize)) {
       const int b1 = std::min(chunk.end, b0 + static_cast<int>(EmitterBlocks::kSize));
       double block_sum = 0;
       for (int t = b0; t < b1; ++t) {
         const std::size_t count = std::size_t{m[t]} * m[t];
         const double sum = from.Copy(first[t], first[t] + count, glow);
-        const double p = count == 1 ? sum * area[t] : TrianglePower(sum, count, area[t]);
+        const double p = TrianglePower(sum, count, area[t]);
         if (!block_power) power[t] = p;
         block_sum += p;
-        if (p > 0) {
-          ++glowing;
-          chunk_power += p;
-        }
+        sums.Add(p);
       }
       if (block_power) block_power[b0 >> EmitterBlocks::kBits] = block_sum;
     }
-    chunk.glowing = glowing;
-    chunk.power = chunk_power;
+    chunk.glowing = sums.glowing;
+    chunk.power = sums.power;
   });
 }
 void CopyGlowOfUvAtlas(const SceneGeometry& geometry, const CoupledSolver& solver, GlowingChunk* chunks,
