@@ -82,8 +82,10 @@ void RegisterEdit(CLI::App& app) {
       edit->add_subcommand("solve",
                            "Find the phosphor that meets space-time constraints at one point: targets ('this\n"
                            "radiance at t') and bounds ('at least this bright until t'), given the irradiance\n"
-                           "there over time (phos.constraints/1, see docs/editor.md). Lambda is solved in closed\n"
-                           "form for every (kr, ke) of a log-grid curve library, then Ceres refines the best.\n"
+                           "there over time (phos.constraints/1, see docs/editor.md: a row per frame, or phases\n"
+                           "such as [{\"duration_s\": 10, \"irradiance\": [1, 0.6, 0.2]}, {\"duration_s\": 90}]).\n"
+                           "Lambda is solved in closed form for every (kr, ke) of a log-grid curve library,\n"
+                           "then Ceres refines the best.\n"
                            "Also runs the paper's grid search (Table 8.2) on the same input, for comparison.");
   solve->add_option("constraints", args->constraints, "Constraints file (phos.constraints/1)")->required();
   solve->add_option("--states", args->states, "Excited states to solve for (default: the file's 'states')")

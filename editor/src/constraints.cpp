@@ -5,11 +5,45 @@
 #include <nlohmann/json.hpp>
 
 #include "phos/editor/solve.h"
+#include "phos/model/schedule.h"
 #include "phos/util/error.h"
 #include "phos/util/format.h"
 #include "phos/util/json.h"
 
 namespace phos::editor {
+
+namespace {
+constexpr std::size_t kMaxFrames = 1000000;
+
+// "irradiance": one row per frame, or phases ({"duration_s", "irradiance",
+// "label"}; no "irradiance": dark) that FrameIrradiance lays on the frames,
+// so that a charge then a decay is two lines instead of a row per frame.
+std::vector<std::vector<double>> ReadIrradiance(const JsonField& irradiance, std::size_t nb, double dt_s) {
+  if (irradiance.ArraySize() == 0) irradiance.Fail("expected at least one frame");
+  std::vector<std::vector<double>> frames;
+  if (!irradiance.At(0).value().is_object()) {
+    if (irradiance.ArraySize() > kMaxFrames) irradiance.Fail("more than a million frames");
+    for (std::size_t f = 0; f < irradiance.ArraySize(); ++f) frames.push_back(irradiance.At(f).NumberArray(nb, 0.0));
+    return frames;
+  }
+  IrradianceSchedule schedule;
+  for (std::size_t k = 0; k < irradiance.ArraySize(); ++k) {
+    const JsonField phase = irradiance.At(k);
+    phase.RejectUnknownKeys({"duration_s", "irradiance", "label"});
+    const double duration_s = phase["duration_s"].NumberInRange(0, static_cast<double>(kMaxFrames) * dt_s);
+    std::vector<double> E = phase.Has("irradiance") ? phase["irradiance"].NumberArray(nb, 0.0)
+                                                    : std::vector<double>(nb, 0.0);
+    schedule.Add(duration_s, std::move(E), phase.Has("label") ? phase["label"].String() : "");
+  }
+  const std::optional<long long> count = WholeFrames(schedule.total_s(), dt_s);
+  if (!count)
+    irradiance.Fail("the phases last " + FormatDouble(schedule.total_s()) + " s, not a whole number of frames of dt_s = " +
+                    FormatDouble(dt_s) + " s; lengthen or shorten the last phase");
+  if (*count == 0) irradiance.Fail("the phases last 0 s: expected at least one frame");
+  if (*count > static_cast<long long>(kMaxFrames)) irradiance.Fail("more than a million frames");
+  return FrameIrradiance(schedule, dt_s);
+}
+}  // namespace
 
 Problem LoadProblem(const std::filesystem::path& path) { return ProblemFromJson(ReadJsonFile(path), path.string()); }
 
@@ -28,14 +62,11 @@ Problem ProblemFromJson(const nlohmann::json& json, const std::string& source) {
   const std::size_t nb = static_cast<std::size_t>(p.bands.band_count());
   p.dt_s = root["dt_s"].NumberInRange(1e-6, 1e6);
   const JsonField irradiance = root["irradiance"];
-  if (irradiance.ArraySize() == 0) irradiance.Fail("expected at least one frame");
-  if (irradiance.ArraySize() > 1000000) irradiance.Fail("more than a million frames");
   Point point;
+  point.irradiance = ReadIrradiance(irradiance, nb, p.dt_s);
   bool lit = false;
-  for (std::size_t f = 0; f < irradiance.ArraySize(); ++f) {
-    point.irradiance.push_back(irradiance.At(f).NumberArray(nb, 0.0));
-    for (double e : point.irradiance.back()) lit = lit || e > 0;
-  }
+  for (const std::vector<double>& frame : point.irradiance)
+    for (double e : frame) lit = lit || e > 0;
   // As the editor page refuses such a point: nothing charges it, and every
   // target could only be met with Lambda = 0.
   if (!lit) irradiance.Fail("zero at every frame: nothing charges the point, so no glow can be designed there");

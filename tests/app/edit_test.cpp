@@ -53,6 +53,23 @@ TEST(EditCommand, KeIsUnknownWhereNoLightReaches) {
   EXPECT_FALSE(m.states[0].ke[2].has_value());
 }
 
+TEST(EditCommand, PhasesSolveAsTheirRows) {
+  // glow-sign.json's 200 rows written as its two phases: the same material.
+  TempDir dir;
+  const std::string sign_phases = Fixture("constraints/glow-sign-phases.json").string();
+  nlohmann::json phases = nlohmann::json::parse(ReadText(sign_phases));
+  const CommandResult rows = RunPhos("edit solve " + kSign + " --json --no-baseline");
+  const CommandResult two = RunPhos("edit solve " + sign_phases + " --json --no-baseline");
+  ASSERT_EQ(rows.exit_code, 0) << rows.err;
+  ASSERT_EQ(two.exit_code, 0) << two.err;
+  EXPECT_EQ(nlohmann::json::parse(rows.out)["material"]["states"], nlohmann::json::parse(two.out)["material"]["states"]);
+  // Off the frame grid in all: one line, exit 2.
+  phases["irradiance"][1]["duration_s"] = 90.2;
+  WriteText(dir / "off.json", phases.dump());
+  EXPECT_TRUE(IsOneLineUserError(RunPhos("edit solve " + (dir / "off.json").string()),
+                                 "irradiance: the phases last 100.2 s, not a whole number of frames"));
+}
+
 TEST(EditCommand, BadInputIsOneLineAndExitTwo) {
   TempDir dir;
   EXPECT_TRUE(IsOneLineUserError(RunPhos("edit solve /nonexistent.json"), "nonexistent.json"));

@@ -250,5 +250,50 @@ TEST(EditorSolve, BadConstraintFilesNameTheField) {
             std::string::npos);
 }
 
+TEST(EditorSolve, PhasesGiveTheSameProblemAsRows) {
+  // glow-sign.json's 200 rows are 10 s lit, then 90 s dark: the two phases
+  // of glow-sign-phases.json.
+  const nlohmann::json rows = phos::ReadJsonFile(phos::testing::Fixture("constraints/glow-sign.json"));
+  nlohmann::json phases = phos::ReadJsonFile(phos::testing::Fixture("constraints/glow-sign-phases.json"));
+  const Problem a = ProblemFromJson(rows, "rows.json"), b = ProblemFromJson(phases, "phases.json");
+  ASSERT_EQ(a.points.size(), 1u);
+  ASSERT_EQ(b.points.size(), 1u);
+  EXPECT_EQ(a.points[0].irradiance, b.points[0].irradiance);
+  EXPECT_EQ(a.end_s(), b.end_s());
+  EXPECT_EQ(Solve(a).material.states[0].kr, Solve(b).material.states[0].kr);
+
+  // A switch inside a frame: that frame gets the mean (0.25 s lit of 0.5).
+  phases["irradiance"][0]["duration_s"] = 10.25;
+  phases["irradiance"][1]["duration_s"] = 89.75;
+  const Problem c = ProblemFromJson(phases, "phases.json");
+  ASSERT_EQ(c.points[0].irradiance.size(), 200u);
+  EXPECT_EQ(c.points[0].irradiance[19], (std::vector<double>{1.0, 0.6, 0.2}));
+  EXPECT_EQ(c.points[0].irradiance[20], (std::vector<double>{0.5, 0.3, 0.1}));
+  EXPECT_EQ(c.points[0].irradiance[21], (std::vector<double>{0, 0, 0}));
+}
+
+TEST(EditorSolve, BadPhasesNameTheField) {
+  nlohmann::json j = phos::ReadJsonFile(phos::testing::Fixture("constraints/glow-sign-phases.json"));
+  ASSERT_NO_THROW(ProblemFromJson(j, "c.json"));
+  auto error = [&](const std::function<void(nlohmann::json&)>& edit) {
+    nlohmann::json copy = j;
+    edit(copy);
+    return phos::testing::ErrorOfType<UserError>([&] { ProblemFromJson(copy, "c.json"); });
+  };
+  EXPECT_NE(error([](nlohmann::json& c) { c["irradiance"][1]["duration_s"] = 90.2; }).find("not a whole number of frames"),
+            std::string::npos);
+  EXPECT_NE(error([](nlohmann::json& c) { c["irradiance"][1]["duraton_s"] = 90; }).find("irradiance[1]"),
+            std::string::npos);
+  EXPECT_NE(error([](nlohmann::json& c) { c["irradiance"][1] = {0, 0, 0}; }).find("irradiance[1]"), std::string::npos);
+  EXPECT_NE(error([](nlohmann::json& c) { c["irradiance"][0]["irradiance"] = {1, 2}; }).find("irradiance[0].irradiance"),
+            std::string::npos);
+  EXPECT_NE(error([](nlohmann::json& c) { c["irradiance"][0]["duration_s"] = -1; }).find("irradiance[0].duration_s"),
+            std::string::npos);
+  EXPECT_NE(error([](nlohmann::json& c) { c["irradiance"][0].erase("irradiance"); }).find("zero at every frame"),
+            std::string::npos);
+  EXPECT_NE(error([](nlohmann::json& c) { c["irradiance"][1]["duration_s"] = 1e9; }).find("irradiance[1].duration_s"),
+            std::string::npos);
+}
+
 }  // namespace
 }  // namespace phos::editor

@@ -3,6 +3,7 @@
 // band-integrated irradiance E[b] (Eq. 8.1 holds E piecewise constant). A
 // phase with E = 0 everywhere is darkness, where the state decays in closed form.
 
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -29,6 +30,19 @@ class IrradianceSchedule {
  private:
   std::vector<IrradiancePhase> phases_;
 };
+
+// The schedule on a grid of frames of dt_s, frame f holding from f dt_s to
+// (f + 1) dt_s: each frame's irradiance is the mean of the phases over it, so
+// a switch inside a frame keeps that frame's dose (Eq. 8.1 then holds it
+// constant over the frame). A phase boundary within 1e-9 frames of the grid
+// is taken on it, so a frame wholly in one phase gets that phase's E exactly
+// (a dark frame stays exactly dark). The phases must last a whole number of
+// frames (within 1e-9 of one; the caller names its field if not: see
+// WholeFrames).
+std::vector<std::vector<double>> FrameIrradiance(const IrradianceSchedule& schedule, double dt_s);
+// The number of frames of dt_s that `total_s` lasts, or nullopt unless that
+// is a whole number (within 1e-9 of one).
+std::optional<long long> WholeFrames(double total_s, double dt_s);
 
 // The excitation rate a_i = sum_b ke_i[b] E[b] of every state (Eq. 8.1), in 1/s.
 // Irradiance in a band where some ke is unknown is a UserError naming the
