@@ -206,6 +206,7 @@ struct MapArgs {
   std::string session, out, weights = "poisson", tile;
   int states = 1;
   bool no_background = false, json = false, merge = false;
+  bool check = false;  // --check: the session and --tile checked, nothing fitted or written
 };
 
 // What the map's pixels are made from: a tile's done record for other inputs is not this map's.
@@ -253,16 +254,30 @@ struct MapFrames {
   std::size_t first_row = 0;
 };
 
-MapFrames ReadMapFrames(const MapArgs& args, int index, int count) {
-  namespace fs = std::filesystem;
-  const fs::path dir = args.session;
-  const SessionRecord session = ReadSessionRecord(dir);
+// The session of a map: a decay session (a UserError naming the folder if not).
+SessionRecord ReadDecaySession(const std::filesystem::path& dir) {
+  SessionRecord session = ReadSessionRecord(dir);
   const std::string& protocol = session.protocol;
   if (protocol != "decay")
     ThrowUserError(dir.string(), "",
                    "is a '" + protocol + "' session; a decay map needs a decay session" +
                        (protocol == "all" ? " (this folder's decay part: phos fit map " + (dir / "decay").string() + ")"
                                           : ""));
+  return session;
+}
+
+// Rows [first, last) of tile `index` of `count`, or a UserError if it has none.
+std::pair<std::size_t, std::size_t> TileRows(const std::filesystem::path& dir, int height, int index, int count) {
+  const auto [first, last] = TaskShare(static_cast<std::size_t>(height), index, count);
+  if (first >= last)
+    ThrowUserError(dir.string(), "--tile", "has no rows: more tiles than the frames' " + std::to_string(height) + " rows");
+  return {first, last};
+}
+
+MapFrames ReadMapFrames(const MapArgs& args, int index, int count) {
+  namespace fs = std::filesystem;
+  const fs::path dir = args.session;
+  const SessionRecord session = ReadDecaySession(dir);
   // Typed records, every frame checked against its size and checksum first:
   // a map is never built on a bad frame.
   const FrameRecords records = ReadFrameRecords(dir);
@@ -283,10 +298,7 @@ MapFrames ReadMapFrames(const MapArgs& args, int index, int count) {
     const Frame frame = ReadFrame(dir, line);
     if (input.frames.empty()) {
       out.full_height = frame.height;
-      const auto [first, last] = TaskShare(static_cast<std::size_t>(frame.height), index, count);
-      if (first >= last)
-        ThrowUserError(dir.string(), "--tile",
-                       "has no rows: more tiles than the frames' " + std::to_string(frame.height) + " rows");
+      const auto [first, last] = TileRows(dir, frame.height, index, count);
       out.first_row = first;
       input.width = frame.width;
       input.height = static_cast<int>(last - first);
@@ -526,9 +538,28 @@ void RunFitMapMerge(const MapArgs& args) {
   WriteMapOutputs(args, map, tiles.string());
 }
 
+// --check: what a map or a tile would refuse before fitting, read from the
+// session's records and its first frame only: a decay session with frames,
+// and --tile i/N with no tile of N empty (so 'phos slurm map' refuses N
+// above the rows before it submits an array whose merge could never run).
+void CheckFitMap(const MapArgs& args) {
+  int index = 0, count = 1;
+  if (!args.tile.empty() && !ParseTaskIndex(args.tile, &index, &count))
+    ThrowUserError("", "--tile", "expected i/N with 0 <= i < N, got \"" + args.tile + "\"");
+  const std::filesystem::path dir = args.session;
+  ReadDecaySession(dir);
+  const FrameRecords records = ReadFrameRecords(dir);
+  if (records.frames.empty()) ThrowUserError(dir.string(), "", "has no frames to fit");
+  const Frame first = ReadFrame(dir, records.frames.front());
+  for (int i = 0; i < count; ++i) TileRows(dir, first.height, i, count);
+  std::printf("phos fit map: %s: %zu frame(s) of %d x %d, %d tile(s) (--check: nothing fitted)\n", dir.c_str(),
+              records.frames.size(), first.width, first.height, count);
+}
+
 void RunFitMap(const MapArgs& args) {
   if (args.merge) return RunFitMapMerge(args);
   if (args.session.empty()) ThrowUserError("", "SESSION", "is required (except with --merge)");
+  if (args.check) return CheckFitMap(args);
   if (!args.tile.empty()) return RunFitMapTile(args);
   const MapFrames frames = ReadMapFrames(args, 0, 1);
   if (frames.clipped > 0 && !args.json) std::printf("phos fit map: %d clipped frame(s) left out\n", frames.clipped);
@@ -542,6 +573,7 @@ struct BatchArgs {
   std::string out, weights = "poisson", task;
   int jobs = 0, components = 0;
   bool reports = true, json = false, merge = false;
+  bool check = false;  // --check: the items and --task checked, nothing fitted or written
 };
 
 // <item>.done.json: an item of a batch is done. Written last (after the
@@ -666,6 +698,10 @@ void RunFitBatch(const BatchArgs& args) {
       ThrowUserError("", "--task", "expected i/N with 0 <= i < N, got \"" + args.task + "\"");
     const auto [first, last] = TaskShare(items.size(), task_index, task_count);
     items = std::vector<fs::path>(items.begin() + first, items.begin() + last);
+  }
+  if (args.check) {
+    std::printf("phos fit batch: %zu item(s) to fit or keep (--check: nothing fitted)\n", items.size());
+    return;
   }
   const auto task_start = std::chrono::steady_clock::now();
   std::error_code ec;
@@ -886,6 +922,9 @@ void RegisterFit(CLI::App& app) {
                  "fast one's, where BIC keeps both; elsewhere kr2 is NaN (docs/two-state-map.md)")
       ->check(CLI::Range(1, 2));
   mp->add_flag("--json", map_args->json, "print one JSON object (size, frames, kr percentiles, outputs)");
+  mp->add_flag("--check", map_args->check,
+               "check the session (a decay session with frames) and --tile against its rows, then stop:\n"
+               "nothing fitted or written ('phos slurm map' checks its tasks' command so)");
   mp->callback([map_args] { RunFitMap(*map_args); });
 
   auto batch = std::make_shared<BatchArgs>();
@@ -904,6 +943,9 @@ void RegisterFit(CLI::App& app) {
       ->check(CLI::Range(1, 4));
   b->add_option("--weights", batch->weights, "poisson (default) or none");
   b->add_flag("--json", batch->json, "print one JSON object (the rows of the summary table) instead of the table");
+  b->add_flag("--check", batch->check,
+              "find the items and check the options, then stop: nothing fitted or written\n"
+              "('phos slurm batch' checks its tasks' command so)");
   b->add_option("--task", batch->task,
                 "i/N: fit only the i-th (0-based) of N near-equal consecutive shares of the items (a Slurm\n"
                 "array task); no summary.csv (the merge writes it); then <out>/tasks/task-i-of-N.json");

@@ -48,6 +48,7 @@ namespace {
 struct RenderArgs {
   std::string scene, out, times, transport = "direct";
   bool no_phosphorescence = false, json = false;
+  bool check = false;  // --check: every refusal a run would make up to here, then nothing written
   int spp = 0, width = 0, height = 0;
   std::string exposure_text;  // --exposure as given: a number or "auto"
   bool exposure_given = false;
@@ -531,6 +532,11 @@ void Run(const RenderArgs& args) {
   if (args.solve_only && args.checkpoints.empty())
     ThrowUserError("", "--solve-only", "writes the states to --checkpoints DIR: give it");
   if (!args.solve_only && args.out.empty()) ThrowUserError("", "--out", "is required (except with --solve-only)");
+  if (args.check) {
+    std::printf("%s: the command would render %zu frame(s) (--check: nothing written)\n", scene.name.c_str(),
+                args.solve_only ? std::size_t{0} : range.last - range.first);
+    return;
+  }
   const std::filesystem::path done =
       range.whole ? std::filesystem::path() : std::filesystem::path(args.out) / "done" / range.done_name;
   const std::string inputs = range.whole ? "" : RangeInputs(args, scene, range);
@@ -808,6 +814,9 @@ void RegisterRender(CLI::App& app) {
                   "OBJECT=FILE: give the object of that name this phosphor material (repeatable),\n"
                   "e.g. one just fitted by 'phos fit', without editing the scene");
   cmd->add_flag("--json", args->json, "Print one JSON object: frames with t, exr, png and seconds");
+  cmd->add_flag("--check", args->check,
+                "Load the scene and check every option as a run would, then stop before the solver: write\n"
+                "nothing (exit 0: the run would start; 'phos slurm render' checks its tasks' command so)");
   cmd->add_option("--frames", args->frames,
                   "FIRST:END: render only frames FIRST to END-1 of the run (0-based, numbered as in the whole\n"
                   "run); equal bit for bit to the same frames of one run. The states start from the latest\n"

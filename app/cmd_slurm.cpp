@@ -4,25 +4,31 @@
 // Writes the sbatch scripts into DIR and submits them: for a render, the
 // solver pass (the states are sequential in time), then the array of frame
 // ranges; for a map, the array of tiles; for a batch, the array of item
-// shares; then a merge job. The array waits for the solver pass to succeed
-// (--dependency=afterok). The merge waits for every task to end
-// (--dependency=afterany) and checks the done records itself: with afterok,
-// a task that failed (a requeued task whose rerun failed, in CI) left the
-// merge PENDING forever (DependencyNeverSatisfied) with nothing said; with
-// afterany the merge runs and fails with one line naming the missing tasks,
-// which `status` shows too. Every task
-// is idempotent (its done record, util/task_record.h), so Slurm's requeue and
-// a resubmission are safe; `status` counts the records.
+// shares; then a merge job. Before anything is written, the tasks' command
+// is run with --check (its options, its inputs), so a mistake after `--` is
+// one line at submission, not a log line after the queue. Each stage waits
+// for the one before to end, however it ended (--dependency=afterany), and
+// checks for itself what it needs: with afterok, a stage that failed (a
+// requeued task whose rerun failed, in CI; a solver pass given a bad option)
+// left the next PENDING forever (DependencyNeverSatisfied) with nothing said.
+// With afterany, render tasks whose solver pass failed start from the latest
+// state there is (the scene's start if none: slower, the same frames) or
+// fail with the pass's own line, and the merge fails with one line naming
+// the missing tasks, which `status` shows too. Every task is idempotent (its
+// done record, util/task_record.h), so Slurm's requeue and a resubmission
+// are safe; `status` counts the records.
 
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <climits>
 #include <cstdio>
 #include <filesystem>
 #include <memory>
 #include <optional>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -125,8 +131,12 @@ std::string PhosExecutable() {
 // The value of --out in the command's arguments, absolute ("" if absent).
 std::string OutFolder(const std::vector<std::string>& command) {
   for (std::size_t i = 0; i < command.size(); ++i) {
-    if (command[i] == "--out" && i + 1 < command.size()) return fs::absolute(command[i + 1]).lexically_normal().string();
-    if (command[i].rfind("--out=", 0) == 0) return fs::absolute(command[i].substr(6)).lexically_normal().string();
+    std::string value;
+    if (command[i] == "--out" && i + 1 < command.size()) value = command[i + 1];
+    else if (command[i].rfind("--out=", 0) == 0) value = command[i].substr(6);
+    else continue;
+    if (value.empty()) ThrowUserError("", "COMMAND", "--out is empty: give the folder for the outputs");
+    return fs::absolute(value).lexically_normal().string();
   }
   return "";
 }
@@ -161,9 +171,9 @@ std::string Command(const std::vector<std::string>& words) {
   return s;
 }
 
-// How a stage waits for the one before: a merge checks the done records
-// itself, so it runs once every task has ended, however it ended (see the top).
-const char* Dependency(const std::string& stage_name) { return stage_name == "merge" ? "afterany" : "afterok"; }
+// How a stage waits for the one before: once it has ended, however it ended
+// (see the top).
+constexpr const char* kDependency = "afterany";
 
 // Runs sbatch --parsable on a script; the job id, or a UserError with sbatch's words.
 std::string Submit(const std::string& sbatch, const std::string& script, const std::string& dependency,
@@ -183,26 +193,79 @@ std::string Submit(const std::string& sbatch, const std::string& script, const s
   return out.substr(0, out.find(';'));  // "id;cluster" on federated clusters
 }
 
+// Runs the tasks' command with --check (render, fit map, fit batch: every
+// refusal a task would make before its work); its one line, if it refuses.
+void CheckCommand(const std::vector<std::string>& words) {
+  std::vector<std::string> check = words;
+  check.push_back("--check");
+  FILE* pipe = popen((Command(check) + " 2>&1").c_str(), "r");
+  if (!pipe) ThrowUserError("", "COMMAND", "cannot run '" + words.front() + "' to check it");
+  std::string output;
+  char buffer[1024];
+  while (std::fgets(buffer, sizeof buffer, pipe)) output += buffer;
+  const int status = pclose(pipe);
+  if (status == 0) return;
+  // Its last line that says something: the refusal (warnings come before it).
+  std::string last, line;
+  std::istringstream lines(output);
+  while (std::getline(lines, line))
+    if (line.find_first_not_of(" \t") != std::string::npos) last = line;
+  ThrowUserError("", "COMMAND", "its tasks would fail (nothing submitted): " +
+                                     (last.empty() ? "exit status " + std::to_string(status) : last));
+}
+
+// Cancels jobs already submitted when a later sbatch failed, so that nothing
+// runs that job.json does not record; scancel beside --sbatch if that is a
+// path, else on PATH. False if it could not.
+bool CancelJobs(const std::string& sbatch, const std::vector<std::string>& ids) {
+  const fs::path beside = fs::path(sbatch).parent_path() / "scancel";
+  const std::string scancel = sbatch.find('/') != std::string::npos && fs::exists(beside) ? beside.string() : "scancel";
+  std::string command = ShellQuote(scancel);
+  for (const std::string& id : ids) command += " " + ShellQuote(id);
+  return std::system((command + " >/dev/null 2>&1").c_str()) == 0;
+}
+
+// The job.json of a folder: an earlier submission's (refused: a second chain
+// would write to the same logs), or scripts written by --no-submit and never
+// submitted (replaced).
+void RequireNoJobSubmitted(const fs::path& dir) {
+  const fs::path file = dir / "job.json";
+  if (!fs::exists(file)) return;
+  const nlohmann::json json = ReadJsonFile(file);
+  const SlurmJob job = SlurmJob::FromJson(JsonField(json, file.string()));
+  const bool submitted = std::any_of(job.stages.begin(), job.stages.end(), [](const SlurmStage& s) { return !s.job_id.empty(); });
+  if (submitted)
+    ThrowUserError(file.string(), "",
+                   "a job was already submitted from this folder ('phos slurm status " + dir.string() +
+                       "'); give another --job-dir");
+}
+
 void RunSubmit(const SubmitArgs& args) {
   if (args.command.empty())
     ThrowUserError("", "COMMAND", "give the phos " + args.kind + " arguments after --, e.g. -- SCENE --out OUT");
   const std::string out = OutFolder(args.command);
   if (out.empty()) ThrowUserError("", "COMMAND", "needs --out OUT (the tasks' outputs and done records go there)");
+  if (args.job_dir.empty()) ThrowUserError("", "--job-dir", "is empty: give the folder for the scripts and logs");
   const fs::path dir = fs::absolute(args.job_dir).lexically_normal();
-  if (fs::exists(dir / "job.json"))
-    ThrowUserError((dir / "job.json").string(), "",
-                   "a job was already submitted from this folder ('phos slurm status " + dir.string() +
-                       "'); give another --job-dir");
-  std::error_code ec;
-  fs::create_directories(dir / "logs", ec);
-  if (ec) ThrowUserError(dir.string(), "--job-dir", "cannot create: " + ec.message());
-  SubmitArgs a = args;
-  a.job_dir = dir.string();
+  RequireNoJobSubmitted(dir);
   const std::string phos = PhosExecutable(), n = std::to_string(args.tasks), task = "${SLURM_ARRAY_TASK_ID}/" + n;
   std::vector<std::string> base = {phos};
   if (args.kind == "map" || args.kind == "batch") base.push_back("fit");
   base.push_back(args.kind);
   base.insert(base.end(), args.command.begin(), args.command.end());
+  const std::string states = (dir / "states").string();
+  // The first task's command as it will run (a map's check covers every tile).
+  std::vector<std::string> first_task = base;
+  if (args.kind == "render")
+    first_task.insert(first_task.end(), {"--task", "0/" + n, "--checkpoints", states});
+  else
+    first_task.insert(first_task.end(), {args.kind == "map" ? "--tile" : "--task", "0/" + n});
+  CheckCommand(first_task);
+  std::error_code ec;
+  fs::create_directories(dir / "logs", ec);
+  if (ec) ThrowUserError(dir.string(), "--job-dir", "cannot create: " + ec.message());
+  SubmitArgs a = args;
+  a.job_dir = dir.string();
 
   SlurmJob job{args.kind, args.tasks, args.command, {}, 0};
   auto stage = [&](const std::string& name, int array, const std::vector<std::string>& extra,
@@ -215,7 +278,6 @@ void RunSubmit(const SubmitArgs& args) {
   };
   std::vector<std::string> task_done;
   if (args.kind == "render") {
-    const std::string states = (dir / "states").string();
     stage("solve", 0, {"--solve-only", "--checkpoints", states, "--tasks", n}, {(dir / "states" / "done.json").string()});
     for (int i = 0; i < args.tasks; ++i) task_done.push_back((fs::path(out) / "done" / TaskRecordName("task-", i, args.tasks)).string());
     stage("tasks", args.tasks, {"--task", task, "--checkpoints", states}, task_done);
@@ -234,8 +296,22 @@ void RunSubmit(const SubmitArgs& args) {
   }
   if (!args.no_submit) {
     const auto start = std::chrono::steady_clock::now();
-    std::string after;
-    for (SlurmStage& s : job.stages) after = s.job_id = Submit(args.sbatch, s.script, Dependency(s.name), after);
+    std::vector<std::string> submitted;
+    try {
+      for (SlurmStage& s : job.stages) submitted.push_back(s.job_id = Submit(args.sbatch, s.script, kDependency,
+                                                                             submitted.empty() ? "" : submitted.back()));
+    } catch (const UserError& e) {
+      // The stages before it are queued already: cancelled, so that a retry
+      // in this folder (no job.json) does not run the chain twice.
+      if (submitted.empty()) throw;
+      std::string ids;
+      for (const std::string& id : submitted) ids += (ids.empty() ? "" : " ") + id;
+      if (CancelJobs(args.sbatch, submitted))
+        throw UserError(std::string(e.what()) + "; the job(s) submitted before it (" + ids +
+                        ") were cancelled: nothing of this chain runs");
+      throw UserError(std::string(e.what()) + "; job(s) " + ids +
+                      " were submitted before it and could not be cancelled: 'scancel " + ids + "'");
+    }
     job.submitted_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   }
   WriteFileAtomically(dir / "job.json", job.ToJson().dump(2) + "\n");
@@ -252,7 +328,7 @@ void RunSubmit(const SubmitArgs& args) {
     const std::string script = (shown / fs::path(s.script).filename()).string();
     if (args.no_submit)
       std::printf("  %-5s sbatch --parsable%s %s\n", s.name.c_str(),
-                  after.empty() ? "" : (std::string(" --dependency=") + Dependency(s.name) + ":<previous job>").c_str(),
+                  after.empty() ? "" : (std::string(" --dependency=") + kDependency + ":<previous job>").c_str(),
                   script.c_str());
     else
       std::printf("  %-5s job %s%s  %s\n", s.name.c_str(), s.job_id.c_str(),

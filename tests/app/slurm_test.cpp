@@ -7,9 +7,7 @@
 // cannot start (slurm-wlm or munge missing, not root, a daemon that dies).
 // Also, without Slurm: the scripts --no-submit writes, and status.
 
-#include <netinet/in.h>
 #include <signal.h>
-#include <sys/socket.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -62,29 +60,6 @@ std::string Executable(const std::string& name) {
   return "";
 }
 
-// A TCP port free now (the kernel's pick).
-int FreePort() {
-  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in address{};
-  address.sin_family = AF_INET;
-  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  socklen_t size = sizeof address;
-  int port = 0;
-  if (::bind(fd, reinterpret_cast<sockaddr*>(&address), sizeof address) == 0 &&
-      ::getsockname(fd, reinterpret_cast<sockaddr*>(&address), &size) == 0)
-    port = ntohs(address.sin_port);
-  ::close(fd);
-  return port;
-}
-
-// Running (a zombie, which init reaps later, counts as gone).
-bool Alive(pid_t pid) {
-  if (::kill(pid, 0) != 0) return false;
-  const std::string stat = ReadText("/proc/" + std::to_string(pid) + "/stat");
-  const std::size_t paren = stat.rfind(')');
-  return paren == std::string::npos || paren + 2 >= stat.size() || stat[paren + 2] != 'Z';
-}
-
 std::string Tail(const fs::path& log) {
   const std::string text = ReadText(log);
   return text.size() > 600 ? text.substr(text.size() - 600) : text;
@@ -96,7 +71,13 @@ std::string Tail(const fs::path& log) {
 // the default made the requeue two thirds of this test's time.
 constexpr int kCredentialLifetimeS = 20;
 
-// munged, slurmctld and slurmd as a one-node cluster in a folder of its own.
+// The script users start a one-node cluster with (docs/scale.md).
+std::string OneNodeScript() {
+  return (fs::path(PHOS_FIXTURES_DIR).parent_path() / "scripts" / "slurm-one-node.sh").string();
+}
+
+// munged, slurmctld and slurmd as a one-node cluster in a folder of its own,
+// through scripts/slurm-one-node.sh.
 class OneNodeSlurm {
  public:
   // "" when the cluster is up; otherwise why it cannot be.
@@ -107,63 +88,20 @@ class OneNodeSlurm {
       if (Executable(tool).empty())
         return std::string(tool) + " is not installed (scripts/bootstrap.sh installs slurm-wlm and munge)";
     const fs::path d = dir_.path();
-    ::chmod(d.c_str(), 0755);  // slurmd and the jobs read the config
-    const CommandResult key = Shell(Executable("mungekey") + " -c -f -k " + (d / "munge.key").string());
-    if (key.exit_code != 0) return "mungekey failed: " + key.out;
-    ::chmod((d / "munge.key").c_str(), 0600);
-    const CommandResult munged =
-        Shell(Executable("munged") + " --socket=" + (d / "munge.sock").string() +
-              " --key-file=" + (d / "munge.key").string() + " --pid-file=" + (d / "munged.pid").string() +
-              " --log-file=" + (d / "munged.log").string() + " --seed-file=" + (d / "munged.seed").string());
-    pid_files_.push_back(d / "munged.pid");
-    if (munged.exit_code != 0) return "munged did not start: " + munged.out;
-    char host[256] = {};
-    ::gethostname(host, sizeof host - 1);
-    const std::string hostname = std::string(host).substr(0, std::string(host).find('.'));
-    fs::create_directories(d / "state");
-    fs::create_directories(d / "spool");
-    const std::string conf = (d / "slurm.conf").string();
-    WriteText(
-        conf,
-        "ClusterName=phos" + std::to_string(::getpid()) + "\nSlurmctldHost=" + hostname +
-            "\nSlurmctldPort=" + std::to_string(FreePort()) + "\nSlurmdPort=" + std::to_string(FreePort()) +
-            "\nSlurmUser=root\nSlurmdUser=root\nAuthType=auth/munge\nAuthInfo=socket=" + (d / "munge.sock").string() +
-            ",cred_expire=" + std::to_string(kCredentialLifetimeS) +
-            "\nStateSaveLocation=" + (d / "state").string() + "\nSlurmdSpoolDir=" + (d / "spool").string() +
-            "\nSlurmctldPidFile=" + (d / "slurmctld.pid").string() + "\nSlurmdPidFile=" + (d / "slurmd.pid").string() +
-            "\nSlurmctldLogFile=" + (d / "slurmctld.log").string() + "\nSlurmdLogFile=" + (d / "slurmd.log").string() +
-            "\nProctrackType=proctrack/linuxproc\nTaskPlugin=task/none\nSelectType=select/cons_tres\n"
-            "SelectTypeParameters=CR_Core\nSchedulerType=sched/backfill\nMpiDefault=none\n"
-            "ReturnToService=2\nJobCompType=jobcomp/none\nJobAcctGatherType=jobacct_gather/none\n"
-            "AccountingStorageType=accounting_storage/none\nSwitchType=switch/none\nMinJobAge=3600\n"
-            "KillWait=5\nNodeName=" +
-            hostname + " CPUs=2 RealMemory=2000 State=UNKNOWN\nPartitionName=test Nodes=" + hostname +
-            " Default=YES MaxTime=INFINITE State=UP\n");
-    ::setenv("SLURM_CONF", conf.c_str(), 1);  // sbatch, squeue, scontrol (and phos slurm's sbatch) find it
-    const CommandResult ctld = Shell(Executable("slurmctld") + " -i -f " + conf);
-    pid_files_.push_back(d / "slurmctld.pid");
-    if (ctld.exit_code != 0) return "slurmctld did not start: " + ctld.out + Tail(d / "slurmctld.log");
-    const CommandResult slurmd = Shell(Executable("slurmd") + " -f " + conf);
-    pid_files_.push_back(d / "slurmd.pid");
-    if (slurmd.exit_code != 0) return "slurmd did not start: " + slurmd.out + Tail(d / "slurmd.log");
-    if (!WaitFor([] { return Shell("sinfo -h -o %T").out.find("idle") != std::string::npos; }, 30, 0.2))
-      return "the node did not come up in 30 s: " + Tail(d / "slurmctld.log") + Tail(d / "slurmd.log");
+    started_ = true;
+    const CommandResult start = Shell("PHOS_SLURM_CRED_EXPIRE_S=" + std::to_string(kCredentialLifetimeS) +
+                                      " PHOS_SLURM_MEMORY_MB=2000 bash " + OneNodeScript() + " start " + d.string());
+    if (start.exit_code != 0) return "scripts/slurm-one-node.sh start failed: " + start.out;
+    // sbatch, squeue, scontrol (and phos slurm's sbatch) find it.
+    ::setenv("SLURM_CONF", (d / "slurm.conf").c_str(), 1);
     return "";
   }
 
-  // Cancels every job, then stops the daemons it started, by their PIDs (last started first).
+  // Cancels every job, then stops the daemons it started.
   void Stop() {
-    if (pid_files_.empty()) return;
-    Shell("scancel --full --user=root");
-    WaitFor([] { return Shell("squeue -h -t running,completing").out.empty(); }, 15, 0.2);
-    for (auto it = pid_files_.rbegin(); it != pid_files_.rend(); ++it) {
-      const std::string text = ReadText(*it);
-      const pid_t pid = static_cast<pid_t>(std::atol(text.c_str()));
-      if (pid <= 1) continue;
-      ::kill(pid, SIGTERM);
-      if (!WaitFor([pid] { return !Alive(pid); }, 10, 0.05)) ::kill(pid, SIGKILL);
-    }
-    pid_files_.clear();
+    if (!started_) return;
+    Shell("bash " + OneNodeScript() + " stop " + dir_.path().string());
+    started_ = false;
     ::unsetenv("SLURM_CONF");
   }
 
@@ -172,7 +110,7 @@ class OneNodeSlurm {
 
  private:
   TempDir dir_;
-  std::vector<fs::path> pid_files_;
+  bool started_ = false;
 };
 
 std::map<std::string, LargeTable<float>> Images(const fs::path& dir, const std::string& extension) {
@@ -308,10 +246,38 @@ TEST(SlurmCluster, ArraysEqualOneProcessAndARequeuedTaskIsRedoneWhole) {
   slurm.Stop();
 }
 
+// A small decay session (40 x 30) for the map's check.
+std::string SmallSession(const TempDir& dir) {
+  const std::string session = (dir / "s").string();
+  const CommandResult r = RunPhos("capture decay --sim-material " + Fixture("materials/orange.json").string() +
+                                  " --sim-size 40x30 --charge-s 600 --out " + session);
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  return session;
+}
+
+// A stand-in for sbatch that prints job ids 101, 102, ... and fails on call
+// `fail_at` (0: never), with scancel beside it logging what it cancels: what
+// phos slurm does around sbatch, without a cluster (SlurmCluster runs the real one).
+std::string FakeSbatch(const TempDir& dir, int fail_at) {
+  const fs::path bin = dir / "bin";
+  fs::create_directories(bin);
+  WriteText(bin / "sbatch", "#!/bin/bash\nn=$(( $(cat " + (bin / "count").string() + " 2>/dev/null || echo 0) + 1 ))\n" +
+                                "echo $n > " + (bin / "count").string() + "\n" + "echo \"$@\" >> " +
+                                (bin / "calls").string() + "\n" +
+                                "if [ $n -eq " + std::to_string(fail_at) +
+                                " ]; then echo 'sbatch: error: Batch job submission failed' >&2; exit 1; fi\n"
+                                "echo $((100 + n))\n");
+  WriteText(bin / "scancel", "#!/bin/bash\necho \"$@\" >> " + (bin / "cancelled").string() + "\n");
+  fs::permissions(bin / "sbatch", fs::perms::owner_all);
+  fs::permissions(bin / "scancel", fs::perms::owner_all);
+  return (bin / "sbatch").string();
+}
+
 TEST(SlurmScripts, NoSubmitWritesTheChainAndStatusCountsRecords) {
   TempDir dir;
+  const std::string session = SmallSession(dir);
   const CommandResult r = RunPhos("slurm map --tasks 4 --no-submit --job-dir " + (dir / "job").string() +
-                                  " --partition short --account lab7 --sbatch-option qos=low -- S --out " +
+                                  " --partition short --account lab7 --sbatch-option qos=low -- " + session + " --out " +
                                   (dir / "out").string() + " --weights none");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const std::string tasks = ReadText(dir / "job" / "tasks.sbatch");
@@ -334,11 +300,80 @@ TEST(SlurmScripts, NoSubmitWritesTheChainAndStatusCountsRecords) {
   status = RunPhos("slurm status " + (dir / "job").string());
   EXPECT_NE(status.out.find("tasks  2/4 done; not done: 0 2; 2 s per task"), std::string::npos) << status.out;
   EXPECT_EQ(RunPhos("slurm status " + (dir / "job").string() + " --require-done").exit_code, 2);
+  // Scripts written and never submitted do not block the folder: submitting replaces them.
+  const std::string sbatch = FakeSbatch(dir, 0);
+  const CommandResult submit = RunPhos("slurm map --tasks 4 --sbatch " + sbatch + " --job-dir " +
+                                       (dir / "job").string() + " -- " + session + " --out " + (dir / "out").string());
+  ASSERT_EQ(submit.exit_code, 0) << submit.err;
+  EXPECT_NE(submit.out.find("  merge job 102 after 101"), std::string::npos) << submit.out;
   // A second submission from the same folder is refused.
-  const CommandResult again = RunPhos("slurm map --tasks 4 --no-submit --job-dir " + (dir / "job").string() +
-                                      " -- S --out " + (dir / "out").string());
+  const CommandResult again = RunPhos("slurm map --tasks 4 --no-submit --job-dir " + (dir / "job").string() + " -- " +
+                                      session + " --out " + (dir / "out").string());
   EXPECT_EQ(again.exit_code, 2);
   EXPECT_NE(again.err.find("a job was already submitted from this folder"), std::string::npos) << again.err;
+}
+
+TEST(SlurmScripts, EveryStageWaitsForTheOneBeforeToEndHoweverItEnded) {
+  // A render's tasks after a solver pass that failed (say, killed) start from
+  // the states there are, or fail with its line; with afterok they waited forever.
+  TempDir dir;
+  const std::string sbatch = FakeSbatch(dir, 0);
+  const CommandResult r = RunPhos("slurm render --tasks 2 --sbatch " + sbatch + " --job-dir " + (dir / "job").string() +
+                                  " -- " + Fixture("scenes/cornell-phosphor.json").string() + " --out " +
+                                  (dir / "frames").string() + " --times 20,40");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const std::string calls = ReadText(dir / "bin" / "calls");
+  EXPECT_NE(calls.find("--dependency=afterany:101 "), std::string::npos) << calls;
+  EXPECT_NE(calls.find("--dependency=afterany:102 "), std::string::npos) << calls;
+  EXPECT_EQ(calls.find("afterok"), std::string::npos) << calls;
+}
+
+TEST(SlurmScripts, ACommandItsTasksWouldRefuseIsRefusedBeforeAnythingIsWritten) {
+  TempDir dir;
+  const std::string sbatch = FakeSbatch(dir, 0), scene = Fixture("scenes/cornell-phosphor.json").string();
+  const std::string job = (dir / "job").string(), out = " --out " + (dir / "frames").string();
+  auto refused = [&](const std::string& kind, const std::string& command, const std::string& why) {
+    const CommandResult r =
+        RunPhos("slurm " + kind + " --tasks 10 --sbatch " + sbatch + " --job-dir " + job + " -- " + command);
+    EXPECT_TRUE(IsOneLineUserError(r, why)) << command << "\n" << r.err;
+    EXPECT_FALSE(fs::exists(job)) << command;  // no folder, no script
+  };
+  refused("render", scene + out + " --no-such", "COMMAND: its tasks would fail (nothing submitted)");
+  refused("render", scene + out + " --no-such", "--no-such");
+  refused("render", scene + out + " --frames 0:4", "--frames excludes --task");
+  refused("render", scene + out + " --times 20,40 --exposure auto", "\"auto\" meters every frame after dark");
+  refused("render", (dir / "none.json").string() + out, "none.json");
+  refused("map", (dir / "no-session").string() + out, "no-session");
+  refused("batch", (dir / "no-captures").string() + out, "no-captures");
+  // More tiles than the session's 30 rows: some tile would have none, and the merge could never run.
+  const std::string session = SmallSession(dir);
+  const CommandResult rows = RunPhos("slurm map --tasks 31 --sbatch " + sbatch + " --job-dir " + job + " -- " +
+                                     session + out);
+  EXPECT_TRUE(IsOneLineUserError(rows, "has no rows: more tiles than the frames' 30 rows")) << rows.err;
+  EXPECT_FALSE(fs::exists(job));
+  EXPECT_FALSE(fs::exists(dir / "bin" / "calls"));  // sbatch never ran
+  // Empty paths: one line each, not an internal error.
+  EXPECT_TRUE(IsOneLineUserError(RunPhos("slurm render --tasks 2 --job-dir '' -- " + scene + out), "--job-dir"));
+  EXPECT_TRUE(IsOneLineUserError(RunPhos("slurm render --tasks 2 --job-dir " + job + " -- " + scene + " --out ''"),
+                                 "--out is empty"));
+}
+
+TEST(SlurmScripts, ALaterSbatchThatFailsCancelsTheJobsBeforeIt) {
+  // The third sbatch (the merge) fails: the solver pass and the array were
+  // queued already; they are cancelled, no job.json is written, and a retry
+  // in the same folder submits the chain once.
+  TempDir dir;
+  const std::string sbatch = FakeSbatch(dir, 3), scene = Fixture("scenes/cornell-phosphor.json").string();
+  const std::string submit = "slurm render --tasks 2 --sbatch " + sbatch + " --job-dir " + (dir / "job").string() +
+                             " -- " + scene + " --out " + (dir / "frames").string() + " --times 20,40";
+  const CommandResult r = RunPhos(submit);
+  EXPECT_TRUE(IsOneLineUserError(r, "were cancelled: nothing of this chain runs")) << r.err;
+  EXPECT_NE(r.err.find("(101 102)"), std::string::npos) << r.err;
+  EXPECT_EQ(ReadText(dir / "bin" / "cancelled"), "101 102\n");
+  EXPECT_FALSE(fs::exists(dir / "job" / "job.json"));
+  const CommandResult retry = RunPhos(submit);
+  ASSERT_EQ(retry.exit_code, 0) << retry.err;
+  EXPECT_NE(retry.out.find("  merge job 106 after 105"), std::string::npos) << retry.out;
 }
 
 }  // namespace
