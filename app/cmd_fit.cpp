@@ -732,7 +732,7 @@ void RunFitBatch(const BatchArgs& args) {
       rows[i].kr = record->kr_per_s;
       rows[i].kr_by_state = record->kr_by_state_per_s;
       rows[i].seconds = record->seconds;
-      rows[i].detail = "done in an earlier run";
+      rows[i].detail = args.merge ? "fitted before this merge (its task's record)" : "done in an earlier run";
     } else {
       if (record)
         rows[i].detail = "its .done.json was made from other inputs (the data or the options): fitted again";

@@ -25,6 +25,7 @@
 #include <chrono>
 #include <climits>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <memory>
 #include <optional>
@@ -188,8 +189,17 @@ std::string Submit(const std::string& sbatch, const std::string& script, const s
   while (std::fgets(buffer, sizeof buffer, pipe)) out += buffer;
   const int status = pclose(pipe);
   while (!out.empty() && (out.back() == '\n' || out.back() == ' ')) out.pop_back();
-  if (status != 0 || out.empty() || out.find_first_not_of("0123456789;") != out.find(';'))
-    ThrowUserError(script, "sbatch", "failed: " + (out.empty() ? "exit status " + std::to_string(status) : out));
+  if (status != 0 || out.empty() || out.find_first_not_of("0123456789;") != out.find(';')) {
+    // sbatch's lines ("sbatch: error: ..."), each without its prefix, on one line.
+    std::string said, line;
+    std::istringstream lines(out);
+    while (std::getline(lines, line)) {
+      for (const char* prefix : {"sbatch: error: ", "sbatch: "})
+        if (line.rfind(prefix, 0) == 0) line.erase(0, std::strlen(prefix));
+      if (line.find_first_not_of(" \t") != std::string::npos) said += (said.empty() ? "" : "; ") + line;
+    }
+    ThrowUserError(script, "sbatch", "refused: " + (said.empty() ? "exit status " + std::to_string(status) : said));
+  }
   return out.substr(0, out.find(';'));  // "id;cluster" on federated clusters
 }
 
@@ -351,7 +361,7 @@ void RunStatus(const StatusArgs& args) {
   const SlurmJob job = SlurmJob::FromJson(JsonField(json, file.string()));
   nlohmann::json stages = nlohmann::json::array();
   bool all = true;
-  std::string text;
+  std::string text, not_done;  // not_done: the stages and tasks not done, for --require-done's one line
   for (const SlurmStage& s : job.stages) {
     std::vector<int> missing;
     double seconds = 0;
@@ -370,6 +380,15 @@ void RunStatus(const StatusArgs& args) {
     }
     const std::size_t done = s.done.size() - missing.size();
     const bool whole = missing.empty() && (!s.done.empty() || all);  // a check stage is done when all before it are
+    if (!whole && !s.done.empty()) {
+      std::string which = s.name;
+      if (s.name == "tasks") {
+        which += " ";
+        for (std::size_t k = 0; k < missing.size(); ++k) which += (k ? "," : "") + std::to_string(missing[k]);
+        which += " of " + std::to_string(s.done.size());
+      }
+      not_done += (not_done.empty() ? "" : "; ") + which + " not done";
+    }
     all = all && whole;
     stages.push_back({{"name", s.name},
                       {"job_id", s.job_id},
@@ -398,7 +417,8 @@ void RunStatus(const StatusArgs& args) {
     std::printf("phos slurm status: %s, %d task(s): %s\n%s", job.kind.c_str(), job.tasks, all ? "done" : "not done",
                 text.c_str());
   }
-  if (args.require_done && !all) ThrowUserError(args.dir, "", "not every task is done (see the lines above)");
+  if (args.require_done && !all)
+    ThrowUserError(args.dir, "", "not every task is done: " + (not_done.empty() ? std::string("see the lines above") : not_done));
 }
 
 void AddSubmit(CLI::App& slurm, const std::string& kind, const std::string& what) {
@@ -432,7 +452,22 @@ void AddSubmit(CLI::App& slurm, const std::string& kind, const std::string& what
                                                  std::string(kind == "render" ? "render" : "fit " + kind) +
                                                  "', --out included")
       ->required();
-  cmd->callback([args] { RunSubmit(*args); });
+  // An option that is not phos slurm's is most often the command's, given
+  // before or without the --: say so, instead of CLI11's bare "not expected".
+  cmd->allow_extras();
+  cmd->callback([args, cmd] {
+    std::string words;  // CLI11 leaves the -- itself among the extras
+    for (const std::string& w : cmd->remaining())
+      if (w != "--") words += (words.empty() ? "" : " ") + w;
+    if (!words.empty()) {
+      ThrowUserError("", words,
+                     "not an option of phos slurm " + args->kind +
+                         "; the command's own arguments go after --, e.g. phos slurm " + args->kind +
+                         " --tasks 2 --job-dir J -- " + (args->kind == "render" ? "SCENE" : args->kind == "map" ? "SESSION" : "CAPTURES") +
+                         " --out OUT");
+    }
+    RunSubmit(*args);
+  });
 }
 
 }  // namespace

@@ -43,12 +43,17 @@ int RunCommand(int argc, char** argv, const char* command, void (*register_comma
       level = level->get_subcommands().front();
       name += " " + level->get_name();
     }
+    std::fflush(stdout);  // what was printed before comes before the error, in a log too
     std::fprintf(stderr, "phos%s: %s (see 'phos%s --help')\n", name.c_str(), e.what(), name.c_str());
     return 2;
   } catch (const phos::UserError& e) {
+    // A job's log holds both streams: the lines an error refers to ("see the
+    // lines above") were still in stdout's buffer when it was written.
+    std::fflush(stdout);
     std::fprintf(stderr, "phos: %s\n", e.what());
     return 2;
   } catch (const std::exception& e) {
+    std::fflush(stdout);
     std::fprintf(stderr, "phos: internal error: %s\n", e.what());
     return 1;
   }

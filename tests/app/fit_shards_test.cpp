@@ -104,6 +104,10 @@ TEST(FitShards, BatchTasksThenMergeEqualOneBatch) {
   merge = RunPhos("fit batch " + captures + " --out " + out + " --merge --json");
   ASSERT_EQ(merge.exit_code, 0) << merge.err;
   EXPECT_EQ(nlohmann::json::parse(merge.out)["kept"].get<int>(), 2);
+  // The summary says where the fits came from: the tasks, not "an earlier run".
+  const std::string summary = ReadText(dir / "tasks" / "summary.csv");
+  EXPECT_NE(summary.find("fitted before this merge"), std::string::npos) << summary;
+  EXPECT_EQ(summary.find("earlier run"), std::string::npos) << summary;
   for (const char* name : {"orange", "blue"})
     EXPECT_EQ(ReadText(dir / "whole" / (std::string(name) + ".json")),
               ReadText(dir / "tasks" / (std::string(name) + ".json")))

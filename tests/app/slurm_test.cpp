@@ -299,7 +299,12 @@ TEST(SlurmScripts, NoSubmitWritesTheChainAndStatusCountsRecords) {
               R"({"format":"phos.task-done/1","task":"t","inputs":"","outputs":[],"seconds":2,"host":"h"})");
   status = RunPhos("slurm status " + (dir / "job").string());
   EXPECT_NE(status.out.find("tasks  2/4 done; not done: 0 2; 2 s per task"), std::string::npos) << status.out;
-  EXPECT_EQ(RunPhos("slurm status " + (dir / "job").string() + " --require-done").exit_code, 2);
+  // --require-done (the render's last job) names what is missing, after the lines it sums up, in a log too.
+  EXPECT_TRUE(IsOneLineUserError(RunPhos("slurm status " + (dir / "job").string() + " --require-done"),
+                                 "not every task is done: tasks 0,2 of 4 not done; merge not done"));
+  const std::string log = Shell(std::string(PHOS_BINARY) + " slurm status " + (dir / "job").string() + " --require-done").out;
+  ASSERT_NE(log.find("not every task is done"), std::string::npos) << log;
+  EXPECT_LT(log.find("tasks  2/4 done"), log.find("not every task is done")) << log;
   // Scripts written and never submitted do not block the folder: submitting replaces them.
   const std::string sbatch = FakeSbatch(dir, 0);
   const CommandResult submit = RunPhos("slurm map --tasks 4 --sbatch " + sbatch + " --job-dir " +
@@ -352,6 +357,10 @@ TEST(SlurmScripts, ACommandItsTasksWouldRefuseIsRefusedBeforeAnythingIsWritten) 
   EXPECT_TRUE(IsOneLineUserError(rows, "has no rows: more tiles than the frames' 30 rows")) << rows.err;
   EXPECT_FALSE(fs::exists(job));
   EXPECT_FALSE(fs::exists(dir / "bin" / "calls"));  // sbatch never ran
+  // The command's options before or without the --: said so.
+  EXPECT_TRUE(IsOneLineUserError(RunPhos("slurm render --tasks 2 --job-dir " + job + " " + scene + out),
+                                 "--out: not an option of phos slurm render; the command's own arguments go after --"));
+  EXPECT_FALSE(fs::exists(job));
   // Empty paths: one line each, not an internal error.
   EXPECT_TRUE(IsOneLineUserError(RunPhos("slurm render --tasks 2 --job-dir '' -- " + scene + out), "--job-dir"));
   EXPECT_TRUE(IsOneLineUserError(RunPhos("slurm render --tasks 2 --job-dir " + job + " -- " + scene + " --out ''"),
@@ -368,6 +377,7 @@ TEST(SlurmScripts, ALaterSbatchThatFailsCancelsTheJobsBeforeIt) {
                              " -- " + scene + " --out " + (dir / "frames").string() + " --times 20,40";
   const CommandResult r = RunPhos(submit);
   EXPECT_TRUE(IsOneLineUserError(r, "were cancelled: nothing of this chain runs")) << r.err;
+  EXPECT_NE(r.err.find("merge.sbatch: sbatch: refused: Batch job submission failed;"), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("(101 102)"), std::string::npos) << r.err;
   EXPECT_EQ(ReadText(dir / "bin" / "cancelled"), "101 102\n");
   EXPECT_FALSE(fs::exists(dir / "job" / "job.json"));
