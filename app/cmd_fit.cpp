@@ -748,9 +748,27 @@ void RunFitBatch(const BatchArgs& args) {
       for (const char* suffix : {".json", ".html", ".done.json", ".failed.txt"}) names.push_back(rows[i].name + suffix);
     RemoveTemporaries(args.out, names);
   }
-  if (args.merge && !todo.empty()) {
-    const std::string missing = JoinComma(todo, [&](std::size_t i) { return rows[i].name; });
-    ThrowUserError(args.out, "--merge", "item(s) not fitted yet: " + missing + " (nothing merged)");
+  if (args.merge) {
+    // An item its task could not fit (its .failed.txt, the task's own words)
+    // is a failed row of the summary, as in one process's batch; one no task
+    // has tried yet is refused, naming it.
+    std::vector<std::size_t> untried;
+    for (std::size_t i : todo) {
+      const fs::path failed = fs::path(args.out) / (rows[i].name + ".failed.txt");
+      std::error_code exists_error;
+      const std::string why = fs::is_regular_file(failed, exists_error) ? ReadFileText(failed, 1 << 20) : "";
+      if (why.empty()) {
+        untried.push_back(i);
+        continue;
+      }
+      rows[i].status = "failed";
+      rows[i].detail = why.substr(0, why.find_last_not_of("\n") + 1);
+    }
+    if (!untried.empty()) {
+      const std::string missing = JoinComma(untried, [&](std::size_t i) { return rows[i].name; });
+      ThrowUserError(args.out, "--merge", "item(s) not fitted yet: " + missing + " (nothing merged)");
+    }
+    todo.clear();
   }
   ProgressBar progress("fit batch", todo.size());
   std::atomic<std::size_t> next{0};
@@ -799,9 +817,12 @@ void RunFitBatch(const BatchArgs& args) {
   std::string csv = "item,status,n_components,kr_per_s,seconds,detail,kr_by_state_per_s\n";
   if (!args.json) std::printf("%-24s %-7s %3s %16s %8s  %s\n", "item", "status", "nc", "kr (1/s)", "s", "detail");
   int failed = 0;
+  std::size_t fitted_now = 0, kept = 0;
   nlohmann::json json_rows = nlohmann::json::array();
   for (const Row& row : rows) {
     failed += row.status == "failed";
+    fitted_now += row.status == "fitted";
+    kept += row.status == "kept";
     json_rows.push_back({{"item", row.name},
                          {"status", row.status},
                          {"n_components", row.nc},
@@ -834,16 +855,15 @@ void RunFitBatch(const BatchArgs& args) {
   if (args.task.empty()) WriteFileAtomically(fs::path(args.out) / "summary.csv", csv);
   if (args.json)
     std::printf("%s\n", nlohmann::json({{"items", json_rows},
-                                        {"fitted_now", todo.size() - failed},
-                                        {"kept", rows.size() - todo.size()},
+                                        {"fitted_now", fitted_now},
+                                        {"kept", kept},
                                         {"failed", failed},
                                         {"out", args.out}})
                             .dump()
                             .c_str());
   else
     std::printf("phos fit batch: %zu item(s)%s, %zu fitted now, %zu kept, %d failed -> %s%s\n", rows.size(),
-                args.task.empty() ? "" : (" (task " + args.task + ")").c_str(), todo.size() - failed,
-                rows.size() - todo.size(), failed, args.out.c_str(), args.task.empty() ? " (summary.csv)" : "");
+                args.task.empty() ? "" : (" (task " + args.task + ")").c_str(), fitted_now, kept, failed, args.out.c_str(), args.task.empty() ? " (summary.csv)" : "");
   if (failed > 0)
     ThrowUserError(
         "", "fit batch",

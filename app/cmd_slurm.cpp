@@ -27,6 +27,7 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <map>
 #include <memory>
 #include <optional>
 #include <sstream>
@@ -350,6 +351,42 @@ void RunSubmit(const SubmitArgs& args) {
 
 // ---- phos slurm status ------------------------------------------------------
 
+// Slurm's own word on a job, for status beside the done records: "FAILED",
+// "PENDING (DependencyNeverSatisfied)", an array's "2 COMPLETED, 1 RUNNING";
+// "" when scontrol cannot say (not installed, no cluster, or a job older than
+// the controller keeps: slurm.conf's MinJobAge, 300 s by default).
+std::string SlurmState(const std::string& job_id) {
+  FILE* pipe = popen(("scontrol -o show job " + ShellQuote(job_id) + " 2>/dev/null").c_str(), "r");
+  if (!pipe) return "";
+  std::map<std::string, int> counts;  // by state (with its reason while pending)
+  int jobs = 0;
+  char buffer[4096];
+  std::string line;
+  while (std::fgets(buffer, sizeof buffer, pipe)) {
+    line += buffer;
+    if (line.empty() || line.back() != '\n') continue;  // one job per line, possibly longer than the buffer
+    auto field = [&](const std::string& key) {
+      const std::size_t at = line.find(" " + key + "=");
+      if (at == std::string::npos) return std::string();
+      const std::size_t begin = at + key.size() + 2;
+      return line.substr(begin, line.find_first_of(" \n", begin) - begin);
+    };
+    std::string state = field("JobState");
+    const std::string reason = field("Reason");
+    if (!state.empty()) {
+      if (state == "PENDING" && !reason.empty() && reason != "None") state += " (" + reason + ")";
+      ++counts[state];
+      ++jobs;
+    }
+    line.clear();
+  }
+  pclose(pipe);
+  if (jobs == 1) return counts.begin()->first;
+  std::string said;
+  for (const auto& [state, n] : counts) said += (said.empty() ? "" : ", ") + std::to_string(n) + " " + state;
+  return said;
+}
+
 struct StatusArgs {
   std::string dir;
   bool json = false, require_done = false;
@@ -390,8 +427,10 @@ void RunStatus(const StatusArgs& args) {
       not_done += (not_done.empty() ? "" : "; ") + which + " not done";
     }
     all = all && whole;
+    const std::string slurm_state = s.job_id.empty() ? "" : SlurmState(s.job_id);
     stages.push_back({{"name", s.name},
                       {"job_id", s.job_id},
+                      {"slurm_state", slurm_state},
                       {"done", done},
                       {"of", s.done.size()},
                       {"missing", missing},
@@ -408,7 +447,7 @@ void RunStatus(const StatusArgs& args) {
       line += whole ? "done" : "not done";
       if (seconds > 0) line += " (" + FormatShort(seconds, 3) + " s)";
     }
-    text += line + (s.job_id.empty() ? "" : "  [job " + s.job_id + "]") + "\n";
+    text += line + (s.job_id.empty() ? "" : "  [job " + s.job_id + (slurm_state.empty() ? "" : ": " + slurm_state) + "]") + "\n";
   }
   if (args.json) {
     std::printf("%s\n",

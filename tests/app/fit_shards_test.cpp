@@ -114,5 +114,33 @@ TEST(FitShards, BatchTasksThenMergeEqualOneBatch) {
         << name;
 }
 
+TEST(FitShards, AMergeListsAnItemItsTaskCouldNotFitAsOneBatchDoes) {
+  // A capture folder whose session.json is not a session: one process's
+  // batch lists it as failed in summary.csv and exits 2; the tasks' merge
+  // must write the same row (it wrote no summary at all before).
+  TempDir dir;
+  ASSERT_EQ(RunPhos("capture all --sim-material " + Fixture("materials/orange.json").string() +
+                    " --sim-size 16x12 --out " + (dir / "captures" / "orange").string())
+                .exit_code,
+            0);
+  std::filesystem::create_directories(dir / "captures" / "broken");
+  WriteText(dir / "captures" / "broken" / "session.json", "{}");
+  const std::string captures = (dir / "captures").string(), out = (dir / "tasks").string();
+  EXPECT_EQ(RunPhos("fit batch " + captures + " --out " + (dir / "whole").string()).exit_code, 2);
+  EXPECT_EQ(RunPhos("fit batch " + captures + " --out " + out + " --task 0/2").exit_code, 2);  // broken
+  EXPECT_EQ(RunPhos("fit batch " + captures + " --out " + out + " --task 1/2").exit_code, 0);  // orange
+  const CommandResult merge = RunPhos("fit batch " + captures + " --out " + out + " --merge");
+  EXPECT_TRUE(IsOneLineUserError(merge, "1 item(s) could not be fitted")) << merge.err;
+  auto row = [](const std::string& csv, const std::string& item) {
+    const std::size_t at = csv.find("\n" + item + ",");
+    return at == std::string::npos ? std::string() : csv.substr(at + 1, csv.find('\n', at + 1) - at - 1);
+  };
+  const std::string whole = ReadText(dir / "whole" / "summary.csv"), merged = ReadText(dir / "tasks" / "summary.csv");
+  ASSERT_NE(row(whole, "broken"), "") << whole;
+  EXPECT_EQ(row(merged, "broken"), row(whole, "broken")) << merged;
+  EXPECT_EQ(row(merged, "orange").rfind("orange,kept,", 0), 0u) << merged;
+  EXPECT_NE(merge.out.find("0 fitted now, 1 kept, 1 failed"), std::string::npos) << merge.out;
+}
+
 }  // namespace
 }  // namespace phos::testing

@@ -226,7 +226,15 @@ TEST(SlurmCluster, ArraysEqualOneProcessAndARequeuedTaskIsRedoneWhole) {
     }
     const CommandResult status = RunPhos("slurm status " + job.string() + " --json");
     ASSERT_EQ(status.exit_code, 0) << status.err;
-    EXPECT_TRUE(nlohmann::json::parse(status.out)["done"].get<bool>()) << status.out;
+    const nlohmann::json said = nlohmann::json::parse(status.out);
+    EXPECT_TRUE(said["done"].get<bool>()) << status.out;
+    // Slurm's own word beside the records: a job "COMPLETED", an array "N COMPLETED".
+    for (const auto& stage : said["stages"]) {
+      const std::string state = stage["slurm_state"].get<std::string>();
+      EXPECT_TRUE(state == "COMPLETED" || (state.size() > 10 && state.substr(state.size() - 10) == " COMPLETED" &&
+                                           state.find(',') == std::string::npos))
+          << job << " " << stage["name"] << ": " << state;
+    }
   }
   // The requeued task ran twice, its frames are whole and no temporary is left.
   EXPECT_NE(Shell("scontrol -o show job " + render_tasks + "_0").out.find("Restarts=1"), std::string::npos);
@@ -331,6 +339,21 @@ TEST(SlurmScripts, EveryStageWaitsForTheOneBeforeToEndHoweverItEnded) {
   EXPECT_NE(calls.find("--dependency=afterany:101 "), std::string::npos) << calls;
   EXPECT_NE(calls.find("--dependency=afterany:102 "), std::string::npos) << calls;
   EXPECT_EQ(calls.find("afterok"), std::string::npos) << calls;
+  // status says what Slurm says of each job (here a stand-in scontrol: the
+  // solver pass failed, its array pending), beside the records it counts.
+  WriteText(dir / "bin" / "scontrol",
+            "#!/bin/bash\ncase $4 in\n"
+            "101) echo 'JobId=101 JobName=phos-render-solve JobState=FAILED Reason=NonZeroExitCode Dependency=(null)' ;;\n"
+            "102) echo 'JobId=102 ArrayJobId=102 ArrayTaskId=0 JobState=PENDING Reason=Dependency Dependency=afterany:101'\n"
+            "     echo 'JobId=103 ArrayJobId=102 ArrayTaskId=1 JobState=PENDING Reason=Dependency Dependency=afterany:101' ;;\n"
+            "*) exit 1 ;;\nesac\n");
+  fs::permissions(dir / "bin" / "scontrol", fs::perms::owner_all);
+  const CommandResult status = Shell("PATH=" + (dir / "bin").string() + ":$PATH " + std::string(PHOS_BINARY) +
+                                     " slurm status " + (dir / "job").string());
+  EXPECT_NE(status.out.find("  solve  not done  [job 101: FAILED]"), std::string::npos) << status.out;
+  EXPECT_NE(status.out.find("  tasks  0/2 done; not done: 0 1  [job 102: 2 PENDING (Dependency)]"), std::string::npos)
+      << status.out;
+  EXPECT_NE(status.out.find("  merge  not done  [job 103]"), std::string::npos) << status.out;  // scontrol: unknown
 }
 
 TEST(SlurmScripts, ACommandItsTasksWouldRefuseIsRefusedBeforeAnythingIsWritten) {

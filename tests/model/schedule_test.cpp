@@ -81,7 +81,9 @@ TEST(FrameIrradiance, RandomSchedulesKeepTheirDose) {
       const double end = begin + p.duration_s;
       for (std::size_t f = 0; f < E.size(); ++f) {
         const double f0 = static_cast<double>(f) * dt, f1 = f0 + dt;
-        if (p.dark() && f0 >= begin + 1e-9 && f1 <= end - 1e-9) EXPECT_EQ(E[f][0] + E[f][1], 0.0) << trial;
+        if (p.dark() && f0 >= begin + 1e-9 && f1 <= end - 1e-9) {
+          EXPECT_EQ(E[f][0] + E[f][1], 0.0) << trial;
+        }
       }
       begin = end;
     }
