@@ -30,6 +30,7 @@
 #include <map>
 #include <memory>
 #include <optional>
+#include <regex>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -148,8 +149,17 @@ std::string TaskRecordName(const char* prefix, int i, int n) {
 }
 
 // One sbatch script: the site's options, then `body`.
-std::string Script(const SubmitArgs& args, const std::string& name, int array_tasks, const std::string& body) {
-  const SiteOptions& site = args.site;
+// `light`: a job that only reads done records (the render's last, `phos
+// slurm status`, about 4 MB): one CPU, 256 MB and 10 minutes, not a task's
+// share, so that it does not wait in the queue for a task's resources.
+std::string Script(const SubmitArgs& args, const std::string& name, int array_tasks, const std::string& body,
+                   bool light = false) {
+  SiteOptions site = args.site;
+  if (light) {
+    site.cpus_per_task = 1;
+    site.mem_per_task = "256M";
+    site.time_per_task = "00:10:00";
+  }
   const fs::path logs = fs::path(args.job_dir) / "logs";
   std::string s = "#!/bin/bash\n# Written by phos slurm " + args.kind + " (docs/scale.md).\n";
   s += "#SBATCH --job-name=phos-" + args.kind + "-" + name + "\n";
@@ -294,7 +304,7 @@ void RunSubmit(const SubmitArgs& args) {
     stage("tasks", args.tasks, {"--task", task, "--checkpoints", states}, task_done);
     // Nothing to assemble: the frames are the outputs. The last job checks that every range is done.
     const fs::path script = dir / "merge.sbatch";
-    WriteFileAtomically(script, Script(a, "merge", 0, Command({phos, "slurm", "status", dir.string(), "--require-done"})));
+    WriteFileAtomically(script, Script(a, "merge", 0, Command({phos, "slurm", "status", dir.string(), "--require-done"}), true));
     job.stages.push_back({"merge", script.string(), "", {}});
   } else if (args.kind == "map") {
     for (int i = 0; i < args.tasks; ++i) task_done.push_back((fs::path(out) / "tiles" / TaskRecordName("tile-", i, args.tasks)).string());
@@ -472,8 +482,19 @@ void AddSubmit(CLI::App& slurm, const std::string& kind, const std::string& what
       ->required();
   cmd->add_option("--partition", args->site.partition, "sbatch --partition (default: the cluster's default)");
   cmd->add_option("--account", args->site.account, "sbatch --account (default: your default account)");
-  cmd->add_option("--time-per-task", args->site.time_per_task, "sbatch --time of each job, [D-]HH:MM:SS")
-      ->default_str("01:00:00");
+  cmd->add_option("--time-per-task", args->site.time_per_task,
+                  "sbatch --time of each job: MM, MM:SS, HH:MM:SS, D-HH, D-HH:MM, D-HH:MM:SS or UNLIMITED")
+      ->default_str("01:00:00")
+      ->check(CLI::Validator(
+          [](std::string& value) {
+            // Slurm's forms of a time limit (sbatch(1), --time); anything else sbatch refuses after the check.
+            static const std::regex form(R"((\d+|\d+:\d+|\d+:\d+:\d+|\d+-\d+|\d+-\d+:\d+|\d+-\d+:\d+:\d+|)"
+                                         R"(UNLIMITED|INFINITE|unlimited|infinite))");
+            return std::regex_match(value, form)
+                       ? std::string()
+                       : "expected a Slurm time (MM, HH:MM:SS, D-HH:MM:SS, ...), got \"" + value + "\"";
+          },
+          "", "slurm time"));
   cmd->add_option("--mem-per-task", args->site.mem_per_task,
                   "sbatch --mem of each job (docs/scale.md says what each kind needs)")
       ->default_str("4G");

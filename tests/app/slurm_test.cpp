@@ -339,6 +339,11 @@ TEST(SlurmScripts, EveryStageWaitsForTheOneBeforeToEndHoweverItEnded) {
   EXPECT_NE(calls.find("--dependency=afterany:101 "), std::string::npos) << calls;
   EXPECT_NE(calls.find("--dependency=afterany:102 "), std::string::npos) << calls;
   EXPECT_EQ(calls.find("afterok"), std::string::npos) << calls;
+  // The render's last job only reads records: it asks for little, not a task's share.
+  const std::string check = ReadText(dir / "job" / "merge.sbatch"), tasks = ReadText(dir / "job" / "tasks.sbatch");
+  for (const char* line : {"#SBATCH --mem=256M\n", "#SBATCH --cpus-per-task=1\n", "#SBATCH --time=00:10:00\n"})
+    EXPECT_NE(check.find(line), std::string::npos) << line << " not in\n" << check;
+  EXPECT_NE(tasks.find("#SBATCH --mem=4G\n"), std::string::npos) << tasks;
   // status says what Slurm says of each job (here a stand-in scontrol: the
   // solver pass failed, its array pending), beside the records it counts.
   WriteText(dir / "bin" / "scontrol",
@@ -384,6 +389,16 @@ TEST(SlurmScripts, ACommandItsTasksWouldRefuseIsRefusedBeforeAnythingIsWritten) 
   EXPECT_TRUE(IsOneLineUserError(RunPhos("slurm render --tasks 2 --job-dir " + job + " " + scene + out),
                                  "--out: not an option of phos slurm render; the command's own arguments go after --"));
   EXPECT_FALSE(fs::exists(job));
+  // A time limit Slurm would refuse, refused before anything else.
+  EXPECT_TRUE(IsOneLineUserError(
+      RunPhos("slurm render --tasks 2 --time-per-task 90min --job-dir " + job + " -- " + scene + out),
+      "--time-per-task: expected a Slurm time"));
+  for (const char* time : {"90", "1:30:00", "2-12", "2-12:30:00", "UNLIMITED"})
+    EXPECT_EQ(RunPhos("slurm render --tasks 2 --no-submit --time-per-task " + std::string(time) + " --job-dir " +
+                      (dir / (std::string("t") + time)).string() + " -- " + scene + out)
+                  .exit_code,
+              0)
+        << time;
   // Empty paths: one line each, not an internal error.
   EXPECT_TRUE(IsOneLineUserError(RunPhos("slurm render --tasks 2 --job-dir '' -- " + scene + out), "--job-dir"));
   EXPECT_TRUE(IsOneLineUserError(RunPhos("slurm render --tasks 2 --job-dir " + job + " -- " + scene + " --out ''"),
