@@ -538,6 +538,13 @@ void RunFitMapMerge(const MapArgs& args) {
   WriteMapOutputs(args, map, tiles.string());
 }
 
+// `path` a folder or nothing yet (an output folder a run would create): a file there is one line naming `option`.
+void RequireFolderOrNothing(const std::string& path, const char* option) {
+  std::error_code ec;
+  if (std::filesystem::exists(path, ec) && !std::filesystem::is_directory(path, ec))
+    ThrowUserError("", option, "'" + path + "' is a file, not a folder");
+}
+
 // --check: what a map or a tile would refuse before fitting, read from the
 // session's records and its first frame only: a decay session with frames,
 // and --tile i/N with no tile of N empty (so 'phos slurm map' refuses N
@@ -546,6 +553,8 @@ void CheckFitMap(const MapArgs& args) {
   int index = 0, count = 1;
   if (!args.tile.empty() && !ParseTaskIndex(args.tile, &index, &count))
     ThrowUserError("", "--tile", "expected i/N with 0 <= i < N, got \"" + args.tile + "\"");
+  ParseWeightsOption(args.weights);
+  RequireFolderOrNothing(args.out, "--out");
   const std::filesystem::path dir = args.session;
   ReadDecaySession(dir);
   const FrameRecords records = ReadFrameRecords(dir);
@@ -700,6 +709,7 @@ void RunFitBatch(const BatchArgs& args) {
     items = std::vector<fs::path>(items.begin() + first, items.begin() + last);
   }
   if (args.check) {
+    RequireFolderOrNothing(args.out, "--out");
     std::printf("phos fit batch: %zu item(s) to fit or keep (--check: nothing fitted)\n", items.size());
     return;
   }
@@ -944,7 +954,8 @@ void RegisterFit(CLI::App& app) {
   mp->add_flag("--json", map_args->json, "print one JSON object (size, frames, kr percentiles, outputs)");
   mp->add_flag("--check", map_args->check,
                "check the session (a decay session with frames) and --tile against its rows, then stop:\n"
-               "nothing fitted or written ('phos slurm map' checks its tasks' command so)");
+               "nothing fitted or written ('phos slurm map' checks its tasks' command so)")
+      ->excludes("--merge");
   mp->callback([map_args] { RunFitMap(*map_args); });
 
   auto batch = std::make_shared<BatchArgs>();
@@ -963,9 +974,6 @@ void RegisterFit(CLI::App& app) {
       ->check(CLI::Range(1, 4));
   b->add_option("--weights", batch->weights, "poisson (default) or none");
   b->add_flag("--json", batch->json, "print one JSON object (the rows of the summary table) instead of the table");
-  b->add_flag("--check", batch->check,
-              "find the items and check the options, then stop: nothing fitted or written\n"
-              "('phos slurm batch' checks its tasks' command so)");
   b->add_option("--task", batch->task,
                 "i/N: fit only the i-th (0-based) of N near-equal consecutive shares of the items (a Slurm\n"
                 "array task); no summary.csv (the merge writes it); then <out>/tasks/task-i-of-N.json");
@@ -973,6 +981,10 @@ void RegisterFit(CLI::App& app) {
               "fit nothing: write summary.csv of items all fitted already (by the array tasks); an item\n"
               "without its .done.json is an error naming it")
       ->excludes("--task");
+  b->add_flag("--check", batch->check,
+              "find the items and check the options, then stop: nothing fitted or written\n"
+              "('phos slurm batch' checks its tasks' command so)")
+      ->excludes("--merge");
   b->callback([batch] { RunFitBatch(*batch); });
   RequireFiniteNumbers(*fit);
 }

@@ -49,6 +49,7 @@ struct RenderArgs {
   std::string scene, out, times, transport = "direct";
   bool no_phosphorescence = false, json = false;
   bool check = false;  // --check: every refusal a run would make up to here, then nothing written
+  std::string exr_compression = "zip";
   int spp = 0, width = 0, height = 0;
   std::string exposure_text;  // --exposure as given: a number or "auto"
   bool exposure_given = false;
@@ -139,7 +140,9 @@ std::string RangeInputs(const RenderArgs& a, const render::Scene& scene, const F
          " size=" + std::to_string(a.width) + "x" + std::to_string(a.height) + " exposure=" + FormatDouble(a.exposure) +
          " night=" + FormatDouble(a.night_vision_cd) + " no_phosphorescence=" + std::to_string(a.no_phosphorescence) +
          " indirect_visibility=" + std::to_string(a.indirect_visibility) + " materials=" + materials +
-         " frames=" + std::to_string(range.first) + ":" + std::to_string(range.last);
+         " frames=" + std::to_string(range.first) + ":" + std::to_string(range.last) +
+         // Only when not the default, so that ranges rendered before the option stay done.
+         (a.exr_compression == "zip" ? "" : " exr=" + a.exr_compression);
 }
 
 // Where the solver pass writes the state at frame f.
@@ -153,6 +156,14 @@ std::filesystem::path CheckpointPath(const std::string& dir, std::size_t frame) 
 std::size_t LatestCheckpoint(const std::string& dir, std::size_t frame) {
   std::size_t best = SIZE_MAX;
   std::error_code ec;
+  if (!std::filesystem::exists(dir, ec)) {
+    // A solver pass that failed or was cancelled before it made the folder
+    // (phos slurm's tasks run after it however it ended): the states start
+    // from the scene's start, the same frames, later.
+    std::fprintf(stderr, "phos render: warning: --checkpoints %s: no such folder; the states start from the scene's start\n",
+                 dir.c_str());
+    return best;
+  }
   static const std::regex form(R"(state-(\d{6,9})\.bin)");
   for (const auto& entry : std::filesystem::directory_iterator(dir, ec)) {
     std::smatch m;
@@ -532,6 +543,10 @@ void Run(const RenderArgs& args) {
   if (args.solve_only && args.checkpoints.empty())
     ThrowUserError("", "--solve-only", "writes the states to --checkpoints DIR: give it");
   if (!args.solve_only && args.out.empty()) ThrowUserError("", "--out", "is required (except with --solve-only)");
+  if (args.indirect_visibility && transport != Transport::kDss)
+    ThrowUserError("", "--indirect-visibility", "is for --transport dss");
+  if (!args.solve_only && std::filesystem::exists(args.out) && !std::filesystem::is_directory(args.out))
+    ThrowUserError("", "--out", "'" + args.out + "' is a file, not a folder");
   if (args.check) {
     std::printf("%s: the command would render %zu frame(s) (--check: nothing written)\n", scene.name.c_str(),
                 args.solve_only ? std::size_t{0} : range.last - range.first);
@@ -585,8 +600,6 @@ void Run(const RenderArgs& args) {
   }
   FrameOptions options = DefaultFrameOptions(scene, transport);
   if (args.spp > 0) options.spp = options.direct_spp = args.spp;
-  if (args.indirect_visibility && transport != Transport::kDss)
-    ThrowUserError("", "--indirect-visibility", "is for --transport dss");
   options.indirect_visibility = args.indirect_visibility;
   nlohmann::json choice_json;
   std::string choice_line;
@@ -664,7 +677,7 @@ void Run(const RenderArgs& args) {
 
     const std::filesystem::path exr = std::filesystem::path(args.out) / (FrameStem(f) + ".exr");
     const std::filesystem::path png = std::filesystem::path(args.out) / (FrameStem(f) + ".png");
-    WriteExr(exr, rgb, bands, scene.bands);
+    WriteExr(exr, rgb, bands, scene.bands, args.exr_compression);
     nlohmann::json entry = {{"t", t},
                             {"exr", exr.string()},
                             {"png", png.string()},
@@ -814,6 +827,12 @@ void RegisterRender(CLI::App& app) {
                   "OBJECT=FILE: give the object of that name this phosphor material (repeatable),\n"
                   "e.g. one just fitted by 'phos fit', without editing the scene");
   cmd->add_flag("--json", args->json, "Print one JSON object: frames with t, exr, png and seconds");
+  cmd->add_option("--exr-compression", args->exr_compression,
+                  "How the EXR frames are compressed: zip, zips, piz, rle or none keep every float (none writes\n"
+                  "fastest and largest, zip smallest of those here); pxr24 rounds floats to 24 bits; dwaa and\n"
+                  "dwab are lossy, for viewing (docs/render.md, 'EXR compression', measures the trade)")
+      ->default_str("zip")
+      ->check(CLI::IsMember({"zip", "zips", "piz", "rle", "none", "pxr24", "dwaa", "dwab"}));
   cmd->add_flag("--check", args->check,
                 "Load the scene and check every option as a run would, then stop before the solver: write\n"
                 "nothing (exit 0: the run would start; 'phos slurm render' checks its tasks' command so)");

@@ -179,7 +179,10 @@ std::string Script(const SubmitArgs& args, const std::string& name, int array_ta
 
 std::string Command(const std::vector<std::string>& words) {
   std::string s;
-  for (const std::string& w : words) s += (s.empty() ? "" : " ") + (w.rfind("${", 0) == 0 ? w : ShellQuote(w));
+  // Every word quoted but the array task's index this file writes ("${SLURM_ARRAY_TASK_ID}/N"), which the
+  // job's shell must expand: a user's word that starts with ${ is theirs, not the shell's.
+  for (const std::string& w : words)
+    s += (s.empty() ? "" : " ") + (w.rfind("${SLURM_ARRAY_TASK_ID}/", 0) == 0 ? w : ShellQuote(w));
   return s;
 }
 
@@ -190,28 +193,35 @@ constexpr const char* kDependency = "afterany";
 // Runs sbatch --parsable on a script; the job id, or a UserError with sbatch's words.
 std::string Submit(const std::string& sbatch, const std::string& script, const std::string& dependency,
                    const std::string& after) {
+  // The id from stdout alone: many sites print notes on stderr ("sbatch:
+  // info: Setting QOS ...") and submit all the same (exit status 0).
+  const fs::path errors = fs::temp_directory_path() / ("phos-sbatch-" + std::to_string(::getpid()) + ".err");
   const std::string command = ShellQuote(sbatch) + " --parsable" +
                               (after.empty() ? "" : " --dependency=" + dependency + ":" + after) + " " +
-                              ShellQuote(script) + " 2>&1";
+                              ShellQuote(script) + " 2>" + ShellQuote(errors.string());
   FILE* pipe = popen(command.c_str(), "r");
   if (!pipe) ThrowUserError("", "--sbatch", "cannot run '" + sbatch + "'");
-  std::string out;
+  std::string out, line, id;
   char buffer[512];
   while (std::fgets(buffer, sizeof buffer, pipe)) out += buffer;
   const int status = pclose(pipe);
-  while (!out.empty() && (out.back() == '\n' || out.back() == ' ')) out.pop_back();
-  if (status != 0 || out.empty() || out.find_first_not_of("0123456789;") != out.find(';')) {
-    // sbatch's lines ("sbatch: error: ..."), each without its prefix, on one line.
-    std::string said, line;
-    std::istringstream lines(out);
-    while (std::getline(lines, line)) {
-      for (const char* prefix : {"sbatch: error: ", "sbatch: "})
-        if (line.rfind(prefix, 0) == 0) line.erase(0, std::strlen(prefix));
-      if (line.find_first_not_of(" \t") != std::string::npos) said += (said.empty() ? "" : "; ") + line;
-    }
-    ThrowUserError(script, "sbatch", "refused: " + (said.empty() ? "exit status " + std::to_string(status) : said));
+  std::error_code ec;
+  const std::string stderr_text = fs::exists(errors, ec) ? ReadFileText(errors, 1 << 20) : "";
+  fs::remove(errors, ec);
+  std::istringstream out_lines(out);
+  while (std::getline(out_lines, line))  // its last line: "id" or "id;cluster" (federated clusters)
+    if (line.find_first_not_of(" \t\r") != std::string::npos) id = line.substr(0, line.find(';'));
+  const bool numeric = !id.empty() && id.find_first_not_of("0123456789") == std::string::npos;
+  if (status == 0 && numeric) return id;
+  // sbatch's lines ("sbatch: error: ..."), each without its prefix, on one line.
+  std::string said;
+  std::istringstream lines(stderr_text + "\n" + out);
+  while (std::getline(lines, line)) {
+    for (const char* prefix : {"sbatch: error: ", "sbatch: "})
+      if (line.rfind(prefix, 0) == 0) line.erase(0, std::strlen(prefix));
+    if (line.find_first_not_of(" \t\r") != std::string::npos) said += (said.empty() ? "" : "; ") + line;
   }
-  return out.substr(0, out.find(';'));  // "id;cluster" on federated clusters
+  ThrowUserError(script, "sbatch", "refused: " + (said.empty() ? "exit status " + std::to_string(status) : said));
 }
 
 // Runs the tasks' command with --check (render, fit map, fit batch: every
@@ -361,20 +371,44 @@ void RunSubmit(const SubmitArgs& args) {
 
 // ---- phos slurm status ------------------------------------------------------
 
+// How many array tasks an scontrol record stands for: its ArrayTaskId, "3",
+// or the pending rest of an array as one record, "0-1" or "2,4-7%2" (1 for
+// a job that is not an array).
+int ArrayTasksOf(const std::string& array_task_id) {
+  if (array_task_id.empty()) return 1;
+  const std::string ids = array_task_id.substr(0, array_task_id.find('%'));  // "%2": at most 2 at once
+  int tasks = 0;
+  std::istringstream parts(ids);
+  std::string part;
+  while (std::getline(parts, part, ',')) {
+    const std::size_t dash = part.find('-');
+    if (dash == std::string::npos) {
+      ++tasks;
+      continue;
+    }
+    const long first = std::strtol(part.c_str(), nullptr, 10), last = std::strtol(part.c_str() + dash + 1, nullptr, 10);
+    tasks += last >= first ? static_cast<int>(last - first + 1) : 1;
+  }
+  return std::max(tasks, 1);
+}
+
 // Slurm's own word on a job, for status beside the done records: "FAILED",
 // "PENDING (DependencyNeverSatisfied)", an array's "2 COMPLETED, 1 RUNNING";
 // "" when scontrol cannot say (not installed, no cluster, or a job older than
-// the controller keeps: slurm.conf's MinJobAge, 300 s by default).
-std::string SlurmState(const std::string& job_id) {
-  FILE* pipe = popen(("scontrol -o show job " + ShellQuote(job_id) + " 2>/dev/null").c_str(), "r");
+// the controller keeps: slurm.conf's MinJobAge, 300 s by default). A
+// controller that does not answer within 5 s (scontrol would wait about 18 s
+// a call) is asked nothing more: *answering turns false.
+std::string SlurmState(const std::string& job_id, bool* answering) {
+  if (!*answering) return "";
+  FILE* pipe = popen(("timeout 5 scontrol -o show job " + ShellQuote(job_id) + " 2>/dev/null").c_str(), "r");
   if (!pipe) return "";
-  std::map<std::string, int> counts;  // by state (with its reason while pending)
-  int jobs = 0;
+  std::map<std::string, int> counts;  // array tasks by state (with its reason while pending)
+  int tasks = 0;
   char buffer[4096];
   std::string line;
   while (std::fgets(buffer, sizeof buffer, pipe)) {
     line += buffer;
-    if (line.empty() || line.back() != '\n') continue;  // one job per line, possibly longer than the buffer
+    if (line.empty() || line.back() != '\n') continue;  // one record per line, possibly longer than the buffer
     auto field = [&](const std::string& key) {
       const std::size_t at = line.find(" " + key + "=");
       if (at == std::string::npos) return std::string();
@@ -385,13 +419,16 @@ std::string SlurmState(const std::string& job_id) {
     const std::string reason = field("Reason");
     if (!state.empty()) {
       if (state == "PENDING" && !reason.empty() && reason != "None") state += " (" + reason + ")";
-      ++counts[state];
-      ++jobs;
+      const int n = ArrayTasksOf(field("ArrayTaskId"));
+      counts[state] += n;
+      tasks += n;
     }
     line.clear();
   }
-  pclose(pipe);
-  if (jobs == 1) return counts.begin()->first;
+  const int status = pclose(pipe);
+  if (WIFEXITED(status) && WEXITSTATUS(status) == 124) *answering = false;  // timeout(1)'s code
+  if (tasks == 0) return "";
+  if (tasks == 1 && !counts.empty()) return counts.begin()->first;
   std::string said;
   for (const auto& [state, n] : counts) said += (said.empty() ? "" : ", ") + std::to_string(n) + " " + state;
   return said;
@@ -409,6 +446,7 @@ void RunStatus(const StatusArgs& args) {
   nlohmann::json stages = nlohmann::json::array();
   bool all = true;
   std::string text, not_done;  // not_done: the stages and tasks not done, for --require-done's one line
+  bool slurm_answering = true;
   for (const SlurmStage& s : job.stages) {
     std::vector<int> missing;
     double seconds = 0;
@@ -431,13 +469,15 @@ void RunStatus(const StatusArgs& args) {
       std::string which = s.name;
       if (s.name == "tasks") {
         which += " ";
-        for (std::size_t k = 0; k < missing.size(); ++k) which += (k ? "," : "") + std::to_string(missing[k]);
+        const std::size_t shown = std::min<std::size_t>(missing.size(), 20);  // one line, even of 100,000 tasks
+        for (std::size_t k = 0; k < shown; ++k) which += (k ? "," : "") + std::to_string(missing[k]);
+        if (shown < missing.size()) which += " and " + std::to_string(missing.size() - shown) + " more";
         which += " of " + std::to_string(s.done.size());
       }
       not_done += (not_done.empty() ? "" : "; ") + which + " not done";
     }
     all = all && whole;
-    const std::string slurm_state = s.job_id.empty() ? "" : SlurmState(s.job_id);
+    const std::string slurm_state = s.job_id.empty() ? "" : SlurmState(s.job_id, &slurm_answering);
     stages.push_back({{"name", s.name},
                       {"job_id", s.job_id},
                       {"slurm_state", slurm_state},
@@ -513,19 +553,11 @@ void AddSubmit(CLI::App& slurm, const std::string& kind, const std::string& what
                                                  "', --out included")
       ->required();
   // An option that is not phos slurm's is most often the command's, given
-  // before or without the --: say so, instead of CLI11's bare "not expected".
-  cmd->allow_extras();
-  cmd->callback([args, cmd] {
-    std::string words;  // CLI11 leaves the -- itself among the extras
-    for (const std::string& w : cmd->remaining())
-      if (w != "--") words += (words.empty() ? "" : " ") + w;
-    if (!words.empty()) {
-      ThrowUserError("", words,
-                     "not an option of phos slurm " + args->kind +
-                         "; the command's own arguments go after --, e.g. phos slurm " + args->kind +
-                         " --tasks 2 --job-dir J -- " + (args->kind == "render" ? "SCENE" : args->kind == "map" ? "SESSION" : "CAPTURES") +
-                         " --out OUT");
-    }
+  // before or without the --: RunCommand adds this footer to CLI11's "not
+  // expected" (and --help shows it).
+  cmd->footer("The command's own arguments go after --, e.g. phos slurm " + kind + " --tasks 2 --job-dir J -- " +
+              (kind == "render" ? "SCENE" : kind == "map" ? "SESSION" : "CAPTURES") + " --out OUT");
+  cmd->callback([args] {
     RunSubmit(*args);
   });
 }

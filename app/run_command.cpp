@@ -39,12 +39,17 @@ int RunCommand(int argc, char** argv, const char* command, void (*register_comma
   } catch (const CLI::ParseError& e) {
     // Name the (possibly nested) command the mistake was made in: "phos fit decay-curve".
     std::string name;
-    for (const CLI::App* level = &app; !level->get_subcommands().empty();) {
+    const CLI::App* level = &app;
+    while (!level->get_subcommands().empty()) {
       level = level->get_subcommands().front();
       name += " " + level->get_name();
     }
+    // Words it does not take: its footer, where it has one, says where they go (phos slurm's --).
+    const std::string hint = dynamic_cast<const CLI::ExtrasError*>(&e) && !level->get_footer().empty()
+                                 ? "; " + level->get_footer()
+                                 : "";
     std::fflush(stdout);  // what was printed before comes before the error, in a log too
-    std::fprintf(stderr, "phos%s: %s (see 'phos%s --help')\n", name.c_str(), e.what(), name.c_str());
+    std::fprintf(stderr, "phos%s: %s%s (see 'phos%s --help')\n", name.c_str(), e.what(), hint.c_str(), name.c_str());
     return 2;
   } catch (const phos::UserError& e) {
     // A job's log holds both streams: the lines an error refers to ("see the

@@ -47,6 +47,13 @@ start() {
     echo "slurm-one-node.sh: $dir: a cluster is already running there ('$0 stop $dir' first)" >&2
     exit 2
   fi
+  # A folder of its own: new, empty, or one this script made before (its
+  # slurm.conf says so). Never /tmp or a home folder, whose mode it sets.
+  if [ -e "$dir" ] && [ -n "$(ls -A "$dir" 2>/dev/null)" ] &&
+    ! grep -qs '^# Written by scripts/slurm-one-node.sh' "$dir/slurm.conf"; then
+    echo "slurm-one-node.sh: $dir: not empty and not a cluster folder of this script; give a new folder (e.g. /tmp/slurm)" >&2
+    exit 2
+  fi
   mkdir -p "$dir/state" "$dir/spool"
   dir=$(cd "$dir" && pwd)
   chmod 0755 "$dir"  # slurmd and the jobs read the config
@@ -113,7 +120,10 @@ stop() {
   dir=$(cd "$dir" && pwd)
   if [ -f "$dir/slurm.conf" ]; then
     export SLURM_CONF=$dir/slurm.conf
-    scancel --full --user="$(id -un)" >/dev/null 2>&1 || true
+    # Every job, whoever submitted it (a user's, under sudo, is not root's).
+    local ids
+    ids=$(squeue -h -o %A 2>/dev/null | sort -u || true)
+    [ -n "$ids" ] && scancel --full $ids >/dev/null 2>&1 || true
     for _ in $(seq 75); do
       [ -z "$(squeue -h -t running,completing 2>/dev/null)" ] && break
       sleep 0.2

@@ -23,12 +23,17 @@ std::vector<std::vector<double>> ReadIrradiance(const JsonField& irradiance, std
   std::vector<std::vector<double>> frames;
   if (!irradiance.At(0).value().is_object()) {
     if (irradiance.ArraySize() > kMaxFrames) irradiance.Fail("more than a million frames");
-    for (std::size_t f = 0; f < irradiance.ArraySize(); ++f) frames.push_back(irradiance.At(f).NumberArray(nb, 0.0));
+    for (std::size_t f = 0; f < irradiance.ArraySize(); ++f) {
+      if (irradiance.At(f).value().is_object())
+        irradiance.At(f).Fail("a phase among rows: give a row per frame, or phases only");
+      frames.push_back(irradiance.At(f).NumberArray(nb, 0.0));
+    }
     return frames;
   }
   IrradianceSchedule schedule;
   for (std::size_t k = 0; k < irradiance.ArraySize(); ++k) {
     const JsonField phase = irradiance.At(k);
+    if (!phase.value().is_object()) phase.Fail("a row among phases: give phases only, or a row per frame");
     phase.RejectUnknownKeys({"duration_s", "irradiance", "label"});
     const double duration_s = phase["duration_s"].NumberInRange(0, static_cast<double>(kMaxFrames) * dt_s);
     std::vector<double> E = phase.Has("irradiance") ? phase["irradiance"].NumberArray(nb, 0.0)

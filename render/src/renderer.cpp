@@ -195,12 +195,13 @@ void WriteImageAtomically(const std::filesystem::path& path, const OIIO::ImageSp
 
 }  // namespace
 
-void WriteExr(const std::filesystem::path& path, const Image& rgb, const Image& bands, const SpectralGrid& grid) {
+void WriteExr(const std::filesystem::path& path, const Image& rgb, const Image& bands, const SpectralGrid& grid,
+              const std::string& compression) {
   const int nb = bands.channels;
   OIIO::ImageSpec spec(rgb.width, rgb.height, 3 + nb, OIIO::TypeDesc::FLOAT);
   spec.channelnames = {"R", "G", "B"};
   for (int b = 0; b < nb; ++b) spec.channelnames.push_back("band" + std::to_string(b));
-  spec.attribute("compression", "zip");
+  spec.attribute("compression", compression);
   std::string edges;
   for (double e : grid.edges_nm) {
     if (!edges.empty()) edges += ',';

@@ -66,6 +66,37 @@ TEST(RenderCommand, NoPhosphorescenceLeavesTheDarkBoxBlack) {
   EXPECT_FALSE(nlohmann::json::parse(b.out)["phosphorescence"].get<bool>());
 }
 
+TEST(RenderCommand, ExrCompressionIsTheOneAskedForAndLosslessOnesKeepEveryFloat) {
+  TempDir dir;
+  auto render = [&](const std::string& compression) {
+    const std::string out = (dir / compression).string();
+    const CommandResult r = RunPhos("render " + kCornell + " --times 20 --width 32 --height 24 --transport path --spp 1" +
+                                    " --exr-compression " + compression + " --out " + out);
+    EXPECT_EQ(r.exit_code, 0) << r.err;
+    auto in = OIIO::ImageInput::open(out + "/frame-0000.exr");
+    EXPECT_TRUE(in) << compression;
+    if (!in) return std::make_pair(std::string(), std::vector<float>());
+    const OIIO::ImageSpec& spec = in->spec();
+    std::vector<float> pixels(static_cast<std::size_t>(spec.width) * spec.height * spec.nchannels);
+    in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, pixels.data());
+    return std::make_pair(std::string(spec.get_string_attribute("compression")), pixels);
+  };
+  const auto zip = render("zip");
+  EXPECT_EQ(zip.first, "zip");
+  for (const char* lossless : {"none", "piz", "rle", "zips"}) {
+    const auto other = render(lossless);
+    EXPECT_EQ(other.first, lossless);
+    EXPECT_TRUE(other.second == zip.second) << lossless;  // bit for bit
+  }
+  const auto pxr24 = render("pxr24");
+  EXPECT_EQ(pxr24.first, "pxr24");
+  ASSERT_EQ(pxr24.second.size(), zip.second.size());
+  for (std::size_t i = 0; i < zip.second.size(); ++i)  // floats rounded to 24 bits: a relative 2^-15 at most
+    EXPECT_NEAR(pxr24.second[i], zip.second[i], 1e-4 * std::fabs(zip.second[i]) + 1e-30) << i;
+  EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + kCornell + " --exr-compression b44 --out " + (dir / "x").string()),
+                                 "--exr-compression"));
+}
+
 TEST(RenderCommand, PathTransportRenders) {
   TempDir dir;
   const CommandResult r = RunPhos("render " + kCornell + " --out " + dir.path().string() +

@@ -274,6 +274,8 @@ std::string FakeSbatch(const TempDir& dir, int fail_at) {
                                 (bin / "calls").string() + "\n" +
                                 "if [ $n -eq " + std::to_string(fail_at) +
                                 " ]; then echo 'sbatch: error: Batch job submission failed' >&2; exit 1; fi\n"
+                                // A note on stderr, as many sites print, on a submission that succeeds.
+                                "echo 'sbatch: info: Setting QOS to normal' >&2\n"
                                 "echo $((100 + n))\n");
   WriteText(bin / "scancel", "#!/bin/bash\necho \"$@\" >> " + (bin / "cancelled").string() + "\n");
   fs::permissions(bin / "sbatch", fs::perms::owner_all);
@@ -349,8 +351,8 @@ TEST(SlurmScripts, EveryStageWaitsForTheOneBeforeToEndHoweverItEnded) {
   WriteText(dir / "bin" / "scontrol",
             "#!/bin/bash\ncase $4 in\n"
             "101) echo 'JobId=101 JobName=phos-render-solve JobState=FAILED Reason=NonZeroExitCode Dependency=(null)' ;;\n"
-            "102) echo 'JobId=102 ArrayJobId=102 ArrayTaskId=0 JobState=PENDING Reason=Dependency Dependency=afterany:101'\n"
-            "     echo 'JobId=103 ArrayJobId=102 ArrayTaskId=1 JobState=PENDING Reason=Dependency Dependency=afterany:101' ;;\n"
+            // A pending array's tasks are one record (ArrayTaskId=0-1), as Slurm prints them.
+            "102) echo 'JobId=102 ArrayJobId=102 ArrayTaskId=0-1 JobState=PENDING Reason=Dependency Dependency=afterany:101' ;;\n"
             "*) exit 1 ;;\nesac\n");
   fs::permissions(dir / "bin" / "scontrol", fs::perms::owner_all);
   const CommandResult status = Shell("PATH=" + (dir / "bin").string() + ":$PATH " + std::string(PHOS_BINARY) +
@@ -359,12 +361,42 @@ TEST(SlurmScripts, EveryStageWaitsForTheOneBeforeToEndHoweverItEnded) {
   EXPECT_NE(status.out.find("  tasks  0/2 done; not done: 0 1  [job 102: 2 PENDING (Dependency)]"), std::string::npos)
       << status.out;
   EXPECT_NE(status.out.find("  merge  not done  [job 103]"), std::string::npos) << status.out;  // scontrol: unknown
+  // A controller that does not answer (SLURM_CONF still set after the cluster
+  // stopped): status asks once, gives up after scontrol's 5 s, and asks no more.
+  WriteText(dir / "bin" / "scontrol", "#!/bin/bash\necho \"$@\" >> " + (dir / "bin" / "asked").string() +
+                                          "\nexec sleep 30\n");
+  const CommandResult silent = Shell("PATH=" + (dir / "bin").string() + ":$PATH " + std::string(PHOS_BINARY) +
+                                     " slurm status " + (dir / "job").string());
+  EXPECT_NE(silent.out.find("  solve  not done  [job 101]"), std::string::npos) << silent.out;
+  EXPECT_EQ(ReadText(dir / "bin" / "asked"), "-o show job 101\n");
+  // A task whose solver pass left no states folder at all (cancelled before
+  // it made one) starts from the scene's start: the same frames, said.
+  const std::string scene = Fixture("scenes/cornell-phosphor.json").string();
+  const CommandResult task = RunPhos("render " + scene + " --out " + (dir / "task").string() +
+                                     " --times 20,40 --width 32 --height 24 --task 1/2 --checkpoints " +
+                                     (dir / "no-states").string());
+  ASSERT_EQ(task.exit_code, 0) << task.err;
+  EXPECT_NE(task.err.find("no-states: no such folder; the states start from the scene's start"), std::string::npos)
+      << task.err;
+  ASSERT_EQ(RunPhos("render " + scene + " --out " + (dir / "whole").string() + " --times 20,40 --width 32 --height 24")
+                .exit_code,
+            0);
+  EXPECT_TRUE(render::ReadImage(dir / "task" / "frame-0001.exr").pixels ==
+              render::ReadImage(dir / "whole" / "frame-0001.exr").pixels);
+  // A word of the user's that starts with ${ is quoted like any other: only the array index is the shell's.
+  const CommandResult dollar = RunPhos("slurm render --tasks 2 --no-submit --job-dir " + (dir / "job2").string() +
+                                       " -- " + scene + " --times 20,40 --out '${HOME}/phos-test-out'");
+  ASSERT_EQ(dollar.exit_code, 0) << dollar.err;
+  const std::string script = ReadText(dir / "job2" / "tasks.sbatch");
+  EXPECT_NE(script.find(" '${HOME}/phos-test-out' "), std::string::npos) << script;
+  EXPECT_NE(script.find("'--task' ${SLURM_ARRAY_TASK_ID}/2 "), std::string::npos) << script;
 }
 
 TEST(SlurmScripts, ACommandItsTasksWouldRefuseIsRefusedBeforeAnythingIsWritten) {
   TempDir dir;
   const std::string sbatch = FakeSbatch(dir, 0), scene = Fixture("scenes/cornell-phosphor.json").string();
   const std::string job = (dir / "job").string(), out = " --out " + (dir / "frames").string();
+  WriteText(dir / "afile", "");  // an --out that is a file
   auto refused = [&](const std::string& kind, const std::string& command, const std::string& why) {
     const CommandResult r =
         RunPhos("slurm " + kind + " --tasks 10 --sbatch " + sbatch + " --job-dir " + job + " -- " + command);
@@ -384,11 +416,20 @@ TEST(SlurmScripts, ACommandItsTasksWouldRefuseIsRefusedBeforeAnythingIsWritten) 
                                      session + out);
   EXPECT_TRUE(IsOneLineUserError(rows, "has no rows: more tiles than the frames' 30 rows")) << rows.err;
   EXPECT_FALSE(fs::exists(job));
+  refused("map", session + out + " --weights bogus", "--weights");
+  refused("map", session + " --out " + (dir / "afile").string(), "is a file, not a folder");
+  // --check fits and writes nothing, and is not for a merge (which would write).
+  EXPECT_TRUE(IsOneLineUserError(RunPhos("fit map " + session + out + " --merge --check"), "--check"));
   EXPECT_FALSE(fs::exists(dir / "bin" / "calls"));  // sbatch never ran
   // The command's options before or without the --: said so.
-  EXPECT_TRUE(IsOneLineUserError(RunPhos("slurm render --tasks 2 --job-dir " + job + " " + scene + out),
-                                 "--out: not an option of phos slurm render; the command's own arguments go after --"));
+  for (const std::string& words : {" " + scene + out, out + " -- " + scene, " --transport path -- " + scene + out})
+    EXPECT_TRUE(IsOneLineUserError(RunPhos("slurm render --tasks 2 --job-dir " + job + words),
+                                   "The command's own arguments go after --"))
+        << words;
   EXPECT_FALSE(fs::exists(job));
+  // What a task would refuse after its scene is loaded: checked too.
+  refused("render", scene + " --out " + (dir / "afile").string(), "--out: '" + (dir / "afile").string() + "' is a file");
+  refused("render", scene + out + " --indirect-visibility", "--indirect-visibility: is for --transport dss");
   // A time limit Slurm would refuse, refused before anything else.
   EXPECT_TRUE(IsOneLineUserError(
       RunPhos("slurm render --tasks 2 --time-per-task 90min --job-dir " + job + " -- " + scene + out),

@@ -284,7 +284,8 @@ TEST(EditorSolve, BadPhasesNameTheField) {
             std::string::npos);
   EXPECT_NE(error([](nlohmann::json& c) { c["irradiance"][1]["duraton_s"] = 90; }).find("irradiance[1]"),
             std::string::npos);
-  EXPECT_NE(error([](nlohmann::json& c) { c["irradiance"][1] = {0, 0, 0}; }).find("irradiance[1]"), std::string::npos);
+  EXPECT_NE(error([](nlohmann::json& c) { c["irradiance"][1] = {0, 0, 0}; }).find("irradiance[1]: a row among phases"),
+            std::string::npos);
   EXPECT_NE(error([](nlohmann::json& c) { c["irradiance"][0]["irradiance"] = {1, 2}; }).find("irradiance[0].irradiance"),
             std::string::npos);
   EXPECT_NE(error([](nlohmann::json& c) { c["irradiance"][0]["duration_s"] = -1; }).find("irradiance[0].duration_s"),

@@ -34,14 +34,15 @@ class IrradianceSchedule {
 // The schedule on a grid of frames of dt_s, frame f holding from f dt_s to
 // (f + 1) dt_s: each frame's irradiance is the mean of the phases over it, so
 // a switch inside a frame keeps that frame's dose (Eq. 8.1 then holds it
-// constant over the frame). A phase boundary within 1e-9 frames of the grid
-// is taken on it, so a frame wholly in one phase gets that phase's E exactly
-// (a dark frame stays exactly dark). The phases must last a whole number of
-// frames (within 1e-9 of one; the caller names its field if not: see
+// constant over the frame). A phase boundary t with |t / dt_s - k| <= 1e-9
+// max(1, k) for a whole k (the rounding of durations summed) is taken on
+// k dt_s, so a frame wholly in one phase gets that phase's E exactly (a
+// dark frame stays exactly dark). The phases must last a whole number of
+// frames (to the same relative 1e-9; the caller names its field if not: see
 // WholeFrames).
 std::vector<std::vector<double>> FrameIrradiance(const IrradianceSchedule& schedule, double dt_s);
 // The number of frames of dt_s that `total_s` lasts, or nullopt unless that
-// is a whole number (within 1e-9 of one).
+// is a whole number (to a relative 1e-9, as above).
 std::optional<long long> WholeFrames(double total_s, double dt_s);
 
 // The excitation rate a_i = sum_b ke_i[b] E[b] of every state (Eq. 8.1), in 1/s.

@@ -139,7 +139,12 @@ std::vector<double> BandToXyzWeights(const SpectralGrid& grid);
 
 // Linear EXR (32-bit float: glows are dim, half floats would lose them) with R, G, B and one channel per band ("band<b>"),
 // the band edges in the header attribute "phos:bands_nm". Atomic write.
-void WriteExr(const std::filesystem::path& path, const Image& rgb, const Image& bands, const SpectralGrid& grid);
+// `compression`: one of OpenEXR's as OpenImageIO names them; "zip" (the
+// default) and "none", "rle", "zips", "piz" keep every float; "pxr24"
+// (floats to 24 bits) and "dwaa", "dwab" (lossy, for viewing) do not
+// (docs/render.md, "EXR compression", measures the trade).
+void WriteExr(const std::filesystem::path& path, const Image& rgb, const Image& bands, const SpectralGrid& grid,
+              const std::string& compression = "zip");
 // For viewing: rgb * exposure through Reinhard's global operator (L / (1 + L)
 // on luminance), then the sRGB transfer: display values in [0, 1].
 Image ToneMap(const Image& rgb, double exposure);
