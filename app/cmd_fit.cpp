@@ -757,6 +757,10 @@ void RunFitBatch(const BatchArgs& args) {
     for (std::size_t i : todo)
       for (const char* suffix : {".json", ".html", ".done.json", ".failed.txt"}) names.push_back(rows[i].name + suffix);
     RemoveTemporaries(args.out, names);
+    // And an earlier run's failure of an item this task fits again: the merge
+    // reads .failed.txt as this chain's word, so a task killed before the
+    // item must leave it "not fitted yet", not failed for an old reason.
+    for (std::size_t i : todo) fs::remove(fs::path(args.out) / (rows[i].name + ".failed.txt"), ec);
   }
   if (args.merge) {
     // An item its task could not fit (its .failed.txt, the task's own words)

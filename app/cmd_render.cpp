@@ -545,7 +545,8 @@ void Run(const RenderArgs& args) {
   if (!args.solve_only && args.out.empty()) ThrowUserError("", "--out", "is required (except with --solve-only)");
   if (args.indirect_visibility && transport != Transport::kDss)
     ThrowUserError("", "--indirect-visibility", "is for --transport dss");
-  if (!args.solve_only && std::filesystem::exists(args.out) && !std::filesystem::is_directory(args.out))
+  if (std::error_code out_error; !args.solve_only && std::filesystem::exists(args.out, out_error) &&
+                                 !std::filesystem::is_directory(args.out, out_error))
     ThrowUserError("", "--out", "'" + args.out + "' is a file, not a folder");
   if (args.check) {
     std::printf("%s: the command would render %zu frame(s) (--check: nothing written)\n", scene.name.c_str(),
@@ -829,8 +830,8 @@ void RegisterRender(CLI::App& app) {
   cmd->add_flag("--json", args->json, "Print one JSON object: frames with t, exr, png and seconds");
   cmd->add_option("--exr-compression", args->exr_compression,
                   "How the EXR frames are compressed: zip, zips, piz, rle or none keep every float (none writes\n"
-                  "fastest and largest, zip smallest of those here); pxr24 rounds floats to 24 bits; dwaa and\n"
-                  "dwab are lossy, for viewing (docs/render.md, 'EXR compression', measures the trade)")
+                  "fastest and largest; zip or piz smallest); pxr24 rounds floats to 24 bits; dwaa and dwab\n"
+                  "are lossy on R, G, B, for viewing (docs/render.md, 'EXR compression', measures the trade)")
       ->default_str("zip")
       ->check(CLI::IsMember({"zip", "zips", "piz", "rle", "none", "pxr24", "dwaa", "dwab"}));
   cmd->add_flag("--check", args->check,

@@ -149,6 +149,22 @@ std::string TaskRecordName(const char* prefix, int i, int n) {
 }
 
 // One sbatch script: the site's options, then `body`.
+// Minutes of a Slurm time limit (sbatch(1): MM, MM:SS, HH:MM:SS, D-HH,
+// D-HH:MM, D-HH:MM:SS); nullopt for UNLIMITED or anything else.
+std::optional<double> SlurmMinutes(const std::string& time) {
+  static const std::regex form(R"((?:(\d+)-)?(\d+)(?::(\d+))?(?::(\d+))?)");
+  std::smatch m;
+  if (!std::regex_match(time, m, form)) return std::nullopt;
+  auto number = [&](int i) { return m[i].matched ? std::stod(m[i].str()) : 0.0; };
+  const int fields = 1 + m[3].matched + m[4].matched;  // after the day
+  if (m[1].matched) {  // D-HH[:MM[:SS]]
+    return number(1) * 1440 + number(2) * 60 + number(3) + number(4) / 60;
+  }
+  if (fields == 1) return number(2);                           // MM
+  if (fields == 2) return number(2) + number(3) / 60;          // MM:SS
+  return number(2) * 60 + number(3) + number(4) / 60;          // HH:MM:SS
+}
+
 // `light`: a job that only reads done records (the render's last, `phos
 // slurm status`, about 4 MB): one CPU, 256 MB and 10 minutes, not a task's
 // share, so that it does not wait in the queue for a task's resources.
@@ -158,7 +174,10 @@ std::string Script(const SubmitArgs& args, const std::string& name, int array_ta
   if (light) {
     site.cpus_per_task = 1;
     site.mem_per_task = "256M";
-    site.time_per_task = "00:10:00";
+    // 10 minutes, or the tasks' time if shorter (a partition whose MaxTime
+    // is below 10 minutes would refuse or never run it).
+    const std::optional<double> task_minutes = SlurmMinutes(site.time_per_task);
+    if (!task_minutes || *task_minutes >= 10) site.time_per_task = "00:10:00";
   }
   const fs::path logs = fs::path(args.job_dir) / "logs";
   std::string s = "#!/bin/bash\n# Written by phos slurm " + args.kind + " (docs/scale.md).\n";
@@ -190,12 +209,18 @@ std::string Command(const std::vector<std::string>& words) {
 // (see the top).
 constexpr const char* kDependency = "afterany";
 
+// A child's exit code from pclose's wait status (128 + the signal if one ended it).
+int ExitCode(int status) { return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status); }
+
 // Runs sbatch --parsable on a script; the job id, or a UserError with sbatch's words.
 std::string Submit(const std::string& sbatch, const std::string& script, const std::string& dependency,
                    const std::string& after) {
   // The id from stdout alone: many sites print notes on stderr ("sbatch:
   // info: Setting QOS ...") and submit all the same (exit status 0).
-  const fs::path errors = fs::temp_directory_path() / ("phos-sbatch-" + std::to_string(::getpid()) + ".err");
+  // Its stderr goes to the job folder's logs (made before any submission,
+  // ours): <script name>.sbatch-stderr, kept.
+  const fs::path errors =
+      fs::path(script).parent_path() / "logs" / (fs::path(script).stem().string() + ".sbatch-stderr");
   const std::string command = ShellQuote(sbatch) + " --parsable" +
                               (after.empty() ? "" : " --dependency=" + dependency + ":" + after) + " " +
                               ShellQuote(script) + " 2>" + ShellQuote(errors.string());
@@ -207,7 +232,6 @@ std::string Submit(const std::string& sbatch, const std::string& script, const s
   const int status = pclose(pipe);
   std::error_code ec;
   const std::string stderr_text = fs::exists(errors, ec) ? ReadFileText(errors, 1 << 20) : "";
-  fs::remove(errors, ec);
   std::istringstream out_lines(out);
   while (std::getline(out_lines, line))  // its last line: "id" or "id;cluster" (federated clusters)
     if (line.find_first_not_of(" \t\r") != std::string::npos) id = line.substr(0, line.find(';'));
@@ -221,7 +245,7 @@ std::string Submit(const std::string& sbatch, const std::string& script, const s
       if (line.rfind(prefix, 0) == 0) line.erase(0, std::strlen(prefix));
     if (line.find_first_not_of(" \t\r") != std::string::npos) said += (said.empty() ? "" : "; ") + line;
   }
-  ThrowUserError(script, "sbatch", "refused: " + (said.empty() ? "exit status " + std::to_string(status) : said));
+  ThrowUserError(script, "sbatch", "refused: " + (said.empty() ? "exit status " + std::to_string(ExitCode(status)) : said));
 }
 
 // Runs the tasks' command with --check (render, fit map, fit batch: every
@@ -242,7 +266,7 @@ void CheckCommand(const std::vector<std::string>& words) {
   while (std::getline(lines, line))
     if (line.find_first_not_of(" \t") != std::string::npos) last = line;
   ThrowUserError("", "COMMAND", "its tasks would fail (nothing submitted): " +
-                                     (last.empty() ? "exit status " + std::to_string(status) : last));
+                                     (last.empty() ? "exit status " + std::to_string(ExitCode(status)) : last));
 }
 
 // Cancels jobs already submitted when a later sbatch failed, so that nothing
@@ -386,8 +410,10 @@ int ArrayTasksOf(const std::string& array_task_id) {
       ++tasks;
       continue;
     }
-    const long first = std::strtol(part.c_str(), nullptr, 10), last = std::strtol(part.c_str() + dash + 1, nullptr, 10);
-    tasks += last >= first ? static_cast<int>(last - first + 1) : 1;
+    char* end = nullptr;
+    const long first = std::strtol(part.c_str(), nullptr, 10), last = std::strtol(part.c_str() + dash + 1, &end, 10);
+    const long step = end && *end == ':' ? std::max(1L, std::strtol(end + 1, nullptr, 10)) : 1;  // "4-7:2"
+    tasks += last >= first ? static_cast<int>((last - first) / step + 1) : 1;
   }
   return std::max(tasks, 1);
 }

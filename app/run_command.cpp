@@ -44,12 +44,31 @@ int RunCommand(int argc, char** argv, const char* command, void (*register_comma
       level = level->get_subcommands().front();
       name += " " + level->get_name();
     }
-    // Words it does not take: its footer, where it has one, says where they go (phos slurm's --).
-    const std::string hint = dynamic_cast<const CLI::ExtrasError*>(&e) && !level->get_footer().empty()
-                                 ? "; " + level->get_footer()
-                                 : "";
     std::fflush(stdout);  // what was printed before comes before the error, in a log too
-    std::fprintf(stderr, "phos%s: %s%s (see 'phos%s --help')\n", name.c_str(), e.what(), hint.c_str(), name.c_str());
+    // Words a command with a footer (phos slurm's: the command's own
+    // arguments go after --) does not take: CLI11 lists the words it could
+    // not place, often the right ones after the --; name the options before
+    // the -- that are not its own instead, and say where they go.
+    if (dynamic_cast<const CLI::ExtrasError*>(&e) && !level->get_footer().empty()) {
+      std::string misplaced;
+      bool dashes = false;
+      for (std::size_t i = 1; i < args.size(); ++i) {
+        const std::string word = args[i];
+        if (word == "--") {
+          dashes = true;
+          break;
+        }
+        if (word.rfind("--", 0) != 0) continue;
+        const std::string option = word.substr(0, word.find('='));
+        if (!level->get_option_no_throw(option)) misplaced += (misplaced.empty() ? "" : " ") + option;
+      }
+      const std::string what = !misplaced.empty() ? misplaced + ": not an option of phos" + name
+                               : dashes         ? "words before -- that are not its own"
+                                                : "no -- before the command's arguments";
+      std::fprintf(stderr, "phos%s: %s; %s\n", name.c_str(), what.c_str(), level->get_footer().c_str());
+      return 2;
+    }
+    std::fprintf(stderr, "phos%s: %s (see 'phos%s --help')\n", name.c_str(), e.what(), name.c_str());
     return 2;
   } catch (const phos::UserError& e) {
     // A job's log holds both streams: the lines an error refers to ("see the

@@ -49,12 +49,16 @@ start() {
   fi
   # A folder of its own: new, empty, or one this script made before (its
   # slurm.conf says so). Never /tmp or a home folder, whose mode it sets.
-  if [ -e "$dir" ] && [ -n "$(ls -A "$dir" 2>/dev/null)" ] &&
-    ! grep -qs '^# Written by scripts/slurm-one-node.sh' "$dir/slurm.conf"; then
+  if [ -e "$dir" ] && [ ! -d "$dir" ]; then
+    echo "slurm-one-node.sh: $dir: not a folder; give a new folder (e.g. /tmp/slurm)" >&2
+    exit 2
+  fi
+  if [ -n "$(ls -A "$dir" 2>/dev/null)" ] && [ ! -f "$dir/.slurm-one-node" ]; then
     echo "slurm-one-node.sh: $dir: not empty and not a cluster folder of this script; give a new folder (e.g. /tmp/slurm)" >&2
     exit 2
   fi
   mkdir -p "$dir/state" "$dir/spool"
+  touch "$dir/.slurm-one-node"  # ours: a later start (after a failed one) may use it again
   dir=$(cd "$dir" && pwd)
   chmod 0755 "$dir"  # slurmd and the jobs read the config
   "$mungekey" -c -f -k "$dir/munge.key" >/dev/null

@@ -93,8 +93,26 @@ TEST(RenderCommand, ExrCompressionIsTheOneAskedForAndLosslessOnesKeepEveryFloat)
   ASSERT_EQ(pxr24.second.size(), zip.second.size());
   for (std::size_t i = 0; i < zip.second.size(); ++i)  // floats rounded to 24 bits: a relative 2^-15 at most
     EXPECT_NEAR(pxr24.second[i], zip.second[i], 1e-4 * std::fabs(zip.second[i]) + 1e-30) << i;
+  // dwaa: lossy on R, G, B only; every band channel as written.
+  const auto dwaa = render("dwaa");
+  EXPECT_EQ(dwaa.first, "dwaa");
+  ASSERT_EQ(dwaa.second.size(), zip.second.size());
+  const std::size_t channels = zip.second.size() / (32 * 24);
+  for (std::size_t i = 0; i < zip.second.size(); ++i)
+    if (i % channels >= 3) {
+      ASSERT_EQ(dwaa.second[i], zip.second[i]) << i;
+    }
   EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + kCornell + " --exr-compression b44 --out " + (dir / "x").string()),
                                  "--exr-compression"));
+  // A range rendered with zip is rendered again with another compression (its done record names it), once.
+  const std::string range = "render " + kCornell + " --times 20 --width 16 --height 12 --task 0/1 --out " +
+                            (dir / "range").string();
+  ASSERT_EQ(RunPhos(range).exit_code, 0);
+  EXPECT_NE(RunPhos(range).out.find("nothing to do"), std::string::npos);
+  const CommandResult other = RunPhos(range + " --exr-compression none");
+  ASSERT_EQ(other.exit_code, 0) << other.err;
+  EXPECT_EQ(other.out.find("nothing to do"), std::string::npos) << other.out;
+  EXPECT_NE(RunPhos(range + " --exr-compression none").out.find("nothing to do"), std::string::npos);
 }
 
 TEST(RenderCommand, PathTransportRenders) {

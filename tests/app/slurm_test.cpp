@@ -21,6 +21,8 @@
 #include <set>
 #include <string>
 #include <thread>
+#include <utility>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -422,10 +424,16 @@ TEST(SlurmScripts, ACommandItsTasksWouldRefuseIsRefusedBeforeAnythingIsWritten) 
   EXPECT_TRUE(IsOneLineUserError(RunPhos("fit map " + session + out + " --merge --check"), "--check"));
   EXPECT_FALSE(fs::exists(dir / "bin" / "calls"));  // sbatch never ran
   // The command's options before or without the --: said so.
-  for (const std::string& words : {" " + scene + out, out + " -- " + scene, " --transport path -- " + scene + out})
-    EXPECT_TRUE(IsOneLineUserError(RunPhos("slurm render --tasks 2 --job-dir " + job + words),
-                                   "The command's own arguments go after --"))
-        << words;
+  // The options before the -- that are not phos slurm's are named, not the right words after it.
+  for (const auto& [words, named] : std::vector<std::pair<std::string, std::string>>{
+           {" " + scene + out, "--out: not an option of phos slurm render; The command's own arguments go after --"},
+           {out + " -- " + scene, "--out: not an option of phos slurm render;"},
+           {" --transport path -- " + scene + out, "--transport: not an option of phos slurm render;"},
+           {" " + scene + " --times 20,40 -- " + out, "--times: not an option of phos slurm render;"}}) {
+    const CommandResult r = RunPhos("slurm render --tasks 2 --job-dir " + job + words);
+    EXPECT_TRUE(IsOneLineUserError(r, named)) << words;
+    EXPECT_EQ(r.err.find(scene), std::string::npos) << r.err;  // the scene is not among the wrong words
+  }
   EXPECT_FALSE(fs::exists(job));
   // What a task would refuse after its scene is loaded: checked too.
   refused("render", scene + " --out " + (dir / "afile").string(), "--out: '" + (dir / "afile").string() + "' is a file");
@@ -434,6 +442,17 @@ TEST(SlurmScripts, ACommandItsTasksWouldRefuseIsRefusedBeforeAnythingIsWritten) 
   EXPECT_TRUE(IsOneLineUserError(
       RunPhos("slurm render --tasks 2 --time-per-task 90min --job-dir " + job + " -- " + scene + out),
       "--time-per-task: expected a Slurm time"));
+  // The render's last job asks for 10 minutes, or the tasks' time if that is shorter.
+  for (const auto& [time, check_time] : std::vector<std::pair<std::string, std::string>>{
+           {"5", "5"}, {"9:30", "9:30"}, {"01:00:00", "00:10:00"}, {"UNLIMITED", "00:10:00"}}) {
+    const fs::path folder = dir / ("light" + std::to_string(check_time.size()) + time.substr(0, 1));
+    ASSERT_EQ(RunPhos("slurm render --tasks 2 --no-submit --time-per-task " + time + " --job-dir " + folder.string() +
+                      " -- " + scene + out)
+                  .exit_code,
+              0)
+        << time;
+    EXPECT_NE(ReadText(folder / "merge.sbatch").find("#SBATCH --time=" + check_time + "\n"), std::string::npos) << time;
+  }
   for (const char* time : {"90", "1:30:00", "2-12", "2-12:30:00", "UNLIMITED"})
     EXPECT_EQ(RunPhos("slurm render --tasks 2 --no-submit --time-per-task " + std::string(time) + " --job-dir " +
                       (dir / (std::string("t") + time)).string() + " -- " + scene + out)

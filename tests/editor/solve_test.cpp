@@ -286,6 +286,11 @@ TEST(EditorSolve, BadPhasesNameTheField) {
             std::string::npos);
   EXPECT_NE(error([](nlohmann::json& c) { c["irradiance"][1] = {0, 0, 0}; }).find("irradiance[1]: a row among phases"),
             std::string::npos);
+  nlohmann::json mixed = phos::ReadJsonFile(phos::testing::Fixture("constraints/glow-sign.json"));
+  mixed["irradiance"][1] = j["irradiance"][1];  // a phase among the rows
+  EXPECT_NE(phos::testing::ErrorOfType<UserError>([&] { ProblemFromJson(mixed, "c.json"); })
+                .find("irradiance[1]: a phase among rows"),
+            std::string::npos);
   EXPECT_NE(error([](nlohmann::json& c) { c["irradiance"][0]["irradiance"] = {1, 2}; }).find("irradiance[0].irradiance"),
             std::string::npos);
   EXPECT_NE(error([](nlohmann::json& c) { c["irradiance"][0]["duration_s"] = -1; }).find("irradiance[0].duration_s"),
