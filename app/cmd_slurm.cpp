@@ -148,7 +148,6 @@ std::string TaskRecordName(const char* prefix, int i, int n) {
   return std::string(prefix) + std::to_string(i) + "-of-" + std::to_string(n) + ".json";
 }
 
-// One sbatch script: the site's options, then `body`.
 // Minutes of a Slurm time limit (sbatch(1): MM, MM:SS, HH:MM:SS, D-HH,
 // D-HH:MM, D-HH:MM:SS); nullopt for UNLIMITED or anything else.
 std::optional<double> SlurmMinutes(const std::string& time) {
@@ -165,6 +164,7 @@ std::optional<double> SlurmMinutes(const std::string& time) {
   return number(2) * 60 + number(3) + number(4) / 60;          // HH:MM:SS
 }
 
+// One sbatch script: the site's options, then `body`.
 // `light`: a job that only reads done records (the render's last, `phos
 // slurm status`, about 4 MB): one CPU, 256 MB and 10 minutes, not a task's
 // share, so that it does not wait in the queue for a task's resources.
