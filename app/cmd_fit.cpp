@@ -538,13 +538,6 @@ void RunFitMapMerge(const MapArgs& args) {
   WriteMapOutputs(args, map, tiles.string());
 }
 
-// `path` a folder or nothing yet (an output folder a run would create): a file there is one line naming `option`.
-void RequireFolderOrNothing(const std::string& path, const char* option) {
-  std::error_code ec;
-  if (std::filesystem::exists(path, ec) && !std::filesystem::is_directory(path, ec))
-    ThrowUserError("", option, "'" + path + "' is a file, not a folder");
-}
-
 // --check: what a map or a tile would refuse before fitting, read from the
 // session's records and its first frame only: a decay session with frames,
 // and --tile i/N with no tile of N empty (so 'phos slurm map' refuses N

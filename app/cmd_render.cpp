@@ -36,6 +36,7 @@
 #include "phos/render/scene.h"
 #include "phos/render/solver.h"
 #include "phos/render/volume.h"
+#include "phos/util/atomic_file.h"
 #include "phos/util/digest.h"
 #include "phos/util/error.h"
 #include "phos/util/format.h"
@@ -545,9 +546,7 @@ void Run(const RenderArgs& args) {
   if (!args.solve_only && args.out.empty()) ThrowUserError("", "--out", "is required (except with --solve-only)");
   if (args.indirect_visibility && transport != Transport::kDss)
     ThrowUserError("", "--indirect-visibility", "is for --transport dss");
-  if (std::error_code out_error; !args.solve_only && std::filesystem::exists(args.out, out_error) &&
-                                 !std::filesystem::is_directory(args.out, out_error))
-    ThrowUserError("", "--out", "'" + args.out + "' is a file, not a folder");
+  if (!args.solve_only) RequireFolderOrNothing(args.out, "--out");
   if (args.check) {
     std::printf("%s: the command would render %zu frame(s) (--check: nothing written)\n", scene.name.c_str(),
                 args.solve_only ? std::size_t{0} : range.last - range.first);

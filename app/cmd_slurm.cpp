@@ -212,6 +212,30 @@ constexpr const char* kDependency = "afterany";
 // A child's exit code from pclose's wait status (128 + the signal if one ended it).
 int ExitCode(int status) { return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status); }
 
+// A shell command's stdout and exit code (-1: it could not be started).
+struct ShellRun {
+  std::string out;
+  int exit_code = -1;
+};
+ShellRun RunShell(const std::string& command) {
+  ShellRun run;
+  FILE* pipe = popen(command.c_str(), "r");
+  if (!pipe) return run;
+  char buffer[4096];
+  while (std::fgets(buffer, sizeof buffer, pipe)) run.out += buffer;
+  run.exit_code = ExitCode(pclose(pipe));
+  return run;
+}
+
+// The last line of `text` with something on it ("" if none).
+std::string LastLine(const std::string& text) {
+  std::string last, line;
+  std::istringstream lines(text);
+  while (std::getline(lines, line))
+    if (line.find_first_not_of(" \t\r") != std::string::npos) last = line;
+  return last;
+}
+
 // Runs sbatch --parsable on a script; the job id, or a UserError with sbatch's words.
 std::string Submit(const std::string& sbatch, const std::string& script, const std::string& dependency,
                    const std::string& after) {
@@ -224,28 +248,22 @@ std::string Submit(const std::string& sbatch, const std::string& script, const s
   const std::string command = ShellQuote(sbatch) + " --parsable" +
                               (after.empty() ? "" : " --dependency=" + dependency + ":" + after) + " " +
                               ShellQuote(script) + " 2>" + ShellQuote(errors.string());
-  FILE* pipe = popen(command.c_str(), "r");
-  if (!pipe) ThrowUserError("", "--sbatch", "cannot run '" + sbatch + "'");
-  std::string out, line, id;
-  char buffer[512];
-  while (std::fgets(buffer, sizeof buffer, pipe)) out += buffer;
-  const int status = pclose(pipe);
+  const ShellRun run = RunShell(command);
+  if (run.exit_code < 0) ThrowUserError("", "--sbatch", "cannot run '" + sbatch + "'");
   std::error_code ec;
   const std::string stderr_text = fs::exists(errors, ec) ? ReadFileText(errors, 1 << 20) : "";
-  std::istringstream out_lines(out);
-  while (std::getline(out_lines, line))  // its last line: "id" or "id;cluster" (federated clusters)
-    if (line.find_first_not_of(" \t\r") != std::string::npos) id = line.substr(0, line.find(';'));
+  const std::string last = LastLine(run.out), id = last.substr(0, last.find(';'));  // "id;cluster" on federations
   const bool numeric = !id.empty() && id.find_first_not_of("0123456789") == std::string::npos;
-  if (status == 0 && numeric) return id;
+  if (run.exit_code == 0 && numeric) return id;
   // sbatch's lines ("sbatch: error: ..."), each without its prefix, on one line.
-  std::string said;
-  std::istringstream lines(stderr_text + "\n" + out);
+  std::string said, line;
+  std::istringstream lines(stderr_text + "\n" + run.out);
   while (std::getline(lines, line)) {
     for (const char* prefix : {"sbatch: error: ", "sbatch: "})
       if (line.rfind(prefix, 0) == 0) line.erase(0, std::strlen(prefix));
     if (line.find_first_not_of(" \t\r") != std::string::npos) said += (said.empty() ? "" : "; ") + line;
   }
-  ThrowUserError(script, "sbatch", "refused: " + (said.empty() ? "exit status " + std::to_string(ExitCode(status)) : said));
+  ThrowUserError(script, "sbatch", "refused: " + (said.empty() ? "exit status " + std::to_string(run.exit_code) : said));
 }
 
 // Runs the tasks' command with --check (render, fit map, fit batch: every
@@ -253,20 +271,13 @@ std::string Submit(const std::string& sbatch, const std::string& script, const s
 void CheckCommand(const std::vector<std::string>& words) {
   std::vector<std::string> check = words;
   check.push_back("--check");
-  FILE* pipe = popen((Command(check) + " 2>&1").c_str(), "r");
-  if (!pipe) ThrowUserError("", "COMMAND", "cannot run '" + words.front() + "' to check it");
-  std::string output;
-  char buffer[1024];
-  while (std::fgets(buffer, sizeof buffer, pipe)) output += buffer;
-  const int status = pclose(pipe);
-  if (status == 0) return;
+  const ShellRun run = RunShell(Command(check) + " 2>&1");
+  if (run.exit_code < 0) ThrowUserError("", "COMMAND", "cannot run '" + words.front() + "' to check it");
+  if (run.exit_code == 0) return;
   // Its last line that says something: the refusal (warnings come before it).
-  std::string last, line;
-  std::istringstream lines(output);
-  while (std::getline(lines, line))
-    if (line.find_first_not_of(" \t") != std::string::npos) last = line;
+  const std::string last = LastLine(run.out);
   ThrowUserError("", "COMMAND", "its tasks would fail (nothing submitted): " +
-                                     (last.empty() ? "exit status " + std::to_string(ExitCode(status)) : last));
+                                     (last.empty() ? "exit status " + std::to_string(run.exit_code) : last));
 }
 
 // Cancels jobs already submitted when a later sbatch failed, so that nothing
@@ -426,15 +437,14 @@ int ArrayTasksOf(const std::string& array_task_id) {
 // a call) is asked nothing more: *answering turns false.
 std::string SlurmState(const std::string& job_id, bool* answering) {
   if (!*answering) return "";
-  FILE* pipe = popen(("timeout 5 scontrol -o show job " + ShellQuote(job_id) + " 2>/dev/null").c_str(), "r");
-  if (!pipe) return "";
+  const ShellRun run = RunShell("timeout 5 scontrol -o show job " + ShellQuote(job_id) + " 2>/dev/null");
+  if (run.exit_code == 124) *answering = false;  // timeout(1)'s code
   std::map<std::string, int> counts;  // array tasks by state (with its reason while pending)
   int tasks = 0;
-  char buffer[4096];
   std::string line;
-  while (std::fgets(buffer, sizeof buffer, pipe)) {
-    line += buffer;
-    if (line.empty() || line.back() != '\n') continue;  // one record per line, possibly longer than the buffer
+  std::istringstream records(run.out);
+  while (std::getline(records, line)) {  // one record per line
+    line += '\n';
     auto field = [&](const std::string& key) {
       const std::size_t at = line.find(" " + key + "=");
       if (at == std::string::npos) return std::string();
@@ -449,10 +459,7 @@ std::string SlurmState(const std::string& job_id, bool* answering) {
       counts[state] += n;
       tasks += n;
     }
-    line.clear();
   }
-  const int status = pclose(pipe);
-  if (WIFEXITED(status) && WEXITSTATUS(status) == 124) *answering = false;  // timeout(1)'s code
   if (tasks == 0) return "";
   if (tasks == 1 && !counts.empty()) return counts.begin()->first;
   std::string said;

@@ -8,66 +8,21 @@
 #   - the solver pass, the tasks' own times (done records), the map merge.
 # Needs root, slurm-wlm and munge (scripts/bootstrap.sh). Run from the source
 # tree after a Release build:   scripts/scale-bench.sh build/bin/phos
-# The daemons are stopped by PID on the way out, whatever happens.
+# The cluster is scripts/slurm-one-node.sh's (with task/affinity), stopped on the
+# way out whatever happens.
 set -euo pipefail
 PHOS=$(readlink -f "${1:-build/bin/phos}")
 WORK=$(mktemp -d /tmp/phos-scale-XXXXXX)
-HOST=$(hostname -s)
-PIDS=()
+chmod 755 "$WORK"  # munged and the jobs reach the cluster's folder through it
+ONE_NODE=$(dirname "$(readlink -f "$0")")/slurm-one-node.sh
 stop() {
-  SLURM_CONF=$WORK/slurm.conf scancel --full --user=root 2>/dev/null || true
-  sleep 1
-  for ((i = ${#PIDS[@]} - 1; i >= 0; i--)); do
-    pid=$(cat "${PIDS[$i]}" 2>/dev/null || true)
-    [ -n "$pid" ] && kill "$pid" 2>/dev/null || true
-  done
-  sleep 1; rm -rf "$WORK" 2>/dev/null || true
+  bash "$ONE_NODE" stop "$WORK/cluster" >/dev/null 2>&1 || true
+  rm -rf "$WORK" 2>/dev/null || true
 }
 trap stop EXIT
-free_port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])'; }
-
-chmod 755 "$WORK"
-mungekey -c -f -k "$WORK/munge.key" && chmod 600 "$WORK/munge.key"
-munged --socket="$WORK/munge.sock" --key-file="$WORK/munge.key" --pid-file="$WORK/munged.pid" \
-  --log-file="$WORK/munged.log" --seed-file="$WORK/munged.seed"
-PIDS+=("$WORK/munged.pid")
-mkdir -p "$WORK/state" "$WORK/spool"
-cat >"$WORK/slurm.conf" <<CONF
-ClusterName=phosscale
-SlurmctldHost=$HOST
-SlurmctldPort=$(free_port)
-SlurmdPort=$(free_port)
-SlurmUser=root
-SlurmdUser=root
-AuthType=auth/munge
-AuthInfo=socket=$WORK/munge.sock
-StateSaveLocation=$WORK/state
-SlurmdSpoolDir=$WORK/spool
-SlurmctldPidFile=$WORK/slurmctld.pid
-SlurmdPidFile=$WORK/slurmd.pid
-SlurmctldLogFile=$WORK/slurmctld.log
-SlurmdLogFile=$WORK/slurmd.log
-ProctrackType=proctrack/linuxproc
-TaskPlugin=task/affinity
-SelectType=select/cons_tres
-SelectTypeParameters=CR_Core
-SchedulerType=sched/backfill
-MpiDefault=none
-ReturnToService=2
-JobCompType=jobcomp/none
-JobAcctGatherType=jobacct_gather/none
-AccountingStorageType=accounting_storage/none
-SwitchType=switch/none
-MinJobAge=3600
-NodeName=$HOST CPUs=$(nproc) RealMemory=2000 State=UNKNOWN
-PartitionName=bench Nodes=$HOST Default=YES MaxTime=INFINITE State=UP
-CONF
-export SLURM_CONF=$WORK/slurm.conf
-slurmctld -i -f "$SLURM_CONF"
-PIDS+=("$WORK/slurmctld.pid")
-slurmd -f "$SLURM_CONF"
-PIDS+=("$WORK/slurmd.pid")
-for _ in $(seq 100); do sinfo -h -o %T | grep -q idle && break; sleep 0.2; done
+# The one-node cluster of scripts/slurm-one-node.sh, its tasks bound to their CPUs.
+PHOS_SLURM_TASK_PLUGIN=task/affinity bash "$ONE_NODE" start "$WORK/cluster" >/dev/null
+export SLURM_CONF=$WORK/cluster/slurm.conf
 
 now() { date +%s.%N; }
 dt() { python3 -c "print('%.2f' % ($2 - $1))"; }

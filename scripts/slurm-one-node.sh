@@ -13,6 +13,8 @@
 # give `phos slurm ... --mem-per-task` at most that), one partition "test".
 # PHOS_SLURM_CRED_EXPIRE_S (default 20) is slurm.conf's cred_expire: how
 # long a requeued job waits before it may start again (Slurm's default 120).
+# PHOS_SLURM_TASK_PLUGIN (default task/none): task/affinity binds each task
+# to its CPUs, as scripts/scale-bench.sh measures with.
 set -euo pipefail
 
 usage() {
@@ -86,7 +88,7 @@ SlurmdPidFile=$dir/slurmd.pid
 SlurmctldLogFile=$dir/slurmctld.log
 SlurmdLogFile=$dir/slurmd.log
 ProctrackType=proctrack/linuxproc
-TaskPlugin=task/none
+TaskPlugin=${PHOS_SLURM_TASK_PLUGIN:-task/none}
 SelectType=select/cons_tres
 SelectTypeParameters=CR_Core
 SchedulerType=sched/backfill

@@ -231,14 +231,17 @@ TEST(EditorSolve, SeveralPointsShareOneMaterial) {
               0.2 + 0.06 + 0.01, 0.01);
 }
 
+// What ProblemFromJson refuses in a constraint file once `edit` has changed it.
+std::string ErrorOfEdited(const nlohmann::json& file, const std::function<void(nlohmann::json&)>& edit) {
+  nlohmann::json copy = file;
+  edit(copy);
+  return phos::testing::ErrorOfType<UserError>([&] { ProblemFromJson(copy, "c.json"); });
+}
+
 TEST(EditorSolve, BadConstraintFilesNameTheField) {
   nlohmann::json j = phos::ReadJsonFile(phos::testing::Fixture("constraints/glow-sign.json"));
   EXPECT_NO_THROW(ProblemFromJson(j, "glow-sign.json"));
-  auto error = [&](const std::function<void(nlohmann::json&)>& edit) {
-    nlohmann::json copy = j;
-    edit(copy);
-    return phos::testing::ErrorOfType<UserError>([&] { ProblemFromJson(copy, "glow-sign.json"); });
-  };
+  auto error = [&](const std::function<void(nlohmann::json&)>& edit) { return ErrorOfEdited(j, edit); };
   EXPECT_NE(error([](nlohmann::json& c) { c["constraints"][0]["t_s"] = 500; }).find("constraints[0].t_s"),
             std::string::npos);
   EXPECT_NE(error([](nlohmann::json& c) { c["irradiance"][3] = {1, 2}; }).find("irradiance[3]"), std::string::npos);
@@ -275,20 +278,15 @@ TEST(EditorSolve, PhasesGiveTheSameProblemAsRows) {
 TEST(EditorSolve, BadPhasesNameTheField) {
   nlohmann::json j = phos::ReadJsonFile(phos::testing::Fixture("constraints/glow-sign-phases.json"));
   ASSERT_NO_THROW(ProblemFromJson(j, "c.json"));
-  auto error = [&](const std::function<void(nlohmann::json&)>& edit) {
-    nlohmann::json copy = j;
-    edit(copy);
-    return phos::testing::ErrorOfType<UserError>([&] { ProblemFromJson(copy, "c.json"); });
-  };
+  auto error = [&](const std::function<void(nlohmann::json&)>& edit) { return ErrorOfEdited(j, edit); };
   EXPECT_NE(error([](nlohmann::json& c) { c["irradiance"][1]["duration_s"] = 90.2; }).find("not a whole number of frames"),
             std::string::npos);
   EXPECT_NE(error([](nlohmann::json& c) { c["irradiance"][1]["duraton_s"] = 90; }).find("irradiance[1]"),
             std::string::npos);
   EXPECT_NE(error([](nlohmann::json& c) { c["irradiance"][1] = {0, 0, 0}; }).find("irradiance[1]: a row among phases"),
             std::string::npos);
-  nlohmann::json mixed = phos::ReadJsonFile(phos::testing::Fixture("constraints/glow-sign.json"));
-  mixed["irradiance"][1] = j["irradiance"][1];  // a phase among the rows
-  EXPECT_NE(phos::testing::ErrorOfType<UserError>([&] { ProblemFromJson(mixed, "c.json"); })
+  const nlohmann::json rows = phos::ReadJsonFile(phos::testing::Fixture("constraints/glow-sign.json"));
+  EXPECT_NE(ErrorOfEdited(rows, [&](nlohmann::json& c) { c["irradiance"][1] = j["irradiance"][1]; })  // a phase among rows
                 .find("irradiance[1]: a phase among rows"),
             std::string::npos);
   EXPECT_NE(error([](nlohmann::json& c) { c["irradiance"][0]["irradiance"] = {1, 2}; }).find("irradiance[0].irradiance"),

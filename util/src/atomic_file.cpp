@@ -17,6 +17,12 @@ std::filesystem::path AtomicTemporaryPath(const std::filesystem::path& path) {
   return temporary;
 }
 
+void RequireFolderOrNothing(const std::filesystem::path& path, std::string_view option) {
+  std::error_code ec;
+  if (std::filesystem::exists(path, ec) && !std::filesystem::is_directory(path, ec))
+    ThrowUserError("", option, "'" + path.string() + "' is a file, not a folder");
+}
+
 void SyncDirectory(const std::filesystem::path& dir) {
   const int fd = ::open(dir.empty() ? "." : dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
   if (fd < 0) return;

@@ -34,6 +34,12 @@ void WriteFileAtomically(const std::filesystem::path& path, std::string_view tex
 // recognises such names as leftovers by ".tmp.").
 std::filesystem::path AtomicTemporaryPath(const std::filesystem::path& path);
 
+// An output folder a command will create or write into: a file already at
+// `path` is a UserError naming `option` ("'X' is a file, not a folder"), so
+// that a check (phos render --check, fit map, fit batch) refuses it before
+// any work.
+void RequireFolderOrNothing(const std::filesystem::path& path, std::string_view option);
+
 // fsync a file (UserError naming it when the disk refuses) and a folder (its
 // entries: a rename made durable).
 void SyncFile(const std::filesystem::path& path);
