@@ -31,7 +31,7 @@ for transport in direct path; do
       start=$(date +%s.%N)
       "$phos" render "$scene" --out "$work/$compression" --times 20,40,60,80 --width 1920 --height 1080 \
         "${extra[@]}" --exr-compression "$compression" > /dev/null
-      times+=("$(echo "$(date +%s.%N) - $start" | bc)")
+      times+=("$(awk -v end="$(date +%s.%N)" -v start="$start" 'BEGIN {print end - start}')")
     done
     median=$(printf '%s\n' "${times[@]}" | sort -g | awk '{a[NR] = $1} END {print a[int((NR + 1) / 2)]}')
     bytes=$(stat -c %s "$work/$compression/frame-0000.exr")
@@ -42,7 +42,7 @@ for transport in direct path; do
       difference=$(idiff -fail 1e30 -v "$work/reference.exr" "$work/$compression/frame-0000.exr" |
         awk '/Max error/ {print $4; found = 1} END {if (!found) print 0}')
     fi
-    printf '| %s | %s | %.2f | %.1f | %s |\n' "$transport" "$compression" "$median" "$(echo "$bytes / 1000000" | bc -l)" \
+    printf '| %s | %s | %.2f | %.1f | %s |\n' "$transport" "$compression" "$median" "$(awk -v bytes="$bytes" 'BEGIN {print bytes / 1000000}')" \
       "$difference"
   done
 done
