@@ -19,6 +19,7 @@
 #include "cli_finite.h"
 #include "commands.h"
 #include "phos/acquire/lab.h"
+#include "phos/acquire/protocol_records.h"
 #include "phos/acquire/protocols.h"
 #include "phos/acquire/session_records.h"
 #include "phos/acquire/sim_lab.h"
@@ -61,7 +62,8 @@ struct Devices {
   Lights* lights = nullptr;
   Clock* clock = nullptr;
   RigChange rig;
-  nlohmann::json description, sample;
+  DevicesRecord description;
+  SampleRecord sample;
 
   bool simulated() const { return sim != nullptr; }
 
@@ -84,17 +86,25 @@ struct Devices {
       if (what == "lvf") lab->SetLvfInPath(in_place);
       if (what == "white_reference") lab->SetWhiteReferenceInView(in_place);
     };
-    description = {
-        {"device", "sim"}, {"camera", sim->description()}, {"lights", sim->lights().channels()}, {"clock", "virtual"},
-        {"seed", seed},    {"camera_csv", camera_csv}};
+    description.device = "sim";
+    description.camera = sim->description();
+    description.lights = sim->lights().channels();
+    description.clock = "virtual";
+    description.seed = seed;
+    description.camera_csv = camera_csv;
     // What each light puts on the sample per band: the fit needs it for ke.
-    nlohmann::json band_irradiance = nlohmann::json::object();
-    for (const std::string& light : sim->lights().channels()) band_irradiance[light] = sim->SourceBandIrradiance(light);
-    description["light_band_irradiance"] = band_irradiance;
-    description["bands_nm"] = material.bands.edges_nm;
-    sample = {{"material_file", material_file}, {"material", MaterialToJson(material)}, {"albedo", albedo}};
-    if (inset) sample["inset"] = {{"material", MaterialToJson(*inset)}, {"radius_fraction", inset_radius}};
-    description["size"] = {camera_model.width, camera_model.height};
+    for (const std::string& light : sim->lights().channels())
+      description.light_band_irradiance[light] = sim->SourceBandIrradiance(light);
+    description.bands_nm = material.bands.edges_nm;
+    description.width = camera_model.width;
+    description.height = camera_model.height;
+    sample.material_file = material_file;
+    sample.material = MaterialToJson(material);
+    sample.albedo = albedo;
+    if (inset) {
+      sample.inset_material = MaterialToJson(*inset);
+      sample.inset_radius_fraction = inset_radius;
+    }
   }
 
   void OpenLabConfig(const fs::path& path) {
@@ -107,8 +117,7 @@ struct Devices {
     clock = &real->clock;
     rig = real->rig;
     description = real->description;
-    description["device"] = "lab";
-    sample = {{"note", "a real sample"}};
+    sample.note = "a real sample";
   }
 
   explicit Devices(const CaptureArgs& args) {
@@ -143,130 +152,32 @@ struct Devices {
   }
 
   // Reopens the devices a session was recorded with (for resume).
-  Devices(const nlohmann::json& start, const fs::path& session_dir, int resume_count) {
-    const nlohmann::json devices = start.value("devices", nlohmann::json::object());
-    if (devices.value("device", "sim") == "lab") {
-      OpenLabConfig(devices.value("lab_config", ""));
+  Devices(const SessionRecord& start, const fs::path& session_dir, int resume_count) {
+    const std::string where = (session_dir / "session.json").string();
+    const DevicesRecord devices = DevicesRecord::FromJson(start.devices, where + ": devices");
+    if (!devices.simulated()) {
+      OpenLabConfig(devices.lab_config);
       return;
     }
-    const nlohmann::json sample_json = start.value("sample", nlohmann::json::object());
-    if (!sample_json.contains("material"))
-      ThrowUserError((session_dir / "session.json").string(), "sample",
-                     "has no material: cannot rebuild the simulated lab");
-    Material m = MaterialFromJson(sample_json["material"], (session_dir / "session.json").string());
-    std::vector<double> a =
-        sample_json.value("albedo", std::vector<double>(static_cast<std::size_t>(m.band_count()), 0.8));
-    // New noise on each resume: a resumed camera is not the same exposure again.
+    const SampleRecord recorded = SampleRecord::FromJson(start.sample, where + ": sample");
+    if (!recorded.material) ThrowUserError(where, "sample", "has no material: cannot rebuild the simulated lab");
+    Material m = MaterialFromJson(*recorded.material, where);
     std::optional<Material> inset;
-    double inset_radius = 0.5;
-    if (sample_json.contains("inset")) {
-      inset = MaterialFromJson(sample_json["inset"]["material"], (session_dir / "session.json").string());
-      inset_radius = sample_json["inset"].value("radius_fraction", 0.5);
-    }
-    const std::vector<int> size = devices.value("size", std::vector<int>{0, 0});
-    OpenSim(std::move(m), std::move(a), devices.value("seed", 1u) + 1000u * resume_count,
-            sample_json.value("material_file", ""), devices.value("camera_csv", ""), size.size() == 2 ? size[0] : 0,
-            size.size() == 2 ? size[1] : 0, inset, inset_radius);
+    if (recorded.inset_material) inset = MaterialFromJson(*recorded.inset_material, where);
+    // New noise on each resume: a resumed camera is not the same exposure again.
+    OpenSim(std::move(m), recorded.albedo, devices.seed + 1000u * resume_count, recorded.material_file,
+            devices.camera_csv, devices.width, devices.height, inset, recorded.inset_radius_fraction);
   }
 };
 
-// Protocol options <-> the "settings" of session.json, so resume runs the
-// protocol exactly as it started.
-nlohmann::json AutoExposureJson(const AutoExposure& a) {
-  return {{"initial_exposure_s", a.initial_exposure_s},
-          {"min_exposure_s", a.min_exposure_s},
-          {"max_exposure_s", a.max_exposure_s},
-          {"low_fraction", a.low_fraction},
-          {"high_fraction", a.high_fraction}};
-}
-AutoExposure AutoExposureFrom(const nlohmann::json& j, AutoExposure a) {
-  a.initial_exposure_s = j.value("initial_exposure_s", a.initial_exposure_s);
-  a.min_exposure_s = j.value("min_exposure_s", a.min_exposure_s);
-  a.max_exposure_s = j.value("max_exposure_s", a.max_exposure_s);
-  a.low_fraction = j.value("low_fraction", a.low_fraction);
-  a.high_fraction = j.value("high_fraction", a.high_fraction);
-  return a;
-}
-
-nlohmann::json ToJson(const DecayProtocolOptions& o) {
-  return {{"charge_light", o.charge_light},
-          {"charge_s", o.charge_s},
-          {"interval_s", o.interval_s},
-          {"duration_s", o.duration_s},
-          {"first_delay_s", o.first_delay_s},
-          {"early_frames", o.early_frames},
-          {"initial_exposure_s", o.initial_exposure_s},
-          {"max_exposure_s", o.max_exposure_s},
-          {"gain", o.gain}};
-}
-nlohmann::json ToJson(const ExcitationProtocolOptions& o) {
-  return {{"lights", o.lights},
-          {"reset_s", o.reset_s},
-          {"first_charge_s", o.first_charge_s},
-          {"max_charge_s", o.max_charge_s},
-          {"plateau_growth", o.plateau_growth},
-          {"delay_s", o.delay_s},
-          {"exposure_s", o.exposure_s},
-          {"gain", o.gain},
-          {"tail_frames", o.tail_frames},
-          {"tail_growth", o.tail_growth},
-          {"high_fraction", o.high_fraction}};
-}
-ExcitationProtocolOptions ExcitationFrom(const nlohmann::json& j) {
-  ExcitationProtocolOptions o;
-  o.lights = j.value("lights", o.lights);
-  o.reset_s = j.value("reset_s", o.reset_s);
-  o.first_charge_s = j.value("first_charge_s", o.first_charge_s);
-  o.max_charge_s = j.value("max_charge_s", o.max_charge_s);
-  o.plateau_growth = j.value("plateau_growth", o.plateau_growth);
-  o.delay_s = j.value("delay_s", o.delay_s);
-  o.exposure_s = j.value("exposure_s", o.exposure_s);
-  o.gain = j.value("gain", o.gain);
-  // A session recorded before the decay tail had one frame per charge: resume it so.
-  o.tail_frames = j.value("tail_frames", 0);
-  o.tail_growth = j.value("tail_growth", o.tail_growth);
-  o.high_fraction = j.value("high_fraction", o.high_fraction);
-  return o;
-}
-nlohmann::json ToJson(const SpectrumProtocolOptions& o) {
-  return {{"charge_light", o.charge_light},
-          {"charge_s", o.charge_s},
-          {"recharge_s", o.recharge_s},
-          {"frames", o.frames},
-          {"first_delay_s", o.first_delay_s},
-          {"gain", o.gain},
-          {"exposure", AutoExposureJson(o.exposure)}};
-}
-nlohmann::json ToJson(const LvfCalibrationOptions& o) {
-  nlohmann::json lines = nlohmann::json::array();
-  for (const CalibrationLine& l : o.lines) lines.push_back({{"light", l.light}, {"wavelength_nm", l.wavelength_nm}});
-  return {{"lines", lines},
-          {"flat_light", o.flat_light},
-          {"flat_temperature_k", o.flat_temperature_k},
-          {"flat_irradiance", o.flat_irradiance},
-          {"gain", o.gain},
-          {"max_tries", o.max_tries},
-          {"exposure", AutoExposureJson(o.exposure)}};
-}
-LvfCalibrationOptions LvfCalibrationFrom(const nlohmann::json& j) {
-  LvfCalibrationOptions o;
-  for (const nlohmann::json& l : j.value("lines", nlohmann::json::array()))
-    o.lines.push_back({l.value("light", ""), l.value("wavelength_nm", 0.0)});
-  o.flat_light = j.value("flat_light", o.flat_light);
-  o.flat_temperature_k = j.value("flat_temperature_k", o.flat_temperature_k);
-  o.flat_irradiance = j.value("flat_irradiance", o.flat_irradiance);
-  o.gain = j.value("gain", o.gain);
-  o.max_tries = j.value("max_tries", o.max_tries);
-  o.exposure = AutoExposureFrom(j.value("exposure", nlohmann::json::object()), o.exposure);
-  return o;
-}
-
-nlohmann::json StartRecord(const std::string& protocol, const Devices& devices, nlohmann::json settings) {
-  return {{"protocol", protocol},
-          {"sample", devices.sample},
-          {"devices", devices.description},
-          {"settings", std::move(settings)},
-          {"versions", {{"phos", kVersion}}}};
+SessionRecord StartRecord(const std::string& protocol, const Devices& devices, nlohmann::json settings) {
+  SessionRecord record;
+  record.protocol = protocol;
+  record.sample = devices.sample.ToJson();
+  record.devices = devices.description.ToJson();
+  record.settings = std::move(settings);
+  record.phos_version = kVersion;
+  return record;
 }
 
 // The calibration sources of this lab: the config's, or the simulated lab's.
@@ -279,29 +190,34 @@ std::vector<CalibrationLine> CalibrationLinesOf(const Devices& devices) {
 
 // ---- previews: what a session captured, to look at ----------------------
 
-// The frame records as the protocols wrote them (typed reading first, so a
-// malformed record is one line naming it).
-std::vector<nlohmann::json> FrameLines(const fs::path& dir) {
-  std::vector<nlohmann::json> lines;
-  for (const FrameRecord& frame : ReadFrameRecords(dir).frames) lines.push_back(frame.ToJson());
-  return lines;
+// A decay's or a spectrum's frames, each with its delay after light-off.
+std::vector<std::pair<FrameRecord, double>> FramesWithDelays(const fs::path& dir) {
+  std::vector<std::pair<FrameRecord, double>> frames;
+  if (ReadSessionRecord(dir).protocol == SpectrumFrameFields::kProtocol) {
+    for (const auto& frame : ReadProtocolFrames<SpectrumFrameFields>(dir))
+      frames.push_back({frame.record, frame.fields.delay_after_light_off_s});
+  } else {
+    for (const auto& frame : ReadProtocolFrames<DecayFrameFields>(dir))
+      frames.push_back({frame.record, frame.fields.delay_after_light_off_s});
+  }
+  return frames;
 }
 
-// A contact sheet of a session's frames, each scaled by its exposure so the
-// fading shows (one brightness scale for all), labelled with the delay.
+// A contact sheet of a decay's or a spectrum's frames, each scaled by its
+// exposure so the fading shows (one brightness scale for all), labelled with
+// the delay.
 void WriteFramesContactSheet(const fs::path& session_dir, const fs::path& out, int max_frames) {
-  const std::vector<nlohmann::json> lines = FrameLines(session_dir);
-  if (lines.empty()) return;
-  const std::size_t step = std::max<std::size_t>(1, (lines.size() + max_frames - 1) / max_frames);
+  const std::vector<std::pair<FrameRecord, double>> listed = FramesWithDelays(session_dir);
+  if (listed.empty()) return;
+  const std::size_t step = std::max<std::size_t>(1, (listed.size() + max_frames - 1) / max_frames);
   std::vector<Frame> frames;
   std::vector<std::string> labels;
   double brightest = 0;
-  for (std::size_t i = 0; i < lines.size(); i += step) {
-    frames.push_back(ReadFrame(session_dir, lines[i]));
+  for (std::size_t i = 0; i < listed.size(); i += step) {
+    frames.push_back(ReadFrame(session_dir, listed[i].first));
     const Frame& f = frames.back();
     for (int c = 0; c < f.channels; ++c) brightest = std::max(brightest, f.MeanSignal(c) / f.exposure_s);
-    labels.push_back("t+" + FormatShort(lines[i].value("delay_after_light_off_s", 0.0)) + " s, " +
-                     FormatShort(f.exposure_s) + " s exp");
+    labels.push_back("t+" + FormatShort(listed[i].second) + " s, " + FormatShort(f.exposure_s) + " s exp");
   }
   std::vector<render::Image> images;
   for (const Frame& f : frames) {
@@ -325,29 +241,46 @@ void WriteFramesContactSheet(const fs::path& session_dir, const fs::path& out, i
 
 // The measured curves as a plot: signal per second of exposure (decay: over
 // time after light-off; excitation: over charge time, one series per light).
+// One point of a curves plot: a frame's mean signal per channel, its
+// exposure, its x (delay after light-off, or charge time) and its light.
+struct CurvePoint {
+  std::string light;
+  double x = 0, exposure_s = 1;
+  std::vector<double> means;
+};
+
+std::vector<CurvePoint> CurvePoints(const fs::path& session_dir, const std::string& protocol) {
+  std::vector<CurvePoint> points;
+  if (protocol == ExcitationFrameFields::kProtocol) {
+    for (const auto& [frame, line, fields] : ReadProtocolFrames<ExcitationFrameFields>(session_dir))
+      points.push_back({fields.light, fields.charge_s, frame.exposure_s, fields.signal.mean_signal_dn});
+  } else {
+    for (const auto& [frame, line, fields] : ReadProtocolFrames<DecayFrameFields>(session_dir))
+      points.push_back({"", fields.delay_after_light_off_s, frame.exposure_s, fields.signal.mean_signal_dn});
+  }
+  return points;
+}
+
 void WriteCurvesPlot(const fs::path& session_dir, const std::string& protocol, const fs::path& out) {
-  const std::vector<nlohmann::json> lines = FrameLines(session_dir);
   std::map<std::string, PlotSeries> series;
   std::map<std::string, std::size_t> light_order;
-  for (const nlohmann::json& line : lines) {
-    if (!line.contains("mean_signal_dn")) continue;
-    const std::vector<double> means = line["mean_signal_dn"];
-    const double exposure = line.value("exposure_s", 1.0);
+  for (const CurvePoint& point : CurvePoints(session_dir, protocol)) {
+    const std::vector<double>& means = point.means;
+    const double exposure = point.exposure_s;
     const std::vector<std::string> names =
         means.size() == 3 ? std::vector<std::string>{"R", "G", "B"} : std::vector<std::string>{"Y"};
     for (std::size_t c = 0; c < means.size() && c < names.size(); ++c) {
-      const std::string key = protocol == "excitation" ? line.value("light", "") + " " + names[c] : names[c];
+      const std::string key = protocol == "excitation" ? point.light + " " + names[c] : names[c];
       PlotSeries& s = series.try_emplace(key, PlotSeries(key)).first->second;
       s.markers = true;
-      s.x.push_back(protocol == "excitation" ? line.value("charge_s", 0.0)
-                                             : line.value("delay_after_light_off_s", 0.0));
+      s.x.push_back(point.x);
       s.y.push_back(means[c] / exposure);
       // Channels are red, green and blue in every plot; in the excitation
       // plot each light has its own line style (solid, dashed, dots).
       s.color = ChannelOrPaletteColor(names[c], static_cast<int>(c));
       if (protocol == "excitation") {
         const int light_index =
-            static_cast<int>(light_order.try_emplace(line.value("light", ""), light_order.size()).first->second);
+            static_cast<int>(light_order.try_emplace(point.light, light_order.size()).first->second);
         s.dashed = light_index % 3 == 1;
         s.line = light_index % 3 != 2;
       }
@@ -405,7 +338,7 @@ void PrintJsonSummary(const fs::path& dir) {
   nlohmann::json summary = part(dir);
   if (summary["protocol"] == "all") {
     summary["parts"] = nlohmann::json::array();
-    for (const char* name : {"lvf-calibration", "spectrum", "decay", "excitation"})
+    for (const std::string& name : kAllOrder)
       if (fs::exists(dir / name / "session.json")) summary["parts"].push_back(part(dir / name));
   }
   std::printf("%s\n", summary.dump().c_str());
@@ -424,34 +357,18 @@ void RunProtocol(const Plan& plan, Devices& devices, SessionWriter& session, boo
   Camera& camera = *devices.camera;
   Lights& lights = *devices.lights;
   Clock& clock = *devices.clock;
-  const nlohmann::json& s = plan.settings;
-  if (plan.protocol == "decay") {
-    DecayProtocolOptions o;
-    o.charge_light = s.value("charge_light", o.charge_light);
-    o.charge_s = s.value("charge_s", o.charge_s);
-    o.interval_s = s.value("interval_s", o.interval_s);
-    o.duration_s = s.value("duration_s", o.duration_s);
-    o.first_delay_s = s.value("first_delay_s", o.first_delay_s);
-    o.early_frames = s.value("early_frames", 0);  // sessions from before the early frames had none
-    o.initial_exposure_s = s.value("initial_exposure_s", o.initial_exposure_s);
-    o.max_exposure_s = s.value("max_exposure_s", o.max_exposure_s);
-    o.gain = s.value("gain", o.gain);
-    RunDecayProtocol(camera, lights, clock, session, o);
-  } else if (plan.protocol == "excitation") {
-    RunExcitationProtocol(camera, lights, clock, session, ExcitationFrom(s),
+  const std::string where = (session.dir() / "session.json").string() + ": settings";
+  if (plan.protocol == DecayFrameFields::kProtocol) {
+    RunDecayProtocol(camera, lights, clock, session, DecayProtocolOptions::FromJson(plan.settings, where));
+  } else if (plan.protocol == ExcitationFrameFields::kProtocol) {
+    RunExcitationProtocol(camera, lights, clock, session, ExcitationProtocolOptions::FromJson(plan.settings, where),
                           resuming ? ReadExcitationDone(session.dir()) : ExcitationDone{});
-  } else if (plan.protocol == "spectrum") {
-    SpectrumProtocolOptions o;
-    o.charge_light = s.value("charge_light", o.charge_light);
-    o.charge_s = s.value("charge_s", o.charge_s);
-    o.recharge_s = s.value("recharge_s", o.recharge_s);
-    o.frames = s.value("frames", o.frames);
-    o.first_delay_s = s.value("first_delay_s", o.first_delay_s);
-    o.gain = s.value("gain", o.gain);
-    o.exposure = AutoExposureFrom(s.value("exposure", nlohmann::json::object()), o.exposure);
-    RunSpectrumProtocol(camera, lights, clock, session, devices.rig, o);
-  } else if (plan.protocol == "lvf-calibration") {
-    RunLvfCalibrationProtocol(camera, lights, clock, session, devices.rig, LvfCalibrationFrom(s),
+  } else if (plan.protocol == SpectrumFrameFields::kProtocol) {
+    RunSpectrumProtocol(camera, lights, clock, session, devices.rig,
+                        SpectrumProtocolOptions::FromJson(plan.settings, where));
+  } else if (plan.protocol == LvfCalibrationFrameFields::kProtocol) {
+    RunLvfCalibrationProtocol(camera, lights, clock, session, devices.rig,
+                              LvfCalibrationOptions::FromJson(plan.settings, where),
                               resuming ? ReadLvfCalibrationDone(session.dir()) : std::vector<std::string>{});
   } else {
     ThrowUserError("", "protocol", "unknown protocol '" + plan.protocol + "'");
@@ -469,27 +386,29 @@ bool Resumable(const std::string& protocol) { return protocol == "excitation" ||
 void WarnIfNoGlow(const std::string& protocol, const fs::path& dir) {
   if (protocol != "decay") return;
   double best_fraction = -1, brightest = 0, range = 0;  // of the range; the frame's mean and range, DN
-  for (const FrameRecord& frame : ReadFrameRecords(dir).frames) {
+  for (const auto& [frame, line, fields] : ReadProtocolFrames<DecayFrameFields>(dir)) {
     const double frame_range = std::ldexp(1.0, frame.adc_bits) - 1 - frame.black_level_dn;
-    for (const nlohmann::json& mean : frame.protocol.value("mean_signal_dn", nlohmann::json::array()))
-      if (mean.is_number() && mean.get<double>() / frame_range > best_fraction) {
-        best_fraction = mean.get<double>() / frame_range;
-        brightest = mean.get<double>();
+    for (double mean : fields.signal.mean_signal_dn)
+      if (mean / frame_range > best_fraction) {
+        best_fraction = mean / frame_range;
+        brightest = mean;
         range = frame_range;
       }
   }
   if (best_fraction < 0 || best_fraction >= 0.01) return;
-  const nlohmann::json settings = ReadSessionRecord(dir).settings;
+  const SessionRecord start = ReadSessionRecord(dir);
+  const DecayProtocolOptions settings =
+      DecayProtocolOptions::FromJson(start.settings, (dir / "session.json").string() + ": settings");
   std::fprintf(stderr,
                "phos capture: warning: %s: no decay frame rose above 1%% of the camera's range (the brightest: %s "
                "of %s DN): the sample hardly glows; does '%s' charge it?\n",
                dir.string().c_str(), FormatShort(brightest, 3).c_str(), FormatShort(range, 5).c_str(),
-               settings.value("charge_light", std::string("the charge light")).c_str());
+               settings.charge_light.c_str());
 }
 
 void PrintSession(const std::string& protocol, const fs::path& dir) {
-  const std::vector<nlohmann::json> lines = FrameLines(dir);
-  Say("phos capture %s: %zu frames -> %s\n", protocol.c_str(), lines.size(), dir.string().c_str());
+  Say("phos capture %s: %zu frames -> %s\n", protocol.c_str(), ReadFrameRecords(dir).frames.size(),
+      dir.string().c_str());
   WarnIfNoGlow(protocol, dir);
 }
 
@@ -502,19 +421,21 @@ void Previews(const std::string& protocol, const fs::path& session_dir, const fs
   }
 }
 
-// The light channels a protocol's settings name.
-std::vector<std::pair<std::string, std::string>> LightsNamed(const std::string& protocol, const nlohmann::json& s) {
+// The light channels a protocol's settings name, each with the option that named it.
+std::vector<std::pair<std::string, std::string>> LightsNamed(const Plan& plan) {
   std::vector<std::pair<std::string, std::string>> named;  // option, channel
-  auto add = [&](const char* option, const nlohmann::json& v) {
-    if (v.is_string()) named.push_back({option, v.get<std::string>()});
-  };
-  if (protocol == "decay" || protocol == "spectrum") add("--light", s.value("charge_light", nlohmann::json()));
-  if (protocol == "excitation")
-    for (const nlohmann::json& light : s.value("lights", nlohmann::json::array())) add("--light", light);
-  if (protocol == "lvf-calibration") {
-    for (const nlohmann::json& line : s.value("lines", nlohmann::json::array()))
-      add("calibration_lines", line.value("light", nlohmann::json()));
-    add("flat_light", s.value("flat_light", nlohmann::json()));
+  const std::string where = "settings";
+  if (plan.protocol == DecayFrameFields::kProtocol)
+    named.push_back({"--light", DecayProtocolOptions::FromJson(plan.settings, where).charge_light});
+  if (plan.protocol == SpectrumFrameFields::kProtocol)
+    named.push_back({"--light", SpectrumProtocolOptions::FromJson(plan.settings, where).charge_light});
+  if (plan.protocol == ExcitationFrameFields::kProtocol)
+    for (const std::string& light : ExcitationProtocolOptions::FromJson(plan.settings, where).lights)
+      named.push_back({"--light", light});
+  if (plan.protocol == LvfCalibrationFrameFields::kProtocol) {
+    const LvfCalibrationOptions o = LvfCalibrationOptions::FromJson(plan.settings, where);
+    for (const CalibrationLine& line : o.lines) named.push_back({"calibration_lines", line.light});
+    named.push_back({"flat_light", o.flat_light});
   }
   return named;
 }
@@ -523,7 +444,7 @@ std::vector<std::pair<std::string, std::string>> LightsNamed(const std::string& 
 // session folder is created, so a typo leaves nothing behind to block the rerun.
 void CheckLightsExist(const Plan& plan, const Devices& devices) {
   const std::vector<std::string> channels = devices.lights->channels();
-  for (const auto& [option, channel] : LightsNamed(plan.protocol, plan.settings))
+  for (const auto& [option, channel] : LightsNamed(plan))
     if (std::find(channels.begin(), channels.end(), channel) == channels.end())
       ThrowUserError("", option, "unknown channel '" + channel + "' (this lab has: " + JoinComma(channels) + ")");
 }
@@ -533,7 +454,7 @@ void RunNewSession(const Plan& plan, CaptureArgs& args) {
   Devices devices(args);
   // Bad settings are refused before the folder exists.
   CheckLightsExist(plan, devices);
-  SessionWriter session(args.out, StartRecord(plan.protocol, devices, plan.settings));
+  SessionWriter session(args.out, StartRecord(plan.protocol, devices, plan.settings).ToJson());
   RunProtocol(plan, devices, session, false);
   PrintSession(plan.protocol, args.out);
   Previews(plan.protocol, args.out, args.out);
@@ -541,8 +462,6 @@ void RunNewSession(const Plan& plan, CaptureArgs& args) {
 }
 
 // ---- all -----------------------------------------------------------------
-
-const std::vector<std::string> kAllOrder = {"lvf-calibration", "spectrum", "decay", "excitation"};
 
 struct AllArgs : CaptureArgs {
   std::string light;  // charge light (default: the lab's)
@@ -576,10 +495,10 @@ std::string UnrepairableProblem(const SessionCheck& check) {
 // Runs (or, resuming, finishes) every part of an `all` folder in order. A
 // part that says it is complete is checked first: kept only if its records
 // and frames are whole.
-void RunAllParts(const fs::path& dir, const nlohmann::json& parts, Devices& devices, int resume_count) {
+void RunAllParts(const fs::path& dir, const AllSettings& parts, Devices& devices, int resume_count) {
   for (const std::string& protocol : kAllOrder) {
     const fs::path part = dir / protocol;
-    const Plan plan{protocol, parts.at(protocol)};
+    const Plan plan{protocol, parts.PartToJson(protocol)};
     std::error_code ec;
     if (fs::exists(part / "session.json", ec)) {
       const SessionCheck check = CheckSession(part);
@@ -612,10 +531,10 @@ void RunAllParts(const fs::path& dir, const nlohmann::json& parts, Devices& devi
                     check.complete() ? "complete but not whole (" + check.problems.front() + ")"
                                      : "interrupted: a " + protocol + " cannot continue (the glow faded unobserved)");
     }
-    nlohmann::json start = StartRecord(protocol, devices, plan.settings);
-    start["part_of"] = dir.filename().string();
-    if (resume_count > 0) start["resume"] = resume_count;
-    SessionWriter session(part, start);
+    SessionRecord start = StartRecord(protocol, devices, plan.settings);
+    start.part_of = dir.filename().string();
+    start.resume = resume_count;
+    SessionWriter session(part, start.ToJson());
     RunProtocol(plan, devices, session, false);
     Say("  %-16s %d frames\n", protocol.c_str(), static_cast<int>(ReadFrameRecords(part).frames.size()));
     WarnIfNoGlow(protocol, part);
@@ -631,7 +550,6 @@ void FinishAll(const fs::path& dir) {
 void RunCaptureAll(AllArgs args) {
   g_json_output = args.json;
   Devices devices(args);
-  nlohmann::json parts;
   const std::string charge_light = !args.light.empty()   ? args.light
                                    : devices.simulated() ? "led405"
                                                          : devices.lab_config.charge_light;
@@ -665,15 +583,11 @@ void RunCaptureAll(AllArgs args) {
   if (!spectrum.IsValid(&error)) ThrowUserError("", "spectrum", error);
   if (!decay.IsValid(&error)) ThrowUserError("", "decay", error);
   if (!excitation.IsValid(&error)) ThrowUserError("", "excitation", error);
-  parts["lvf-calibration"] = ToJson(calibration);
-  parts["spectrum"] = ToJson(spectrum);
-  parts["decay"] = ToJson(decay);
-  parts["excitation"] = ToJson(excitation);
-
-  for (const std::string& protocol : kAllOrder) CheckLightsExist({protocol, parts[protocol]}, devices);
+  const AllSettings parts{calibration, spectrum, decay, excitation};
+  for (const std::string& protocol : kAllOrder) CheckLightsExist({protocol, parts.PartToJson(protocol)}, devices);
 
   // The folder's own record: the plan of all parts, and how it ended.
-  SessionWriter top(args.out, StartRecord("all", devices, {{"parts", parts}, {"order", kAllOrder}}));
+  SessionWriter top(args.out, StartRecord("all", devices, parts.ToJson()).ToJson());
   Say("phos capture all -> %s\n", args.out.c_str());
   try {
     RunAllParts(args.out, parts, devices, 0);
@@ -694,7 +608,6 @@ void RunCaptureResume(const std::string& dir_text, bool json) {
   const fs::path dir = dir_text;
   const SessionRecord start = ReadSessionRecord(dir);
   const std::string& protocol = start.protocol;
-  const nlohmann::json start_json = ReadJsonFile(dir / "session.json");
   if (protocol == "all") {
     std::optional<StopRecord> stop = ReadStopRecord(dir);
     bool parts_whole = true;
@@ -709,15 +622,13 @@ void RunCaptureResume(const std::string& dir_text, bool json) {
     }
     std::vector<std::string> notes;
     std::unique_ptr<SessionWriter> top = SessionWriter::Reopen(dir, true, &notes);
-    int resumes = 0;
-    for (const nlohmann::json& event : ReadEventRecords(dir)) resumes += event["event"] == "resume";
-    Devices devices(start_json, dir, resumes);
+    const int resumes = CountResumes(dir);
+    Devices devices(start, dir, resumes);
     Say("phos capture resume: %s (all)\n", dir.string().c_str());
     PrintNotes("all", notes);
     try {
-      RunAllParts(dir,
-                  RequiredKey<nlohmann::json>(start.settings, "parts", (dir / "session.json").string() + ": settings"),
-                  devices, resumes);
+      RunAllParts(dir, AllSettings::FromJson(start.settings, (dir / "session.json").string() + ": settings"), devices,
+                  resumes);
     } catch (const std::exception& e) {
       top->StopQuietly("failed", e.what());
       throw;
@@ -759,7 +670,7 @@ void RunCaptureResume(const std::string& dir_text, bool json) {
   std::vector<std::string> notes;
   std::unique_ptr<SessionWriter> session = SessionWriter::Reopen(dir, true, &notes);
   for (const std::string& note : notes) Say("phos capture resume: %s\n", note.c_str());
-  Devices devices(start_json, dir, session->run());  // new noise on every resume, not the first one's again
+  Devices devices(start, dir, session->run());  // new noise on every resume, not the first one's again
   RunProtocol({protocol, start.settings}, devices, *session, true);
   PrintSession(protocol, dir);
   Previews(protocol, dir, dir);
@@ -881,23 +792,30 @@ void RegisterCapture(CLI::App& app) {
   decay->add_option("--light", decay_args->light,
                     "light channel to charge with (default led405, or the lab's charge_light). It must only reach\n"
                     "bands whose ke the material knows");
-  decay->add_option("--charge-s", decay_args->decay.charge_s, "seconds of charging (default 5400, 90 min)")->check(kNonNegative);
-  decay->add_option("--interval-s", decay_args->decay.interval_s, "seconds between frames (default 5)")->check(kPositive);
-  decay->add_option("--duration-s", decay_args->decay.duration_s, "seconds of decay to record (default 180)")->check(kPositive);
-  decay->add_option("--first-delay-s", decay_args->decay.first_delay_s,
-                    "light-off to the first exposure (default 0.005)")->check(kNonNegative);
+  decay->add_option("--charge-s", decay_args->decay.charge_s, "seconds of charging (default 5400, 90 min)")
+      ->check(kNonNegative);
+  decay->add_option("--interval-s", decay_args->decay.interval_s, "seconds between frames (default 5)")
+      ->check(kPositive);
+  decay->add_option("--duration-s", decay_args->decay.duration_s, "seconds of decay to record (default 180)")
+      ->check(kPositive);
+  decay
+      ->add_option("--first-delay-s", decay_args->decay.first_delay_s,
+                   "light-off to the first exposure (default 0.005)")
+      ->check(kNonNegative);
   decay->add_option("--early-frames", decay_args->decay.early_frames,
                     "frames between the first two slots, at delays halving from --interval-s / 2, so a state\n"
                     "that decays in under a second is seen by several frames (default 6; 0: none)");
-  decay->add_option("--initial-exposure-s", decay_args->decay.initial_exposure_s, "first exposure (default 0.05)")->check(kPositive);
-  decay->add_option("--max-exposure-s", decay_args->decay.max_exposure_s, "longest exposure (default 4)")->check(kPositive);
+  decay->add_option("--initial-exposure-s", decay_args->decay.initial_exposure_s, "first exposure (default 0.05)")
+      ->check(kPositive);
+  decay->add_option("--max-exposure-s", decay_args->decay.max_exposure_s, "longest exposure (default 4)")
+      ->check(kPositive);
   decay->callback([decay_args] {
     DecayArgs args = *decay_args;
     args.decay.charge_light = args.light.empty() ? "led405" : args.light;
     if (args.light.empty() && !args.lab.empty()) args.decay.charge_light = LoadLabConfig(args.lab).charge_light;
     std::string error;
     if (!args.decay.IsValid(&error)) ThrowUserError("", "decay protocol", error);
-    RunNewSession({"decay", ToJson(args.decay)}, args);
+    RunNewSession({DecayFrameFields::kProtocol, args.decay.ToJson()}, args);
   });
 
   auto excitation_args = std::make_shared<ExcitationArgs>();
@@ -909,12 +827,17 @@ void RegisterCapture(CLI::App& app) {
   AddDeviceOptions(excitation, *excitation_args);
   excitation->add_option("--light", excitation_args->excitation.lights,
                          "light channel(s) to measure, one after the other (default led405)");
-  excitation->add_option("--reset-s", excitation_args->excitation.reset_s, "darkness before each charge (default 900)")->check(kNonNegative);
-  excitation->add_option("--first-charge-s", excitation_args->excitation.first_charge_s,
-                         "first charge time (default 1)")->check(kPositive);
-  excitation->add_option("--max-charge-s", excitation_args->excitation.max_charge_s, "longest charge (default 4096)")->check(kPositive);
-  excitation->add_option("--delay-s", excitation_args->excitation.delay_s, "light-off to the exposure (default 0.05)")->check(kNonNegative);
-  excitation->add_option("--exposure-s", excitation_args->excitation.exposure_s, "exposure (default 1)")->check(kPositive);
+  excitation->add_option("--reset-s", excitation_args->excitation.reset_s, "darkness before each charge (default 900)")
+      ->check(kNonNegative);
+  excitation
+      ->add_option("--first-charge-s", excitation_args->excitation.first_charge_s, "first charge time (default 1)")
+      ->check(kPositive);
+  excitation->add_option("--max-charge-s", excitation_args->excitation.max_charge_s, "longest charge (default 4096)")
+      ->check(kPositive);
+  excitation->add_option("--delay-s", excitation_args->excitation.delay_s, "light-off to the exposure (default 0.05)")
+      ->check(kNonNegative);
+  excitation->add_option("--exposure-s", excitation_args->excitation.exposure_s, "exposure (default 1)")
+      ->check(kPositive);
   excitation->add_option("--tail-frames", excitation_args->excitation.tail_frames,
                          "frames of decay tail after each charge's first frame, each --tail-growth times longer;\n"
                          "they split the response into the excited states (default 6; 0: one frame per charge)");
@@ -925,7 +848,7 @@ void RegisterCapture(CLI::App& app) {
     if (args.excitation.lights.empty()) args.excitation.lights = {"led405"};
     std::string error;
     if (!args.excitation.IsValid(&error)) ThrowUserError("", "excitation protocol", error);
-    RunNewSession({"excitation", ToJson(args.excitation)}, args);
+    RunNewSession({ExcitationFrameFields::kProtocol, args.excitation.ToJson()}, args);
   });
 
   auto spectrum_args = std::make_shared<SpectrumArgs>();
@@ -937,9 +860,10 @@ void RegisterCapture(CLI::App& app) {
       "turns columns into wavelengths.");
   AddDeviceOptions(spectrum, *spectrum_args);
   spectrum->add_option("--light", spectrum_args->light, "light channel to charge with (default led405)");
-  spectrum->add_option("--charge-s", spectrum_args->spectrum.charge_s, "seconds of the first charge (default 600)")->check(kNonNegative);
-  spectrum->add_option("--recharge-s", spectrum_args->spectrum.recharge_s,
-                       "seconds of each later charge (default 300)")->check(kNonNegative);
+  spectrum->add_option("--charge-s", spectrum_args->spectrum.charge_s, "seconds of the first charge (default 600)")
+      ->check(kNonNegative);
+  spectrum->add_option("--recharge-s", spectrum_args->spectrum.recharge_s, "seconds of each later charge (default 300)")
+      ->check(kNonNegative);
   spectrum->add_option("--frames", spectrum_args->spectrum.frames, "well-exposed frames to average (default 4)");
   spectrum->callback([spectrum_args] {
     SpectrumArgs args = *spectrum_args;
@@ -947,7 +871,7 @@ void RegisterCapture(CLI::App& app) {
     if (args.light.empty() && !args.lab.empty()) args.spectrum.charge_light = LoadLabConfig(args.lab).charge_light;
     std::string error;
     if (!args.spectrum.IsValid(&error)) ThrowUserError("", "spectrum protocol", error);
-    RunNewSession({"spectrum", ToJson(args.spectrum)}, args);
+    RunNewSession({SpectrumFrameFields::kProtocol, args.spectrum.ToJson()}, args);
   });
 
   auto calibration_args = std::make_shared<CaptureArgs>();
@@ -971,7 +895,7 @@ void RegisterCapture(CLI::App& app) {
     }
     std::string error;
     if (!options.IsValid(&error)) ThrowUserError("", "lvf-calibration protocol", error);
-    RunNewSession({"lvf-calibration", ToJson(options)}, args);
+    RunNewSession({LvfCalibrationFrameFields::kProtocol, options.ToJson()}, args);
   });
 
   auto all_args = std::make_shared<AllArgs>();
@@ -988,7 +912,8 @@ void RegisterCapture(CLI::App& app) {
   all->add_option("--charge-s", all_args->charge_s, "decay: seconds of charging (default 5400)")->check(kNonNegative);
   all->add_option("--duration-s", all_args->duration_s, "decay: seconds recorded (default 180)")->check(kPositive);
   all->add_option("--interval-s", all_args->interval_s, "decay: seconds between frames (default 5)")->check(kPositive);
-  all->add_option("--reset-s", all_args->reset_s, "excitation: darkness before each charge (default 900)")->check(kNonNegative);
+  all->add_option("--reset-s", all_args->reset_s, "excitation: darkness before each charge (default 900)")
+      ->check(kNonNegative);
   all->add_option("--tail-frames", all_args->tail_frames,
                   "excitation: frames of decay tail after each charge, which split the response into the\n"
                   "excited states (default 6; 0: one frame per charge)");

@@ -292,18 +292,18 @@ std::unique_ptr<OpenedLab> OpenLab(const LabConfig& config) {
     lab->rig = [](const std::string&, bool) {};
   }
   // What each measured light puts on the sample per band: the fit needs it for ke.
-  nlohmann::json band_irradiance = nlohmann::json::object();
+  DevicesRecord& d = lab->description;
   for (const LabChannel& c : config.channels)
-    if (!c.band_irradiance.empty()) band_irradiance[c.name] = c.band_irradiance;
-  lab->description = {{"camera", camera.description()},
-                      {"light_band_irradiance", band_irradiance},
-                      {"bands_nm", config.bands.edges_nm},
-                      {"pixel_format", camera.pixel_format()},
-                      {"lights", names},
-                      {"lights_backend", config.lights_backend},
-                      {"clock", "system (monotonic)"},
-                      {"lab_config", config.source.string()},
-                      {"lab", config.ToJson()}};
+    if (!c.band_irradiance.empty()) d.light_band_irradiance[c.name] = c.band_irradiance;
+  d.device = "lab";
+  d.camera = camera.description();
+  d.bands_nm = config.bands.edges_nm;
+  d.pixel_format = camera.pixel_format();
+  d.lights = names;
+  d.lights_backend = config.lights_backend;
+  d.clock = "system (monotonic)";
+  d.lab_config = config.source.string();
+  d.lab = config.ToJson();
   return lab;
 }
 

@@ -13,70 +13,57 @@
 
 namespace phos {
 
-bool AutoExposure::IsValid(std::string* error) const {
-  if (!(min_exposure_s > 0) || !(initial_exposure_s >= min_exposure_s) || !(max_exposure_s >= initial_exposure_s))
-    return *error = "need 0 < min exposure <= initial exposure <= max exposure", false;
-  if (!(low_fraction > 0 && low_fraction < high_fraction && high_fraction < 1))
-    return *error = "need 0 < low fraction < high fraction < 1", false;
-  return true;
-}
-
-bool DecayProtocolOptions::IsValid(std::string* error) const {
-  if (charge_light.empty()) return *error = "no charge light named", false;
-  if (!(charge_s >= 0)) return *error = "charge time must be >= 0", false;
-  if (!(interval_s > 0) || !(duration_s > 0)) return *error = "interval and duration must be > 0", false;
-  if (!(first_delay_s >= 0)) return *error = "first delay must be >= 0", false;
-  if (early_frames < 0 || early_frames > 20) return *error = "early frames must be 0-20", false;
-  if (!(initial_exposure_s > 0) || !(max_exposure_s >= initial_exposure_s))
-    return *error = "need 0 < initial exposure <= max exposure", false;
-  if (!(low_fraction > 0 && low_fraction < high_fraction && high_fraction < 1))
-    return *error = "need 0 < low fraction < high fraction < 1", false;
-  return true;
-}
-
 namespace {
 
 void RecordLight(SessionWriter& session, Lights& lights, const Clock& clock, const std::string& channel, bool on) {
   lights.Set(channel, on);
-  session.Event({{"t_s", clock.now_s()}, {"event", "light"}, {"channel", channel}, {"on", on}});
+  session.Event(LightSwitchEvent{clock.now_s(), channel, on}.ToJson());
 }
 
-// Writes the frame with its per-channel mean signal and saturated fraction
-// added to `line`; returns the brightest channel's mean as a fraction of the
-// ADC range above black.
-double RecordFrame(SessionWriter& session, const Frame& frame, nlohmann::json line) {
+// What a frame shows: each channel's mean and, through the LVF, each
+// column's (channels summed), black removed; the brightest of them as a
+// fraction of the ADC range above black is returned in `brightest`.
+FrameSignal MeasureSignal(const Frame& frame, bool through_lvf, double* brightest) {
   const double range = std::pow(2.0, frame.adc_bits) - 1 - frame.black_level_dn;
-  std::vector<double> means;
-  double brightest = 0;
+  FrameSignal signal;
+  *brightest = 0;
   for (int c = 0; c < frame.channels; ++c) {
-    means.push_back(frame.MeanSignal(c));
-    brightest = std::max(brightest, means.back() / range);
+    signal.mean_signal_dn.push_back(frame.MeanSignal(c));
+    *brightest = std::max(*brightest, signal.mean_signal_dn.back() / range);
   }
+  signal.saturated_fraction = frame.SaturatedFraction();
+  signal.lvf = through_lvf;
   // Through the LVF the light lands in a few columns: judge the exposure by
   // the brightest column, which the frame mean would hide.
-  if (line.value("lvf", false)) {
-    // One pass: each column's mean per channel, black removed. The brightest
-    // of those judges the exposure; their sum over channels is the column
-    // profile a spectrum is made of, recorded with the frame so fits need
-    // not decode images (the raw frame stays for reprocessing).
-    std::vector<double> column(static_cast<std::size_t>(frame.width) * frame.channels, -frame.black_level_dn);
-    for (int y = 0; y < frame.height; ++y)
-      for (std::size_t i = 0; i < column.size(); ++i)
-        column[i] += static_cast<double>(frame.pixels[static_cast<std::size_t>(y) * column.size() + i]) / frame.height;
-    brightest = 0;
-    std::vector<double> profile(static_cast<std::size_t>(frame.width), 0.0);
-    for (int x = 0; x < frame.width; ++x)
-      for (int c = 0; c < frame.channels; ++c) {
-        const double mean = column[static_cast<std::size_t>(x) * frame.channels + c];
-        brightest = std::max(brightest, mean / range);
-        profile[x] += mean;
-      }
-    line["peak_column_fraction"] = brightest;
-    line["column_mean_dn"] = profile;
-  }
-  line["mean_signal_dn"] = means;
-  line["saturated_fraction"] = frame.SaturatedFraction();
-  session.WriteFrame(frame, line);
+  if (!through_lvf) return signal;
+  // One pass: each column's mean per channel, black removed. The brightest
+  // of those judges the exposure; their sum over channels is the column
+  // profile a spectrum is made of, recorded with the frame so fits need
+  // not decode images (the raw frame stays for reprocessing).
+  std::vector<double> column(static_cast<std::size_t>(frame.width) * frame.channels, -frame.black_level_dn);
+  for (int y = 0; y < frame.height; ++y)
+    for (std::size_t i = 0; i < column.size(); ++i)
+      column[i] += static_cast<double>(frame.pixels[static_cast<std::size_t>(y) * column.size() + i]) / frame.height;
+  *brightest = 0;
+  signal.column_mean_dn.assign(static_cast<std::size_t>(frame.width), 0.0);
+  for (int x = 0; x < frame.width; ++x)
+    for (int c = 0; c < frame.channels; ++c) {
+      const double mean = column[static_cast<std::size_t>(x) * frame.channels + c];
+      *brightest = std::max(*brightest, mean / range);
+      signal.column_mean_dn[x] += mean;
+    }
+  signal.peak_column_fraction = *brightest;
+  return signal;
+}
+
+// Writes the frame with its record: the protocol's fields and what the frame
+// shows (MeasureSignal); returns the brightest channel's (or, through the
+// LVF, column's) mean as a fraction of the ADC range above black.
+template <typename Fields>
+double RecordFrame(SessionWriter& session, const Frame& frame, Fields fields) {
+  double brightest = 0;
+  fields.signal = MeasureSignal(frame, Fields::kThroughLvf, &brightest);
+  session.WriteFrame(frame, fields.ToJson());
   return brightest;
 }
 
@@ -96,7 +83,7 @@ bool WellExposed(const AutoExposure& a, double brightest, const Frame& frame) {
 void RecordRig(SessionWriter& session, const RigChange& rig, const Clock& clock, const std::string& what,
                bool in_place) {
   rig(what, in_place);
-  session.Event({{"t_s", clock.now_s()}, {"event", "rig"}, {"what", what}, {"in_place", in_place}});
+  session.Event(RigEvent{clock.now_s(), what, in_place}.ToJson());
 }
 
 // Runs a protocol's body; on any error the session is marked failed with the
@@ -105,10 +92,10 @@ void RecordRig(SessionWriter& session, const RigChange& rig, const Clock& clock,
 template <typename Body>
 void RunRecorded(SessionWriter& session, Lights& lights, const Clock& clock, const std::string& protocol, Body body) {
   try {
-    session.Event({{"t_s", clock.now_s()}, {"event", "protocol"}, {"protocol", protocol}, {"phase", "start"}});
+    session.Event(ProtocolEvent{clock.now_s(), protocol, "start"}.ToJson());
     body();
     lights.AllOff();
-    session.Event({{"t_s", clock.now_s()}, {"event", "protocol"}, {"protocol", protocol}, {"phase", "end"}});
+    session.Event(ProtocolEvent{clock.now_s(), protocol, "end"}.ToJson());
     session.Stop("complete");
   } catch (const std::exception& e) {
     session.StopQuietly("failed", e.what());  // on a full disk this fails too: the error to report is the first
@@ -161,8 +148,7 @@ DecayProtocolResult RunDecayProtocol(Camera& camera, Lights& lights, Clock& cloc
       const double exposure_now = std::min(exposure, std::max(1e-6, room));
       Frame frame = camera.Capture(exposure_now, options.gain);
       readout_s = std::max(0.0, clock.now_s() - frame.t_start_s - exposure_now);
-      const double brightest =
-          RecordFrame(session, frame, {{"delay_after_light_off_s", frame.t_start_s - result.light_off_s}});
+      const double brightest = RecordFrame(session, frame, DecayFrameFields{frame.t_start_s - result.light_off_s, {}});
       ++result.frames;
       // Auto-exposure for the next frame.
       if (brightest > options.high_fraction || frame.SaturatedFraction() > 0)
@@ -172,19 +158,6 @@ DecayProtocolResult RunDecayProtocol(Camera& camera, Lights& lights, Clock& cloc
     }
   });
   return result;
-}
-
-bool ExcitationProtocolOptions::IsValid(std::string* error) const {
-  if (lights.empty()) return *error = "no light to measure", false;
-  if (!(reset_s >= 0) || !(delay_s >= 0)) return *error = "reset and delay must be >= 0", false;
-  if (!(first_charge_s > 0) || !(max_charge_s >= first_charge_s))
-    return *error = "need 0 < first charge <= max charge", false;
-  if (!(plateau_growth > 1)) return *error = "plateau growth must be > 1", false;
-  if (!(exposure_s > 0)) return *error = "exposure must be > 0", false;
-  if (tail_frames < 0 || tail_frames > 20) return *error = "tail frames must be 0-20", false;
-  if (!(tail_growth >= 1) || !(tail_growth <= 16)) return *error = "tail growth must be 1-16", false;
-  if (!(high_fraction > 0 && high_fraction < 1)) return *error = "high fraction must be in (0, 1)", false;
-  return true;
 }
 
 ExcitationProtocolResult RunExcitationProtocol(Camera& camera, Lights& lights, Clock& clock, SessionWriter& session,
@@ -232,13 +205,14 @@ ExcitationProtocolResult RunExcitationProtocol(Camera& camera, Lights& lights, C
     for (int tail = 0; tail <= options.tail_frames; ++tail) {
       Frame frame = camera.Capture(std::min(exposure, camera.max_exposure_s()), options.gain);
       ++result.frames;
-      const double brightest = RecordFrame(session, frame,
-                                           {{"light", light},
-                                            {"charge_s", charge_s},
-                                            {"delay_after_light_off_s", frame.t_start_s - off},
-                                            {"light_off_s", off},
-                                            {"tail", tail},
-                                            {"tail_frames", options.tail_frames}});
+      ExcitationFrameFields fields;
+      fields.light = light;
+      fields.charge_s = charge_s;
+      fields.light_off_s = off;
+      fields.delay_after_light_off_s = frame.t_start_s - off;
+      fields.tail = tail;
+      fields.tail_frames = options.tail_frames;
+      const double brightest = RecordFrame(session, frame, fields);
       // The doubling stops on the last frame's response per second: late in
       // the tail the slowest state dominates, and it is the last to reach
       // its plateau (a fast, bright state plateaus first and would stop
@@ -253,7 +227,7 @@ ExcitationProtocolResult RunExcitationProtocol(Camera& camera, Lights& lights, C
     }
     return response;
   };
-  if (!done.empty()) session.Event({{"t_s", clock.now_s()}, {"event", "resume"}, {"measurements_kept", done.size()}});
+  if (!done.empty()) session.Event(ResumeEvent(clock.now_s(), "measurements_kept", done.size()));
   RunRecorded(session, lights, clock, "excitation", [&] {
     for (const std::string& light : options.lights) {
       // Doubling until the response stops growing.
@@ -283,27 +257,17 @@ ExcitationDone ReadExcitationDone(const std::filesystem::path& session_dir) {
     double first_brightest = 0;
   };
   std::map<std::tuple<int, std::string, double>, Measurement> measurements;
-  for (const FrameRecord& frame : ReadFrameRecords(session_dir).frames) {
-    const nlohmann::json& line = frame.protocol;
-    if (!line.contains("light") || !line.contains("charge_s") || !line.contains("mean_signal_dn")) continue;
-    const std::string where = (session_dir / "frames.jsonl").string() + ": frame " + std::to_string(frame.seq);
+  for (const auto& [frame, line, fields] : ReadProtocolFrames<ExcitationFrameFields>(session_dir)) {
     const double range = std::pow(2.0, frame.adc_bits) - 1 - frame.black_level_dn;
     double brightest = 0;
-    for (const nlohmann::json& mean : line["mean_signal_dn"]) {
-      if (!mean.is_number()) ThrowUserError(where, "mean_signal_dn", "expected numbers, got " + DescribeJson(mean));
-      brightest = std::max(brightest, mean.get<double>() / range);
-    }
-    // Sessions from before the decay tail have one frame per charge and no light_off_s.
-    const double off = line.contains("light_off_s") ? RequiredKey<double>(line, "light_off_s", where)
-                                                    : static_cast<double>(measurements.size());
-    Measurement& m = measurements[{frame.run, RequiredKey<std::string>(line, "light", where), off}];
-    m.charge_s = RequiredKey<double>(line, "charge_s", where);
-    m.expected = (line.contains("tail_frames") ? RequiredKey<int>(line, "tail_frames", where) : 0) + 1;
+    for (double mean : fields.signal.mean_signal_dn) brightest = std::max(brightest, mean / range);
+    Measurement& m = measurements[{frame.run, fields.light, fields.light_off_s}];
+    m.charge_s = fields.charge_s;
+    m.expected = fields.tail_frames + 1;
     ++m.frames;
-    const int tail = line.contains("tail") ? RequiredKey<int>(line, "tail", where) : 0;
-    if (tail == m.expected - 1) m.response = brightest / frame.exposure_s;
-    if (tail == 0) {
-      m.first_saturated = line.value("saturated_fraction", 0.0) > 0;
+    if (fields.tail == m.expected - 1) m.response = brightest / frame.exposure_s;
+    if (fields.tail == 0) {
+      m.first_saturated = fields.signal.clipped();
       m.first_brightest = brightest;
     }
   }
@@ -312,14 +276,6 @@ ExcitationDone ReadExcitationDone(const std::filesystem::path& session_dir) {
     if (m.frames == m.expected && m.response >= 0)
       done[{std::get<1>(key), m.charge_s}] = {m.response, m.first_saturated, m.first_brightest};
   return done;
-}
-
-bool SpectrumProtocolOptions::IsValid(std::string* error) const {
-  if (charge_light.empty()) return *error = "no charge light named", false;
-  if (!(charge_s >= 0) || !(recharge_s >= 0)) return *error = "charge times must be >= 0", false;
-  if (frames < 1) return *error = "need at least 1 frame", false;
-  if (!(first_delay_s >= 0)) return *error = "first delay must be >= 0", false;
-  return exposure.IsValid(error);
 }
 
 SpectrumProtocolResult RunSpectrumProtocol(Camera& camera, Lights& lights, Clock& clock, SessionWriter& session,
@@ -345,13 +301,11 @@ SpectrumProtocolResult RunSpectrumProtocol(Camera& camera, Lights& lights, Clock
       clock.SleepUntil(off + options.first_delay_s);
       Frame frame = camera.Capture(std::min(exposure, camera.max_exposure_s()), options.gain);
       // The glow lands in a few columns per band; judge the exposure there.
-      const double brightest = RecordFrame(
-          session, frame, {{"kind", "spectrum"}, {"lvf", true}, {"delay_after_light_off_s", frame.t_start_s - off}});
+      const double brightest = RecordFrame(session, frame, SpectrumFrameFields{frame.t_start_s - off, {}});
       ++result.frames;
       const bool good = WellExposed(options.exposure, brightest, frame);
       result.well_exposed += good;
-      session.Event(
-          {{"t_s", clock.now_s()}, {"event", "exposure"}, {"seq", session.frame_count()}, {"well_exposed", good}});
+      session.Event(ExposureEvent{clock.now_s(), session.frame_count(), good}.ToJson());
       exposure = NextExposure(options.exposure, exposure, brightest, frame);
     }
     RecordRig(session, rig, clock, "lvf", false);
@@ -362,17 +316,6 @@ SpectrumProtocolResult RunSpectrumProtocol(Camera& camera, Lights& lights, Clock
               " frames were well exposed (the glow is too faint through the filter even at the longest exposure)");
   });
   return result;
-}
-
-bool LvfCalibrationOptions::IsValid(std::string* error) const {
-  if (lines.size() < 2) return *error = "need at least 2 sources of known wavelength", false;
-  for (const CalibrationLine& line : lines)
-    if (!(line.wavelength_nm > 200 && line.wavelength_nm < 1200))
-      return *error = "wavelength of '" + line.light + "' must be in 200-1200 nm", false;
-  if (flat_light.empty() || !(flat_temperature_k > 0))
-    return *error = "need a flat-field lamp and its temperature", false;
-  if (max_tries < 1) return *error = "max tries must be >= 1", false;
-  return exposure.IsValid(error);
 }
 
 LvfCalibrationResult RunLvfCalibrationProtocol(Camera& camera, Lights& lights, Clock& clock, SessionWriter& session,
@@ -390,7 +333,7 @@ LvfCalibrationResult RunLvfCalibrationProtocol(Camera& camera, Lights& lights, C
   auto is_done = [&](const std::string& light) { return std::find(done.begin(), done.end(), light) != done.end(); };
   // One source: on, step the exposure until a frame is well exposed, off.
   // Every frame is recorded; the well-exposed one says so.
-  auto expose = [&](const std::string& light, nlohmann::json what) {
+  auto expose = [&](const std::string& light, const LvfCalibrationFrameFields& what) {
     if (!light.empty()) RecordLight(session, lights, clock, light, true);
     // The dark frame is exposed long (an eighth of the longest exposure):
     // the dark signal per second it measures is then well above its noise.
@@ -399,12 +342,10 @@ LvfCalibrationResult RunLvfCalibrationProtocol(Camera& camera, Lights& lights, C
     bool good = false;
     for (int attempt = 0; attempt < options.max_tries && !good; ++attempt) {
       Frame frame = camera.Capture(std::min(exposure, camera.max_exposure_s()), options.gain);
-      nlohmann::json line = what;
-      const double brightest = RecordFrame(session, frame, line);
+      const double brightest = RecordFrame(session, frame, what);
       ++result.frames;
       good = light.empty() || WellExposed(options.exposure, brightest, frame);
-      session.Event(
-          {{"t_s", clock.now_s()}, {"event", "exposure"}, {"seq", session.frame_count()}, {"well_exposed", good}});
+      session.Event(ExposureEvent{clock.now_s(), session.frame_count(), good}.ToJson());
       const double next = NextExposure(options.exposure, exposure, brightest, frame);
       if (!good && next == exposure) break;  // at a bound: more tries would change nothing
       exposure = next;
@@ -413,24 +354,19 @@ LvfCalibrationResult RunLvfCalibrationProtocol(Camera& camera, Lights& lights, C
     if (!good)
       ThrowUserError("", "lvf-calibration protocol",
                      "no well-exposed frame of '" + light + "' (is it on, and does it reach the white reference?)");
-    session.Event({{"t_s", clock.now_s()}, {"event", "calibrated"}, {"light", light}});
+    session.Event(CalibratedEvent{clock.now_s(), light}.ToJson());
   };
-  if (!done.empty()) session.Event({{"t_s", clock.now_s()}, {"event", "resume"}, {"sources_kept", done}});
+  if (!done.empty()) session.Event(ResumeEvent(clock.now_s(), "sources_kept", done));
   RunRecorded(session, lights, clock, "lvf-calibration", [&] {
     lights.AllOff();
     RecordRig(session, rig, clock, "white_reference", true);
     RecordRig(session, rig, clock, "lvf", true);
-    if (!is_done("")) expose("", {{"kind", "dark"}, {"lvf", true}});
+    using Fields = LvfCalibrationFrameFields;
+    if (!is_done("")) expose("", Fields::Dark());
     for (const CalibrationLine& line : options.lines)
-      if (!is_done(line.light))
-        expose(line.light,
-               {{"kind", "line"}, {"lvf", true}, {"light", line.light}, {"wavelength_nm", line.wavelength_nm}});
+      if (!is_done(line.light)) expose(line.light, Fields::Line(line.light, line.wavelength_nm));
     if (!is_done(options.flat_light))
-      expose(options.flat_light, {{"kind", "flat"},
-                                  {"lvf", true},
-                                  {"light", options.flat_light},
-                                  {"temperature_k", options.flat_temperature_k},
-                                  {"irradiance", options.flat_irradiance}});
+      expose(options.flat_light, Fields::Flat(options.flat_light, options.flat_temperature_k, options.flat_irradiance));
     RecordRig(session, rig, clock, "lvf", false);
     RecordRig(session, rig, clock, "white_reference", false);
   });
@@ -442,24 +378,14 @@ std::vector<std::string> ReadLvfCalibrationDone(const std::filesystem::path& ses
   // frame) and frames.jsonl still lists its well-exposed frame: a frame set
   // aside, or a lost frame list, means measuring it again.
   std::set<int> well_exposed;
+  for (const ExposureEvent& event : ReadExposureEvents(session_dir))
+    if (event.well_exposed) well_exposed.insert(event.seq);
   std::vector<std::string> calibrated;
-  for (const nlohmann::json& event : ReadEventRecords(session_dir)) {
-    const std::string name = event["event"].get<std::string>();
-    if (name == "exposure" && event.value("well_exposed", false) && event.contains("seq") &&
-        event["seq"].is_number_integer())
-      well_exposed.insert(event["seq"].get<int>());
-    if (name == "calibrated" && event.contains("light") && event["light"].is_string())
-      calibrated.push_back(event["light"].get<std::string>());
-  }
+  for (const CalibratedEvent& event : ReadCalibratedEvents(session_dir)) calibrated.push_back(event.light);
   std::set<std::string> listed;
-  for (const FrameRecord& frame : ReadFrameRecords(session_dir).frames) {
-    if (!well_exposed.count(frame.seq)) continue;
-    const nlohmann::json& p = frame.protocol;
-    if (p.value("kind", "") == "dark")
-      listed.insert("");
-    else if (p.contains("light") && p["light"].is_string())
-      listed.insert(p["light"].get<std::string>());
-  }
+  for (const auto& [frame, line, fields] : ReadProtocolFrames<LvfCalibrationFrameFields>(session_dir))
+    if (well_exposed.count(frame.seq))
+      listed.insert(fields.kind == LvfCalibrationFrameFields::Kind::kDark ? "" : fields.light);
   std::vector<std::string> done;
   for (const std::string& light : calibrated)
     if (listed.count(light) && std::find(done.begin(), done.end(), light) == done.end()) done.push_back(light);

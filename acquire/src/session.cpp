@@ -16,6 +16,7 @@
 #include <OpenImageIO/imageio.h>
 
 #include "phos/acquire/lights.h"
+#include "phos/acquire/protocol_records.h"
 #include "phos/util/error.h"
 #include "phos/util/json.h"
 
@@ -389,6 +390,14 @@ SessionCheck CheckSession(const std::filesystem::path& dir, bool decode_frames) 
       repairable((dir / "events.jsonl").string() + ":" + std::to_string(events.torn_line) +
                  ": torn last line (a crash mid-write); resume keeps it aside");
     }
+  } catch (const UserError& e) {
+    problem(e.what());
+  }
+  // Every frame record holds its protocol's fields, and the start record its
+  // settings and devices, whole: resume cannot mend a record that lacks one.
+  for (const std::string& text : ProtocolFieldProblems(dir, check.protocol, records)) problem(text);
+  try {
+    if (!check.protocol.empty()) CheckStartRecord(ReadSessionRecord(dir), (dir / "session.json").string());
   } catch (const UserError& e) {
     problem(e.what());
   }

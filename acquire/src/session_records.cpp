@@ -219,23 +219,6 @@ double NumberInRange(const nlohmann::json& j, const char* key, double lower, dou
 // ---- frames.jsonl ----------------------------------------------------------
 
 namespace {
-const char* const kFrameKeys[] = {"file",
-                                  "seq",
-                                  "t_start_s",
-                                  "exposure_s",
-                                  "gain",
-                                  "black_level_dn",
-                                  "adc_bits",
-                                  "sensor_temperature_c",
-                                  "camera_timestamp_ns",
-                                  "run",
-                                  "size_bytes",
-                                  "xxh3",
-                                  "packets_resent",
-                                  "retakes"};
-}
-
-namespace {
 // The fields the protocols add to a frame's record and the fits read: each
 // of its type when present, so a fit never meets a mistyped one.
 enum class Field { kNumber, kNonNegative, kInteger, kString, kBool, kNumberArray };
@@ -351,7 +334,7 @@ FrameRecord FrameRecord::FromJson(const nlohmann::json& j, const std::string& wh
   }
   r.run = OptionalCount(j, "run", 100000, 0, where);
   r.protocol = j;
-  for (const char* key : kFrameKeys) r.protocol.erase(key);
+  for (const char* key : kFrameRecordKeys) r.protocol.erase(key);
   CheckProtocolFields(r.protocol, where);
   return r;
 }
@@ -376,8 +359,7 @@ FrameRecords ReadFrameRecords(const fs::path& session_dir) {
     // one before it began the next run).
     if (!line.value.contains("run")) frame.run = last_run + (frame.t_start_s < last_t_s);
     if (frame.run < last_run)
-      ThrowUserError(where, "run",
-                     "run " + std::to_string(frame.run) + " comes after run " + std::to_string(last_run));
+      ThrowUserError(where, "run", "run " + std::to_string(frame.run) + " comes after run " + std::to_string(last_run));
     last = frame.seq;
     last_run = frame.run;
     last_t_s = frame.t_start_s;

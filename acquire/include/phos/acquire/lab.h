@@ -16,6 +16,7 @@
 #include "phos/acquire/aravis_camera.h"
 #include "phos/acquire/clock.h"
 #include "phos/acquire/lights.h"
+#include "phos/acquire/protocol_records.h"
 #include "phos/acquire/protocols.h"
 #include "phos/model/spectral.h"
 
@@ -97,7 +98,7 @@ struct OpenedLab {
   std::unique_ptr<AravisCamera> camera;
   std::unique_ptr<Lights> lights;
   RigChange rig;
-  nlohmann::json description;  // for the session's start record
+  DevicesRecord description;  // for the session's start record
 };
 std::unique_ptr<OpenedLab> OpenLab(const LabConfig& config);
 

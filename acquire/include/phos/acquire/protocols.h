@@ -14,6 +14,7 @@
 #include "phos/acquire/camera.h"
 #include "phos/acquire/clock.h"
 #include "phos/acquire/lights.h"
+#include "phos/acquire/protocol_records.h"
 #include "phos/acquire/session.h"
 
 namespace phos {
@@ -25,44 +26,13 @@ namespace phos {
 // terminal (or a motorized slide). Every change is recorded as an event.
 using RigChange = std::function<void(const std::string& what, bool in_place)>;
 
-// Exposure control shared by the protocols: keep the brightest channel's
-// mean signal between these fractions of the ADC range above black.
-struct AutoExposure {
-  double initial_exposure_s = 0.05;
-  double min_exposure_s = 1e-4;
-  double max_exposure_s = 4;
-  double low_fraction = 0.15, high_fraction = 0.7;
-
-  bool IsValid(std::string* error) const;
-};
-
 // Decay after saturation (Sec. 8.4.4): charge with the strongest light, light
 // off, then frames on a schedule starting a few ms after light-off. The
 // exposure grows as the glow fades (and shrinks if it saturates) to keep the
 // signal well above the noise; every frame records its exposure and its
-// delay after light-off, so fits can normalize.
-struct DecayProtocolOptions {
-  std::string charge_light;      // the channel to saturate with
-  double charge_s = 5400;        // 90 minutes
-  double interval_s = 5;         // one frame every
-  double duration_s = 180;       // of decay
-  double first_delay_s = 0.005;  // light-off to the first exposure
-  // Frames between the first and the second slot, at delays halving from
-  // interval_s / 2 down: a state that decays in well under interval_s (the
-  // fast state of a two-state material, kr up to a few 1/s) is seen by
-  // several frames, not one. A slot a slow camera cannot take is skipped.
-  // 0: the plain schedule.
-  int early_frames = 6;
-  double initial_exposure_s = 0.05;
-  double max_exposure_s = 4;
-  double gain = 1;
-  // Auto-exposure keeps the brightest channel's mean signal between these
-  // fractions of the ADC range above black.
-  double low_fraction = 0.15, high_fraction = 0.7;
-
-  bool IsValid(std::string* error) const;
-};
-
+// delay after light-off, so fits can normalize (DecayProtocolOptions,
+// DecayFrameFields in protocol_records.h).
+//
 // The frames' delays after light-off: first_delay_s, then the early frames
 // at first_delay_s + interval_s / 2^j (j = early_frames..1), then every
 // interval_s until duration_s.
@@ -94,22 +64,6 @@ DecayProtocolResult RunDecayProtocol(Camera& camera, Lights& lights, Clock& cloc
 // states (docs/fit.md shows the Fisher information of both designs). A
 // measurement is kept whole or redone: every frame records its charge's
 // light-off time and its place in the tail.
-struct ExcitationProtocolOptions {
-  std::vector<std::string> lights;  // channels to measure, one after the other
-  double reset_s = 900;             // darkness before each charge (several 1/kr)
-  double first_charge_s = 1;
-  double max_charge_s = 4096;
-  double plateau_growth = 1.03;  // stop doubling when a doubling adds < 3%
-  double delay_s = 0.05;         // light-off to exposure
-  double exposure_s = 1;
-  double gain = 1;
-  int tail_frames = 6;         // 0: one frame per charge (the paper's design)
-  double tail_growth = 2;      // each tail frame's exposure over the one before
-  double high_fraction = 0.7;  // a tail frame above this share of the range stops the growth
-
-  bool IsValid(std::string* error) const;
-};
-
 struct ExcitationProtocolResult {
   int frames = 0;
 };
@@ -146,18 +100,6 @@ ExcitationDone ReadExcitationDone(const std::filesystem::path& session_dir);
 // one. Each frame records its exposure and delay, and events.jsonl every
 // switch, so the fit knows the state during each frame; the spectrum's
 // shape does not change as it fades (Sec. 8.4.5).
-struct SpectrumProtocolOptions {
-  std::string charge_light;
-  double charge_s = 600;
-  double recharge_s = 300;
-  int frames = 4;
-  double first_delay_s = 0.005;
-  double gain = 1;
-  AutoExposure exposure{0.2, 1e-4, 8, 0.15, 0.7};
-
-  bool IsValid(std::string* error) const;
-};
-
 struct SpectrumProtocolResult {
   int frames = 0, well_exposed = 0;
 };
@@ -171,23 +113,6 @@ SpectrumProtocolResult RunSpectrumProtocol(Camera& camera, Lights& lights, Clock
 // field under a lamp of known colour temperature (how much each column
 // passes). The fit turns these into the filter's centre-vs-column line and
 // the per-column response that spectra are divided by.
-struct CalibrationLine {
-  std::string light;
-  double wavelength_nm;
-};
-
-struct LvfCalibrationOptions {
-  std::vector<CalibrationLine> lines;
-  std::string flat_light = "lamp";
-  double flat_temperature_k = 3000;
-  double flat_irradiance = 1;  // on the white reference, in the material's units (1: relative only)
-  double gain = 1;
-  AutoExposure exposure{0.05, 1e-4, 8, 0.15, 0.7};
-  int max_tries = 12;  // exposure steps per source before giving up
-
-  bool IsValid(std::string* error) const;
-};
-
 struct LvfCalibrationResult {
   int frames = 0;
 };

@@ -69,6 +69,23 @@ void AppendJsonLine(const std::filesystem::path& path, const nlohmann::json& rec
 inline constexpr double kMinExposureS = 1e-6;
 inline constexpr double kMaxExposureS = 86400;
 
+// The keys of a frame record that are the record's own (FrameRecord); the
+// others are its protocol's fields (protocol_records.h).
+inline constexpr const char* kFrameRecordKeys[] = {"file",
+                                                   "seq",
+                                                   "t_start_s",
+                                                   "exposure_s",
+                                                   "gain",
+                                                   "black_level_dn",
+                                                   "adc_bits",
+                                                   "sensor_temperature_c",
+                                                   "camera_timestamp_ns",
+                                                   "run",
+                                                   "size_bytes",
+                                                   "xxh3",
+                                                   "packets_resent",
+                                                   "retakes"};
+
 struct FrameRecord {
   std::string file;      // frames/NNNNNN.tif, relative to the session folder
   int seq = 0;           // 1, 2, ...: the NNNNNN of file
