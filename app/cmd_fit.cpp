@@ -41,8 +41,7 @@ namespace {
 // Writes a float image with named channels (EXR) or 8-bit grey (PNG), whole or not at all;
 // `annotate` adds header attributes.
 void WriteFloatImage(const std::filesystem::path& path, int width, int height, const std::vector<std::string>& names,
-                     const std::vector<float>& pixels,
-                     const std::function<void(OIIO::ImageSpec&)>& annotate = {}) {
+                     const std::vector<float>& pixels, const std::function<void(OIIO::ImageSpec&)>& annotate = {}) {
   WriteAtomically(path, [&](const std::filesystem::path& temporary) {
     auto out = OIIO::ImageOutput::create(temporary.string());
     if (!out) ThrowUserError(path.string(), "", "no writer: " + OIIO::geterror());
@@ -144,8 +143,8 @@ void PrintComparison(const std::string& compare, const MaterialComparison& c) {
   std::printf("  against %s: kr off by %s; emission spectrum L1 %s\n", compare.c_str(), kr_text.c_str(),
               FormatShort(c.spectrum_l1).c_str());
   for (std::size_t i = 0; i < c.ke_relative_error_per_state.size(); ++i) {
-    const std::string ke_text =
-        JoinComma(c.ke_relative_error_per_state[i], [](const auto& e) { return e ? FormatShort(100 * *e) + "%" : "-"; });
+    const std::string ke_text = JoinComma(c.ke_relative_error_per_state[i],
+                                          [](const auto& e) { return e ? FormatShort(100 * *e) + "%" : "-"; });
     std::printf("    state %zu: ke off by %s\n", i + 1, ke_text.c_str());
   }
 }
@@ -212,33 +211,20 @@ struct MapArgs {
 // What the map's pixels are made from: a tile's done record for other inputs is not this map's.
 // (One state writes the record it always wrote, so older tiles stay done.)
 std::string MapInputs(const MapArgs& args, int tiles) {
-  return "session=" + args.session + " weights=" + args.weights +
-         " background=" + std::to_string(!args.no_background) + " tiles=" + std::to_string(tiles) +
-         (args.states == 1 ? "" : " states=" + std::to_string(args.states));
+  return "session=" + args.session + " weights=" + args.weights + " background=" + std::to_string(!args.no_background) +
+         " tiles=" + std::to_string(tiles) + (args.states == 1 ? "" : " states=" + std::to_string(args.states));
 }
 
-// How the session charged the sample before the decay, from its settings
-// and the lab's calibrated band irradiance of the charge light, for the
-// map's header (fit::DecayMapCharge).
-fit::DecayMapCharge ChargeOfSession(const SessionRecord& session) {
-  // Anything but what phos writes (a hand-edited record: other types, a
-  // charge of no length, a negative irradiance) is no
-  // recorded charge, not an error of the map: the renderer then takes the
-  // map as charged to r = 1, as docs/render.md says.
-  auto field = [](const nlohmann::json& object, const char* key) {
-    return object.is_object() && object.contains(key) ? object[key] : nlohmann::json();
-  };
-  const nlohmann::json light = field(session.settings, "charge_light"), charge_s = field(session.settings, "charge_s");
-  if (!light.is_string() || !charge_s.is_number() || !(charge_s.get<double>() > 0)) return {};
-  const nlohmann::json irradiance =
-      field(field(session.devices, "light_band_irradiance"), light.get<std::string>().c_str());
-  if (!irradiance.is_array() || irradiance.empty()) return {};
+// How the session charged the sample before the decay (fit's
+// ChargeBeforeDecay), for the map's header. None recorded (a lab config that
+// gives no irradiance for the light): the renderer then takes the map as
+// charged to r = 1, as docs/render.md says.
+fit::DecayMapCharge MapChargeOf(const CapturedSample::Decay& decay) {
+  const DecayCharge recorded = ChargeBeforeDecay(decay);
   fit::DecayMapCharge charge;
-  for (const auto& value : irradiance) {
-    if (!value.is_number() || !(value.get<double>() >= 0)) return {};
-    charge.band_irradiance.push_back(value.get<float>());
-  }
-  charge.charge_s = charge_s.get<float>();
+  if (recorded.band_irradiance.empty()) return charge;
+  charge.charge_s = static_cast<float>(recorded.charge_s);
+  for (double value : recorded.band_irradiance) charge.band_irradiance.push_back(static_cast<float>(value));
   return charge;
 }
 
@@ -254,47 +240,31 @@ struct MapFrames {
   std::size_t first_row = 0;
 };
 
-// The session of a map: a decay session (a UserError naming the folder if not).
-SessionRecord ReadDecaySession(const std::filesystem::path& dir) {
-  SessionRecord session = ReadSessionRecord(dir);
-  const std::string& protocol = session.protocol;
-  if (protocol != "decay")
-    ThrowUserError(dir.string(), "",
-                   "is a '" + protocol + "' session; a decay map needs a decay session" +
-                       (protocol == "all" ? " (this folder's decay part: phos fit map " + (dir / "decay").string() + ")"
-                                          : ""));
-  return session;
-}
-
 // Rows [first, last) of tile `index` of `count`, or a UserError if it has none.
 std::pair<std::size_t, std::size_t> TileRows(const std::filesystem::path& dir, int height, int index, int count) {
   const auto [first, last] = TaskShare(static_cast<std::size_t>(height), index, count);
   if (first >= last)
-    ThrowUserError(dir.string(), "--tile", "has no rows: more tiles than the frames' " + std::to_string(height) + " rows");
+    ThrowUserError(dir.string(), "--tile",
+                   "has no rows: more tiles than the frames' " + std::to_string(height) + " rows");
   return {first, last};
 }
 
 MapFrames ReadMapFrames(const MapArgs& args, int index, int count) {
   namespace fs = std::filesystem;
   const fs::path dir = args.session;
-  const SessionRecord session = ReadDecaySession(dir);
   // Typed records, every frame checked against its size and checksum first:
   // a map is never built on a bad frame.
-  const FrameRecords records = ReadFrameRecords(dir);
-  RequireGoodFrames(dir, records);
-  if (records.torn)
-    std::printf("phos fit map: %s: torn last line left out ('phos capture resume' repairs it)\n",
-                (dir / "frames.jsonl").string().c_str());
+  std::vector<std::string> notes;
+  const CapturedSample::Decay decay = LoadDecaySession(dir, &notes);
+  for (const std::string& note : notes) std::printf("phos fit map: %s\n", note.c_str());
   MapFrames out;
-  out.charge = ChargeOfSession(session);
+  out.charge = MapChargeOf(decay);
   DecayMapInput& input = out.input;
-  ProgressBar reading("reading frames", records.frames.size());
-  for (const FrameRecord& line : records.frames) {
+  const std::vector<DecaySample> samples = DecaySamples(decay, &out.clipped);
+  ProgressBar reading("reading frames", samples.size());
+  for (const DecaySample& sample : samples) {
     reading.Advance();
-    if (line.protocol.value("saturated_fraction", 0.0) > 0) {
-      ++out.clipped;
-      continue;
-    }
+    const FrameRecord& line = sample.frame->record;
     const Frame frame = ReadFrame(dir, line);
     if (input.frames.empty()) {
       out.full_height = frame.height;
@@ -314,7 +284,7 @@ MapFrames ReadMapFrames(const MapArgs& args, int index, int count) {
       rate[i] = static_cast<float>((frame.pixels[offset + i] - frame.black_level_dn) / frame.exposure_s);
     input.frames.push_back(std::move(rate));
     input.exposure_s.push_back(frame.exposure_s);
-    input.t_s.push_back(line.protocol.value("delay_after_light_off_s", 0.0) + frame.exposure_s / 2);
+    input.t_s.push_back(sample.t_s);
   }
   return out;
 }
@@ -336,10 +306,16 @@ struct MapImage {
 
 MapImage MapImageOf(const DecayMap& map, const MapFrames& frames) {
   const bool two_states = !map.kr2.empty();
-  MapImage image{map.width,    map.height,    fit::DecayMapChannelNames(frames.channel_names, two_states),
-                 {},           map.no_decay,  map.one_state,
-                 frames.input.frames.size(),  frames.clipped,
-                 map.seconds,  frames.charge};
+  MapImage image{map.width,
+                 map.height,
+                 fit::DecayMapChannelNames(frames.channel_names, two_states),
+                 {},
+                 map.no_decay,
+                 map.one_state,
+                 frames.input.frames.size(),
+                 frames.clipped,
+                 map.seconds,
+                 frames.charge};
   const int C = map.channels, nch = 2 + 2 * C + (two_states ? 1 + C : 0);
   PHOS_CHECK(image.names.size() == static_cast<std::size_t>(nch));
   const std::size_t pixels = static_cast<std::size_t>(map.width) * map.height;
@@ -391,28 +367,28 @@ void WriteMapOutputs(const MapArgs& args, const MapImage& map, const std::string
   const bool two_states = std::find(map.names.begin(), map.names.end(), fit::kDecayMapKr2) != map.names.end();
   if (args.json) {
     nlohmann::json json = nlohmann::json({{"width", map.width},
-                                        {"height", map.height},
-                                        {"frames", map.frames},
-                                        {"clipped_frames", map.clipped},
-                                        {"seconds", map.seconds},
-                                        {"exr", exr.string()},
-                                        {"channels", map.names},
-                                        {"kr_median_per_s", median},
-                                        {"kr_p01_per_s", lo},
-                                        {"kr_p99_per_s", hi},
-                                        {"pixels_without_decay", map.no_decay}});
+                                          {"height", map.height},
+                                          {"frames", map.frames},
+                                          {"clipped_frames", map.clipped},
+                                          {"seconds", map.seconds},
+                                          {"exr", exr.string()},
+                                          {"channels", map.names},
+                                          {"kr_median_per_s", median},
+                                          {"kr_p01_per_s", lo},
+                                          {"kr_p99_per_s", hi},
+                                          {"pixels_without_decay", map.no_decay}});
     if (two_states) json["pixels_with_one_state"] = map.one_state;
     std::printf("%s\n", json.dump().c_str());
     return;
   }
-  std::printf("phos fit map: %dx%d pixels, %zu frames, fitted in %s s -> %s (kr, amplitude.*, background.*, rms%s), "
-              "kr.png\n",
-              map.width, map.height, map.frames, FormatShort(map.seconds).c_str(), exr.string().c_str(),
-              two_states ? ", kr2, amplitude2.*" : "");
+  std::printf(
+      "phos fit map: %dx%d pixels, %zu frames, fitted in %s s -> %s (kr, amplitude.*, background.*, rms%s), "
+      "kr.png\n",
+      map.width, map.height, map.frames, FormatShort(map.seconds).c_str(), exr.string().c_str(),
+      two_states ? ", kr2, amplitude2.*" : "");
   std::printf("  kr: median %s /s, 1%%-99%% %s to %s /s; %zu pixel(s) without a decay\n", FormatShort(median).c_str(),
               FormatShort(lo).c_str(), FormatShort(hi).c_str(), map.no_decay);
-  if (two_states)
-    std::printf("  two states: %zu decaying pixel(s) kept one state (kr2 NaN there)\n", map.one_state);
+  if (two_states) std::printf("  two states: %zu decaying pixel(s) kept one state (kr2 NaN there)\n", map.one_state);
 }
 
 DecayMap FitMapFrames(const MapArgs& args, const MapFrames& frames) {
@@ -446,7 +422,8 @@ void RunFitMapTile(const MapArgs& args) {
     std::printf("phos fit map: tile %d/%d already fitted (%s): nothing to do\n", index, count, done.c_str());
     return;
   }
-  RemoveTemporaries(done.parent_path(), {done.filename().string(), TilePath(args.out, index, count, ".exr").filename().string()});
+  RemoveTemporaries(done.parent_path(),
+                    {done.filename().string(), TilePath(args.out, index, count, ".exr").filename().string()});
   const MapFrames frames = ReadMapFrames(args, index, count);
   const std::size_t first_row = frames.first_row, last_row = first_row + frames.input.height;
   const MapImage tile = MapImageOf(FitMapFrames(args, frames), frames);
@@ -476,8 +453,7 @@ void RunFitMapTile(const MapArgs& args) {
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   WriteTaskDone(done, {"fit map tile " + args.tile, inputs, {exr.string()}, seconds, HostName()});
   std::printf("phos fit map: tile %d/%d, rows %zu-%zu of %d, %zu frames, fitted in %s s -> %s\n", index, count,
-              first_row, last_row - 1, frames.full_height, tile.frames, FormatShort(tile.seconds).c_str(),
-              exr.c_str());
+              first_row, last_row - 1, frames.full_height, tile.frames, FormatShort(tile.seconds).c_str(), exr.c_str());
 }
 
 // The tiles of <out>/tiles into one map: every tile of the one count found
@@ -494,7 +470,8 @@ void RunFitMapMerge(const MapArgs& args) {
     if (std::regex_match(name, m, form)) counts.insert(std::stoi(m[2]));
   }
   if (ec || counts.empty()) ThrowUserError(tiles.string(), "", "holds no tiles (run 'phos fit map --tile i/N' first)");
-  if (counts.size() > 1) ThrowUserError(tiles.string(), "", "holds tiles of more than one count N: remove the old ones");
+  if (counts.size() > 1)
+    ThrowUserError(tiles.string(), "", "holds tiles of more than one count N: remove the old ones");
   const int count = *counts.begin();
   const std::string inputs = MapInputs(args, count);
   std::string missing;
@@ -549,13 +526,13 @@ void CheckFitMap(const MapArgs& args) {
   ParseWeightsOption(args.weights);
   RequireFolderOrNothing(args.out, "--out");
   const std::filesystem::path dir = args.session;
-  ReadDecaySession(dir);
-  const FrameRecords records = ReadFrameRecords(dir);
-  if (records.frames.empty()) ThrowUserError(dir.string(), "", "has no frames to fit");
-  const Frame first = ReadFrame(dir, records.frames.front());
+  std::vector<std::string> ignored;
+  const CapturedSample::Decay decay = LoadDecaySession(dir, &ignored);
+  if (decay.frames.empty()) ThrowUserError(dir.string(), "", "has no frames to fit");
+  const Frame first = ReadFrame(dir, decay.frames.front().record);
   for (int i = 0; i < count; ++i) TileRows(dir, first.height, i, count);
   std::printf("phos fit map: %s: %zu frame(s) of %d x %d, %d tile(s) (--check: nothing fitted)\n", dir.c_str(),
-              records.frames.size(), first.width, first.height, count);
+              decay.frames.size(), first.width, first.height, count);
 }
 
 void RunFitMap(const MapArgs& args) {
@@ -585,14 +562,16 @@ struct BatchArgs {
 struct BatchDoneRecord {
   std::string item;
   int n_components = 0;
-  double kr_per_s = 0, seconds = 0;  // kr: the first state's
+  double kr_per_s = 0, seconds = 0;       // kr: the first state's
   std::vector<double> kr_by_state_per_s;  // every state's (absent before it was recorded: just kr)
   std::vector<std::string> notes;
   std::string inputs;  // BatchItemInputs of the fit ("" in records from before it was recorded)
 
   nlohmann::json ToJson() const {
-    return {{"item", item},   {"n_components", n_components}, {"kr", kr_per_s}, {"kr_by_state", kr_by_state_per_s},
-            {"seconds", seconds}, {"notes", notes},          {"inputs", inputs}};
+    return {{"item", item},       {"n_components", n_components},
+            {"kr", kr_per_s},     {"kr_by_state", kr_by_state_per_s},
+            {"seconds", seconds}, {"notes", notes},
+            {"inputs", inputs}};
   }
   // nullopt (and why) when the record is not a whole one.
   static std::optional<BatchDoneRecord> FromJson(const nlohmann::json& j, std::string* why) {
@@ -798,8 +777,8 @@ void RunFitBatch(const BatchArgs& args) {
         const std::string earlier = row.detail;
         row.detail = fit.notes.empty() ? "" : std::to_string(fit.notes.size()) + " note(s): " + fit.notes.front();
         if (!earlier.empty()) row.detail = earlier + (row.detail.empty() ? "" : "; " + row.detail);
-        const BatchDoneRecord done{items[i].string(), row.nc,    row.kr, row.seconds, row.kr_by_state,
-                                   fit.notes,         row.inputs};
+        const BatchDoneRecord done{items[i].string(), row.nc,    row.kr,    row.seconds,
+                                   row.kr_by_state,   fit.notes, row.inputs};
         WriteFileAtomically(base.string() + ".done.json", done.ToJson().dump(2) + "\n");
         fs::remove(base.string() + ".failed.txt", ec);
       } catch (const std::exception& e) {
@@ -840,8 +819,7 @@ void RunFitBatch(const BatchArgs& args) {
     const std::string kr_text = JoinComma(row.kr_by_state, [](double kr) { return FormatShort(kr); });
     if (!args.json)
       std::printf("%-24s %-7s %3d %16s %8s  %s\n", row.name.c_str(), row.status.c_str(), row.nc,
-                  row.status == "failed" ? "-" : kr_text.c_str(), FormatShort(row.seconds).c_str(),
-                  row.detail.c_str());
+                  row.status == "failed" ? "-" : kr_text.c_str(), FormatShort(row.seconds).c_str(), row.detail.c_str());
     std::string detail = row.detail;
     std::replace(detail.begin(), detail.end(), '"', '\'');
     csv.append(row.name)
@@ -861,16 +839,16 @@ void RunFitBatch(const BatchArgs& args) {
   }
   if (args.task.empty()) WriteFileAtomically(fs::path(args.out) / "summary.csv", csv);
   if (args.json)
-    std::printf("%s\n", nlohmann::json({{"items", json_rows},
-                                        {"fitted_now", fitted_now},
-                                        {"kept", kept},
-                                        {"failed", failed},
-                                        {"out", args.out}})
-                            .dump()
-                            .c_str());
+    std::printf(
+        "%s\n",
+        nlohmann::json(
+            {{"items", json_rows}, {"fitted_now", fitted_now}, {"kept", kept}, {"failed", failed}, {"out", args.out}})
+            .dump()
+            .c_str());
   else
     std::printf("phos fit batch: %zu item(s)%s, %zu fitted now, %zu kept, %d failed -> %s%s\n", rows.size(),
-                args.task.empty() ? "" : (" (task " + args.task + ")").c_str(), fitted_now, kept, failed, args.out.c_str(), args.task.empty() ? " (summary.csv)" : "");
+                args.task.empty() ? "" : (" (task " + args.task + ")").c_str(), fitted_now, kept, failed,
+                args.out.c_str(), args.task.empty() ? " (summary.csv)" : "");
   if (failed > 0)
     ThrowUserError(
         "", "fit batch",

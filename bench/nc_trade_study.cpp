@@ -29,6 +29,7 @@
 #include <string>
 #include <vector>
 
+#include "phos/fit/captured_sample.h"
 #include "phos/acquire/protocols.h"
 #include "phos/acquire/sim_lab.h"
 #include "phos/fit/decay_fit.h"
@@ -73,22 +74,25 @@ Curve CaptureDecay(const Material& material, const fs::path& dir) {
   options.charge_light = "led405";
   fs::remove_all(dir);
   {
-    SessionWriter session(dir, {{"protocol", "decay"}, {"study", "nc trade"}});
+    SessionRecord start;
+    start.protocol = DecayFrameFields::kProtocol;
+    start.settings = options.ToJson();
+    SessionWriter session(dir, start.ToJson());
     RunDecayProtocol(lab, lab.lights(), clock, session, options);
   }
+  // The frames as every decay fit reads them (fit/captured_sample.h), the
+  // channels summed.
   Curve curve;
   curve.names = {"R+G+B"};
   curve.channels.resize(1);
-  std::ifstream in(dir / "frames.jsonl");
-  for (std::string text; std::getline(in, text);) {
-    const nlohmann::json line = nlohmann::json::parse(text);
-    if (line.value("saturated_fraction", 0.0) > 0) continue;
-    const double e = line["exposure_s"];
-    double sum = 0;
-    for (double v : line["mean_signal_dn"]) sum += v;
-    curve.t_s.push_back(line["delay_after_light_off_s"].get<double>() + e / 2);
+  std::vector<std::string> notes;
+  int clipped = 0;
+  const CapturedSample::Decay decay = LoadDecaySession(dir, &notes);
+  for (const DecaySample& sample : DecaySamples(decay, &clipped)) {
+    const double e = sample.frame->record.exposure_s;
+    curve.t_s.push_back(sample.t_s);
     curve.exposure_s.push_back(e);
-    curve.channels[0].push_back(sum / e);
+    curve.channels[0].push_back(sample.frame->fields.signal.SumDn() / e);
   }
   return curve;
 }

@@ -27,6 +27,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include "phos/fit/captured_sample.h"
 #include "phos/acquire/session.h"
 #include "phos/acquire/session_records.h"
 #include "phos/model/material.h"
@@ -91,14 +92,16 @@ struct PixelCurve {
 
 PixelCurve ReadPixelCurve(const fs::path& session, int x, int y) {
   PixelCurve curve;
-  for (const FrameRecord& record : ReadFrameRecords(session).frames) {
-    if (record.protocol.value("saturated_fraction", 0.0) > 0) continue;
-    const Frame frame = ReadFrame(session, record);
+  std::vector<std::string> notes;
+  const CapturedSample::Decay decay = LoadDecaySession(session, &notes);
+  int clipped = 0;
+  for (const DecaySample& sample : DecaySamples(decay, &clipped)) {
+    const Frame frame = ReadFrame(session, sample.frame->record);
     if (curve.y.empty()) {
       curve.y.resize(frame.channels);
       curve.channel_names = frame.channel_names;
     }
-    curve.t_s.push_back(record.protocol.value("delay_after_light_off_s", 0.0) + frame.exposure_s / 2);
+    curve.t_s.push_back(sample.t_s);
     curve.exposure_s.push_back(frame.exposure_s);
     for (int c = 0; c < frame.channels; ++c)
       curve.y[c].push_back(
@@ -122,12 +125,12 @@ double Model(const MapFile& map, int x, int y, const std::string& channel, doubl
 
 // A perceptually ordered colour map (viridis, by 5 anchors) for v in [0, 1].
 void Viridis(double v, unsigned char* rgb) {
-  static const double anchors[5][3] = {
-      {68, 1, 84}, {59, 82, 139}, {33, 145, 140}, {94, 201, 98}, {253, 231, 37}};
+  static const double anchors[5][3] = {{68, 1, 84}, {59, 82, 139}, {33, 145, 140}, {94, 201, 98}, {253, 231, 37}};
   v = std::clamp(v, 0.0, 1.0) * 4;
   const int i = std::min(3, static_cast<int>(v));
   const double f = v - i;
-  for (int c = 0; c < 3; ++c) rgb[c] = static_cast<unsigned char>(anchors[i][c] * (1 - f) + anchors[i + 1][c] * f + 0.5);
+  for (int c = 0; c < 3; ++c)
+    rgb[c] = static_cast<unsigned char>(anchors[i][c] * (1 - f) + anchors[i + 1][c] * f + 0.5);
 }
 
 std::string Base64(const std::string& bytes) {
@@ -189,7 +192,8 @@ std::vector<double> Rates(const Material& material) {
 
 int main(int argc, char** argv) {
   using namespace phos;
-  CLI::App app{"Two-state decay maps against one-state maps on a simulated two-material sample (docs/two-state-map.md)"};
+  CLI::App app{
+      "Two-state decay maps against one-state maps on a simulated two-material sample (docs/two-state-map.md)"};
   std::string out = "docs", phos_binary = PHOS_BINARY;
   std::string outside = std::string(PHOS_FIXTURES_DIR) + "/materials/two-state-ratio20.json",
               inside = std::string(PHOS_FIXTURES_DIR) + "/materials/two-state-ratio7-fast90.json";
@@ -283,8 +287,8 @@ int main(int argc, char** argv) {
       for (int c = 0; c < 3; ++c) {
         if (row == 0 && c == 1) continue;  // no kr2 with one state
         const bool rate = c < 2;
-        const std::string uri = MapPng(maps[row], names[c], rate ? k_lo : rms_lo, rate ? k_hi : rms_hi, scale,
-                                       work / "panel.png");
+        const std::string uri =
+            MapPng(maps[row], names[c], rate ? k_lo : rms_lo, rate ? k_hi : rms_hi, scale, work / "panel.png");
         svg << "<image x=\"" << left + c * (pw + gap) << "\" y=\"" << y0 << "\" width=\"" << pw << "\" height=\"" << ph
             << "\" href=\"" << uri << "\"/>\n";
       }
@@ -342,15 +346,16 @@ int main(int argc, char** argv) {
     md << "# Two-state decay maps\n\n"
        << "`phos fit map SESSION --states 2` fits every pixel with two exponentials and a background per\n"
        << "channel, y_c(t) = A1_c exp(-k1 t) + A2_c exp(-k2 t) + B_c with k1 < k2 ([fit.md](fit.md) says how\n"
-       << "and when a pixel keeps one state). This page compares it with the one-state map on a simulated sample whose two-state\n"
+       << "and when a pixel keeps one state). This page compares it with the one-state map on a simulated sample whose "
+          "two-state\n"
        << "material changes across its surface. Written by `build/bin/phos-two-state-map-study --out docs`\n"
        << "(`make study`), which ran:\n\n"
        << "    " << shown << "\n"
        << "    phos fit map SESSION --out MAP1 --states 1\n"
        << "    phos fit map SESSION --out MAP2 --states 2\n\n"
-       << "Outside the disk: `" << fs::path(outside).filename().string() << "` (kr " << FormatShort(k_out[0])
-       << " and " << FormatShort(k_out.back()) << " /s); inside: `" << fs::path(inside).filename().string()
-       << "` (kr " << FormatShort(k_in[0]) << " and " << FormatShort(k_in.back()) << " /s). A ring of 2 pixels\n"
+       << "Outside the disk: `" << fs::path(outside).filename().string() << "` (kr " << FormatShort(k_out[0]) << " and "
+       << FormatShort(k_out.back()) << " /s); inside: `" << fs::path(inside).filename().string() << "` (kr "
+       << FormatShort(k_in[0]) << " and " << FormatShort(k_in.back()) << " /s). A ring of 2 pixels\n"
        << "around the disk's edge, where pixels see both, is left out of the numbers.\n\n"
        << "![maps of kr, kr2 and rms for one and two states](two-state-map.svg)\n\n"
        << "![two pixels' curves with both fits](two-state-map-curves.svg)\n\n"
@@ -361,9 +366,9 @@ int main(int argc, char** argv) {
       const std::vector<double>& k = r == 0 ? k_out : k_in;
       const Region& g = region[r];
       md << "| " << (r == 0 ? "outside" : "inside") << " | " << g.pixels << " | " << FormatShort(k[0]) << ", "
-         << FormatShort(k.back()) << " | " << FormatShort(Median(g.kr1)) << " | " << FormatShort(Median(g.k1))
-         << " | " << FormatShort(Median(g.k2)) << " | " << g.one_state << " | " << FormatShort(Median(g.rms1))
-         << " | " << FormatShort(Median(g.rms2)) << " |\n";
+         << FormatShort(k.back()) << " | " << FormatShort(Median(g.kr1)) << " | " << FormatShort(Median(g.k1)) << " | "
+         << FormatShort(Median(g.k2)) << " | " << g.one_state << " | " << FormatShort(Median(g.rms1)) << " | "
+         << FormatShort(Median(g.rms2)) << " |\n";
     }
     md << "\nThe fits took " << FormatShort(seconds[0]) << " s (one state) and " << FormatShort(seconds[1])
        << " s (two states) for " << width * height << " pixels, as the commands said:\n\n"

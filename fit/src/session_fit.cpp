@@ -25,19 +25,11 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::vector<double> ColumnRate(const nlohmann::json& line) {
-  std::vector<double> profile = line.at("column_mean_dn").get<std::vector<double>>();
-  const double exposure = line.at("exposure_s").get<double>();
-  for (double& v : profile) v /= exposure;
+// A frame's column profile per second of exposure.
+std::vector<double> ColumnRate(const FrameRecord& frame, const FrameSignal& signal) {
+  std::vector<double> profile = signal.column_mean_dn;
+  for (double& v : profile) v /= frame.exposure_s;
   return profile;
-}
-
-bool Clipped(const nlohmann::json& line) { return line.value("saturated_fraction", 0.0) > 0; }
-
-double SumSignal(const nlohmann::json& line) {
-  double sum = 0;
-  for (double v : line.at("mean_signal_dn")) sum += v;
-  return sum;
 }
 
 // Centroid and spread (in columns) of the peak of a profile: a window of
@@ -124,65 +116,47 @@ std::vector<double> SolveNonNegative(const std::vector<std::vector<double>>& A, 
   return x;
 }
 
-// The start record as JSON, read through its typed reader first (a missing
-// or mistyped key is one line naming it).
-nlohmann::json SessionStart(const fs::path& dir) { return ReadSessionRecord(dir).ToJson(); }
-
-std::string StopHow(const fs::path& dir) {
-  const std::optional<StopRecord> stop = ReadStopRecord(dir);
-  return stop ? stop->how : "none (killed, or still running)";
-}
-
-// A part's frame records, typed (session_records.h), every listed frame's
-// file checked against its recorded size and checksum as resume does: a fit
-// is never built on a bad frame. A torn last line (a crash mid-write) is
-// left out and said in a note.
-std::vector<nlohmann::json> SessionFrames(const fs::path& part, std::vector<std::string>* notes = nullptr) {
-  const FrameRecords records = ReadFrameRecords(part);
-  RequireGoodFrames(part, records);
-  if (records.torn && notes)
-    notes->push_back((part / "frames.jsonl").string() + ": torn last line left out ('phos capture resume' repairs it)");
-  std::vector<nlohmann::json> lines;
-  for (const FrameRecord& frame : records.frames) lines.push_back(frame.ToJson());
-  return lines;
-}
+// How a part stopped, for the notes.
+std::string StopHow(const std::string& stop) { return stop.empty() ? "none (killed, or still running)" : stop; }
 
 }  // namespace
 
-LvfCalibrationFit FitLvfCalibration(const fs::path& dir) {
-  const nlohmann::json start = SessionStart(dir);
-  const nlohmann::json settings = start.value("settings", nlohmann::json::object());
+LvfCalibrationFit FitLvfCalibration(const CapturedSample::Calibration& part) {
+  const fs::path dir = part.source;
   LvfCalibrationFit fit;
-  fit.flat_temperature_k = settings.value("flat_temperature_k", 3000.0);
-  fit.flat_irradiance = settings.value("flat_irradiance", 1.0);
+  fit.flat_temperature_k = part.settings.flat_temperature_k;
+  fit.flat_irradiance = part.settings.flat_irradiance;
   // The last unclipped frame of each source is its well-exposed one.
-  std::map<std::string, nlohmann::json> last;
-  for (const nlohmann::json& line : SessionFrames(dir)) {
-    if (!line.contains("column_mean_dn") || Clipped(line)) continue;
-    last[line.value("kind", "") == "dark" ? std::string("(dark)") : line.value("light", "")] = line;
-  }
+  using Kind = LvfCalibrationFrameFields::Kind;
+  std::map<std::string, const ProtocolFrame<LvfCalibrationFrameFields>*> last;
+  for (const auto& frame : part.frames)
+    if (!frame.fields.signal.clipped())
+      last[frame.fields.kind == Kind::kDark ? std::string("(dark)") : frame.fields.light] = &frame;
+  auto rate_of = [](const ProtocolFrame<LvfCalibrationFrameFields>* frame) {
+    return ColumnRate(frame->record, frame->fields.signal);
+  };
   std::vector<double> dark;
-  if (last.count("(dark)")) dark = ColumnRate(last["(dark)"]);
+  if (last.count("(dark)")) dark = rate_of(last["(dark)"]);
   fit.dark_dn_per_s = dark;
   // Dark current is uniform: its mean over the columns, not each noisy column.
   double dark_mean = 0;
   for (double d : dark) dark_mean += d / dark.size();
-  auto rate = [&](const nlohmann::json& line) {
-    std::vector<double> p = ColumnRate(line);
+  auto rate = [&](const ProtocolFrame<LvfCalibrationFrameFields>* frame) {
+    std::vector<double> p = rate_of(frame);
     for (double& v : p) v -= dark_mean;
     return p;
   };
   std::vector<double> sigmas;
-  for (const auto& [light, line] : last) {
-    if (line.value("kind", "") == "line") {
-      const std::vector<double> p = rate(line);
+  for (const auto& [light, frame] : last) {
+    if (frame->fields.kind == Kind::kLine) {
+      const std::vector<double> p = rate(frame);
       fit.width = static_cast<int>(p.size());
       double c = 0, s = 0;
       PeakMoments(p, &c, &s);
-      fit.lines.push_back({light, line.at("wavelength_nm").get<double>(), c});
+      fit.lines.push_back({light, frame->fields.wavelength_nm, c});
       sigmas.push_back(std::sqrt(std::max(0.0, s * s - 1.0 / 12)));  // less the pixel's own width
-    } else if (line.value("kind", "") == "flat") {
-      fit.flat_dn_per_s = rate(line);
+    } else if (frame->fields.kind == Kind::kFlat) {
+      fit.flat_dn_per_s = rate(frame);
     }
   }
   if (fit.lines.size() < 2)
@@ -212,19 +186,17 @@ LvfCalibrationFit FitLvfCalibration(const fs::path& dir) {
   return fit;
 }
 
-SpectrumFit FitEmissionSpectrum(const fs::path& dir, const LvfCalibrationFit& calibration, const SpectralGrid& bands,
-                                double dark_dn_per_s) {
+SpectrumFit FitEmissionSpectrum(const CapturedSample::Spectrum& part, const LvfCalibrationFit& calibration,
+                                const SpectralGrid& bands, double dark_dn_per_s) {
+  const fs::path dir = part.source;
   if (!std::isfinite(dark_dn_per_s)) {
     dark_dn_per_s = 0;
     for (double d : calibration.dark_dn_per_s) dark_dn_per_s += d / calibration.dark_dn_per_s.size();
   }
-  const nlohmann::json start = SessionStart(dir);
-  const nlohmann::json settings = start.value("settings", nlohmann::json::object());
-  const nlohmann::json exposure = settings.value("exposure", nlohmann::json::object());
-  const double low = exposure.value("low_fraction", 0.15), high = exposure.value("high_fraction", 0.7);
+  const double low = part.settings.exposure.low_fraction, high = part.settings.exposure.high_fraction;
   SpectrumFit fit;
-  fit.charge_light = settings.value("charge_light", "");
-  fit.charge_s = settings.value("charge_s", 0.0);
+  fit.charge_light = part.settings.charge_light;
+  fit.charge_s = part.settings.charge_s;
   const int nb = bands.band_count();
   const double sigma = calibration.fwhm_nm / 2.3548;
   if (!(sigma > 0)) ThrowUserError(dir.string(), "spectrum", "the LVF calibration gives no pass-band width");
@@ -287,11 +259,11 @@ SpectrumFit FitEmissionSpectrum(const fs::path& dir, const LvfCalibrationFit& ca
         A[x][b] += sensitivity(nm) * std::exp(-0.5 * std::pow((nm - c) / sigma, 2)) * kStepNm / bands.width_nm(b);
     }
   }
-  for (const nlohmann::json& line : SessionFrames(dir)) {
-    if (line.value("kind", "") != "spectrum" || !line.contains("column_mean_dn") || Clipped(line)) continue;
-    const double peak = line.value("peak_column_fraction", 0.0);
+  for (const auto& [record, line, fields] : part.frames) {
+    if (fields.signal.clipped()) continue;
+    const double peak = fields.signal.peak_column_fraction;
     if (peak < low || peak > high) continue;  // not well exposed: the protocol stepped past it
-    std::vector<double> y = ColumnRate(line);
+    std::vector<double> y = ColumnRate(record, fields.signal);
     for (double& v : y) v -= dark_dn_per_s;
     if (static_cast<int>(y.size()) != width)
       ThrowUserError(dir.string(), "spectrum", "frames and the LVF calibration differ in width");
@@ -311,9 +283,9 @@ SpectrumFit FitEmissionSpectrum(const fs::path& dir, const LvfCalibrationFit& ca
       for (double a : rows[r]) diag += a * a * weights[r] * weights[r];
     const std::vector<double> L = SolveNonNegative(rows, targets, weights, 1e-4 * diag / std::max(1, nb));
     SpectrumFit::FrameFit frame;
-    frame.delay_s = line.value("delay_after_light_off_s", 0.0);
-    frame.exposure_s = line.value("exposure_s", 0.0);
-    frame.t_start_s = line.value("t_start_s", 0.0);
+    frame.delay_s = fields.delay_after_light_off_s;
+    frame.exposure_s = record.exposure_s;
+    frame.t_start_s = record.t_start_s;
     frame.band_radiance = L;
     frame.measured = y;
     frame.modelled.assign(static_cast<std::size_t>(width), std::nan(""));
@@ -341,23 +313,18 @@ struct DecayStage {
 
 // The decay frames as a curve: signal per second of exposure, at the middle
 // of the exposure; clipped frames left out (and counted in a note).
-Curve ReadDecayCurve(const fs::path& part, std::vector<std::string>* notes) {
+Curve ReadDecayCurve(const CapturedSample::Decay& part, std::vector<std::string>* notes) {
   Curve curve;
   int clipped = 0;
-  for (const nlohmann::json& line : SessionFrames(part, notes)) {
-    if (!line.contains("mean_signal_dn")) continue;
-    if (Clipped(line)) {
-      ++clipped;
-      continue;
-    }
-    const std::vector<double> means = line["mean_signal_dn"].get<std::vector<double>>();
-    const double exposure = line.at("exposure_s").get<double>();
+  for (const DecaySample& sample : DecaySamples(part, &clipped)) {
+    const std::vector<double>& means = sample.frame->fields.signal.mean_signal_dn;
+    const double exposure = sample.frame->record.exposure_s;
     if (curve.channels.empty()) {
       curve.channels.resize(means.size());
       for (std::size_t c = 0; c < means.size(); ++c)
         curve.names.push_back(means.size() == 3 ? std::string(1, "RGB"[c]) : "Y");
     }
-    curve.t_s.push_back(line.value("delay_after_light_off_s", 0.0) + exposure / 2);
+    curve.t_s.push_back(sample.t_s);
     curve.exposure_s.push_back(exposure);
     for (std::size_t c = 0; c < means.size() && c < curve.channels.size(); ++c)
       curve.channels[c].push_back(means[c] / exposure);
@@ -393,7 +360,8 @@ Curve CorrectForExposure(const Curve& curve, const DecayFitSummary& fit) {
   return corrected;
 }
 
-DecayStage FitDecayStage(const fs::path& part, const SessionFitOptions& options, std::vector<std::string>* notes) {
+DecayStage FitDecayStage(const CapturedSample::Decay& part, const SessionFitOptions& options,
+                         std::vector<std::string>* notes) {
   DecayStage stage;
   stage.raw = ReadDecayCurve(part, notes);
   if (stage.raw.size() == 0) return stage;
@@ -403,10 +371,10 @@ DecayStage FitDecayStage(const fs::path& part, const SessionFitOptions& options,
     decay_options.max_components = options.max_components;
     decay_options.weighting = options.weighting;
     decay_options.background = true;  // dark current
-    DecayFitSummary fit = FitDecay(stage.raw, decay_options, part.string());
+    DecayFitSummary fit = FitDecay(stage.raw, decay_options, part.source);
     for (int pass = 0; pass < 2; ++pass) {
       stage.corrected = CorrectForExposure(stage.raw, fit);
-      fit = FitDecay(stage.corrected, decay_options, part.string());
+      fit = FitDecay(stage.corrected, decay_options, part.source);
     }
     stage.fit = fit;
   } catch (const UserError& e) {
@@ -421,33 +389,27 @@ DecayStage FitDecayStage(const fs::path& part, const SessionFitOptions& options,
 // frame and its tail). A measurement cut off inside its tail (an interrupted
 // session that was not resumed) is left out whole; frames of a session from
 // before the tails are one-frame measurements.
-std::vector<ExcitationMeasurement> ReadExcitationMeasurements(const fs::path& part, double dark_dn_per_s,
-                                                              std::vector<std::string>* notes) {
+std::vector<ExcitationMeasurement> ReadExcitationMeasurements(const CapturedSample::Excitation& part,
+                                                              double dark_dn_per_s, std::vector<std::string>* notes) {
   struct Group {
     ExcitationMeasurement measurement;
     int expected = 1, clipped = 0;
   };
   std::map<std::tuple<int, std::string, double>, Group> groups;  // (run, light, light-off time)
-  std::size_t order = 0;
-  for (const nlohmann::json& line : SessionFrames(part, notes)) {
-    if (!line.contains("light") || !line.contains("mean_signal_dn") || !line.contains("charge_s")) continue;
-    const std::string light = line["light"].get<std::string>();
-    const double off = line.value("light_off_s", static_cast<double>(order++));
-    const int run = line.value("run", 0);
-    Group& group = groups[{run, light, off}];
-    group.measurement.light = light;
-    group.measurement.run = run;
-    group.measurement.charge_s = line["charge_s"].get<double>();
-    if (line.contains("light_off_s")) group.measurement.light_off_s = line["light_off_s"].get<double>();
-    group.expected = line.value("tail_frames", 0) + 1;
-    if (Clipped(line)) {
+  for (const auto& [frame, line, fields] : part.frames) {
+    Group& group = groups[{frame.run, fields.light, fields.light_off_s}];
+    group.measurement.light = fields.light;
+    group.measurement.run = frame.run;
+    group.measurement.charge_s = fields.charge_s;
+    group.measurement.light_off_s = fields.light_off_s;
+    group.expected = fields.tail_frames + 1;
+    if (fields.signal.clipped()) {
       // A clipped frame is left out; the rest of its tail still tells.
       ++group.clipped;
       continue;
     }
-    const double exposure = line.at("exposure_s").get<double>();
     group.measurement.frames.push_back(
-        {line.value("delay_after_light_off_s", 0.0), exposure, SumSignal(line) / exposure - dark_dn_per_s});
+        {fields.delay_after_light_off_s, frame.exposure_s, fields.signal.SumDn() / frame.exposure_s - dark_dn_per_s});
   }
   std::vector<ExcitationMeasurement> measurements;
   int cut = 0, clipped = 0;
@@ -496,11 +458,9 @@ std::vector<KeEstimate> KePerState(const std::vector<SessionFit::ExcitationLight
   return ke;
 }
 
-ExcitationStage FitExcitationStage(const fs::path& part, const DecayFitSummary& decay, const nlohmann::json& devices,
-                                   int nb, Weighting weighting, std::vector<std::string>* notes) {
+ExcitationStage FitExcitationStage(const CapturedSample::Excitation& part, const DecayFitSummary& decay, int nb,
+                                   Weighting weighting, std::vector<std::string>* notes) {
   ExcitationStage stage;
-  const nlohmann::json exc_devices = SessionStart(part).value("devices", devices);
-  const nlohmann::json irradiance = exc_devices.value("light_band_irradiance", nlohmann::json::object());
   // The decay's background is the camera's dark signal per second (dark
   // current): the excitation frames carry it too, under the same camera.
   double dark = 0;
@@ -516,11 +476,10 @@ ExcitationStage FitExcitationStage(const fs::path& part, const DecayFitSummary& 
   for (auto& [name, light] : by_light) {
     std::sort(light.samples.begin(), light.samples.end(),
               [](const ExcitationSample& a, const ExcitationSample& b) { return a.charge_s < b.charge_s; });
-    if (!irradiance.contains(name))
+    light.band_irradiance = part.devices.BandIrradiance(name);
+    if (light.band_irradiance.empty())
       notes->push_back("excitation: no band irradiance recorded for '" + name +
                        "' (a bench's lab config must give it): its rate is reported, not turned into ke");
-    else
-      light.band_irradiance = irradiance[name].get<std::vector<double>>();
     stage.lights.push_back(light);
   }
   if (stage.measurements.empty()) {
@@ -531,9 +490,9 @@ ExcitationStage FitExcitationStage(const fs::path& part, const DecayFitSummary& 
   for (const DecayComponent& c : decay.components) options.kr.push_back(c.rate);
   options.weighting = weighting;
   try {
-    stage.fit = FitStateExcitation(stage.measurements, options, part.string());
+    stage.fit = FitStateExcitation(stage.measurements, options, part.source);
     for (const std::string& note : stage.fit->notes) notes->push_back("excitation: " + note);
-    stage.ke = KePerState(stage.lights, stage.fit->a, stage.fit->a_stderr, decay.n_components, nb, part.string());
+    stage.ke = KePerState(stage.lights, stage.fit->a, stage.fit->a_stderr, decay.n_components, nb, part.source);
   } catch (const UserError& e) {
     notes->push_back(e.what());
   }
@@ -547,13 +506,11 @@ struct LightSwitch {
   bool on;
 };
 
-std::vector<LightSwitch> ReadSwitches(const fs::path& part, const std::string& light) {
+std::vector<LightSwitch> SwitchesOf(const std::vector<LightSwitchEvent>& events, const std::string& light) {
   std::vector<LightSwitch> switches;
   // Switches without a time (the signal handler's) end a session; none is before a fitted frame.
-  for (const nlohmann::json& event : ReadEventRecords(part))
-    if (event["event"] == "light" && event.value("channel", "") == light && event.contains("t_s") &&
-        event.contains("on") && event["on"].is_boolean())
-      switches.push_back({event["t_s"].get<double>(), event["on"].get<bool>()});
+  for (const LightSwitchEvent& event : events)
+    if (event.channel == light && std::isfinite(event.t_s)) switches.push_back({event.t_s, event.on});
   return switches;
 }
 
@@ -584,23 +541,14 @@ std::optional<double> RateUnder(const std::vector<double>& E, const std::vector<
   return a;
 }
 
-std::vector<double> LightBandIrradiance(const fs::path& part, const nlohmann::json& devices, const std::string& light) {
-  const nlohmann::json irradiance =
-      SessionStart(part).value("devices", devices).value("light_band_irradiance", nlohmann::json::object());
-  if (!irradiance.contains(light)) return {};
-  return irradiance[light].get<std::vector<double>>();
-}
-
 // Each state's share w_i of the emission, proportional to A_i / (kr_i r_i)
 // with r_i the state at the decay's light-off. Unknown ke: r_i = 1, said.
-std::vector<double> EmissionShares(const fs::path& decay_part, const nlohmann::json& devices,
-                                   const DecayFitSummary& decay,
+std::vector<double> EmissionShares(const CapturedSample::Decay& decay_part, const DecayFitSummary& decay,
                                    const std::vector<std::vector<std::optional<double>>>& ke,
                                    std::vector<std::string>* notes) {
-  const nlohmann::json settings = SessionStart(decay_part).value("settings", nlohmann::json::object());
-  const std::string charge_light = settings.value("charge_light", "");
-  const std::vector<double> E = LightBandIrradiance(decay_part, devices, charge_light);
-  const std::vector<LightSwitch> switches = ReadSwitches(decay_part, charge_light);
+  const std::string& charge_light = decay_part.settings.charge_light;
+  const std::vector<double> E = decay_part.devices.BandIrradiance(charge_light);
+  const std::vector<LightSwitch> switches = SwitchesOf(decay_part.switches, charge_light);
   double light_off = 0;
   for (const LightSwitch& sw : switches)
     if (!sw.on) light_off = sw.t_s;
@@ -633,10 +581,9 @@ std::vector<double> EmissionShares(const fs::path& decay_part, const nlohmann::j
 // exposure in the dark. nullopt when the state during the spectrum is not
 // known (the charge light reaches a band without ke).
 std::optional<std::vector<std::vector<double>>> LambdaPerState(
-    const fs::path& spectrum_part, const nlohmann::json& devices, const SpectrumFit& spectrum,
-    const std::vector<double>& kr, const std::vector<std::vector<std::optional<double>>>& ke,
-    const std::vector<double>& shares) {
-  const std::vector<double> E = LightBandIrradiance(spectrum_part, devices, spectrum.charge_light);
+    const CapturedSample::Spectrum& spectrum_part, const SpectrumFit& spectrum, const std::vector<double>& kr,
+    const std::vector<std::vector<std::optional<double>>>& ke, const std::vector<double>& shares) {
+  const std::vector<double> E = spectrum_part.devices.BandIrradiance(spectrum.charge_light);
   if (E.empty() || ke.size() != kr.size()) return std::nullopt;
   std::vector<double> a;
   for (std::size_t i = 0; i < kr.size(); ++i) {
@@ -644,7 +591,7 @@ std::optional<std::vector<std::vector<double>>> LambdaPerState(
     if (!rate || !(*rate > 0)) return std::nullopt;
     a.push_back(*rate);
   }
-  const std::vector<LightSwitch> switches = ReadSwitches(spectrum_part, spectrum.charge_light);
+  const std::vector<LightSwitch> switches = SwitchesOf(spectrum_part.switches, spectrum.charge_light);
   const std::size_t nb = spectrum.shape.size();
   std::vector<double> X(nb, 0.0);
   for (const auto& frame : spectrum.frames) {
@@ -819,175 +766,164 @@ JointFit JointRefine(const Curve& decay_curve, const DecayFitSummary& decay,
 }
 
 namespace {
-SessionFit FitSessionStages(const fs::path& dir, const SessionFitOptions& options);
-}  // namespace
 
-SessionFit FitSession(const fs::path& dir, const SessionFitOptions& options) {
-  // The typed readers name a bad core field; a protocol's nested value that
-  // is missing or mistyped (a band irradiance, a setting) is named here.
-  try {
-    return FitSessionStages(dir, options);
-  } catch (const nlohmann::json::exception& e) {
-    std::string what = e.what();
-    if (auto close = what.find("] "); close != std::string::npos) what = what.substr(close + 2);
-    ThrowUserError(dir.string(), "", "a session record has a missing or mistyped value: " + what);
+// Whether a part was captured; a note when it was not, or did not complete.
+template <typename Part>
+bool PartThere(const std::optional<Part>& part, const char* name, std::vector<std::string>* notes) {
+  if (!part) {
+    notes->push_back(std::string(name) + ": not captured");
+    return false;
+  }
+  if (part->stop != "complete")
+    notes->push_back(std::string(name) + ": stopped '" + StopHow(part->stop) + "'; using the frames it kept");
+  return true;
+}
+
+// Stages 1-3: the LVF calibration, the decay and, with the dark signal the
+// decay measured, the emission spectrum. What cannot be fitted is noted.
+void FitCalibrationDecaySpectrum(const CapturedSample& sample, const SessionFitOptions& options, SessionFit* result) {
+  std::vector<std::string>* notes = &result->notes;
+  if (PartThere(sample.calibration, LvfCalibrationFrameFields::kProtocol, notes)) {
+    try {
+      result->calibration = FitLvfCalibration(*sample.calibration);
+    } catch (const UserError& e) {
+      notes->push_back(e.what());
+    }
+  }
+  if (PartThere(sample.decay, DecayFrameFields::kProtocol, notes)) {
+    DecayStage stage = FitDecayStage(*sample.decay, options, notes);
+    result->decay = stage.fit;
+    result->raw_decay = std::move(stage.raw);
+    result->decay_curve = std::move(stage.corrected);
+  }
+  if (result->calibration && PartThere(sample.spectrum, SpectrumFrameFields::kProtocol, notes)) {
+    try {
+      double dark = std::nan("");
+      if (result->decay) {
+        dark = 0;
+        for (double b : result->decay->background) dark += b;
+      }
+      result->spectrum = FitEmissionSpectrum(*sample.spectrum, *result->calibration, sample.bands, dark);
+    } catch (const UserError& e) {
+      notes->push_back(e.what());
+    }
+  }
+  if (!result->decay) {
+    std::string why;
+    for (const std::string& note : *notes)
+      if (note.find("decay") != std::string::npos) why.append(why.empty() ? "" : "; ").append(note);
+    ThrowUserError(
+        sample.source, "",
+        "no decay could be fitted, so no kr: nothing to write" + (why.empty() ? std::string() : " (" + why + ")"));
   }
 }
 
-namespace {
-SessionFit FitSessionStages(const fs::path& dir, const SessionFitOptions& options) {
-  const auto started = std::chrono::steady_clock::now();
-  const nlohmann::json top = SessionStart(dir);
-  if (top.value("protocol", "") != "all")
-    ThrowUserError(
-        dir.string(), "",
-        "is a '" + top.value("protocol", "?") + "' session; fit session takes the folder of 'phos capture all'");
-  SessionFit result;
-  const std::string top_how = StopHow(dir);
-  if (top_how != "complete")
-    result.notes.push_back("the capture did not complete (stop: " + top_how + "); fitting what it recorded");
-  // The bands: the simulated sample's grid, or the paper's.
-  const nlohmann::json devices = top.value("devices", nlohmann::json::object());
-  SpectralGrid bands = SpectralGrid::Paper();
-  if (devices.contains("bands_nm")) bands.edges_nm = devices["bands_nm"].get<std::vector<double>>();
-  const int nb = bands.band_count();
-  auto part_ok = [&](const std::string& part) {
-    if (!fs::exists(dir / part / "session.json")) {
-      result.notes.push_back(part + ": not captured");
-      return false;
-    }
-    const std::string how = StopHow(dir / part);
-    if (how != "complete") result.notes.push_back(part + ": stopped '" + how + "'; using the frames it kept");
-    return true;
-  };
-
-  // Every part's frames checked first (size and checksum, as resume does): a
-  // damaged session is refused naming the frame, never fitted in part.
-  for (const char* part : {"lvf-calibration", "spectrum", "decay", "excitation"})
-    if (fs::exists(dir / part / "session.json")) RequireGoodFrames(dir / part, ReadFrameRecords(dir / part));
-  // 1. LVF calibration.
-  if (part_ok("lvf-calibration")) {
-    try {
-      result.calibration = FitLvfCalibration(dir / "lvf-calibration");
-    } catch (const UserError& e) {
-      result.notes.push_back(e.what());
-    }
-  }
-  // 3. Decay.
-  if (part_ok("decay")) {
-    DecayStage stage = FitDecayStage(dir / "decay", options, &result.notes);
-    result.decay = stage.fit;
-    result.raw_decay = std::move(stage.raw);
-    result.decay_curve = std::move(stage.corrected);
-  }
-  // 2. The spectrum, with the dark signal the decay measured.
-  if (result.calibration && part_ok("spectrum")) {
-    try {
-      double dark = std::nan("");
-      if (result.decay) {
-        dark = 0;
-        for (double b : result.decay->background) dark += b;
-      }
-      result.spectrum = FitEmissionSpectrum(dir / "spectrum", *result.calibration, bands, dark);
-    } catch (const UserError& e) {
-      result.notes.push_back(e.what());
-    }
-  }
-  if (!result.decay) {
-    std::string why;
-    for (const std::string& note : result.notes)
-      if (note.find("decay") != std::string::npos) why.append(why.empty() ? "" : "; ").append(note);
-    ThrowUserError(
-        dir.string(), "",
-        "no decay could be fitted, so no kr: nothing to write" + (why.empty() ? std::string() : " (" + why + ")"));
-  }
-  const DecayFitSummary& decay = *result.decay;
-  const int nc = decay.n_components;
+// Stage 5 and the material: Lambda per state from the spectrum, with kr
+// from the decay and ke from the excitation (stage 4).
+void WriteSequentialMaterial(const CapturedSample& sample, SessionFit* result) {
+  const DecayFitSummary& decay = *result->decay;
+  const int nc = decay.n_components, nb = sample.bands.band_count();
   std::vector<double> kr;
   for (const DecayComponent& c : decay.components) kr.push_back(c.rate);
-
-  // 4. Excitation per state and ke per band.
-  if (part_ok("excitation")) {
-    ExcitationStage stage =
-        FitExcitationStage(dir / "excitation", decay, devices, nb, options.weighting, &result.notes);
-    result.excitation = std::move(stage.lights);
-    result.excitation_measurements = std::move(stage.measurements);
-    result.state_excitation = std::move(stage.fit);
-    result.ke = std::move(stage.ke);
-  }
-  std::vector<std::vector<std::optional<double>>> ke = KeValues(result.ke);
+  std::vector<std::vector<std::optional<double>>> ke = KeValues(result->ke);
   if (ke.empty())
     ke.assign(static_cast<std::size_t>(nc), std::vector<std::optional<double>>(static_cast<std::size_t>(nb)));
-
-  // 5. Lambda per state.
-  Material& material = result.material;
-  const nlohmann::json sample = top.value("sample", nlohmann::json::object());
-  material.name =
-      (sample.contains("material") ? sample["material"].value("name", std::string("sample")) : std::string("sample")) +
-      " (fitted)";
-  material.bands = bands;
+  Material& material = result->material;
+  material.name = sample.name + " (fitted)";
+  material.bands = sample.bands;
   std::optional<std::vector<std::vector<double>>> Lambda;
-  if (result.spectrum) {
-    const std::vector<double> shares = EmissionShares(dir / "decay", devices, decay, ke, &result.notes);
-    Lambda = LambdaPerState(dir / "spectrum", devices, *result.spectrum, kr, ke, shares);
+  if (result->spectrum) {
+    const std::vector<double> shares = EmissionShares(*sample.decay, decay, ke, &result->notes);
+    Lambda = LambdaPerState(*sample.spectrum, *result->spectrum, kr, ke, shares);
     if (!Lambda)
-      result.notes.push_back(
+      result->notes.push_back(
           "spectrum: the charge light's excitation is not known in every band it reaches, so the "
           "state during the spectrum is not, nor Lambda's scale");
   }
   if (!Lambda)
-    ThrowUserError(dir.string(), "",
+    ThrowUserError(sample.source, "",
                    "no emission spectrum with a known excitation: Lambda cannot be fitted" +
-                       std::string(result.notes.empty() ? "" : " (" + result.notes.back() + ")"));
+                       std::string(result->notes.empty() ? "" : " (" + result->notes.back() + ")"));
   for (int i = 0; i < nc; ++i) {
     ExcitedState state;
     state.kr = kr[i];
     state.kr_stderr = decay.components[i].rate_stderr;
     state.ke = ke[i];
-    if (i < static_cast<int>(result.ke.size())) state.ke_stderr = result.ke[i].ke_stderr;
+    if (i < static_cast<int>(result->ke.size())) state.ke_stderr = result->ke[i].ke_stderr;
     state.Lambda = (*Lambda)[i];
     material.states.push_back(state);
   }
-  material.source = "phos fit session " + dir.string() + ": nc = " + std::to_string(nc) + " (" + decay.choice + ")";
-  ValidateMaterial(material, dir.string());
+  material.source = "phos fit session " + sample.source + ": nc = " + std::to_string(nc) + " (" + decay.choice + ")";
+  ValidateMaterial(material, sample.source);
+}
 
-  // 6. The joint refinement, beside the sequential fit: one problem over the
-  //    decay and every excitation frame at once.
-  if (result.state_excitation && !result.excitation_measurements.empty()) {
-    try {
-      result.joint = JointRefine(result.raw_decay, decay, result.excitation_measurements, *result.state_excitation);
-      JointFit& joint = *result.joint;
-      if (!joint.converged) result.notes.push_back("joint refinement did not converge: " + joint.termination);
-      joint.ke = KePerState(result.excitation, joint.a, joint.a_stderr, nc, nb, dir.string() + " (joint)");
-      if (!joint.ke.empty() && result.spectrum) {
-        std::vector<std::string> ignored;
-        const auto joint_ke = KeValues(joint.ke);
-        const std::vector<double> shares = EmissionShares(dir / "decay", devices, decay, joint_ke, &ignored);
-        if (auto lambda = LambdaPerState(dir / "spectrum", devices, *result.spectrum, joint.kr, joint_ke, shares))
-          joint.Lambda = *lambda;
-      }
-      if (options.joint && joint.converged && !joint.Lambda.empty()) {
-        for (int i = 0; i < nc; ++i) {
-          ExcitedState& state = material.states[i];
-          state.kr = joint.kr[i];
-          state.kr_stderr = joint.kr_stderr[i];
-          state.ke = joint.ke[i].ke;
-          state.ke_stderr = joint.ke[i].ke_stderr;
-          state.Lambda = joint.Lambda[i];
-        }
-        material.source += "; joint refinement over the decay and excitation";
-        ValidateMaterial(material, dir.string());
-        result.joint_written = true;
-      }
-    } catch (const UserError& e) {
-      result.notes.push_back(std::string("joint refinement: ") + e.what());
+// Stage 6: the joint refinement, beside the sequential fit: one problem over
+// the decay and every excitation frame at once; its parameters replace the
+// material's when asked and when it converged.
+void RefineJointly(const CapturedSample& sample, const SessionFitOptions& options, SessionFit* result) {
+  if (!result->state_excitation || result->excitation_measurements.empty()) return;
+  const DecayFitSummary& decay = *result->decay;
+  const int nc = decay.n_components;
+  try {
+    result->joint = JointRefine(result->raw_decay, decay, result->excitation_measurements, *result->state_excitation);
+    JointFit& joint = *result->joint;
+    if (!joint.converged) result->notes.push_back("joint refinement did not converge: " + joint.termination);
+    joint.ke = KePerState(result->excitation, joint.a, joint.a_stderr, nc, sample.bands.band_count(),
+                          sample.source + " (joint)");
+    if (!joint.ke.empty() && result->spectrum) {
+      std::vector<std::string> ignored;
+      const auto joint_ke = KeValues(joint.ke);
+      const std::vector<double> shares = EmissionShares(*sample.decay, decay, joint_ke, &ignored);
+      if (auto lambda = LambdaPerState(*sample.spectrum, *result->spectrum, joint.kr, joint_ke, shares))
+        joint.Lambda = *lambda;
     }
+    if (options.joint && joint.converged && !joint.Lambda.empty()) {
+      Material& material = result->material;
+      for (int i = 0; i < nc; ++i) {
+        ExcitedState& state = material.states[i];
+        state.kr = joint.kr[i];
+        state.kr_stderr = joint.kr_stderr[i];
+        state.ke = joint.ke[i].ke;
+        state.ke_stderr = joint.ke[i].ke_stderr;
+        state.Lambda = joint.Lambda[i];
+      }
+      material.source += "; joint refinement over the decay and excitation";
+      ValidateMaterial(material, sample.source);
+      result->joint_written = true;
+    }
+  } catch (const UserError& e) {
+    result->notes.push_back(std::string("joint refinement: ") + e.what());
   }
+}
+
+}  // namespace
+
+SessionFit FitSession(const CapturedSample& sample, const SessionFitOptions& options) {
+  const auto started = std::chrono::steady_clock::now();
+  SessionFit result;
+  if (sample.stop != "complete")
+    result.notes.push_back("the capture did not complete (stop: " + StopHow(sample.stop) +
+                           "); fitting what it recorded");
+  result.notes.insert(result.notes.end(), sample.notes.begin(), sample.notes.end());
+  FitCalibrationDecaySpectrum(sample, options, &result);
+  // 4. Excitation per state and ke per band.
+  if (PartThere(sample.excitation, ExcitationFrameFields::kProtocol, &result.notes)) {
+    ExcitationStage stage = FitExcitationStage(*sample.excitation, *result.decay, sample.bands.band_count(),
+                                               options.weighting, &result.notes);
+    result.excitation = std::move(stage.lights);
+    result.excitation_measurements = std::move(stage.measurements);
+    result.state_excitation = std::move(stage.fit);
+    result.ke = std::move(stage.ke);
+  }
+  WriteSequentialMaterial(sample, &result);
+  RefineJointly(sample, options, &result);
   result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
   return result;
 }
 
-}  // namespace
+SessionFit FitSession(const fs::path& dir, const SessionFitOptions& options) {
+  return FitSession(LoadCapturedSample(dir), options);
+}
 
 MaterialComparison CompareMaterials(const Material& fitted, const Material& truth) {
   MaterialComparison c;

@@ -37,6 +37,7 @@
 #include <string>
 #include <vector>
 
+#include "phos/fit/captured_sample.h"
 #include "phos/fit/decay_fit.h"
 #include "phos/fit/excitation_fit.h"
 #include "phos/fit/state_excitation_fit.h"
@@ -62,9 +63,9 @@ struct LvfCalibrationFit {
   double CenterNm(double column) const { return center0_nm + nm_per_column * column; }
 };
 
-// Reads an lvf-calibration session. Fewer than two usable lines, or no flat
-// field, is a UserError naming the session.
-LvfCalibrationFit FitLvfCalibration(const std::filesystem::path& session_dir);
+// Fits an lvf-calibration part. Fewer than two usable lines, or no flat
+// field, is a UserError naming the part.
+LvfCalibrationFit FitLvfCalibration(const CapturedSample::Calibration& part);
 
 struct SpectrumFit {
   // Per well-exposed frame: band radiance (material units), its delay after
@@ -83,7 +84,7 @@ struct SpectrumFit {
 // `dark_dn_per_s`: the camera's dark signal per second, all channels summed
 // (the decay fit's background measures it best); NaN: the calibration's
 // dark frame, averaged over its columns (dark current is uniform).
-SpectrumFit FitEmissionSpectrum(const std::filesystem::path& session_dir, const LvfCalibrationFit& calibration,
+SpectrumFit FitEmissionSpectrum(const CapturedSample::Spectrum& part, const LvfCalibrationFit& calibration,
                                 const SpectralGrid& bands, double dark_dn_per_s);
 
 struct SessionFitOptions {
@@ -145,9 +146,11 @@ struct SessionFit {
   double seconds = 0;
 };
 
-// Fits an `all` folder (phos capture all). What cannot be fitted is noted and
-// left out; a material needs at least the decay (kr) and the spectrum
-// (Lambda), else a UserError naming what is missing.
+// Fits a captured sample (an `all` folder, LoadCapturedSample). What cannot
+// be fitted is noted and left out; a material needs at least the decay (kr)
+// and the spectrum (Lambda), else a UserError naming what is missing.
+SessionFit FitSession(const CapturedSample& sample, const SessionFitOptions& options);
+// The same, read from its folder first.
 SessionFit FitSession(const std::filesystem::path& dir, const SessionFitOptions& options);
 
 // The joint refinement alone (FitSession runs it): starts from the
