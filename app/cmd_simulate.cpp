@@ -120,11 +120,12 @@ std::string ToSvg(const SimulationResult& result, const Material& material, doub
 // One sample every --dt from 0 reaches the end of the schedule only when --dt
 // divides it (--dt 3 over 20 s stops at 18): then the state at the end is
 // added as a last sample, stepped from the last one over what is left of the
-// schedule by the same integrator.
+// schedule by the same integrator. An end within rounding of the last sample
+// is that sample; a charge of 1e-12 --dt alone is not (SameTime).
 void SampleTheEnd(const Material& material, const std::vector<double>& E, const SimulateArgs& args,
                   const SimulationOptions& options, SimulationResult* result) {
   const double total = args.charge_s + args.decay_s, last = result->t_s.back();
-  if (!(total - last > 1e-9 * options.dt_s)) return;
+  if (!(total > last) || SameTime(total, last)) return;
   SimulationOptions rest = options;
   rest.dt_s = total - last;
   rest.r0.assign(result->r.end() - result->nc, result->r.end());

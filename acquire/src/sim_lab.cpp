@@ -5,6 +5,7 @@
 
 #include "phos/model/rate_equation.h"
 #include "phos/model/schedule.h"
+#include "phos/model/simulate.h"
 #include "phos/util/csv.h"
 #include "phos/util/error.h"
 #include "phos/util/format.h"
@@ -282,14 +283,10 @@ Frame SimulatedLab::Capture(double exposure_s, double gain) {
     std::vector<double> emission(static_cast<std::size_t>(nb), 0.0);
     if (white_reference_) return emission;
     const std::vector<double> a = ExcitationRates(material, E, "simulated sample '" + material.name + "'");
-    for (int i = 0; i < material.state_count(); ++i) {
-      const ExcitedState& s = material.states[i];
-      const double k = a[i] + s.kr, r_inf = k > 0 ? a[i] / k : 0;
-      const double r_integral =
-          k > 0 ? r_inf * exposure_s + (r[i] - r_inf) * -std::expm1(-k * exposure_s) / k : r[i] * exposure_s;
-      for (int b = 0; b < nb; ++b) emission[b] += s.Lambda[b] * s.kr * r_integral;
-    }
-    return emission;
+    std::vector<double> r_integral(r.size());
+    for (int i = 0; i < material.state_count(); ++i)
+      r_integral[i] = StateIntegral(a[i], material.states[i].kr, exposure_s, r[i]);
+    return EmittedRadiance(material, r_integral.data());
   };
   const std::vector<double> emission = emission_of(material_, r_);
   const std::vector<double> inset_emission = inset_ ? emission_of(*inset_, inset_r_) : emission;

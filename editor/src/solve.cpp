@@ -13,6 +13,7 @@
 #include <nlohmann/json.hpp>
 
 #include "phos/fit/small_nnls.h"
+#include "phos/model/closed_form.h"
 #include "phos/util/error.h"
 #include "phos/util/format.h"
 #include "phos/util/json.h"
@@ -111,16 +112,14 @@ Samples MakeSamples(const Problem& p) {
 }
 
 // r(t) at the samples for decay rate kr and excitation rate a[step] (Eq. 8.1
-// with the exact update, irradiance constant over each step). T: double or a Ceres Jet.
+// with the exact update, irradiance constant over each step: model/'s
+// ChargedState, unclamped so the derivatives pass). T: double or a Ceres Jet.
 template <typename T>
 void StateAtSamples(const PointSamples& s, const std::vector<T>& a, const T& kr, std::vector<T>& r_out) {
-  using std::expm1;
   r_out.resize(s.t.size());
   T r(0.0);
   for (std::size_t j = 0; j < s.steps.size(); ++j) {
-    const T k = a[j] + kr;
-    const T rise = -expm1(-k * s.steps[j].h_s);
-    r = r * (T(1.0) - rise) + a[j] / k * rise;
+    r = ChargedState(a[j], kr, s.steps[j].h_s, r);
     if (s.steps[j].sample >= 0) r_out[s.steps[j].sample] = r;
   }
 }

@@ -292,7 +292,7 @@ void CarryOverStartStates(std::vector<ExcitationMeasurement>& measurements,
     for (std::size_t i = 0; i < kr.size(); ++i) {
       const double r_off = ChargedState(rates->second[i], kr[i], before.charge_s,
                                         before.start_state.empty() ? 0.0 : before.start_state[i]);
-      m.start_state[i] = r_off * std::exp(-kr[i] * dark_s);
+      m.start_state[i] = r_off * DecayFactor(kr[i], dark_s);
     }
   }
 }

@@ -323,7 +323,7 @@ void DecayRangePerPoint(const BatchCoefficients<Real>& c, Real h, StateBatch<Rea
     std::size_t j = j0;
     for (; j + W <= j1; j += W)
       ei::pstoreu(r + j, ei::pmul(ei::ploadu<P>(r + j), ExpNonPositive<Real>(ei::pmul(ei::ploadu<P>(kr + j), minus_h))));
-    for (; j < j1; ++j) r[j] *= std::exp(-kr[j] * h);
+    for (; j < j1; ++j) r[j] *= DecayFactor(kr[j], h);
   }
 }
 
@@ -338,7 +338,7 @@ void DecayBatch(const BatchCoefficients<Real>& c, Real h_s, StateBatch<Real>& s,
   // A mapped batch (per_point) takes one exp per point and state instead.
   CheckPerPoint(c, s);
   Real decay[kMaxStates];
-  for (int i = 0; i < c.nc; ++i) decay[i] = std::exp(-c.kr[i] * h_s);
+  for (int i = 0; i < c.nc; ++i) decay[i] = DecayFactor(c.kr[i], h_s);
   ForEachChunk(s.n, [&](std::size_t j0, std::size_t j1) {
     if (c.per_point())
       DecayRangePerPoint(c, h_s, s, j0, j1);

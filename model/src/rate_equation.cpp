@@ -41,10 +41,8 @@ double MonotoneLimitHk(Integrator integrator) {
 }
 
 double ClosedFormState(double r0, double a, double kr, double t) {
-  double k = a + kr;
-  if (k <= 0) return r0;
-  double r_inf = a / k;
-  return r_inf + (r0 - r_inf) * std::exp(-k * t);
+  if (a + kr <= 0) return r0;
+  return ChargedState(a, kr, t, r0);
 }
 
 }  // namespace phos

@@ -2,11 +2,16 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "phos/util/error.h"
 #include "phos/util/format.h"
 
 namespace phos {
+
+bool SameTime(double x, double y) {
+  return std::fabs(x - y) <= 64 * std::numeric_limits<double>::epsilon() * std::max(std::fabs(x), std::fabs(y));
+}
 
 std::vector<double> EmittedRadiance(const Material& material, const double* r) {
   std::vector<double> L(static_cast<std::size_t>(material.band_count()), 0.0);
@@ -107,14 +112,20 @@ SimulationResult Simulate(const Material& material, const IrradianceSchedule& sc
   record(0.0);
   double t = 0.0;
   std::size_t phase = 0;
-  const double snap = 1e-9 * options.dt_s;  // boundaries this close to a sample are the sample
   ReferenceStats reference_stats;
   for (std::size_t m = 1; m < samples; ++m) {
     const double target = static_cast<double>(m) * options.dt_s;
     while (t < target) {
-      while (phase + 1 < phase_end.size() && phase_end[phase] <= t + snap) ++phase;
+      // A phase is over when t has reached its end; a boundary within
+      // rounding of a sample is the sample (SameTime), so no step of a few
+      // ulps is taken. Only rounding: a phase far shorter than --dt (a
+      // nanosecond flash) is stepped through whole, however short.
+      while (phase + 1 < phase_end.size() && (phase_end[phase] <= t || SameTime(phase_end[phase], t))) ++phase;
       double end = target;
-      if (phase_end[phase] < target - snap) end = phase_end[phase];  // split at the light switch
+      // Split at the light switch. The last phase runs on to the last
+      // sample, which may lie a little past the schedule's sum.
+      if (phase + 1 < phase_end.size() && phase_end[phase] < target && !SameTime(phase_end[phase], target))
+        end = phase_end[phase];
       const double h = end - t;
       for (int i = 0; i < nc; ++i) {
         const double a = rates[phase][i], kr = material.states[i].kr;

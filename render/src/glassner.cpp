@@ -8,6 +8,7 @@
 #include <tbb/parallel_for.h>
 
 #include "phos/model/rate_equation.h"
+#include "phos/model/simulate.h"
 #include "phos/util/error.h"
 #include "phos/util/random.h"
 
@@ -102,11 +103,8 @@ Image EmittedRadianceReference(const SceneGeometry& geometry, double t_s) {
       }
       t0 = t1;
     }
-    for (int b = 0; b < nb; ++b) {
-      double L = 0;
-      for (int i = 0; i < material.state_count(); ++i) L += material.states[i].Lambda[b] * material.states[i].kr * r[i];
-      out[b] = static_cast<float>(L);
-    }
+    const std::vector<double> L = EmittedRadiance(material, r.data());  // Eq. 8.2
+    for (int b = 0; b < nb; ++b) out[b] = static_cast<float>(L[b]);
   });
 }
 
@@ -153,11 +151,8 @@ Image EmittedRadianceGlassner(const SceneGeometry& geometry, double t_s, int tim
       }
       r[i] = sum / time_samples;
     }
-    for (int b = 0; b < nb; ++b) {
-      double L = 0;
-      for (int i = 0; i < material.state_count(); ++i) L += material.states[i].Lambda[b] * material.states[i].kr * r[i];
-      out[b] = static_cast<float>(L);
-    }
+    const std::vector<double> L = EmittedRadiance(material, r.data());  // Eq. 8.2
+    for (int b = 0; b < nb; ++b) out[b] = static_cast<float>(L[b]);
     rays += cast;
   });
   if (shadow_rays) *shadow_rays = rays.load();

@@ -7,6 +7,7 @@
 #include <OpenImageIO/imagebuf.h>
 
 #include "phos/fit/decay_map_file.h"
+#include "phos/model/closed_form.h"
 #include "phos/model/schedule.h"
 #include "phos/util/error.h"
 
@@ -123,8 +124,7 @@ void ApplyPhosphorMap(const PhosphorMap& map, const Material& material, const st
   // The level the lab's charge left in a state of rate kr (Eq. 8.1 from 0); 1 without a recorded charge.
   auto level = [&](int i, double kr) {
     if (map.charge_band_irradiance.empty()) return 1.0;
-    const double k = a[i] + kr;
-    return a[i] / k * -std::expm1(-k * map.charge_s);
+    return ChargedState(a[i], kr, map.charge_s);
   };
   // Until the map says otherwise: the material's rates, and no glow.
   c.kr_per_point.resize(static_cast<std::size_t>(c.nc) * n);

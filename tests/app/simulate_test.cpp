@@ -5,6 +5,9 @@
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
+#include <fstream>
+#include <string>
+#include <vector>
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -149,6 +152,41 @@ TEST(SimulateCommand, SamplesTheEndWhenTheStepDoesNotDivideIt) {
   nlohmann::json c = nlohmann::json::parse(charge.out);
   EXPECT_EQ(c["t"].get<std::vector<double>>(), (std::vector<double>{0, 4, 8, 10}));
   EXPECT_TRUE(testing::RelativelyNear(c["r"][3][0].get<double>(), testing::ClosedForm(0, a, kr, 10), 1e-12));
+}
+
+TEST(SimulateCommand, AFlashFarShorterThanTheStepChargesTheState) {
+  // ke = 1e9: a flash of 1e-12 to 1e-9 s charges r = 1 - e^{-a t} (a = 1e9/s,
+  // kr << a), then decays; once, a charge under 1e-9 --dt left r at 0 throughout.
+  testing::TempDir dir;
+  {
+    std::ofstream file(dir / "flash.json");
+    file << R"({"schema": "phos.material/1", "name": "flash", "bands_nm": [400, 500],
+                "states": [{"kr": 0.01, "ke": [1e9], "Lambda": [1]}]})";
+  }
+  const double a = 1e9, kr = 0.01;
+  for (const char* flash : {"1e-9", "1e-10", "1e-12"}) {
+    auto result = RunPhos("simulate --material " + (dir / "flash.json").string() + " --charge-s " + flash +
+                          " --irradiance 1 --decay-s 2 --dt 1 --json");
+    ASSERT_EQ(result.exit_code, 0) << result.err;
+    nlohmann::json j = nlohmann::json::parse(result.out);
+    const double t_flash = std::stod(flash);
+    EXPECT_EQ(j["t"].get<std::vector<double>>(), (std::vector<double>{0, 1, 2, 2 + t_flash})) << flash;
+    const long double charged = testing::ClosedForm(0, a, kr, t_flash);
+    EXPECT_TRUE(testing::RelativelyNear(static_cast<double>(charged), -std::expm1(-a * t_flash), 1e-9));
+    for (std::size_t m = 1; m < j["t"].size(); ++m) {
+      const double t = j["t"][m].get<double>();
+      EXPECT_TRUE(
+          testing::RelativelyNear(j["r"][m][0].get<double>(), testing::ClosedForm(charged, 0, kr, t - t_flash), 1e-12))
+          << flash << " at " << t;
+    }
+    // The flash alone: its end is sampled, however close to 0.
+    auto alone = RunPhos("simulate --material " + (dir / "flash.json").string() + " --charge-s " + flash +
+                         " --irradiance 1 --dt 1 --json");
+    ASSERT_EQ(alone.exit_code, 0) << alone.err;
+    nlohmann::json k = nlohmann::json::parse(alone.out);
+    EXPECT_EQ(k["t"].get<std::vector<double>>(), (std::vector<double>{0, t_flash}));
+    EXPECT_TRUE(testing::RelativelyNear(k["r"][1][0].get<double>(), charged, 1e-12)) << flash;
+  }
 }
 
 // The phos command itself: the dispatcher and its conventions.

@@ -170,6 +170,49 @@ TEST(Simulate, EulerPastItsLimitsIsRefusedOrWarnedNeverSilent) {
   EXPECT_THROW(Simulate(m, IrradianceSchedule::ChargeThenDecay(E, 10, 10), options, "yellow"), UserError);
 }
 
+// A material that a flash charges: one state, kr = 0.01/s, ke = 1e9 per unit irradiance.
+Material FlashMaterial() {
+  return MaterialFromJson(nlohmann::json::parse(R"({"schema": "phos.material/1", "name": "flash",
+      "bands_nm": [400, 500], "states": [{"kr": 0.01, "ke": [1e9], "Lambda": [1]}]})"),
+                          "flash");
+}
+
+TEST(Simulate, AFlashFarShorterThanTheStepChargesByItsDose) {
+  // Under a = 1e9/s a flash of t_p charges r = a/k (1 - e^{-k t_p}), about
+  // 1 - e^{-a t_p}, then decays. Phase ends within 1e-9 dt of a sample
+  // were once taken as the sample: a flash shorter than that charged nothing.
+  const Material m = FlashMaterial();
+  const double a = 1e9, kr = 0.01;
+  for (double dt : {1.0, 0.5, 1e3})
+    for (double fraction : {1e-3, 1e-6, 1e-9, 3e-10, 1e-10, 1e-11, 1e-12}) {
+      const double flash = fraction * dt;
+      SimulationOptions options;
+      options.dt_s = dt;
+      const SimulationResult result =
+          Simulate(m, IrradianceSchedule::ChargeThenDecay({1}, flash, 3 * dt), options, "flash");
+      ASSERT_EQ(result.sample_count(), 4u) << flash;
+      const long double charged = ClosedForm(0, a, kr, flash);
+      EXPECT_TRUE(RelativelyNear(static_cast<double>(charged), -std::expm1(-a * flash), 1e-9));  // kr << a
+      EXPECT_EQ(result.state(0, 0), 0.0);
+      for (std::size_t s = 1; s < result.sample_count(); ++s)
+        EXPECT_TRUE(RelativelyNear(result.state(s, 0), ClosedForm(charged, 0, kr, result.t_s[s] - flash), 1e-12))
+            << "dt " << dt << " flash " << flash << " t " << result.t_s[s];
+      EXPECT_EQ(result.steps, 4);  // the flash, the rest of the first step, two more
+    }
+}
+
+TEST(Simulate, ALastSamplePastTheSchedulesSumStaysInItsLastPhase) {
+  // 9999.99999999 s at --dt 1 has its last sample at 10000, 1e-8 s past the
+  // end: the last phase runs on to it (the loop once split there forever).
+  const Material m = FlashMaterial();
+  SimulationOptions options;
+  const SimulationResult result =
+      Simulate(m, IrradianceSchedule::ChargeThenDecay({1e-9}, 9999.99999999, 0), options, "flash");
+  ASSERT_EQ(result.sample_count(), 10001u);
+  EXPECT_EQ(result.t_s.back(), 10000.0);
+  EXPECT_TRUE(RelativelyNear(result.state(10000, 0), ClosedForm(0, 1, 0.01, 10000), 1e-12));
+}
+
 TEST(Simulate, BadOptionsAreUserErrors) {
   Material m = LoadMaterial(testing::Fixture("materials/green.json"));
   std::vector<double> E = {1, 1, 1, 0, 0, 0, 0, 0};

@@ -1,6 +1,7 @@
 #pragma once
 // The rate equation of one excited state (Eq. 8.1) and the integrators phos
-// offers for it, with their stability limits.
+// offers for it, with their stability limits. Its closed forms are in
+// closed_form.h.
 //
 //   dr/dt = (1 - r) a - kr r,   a = sum_b ke[b] E[b]
 //
@@ -27,6 +28,8 @@
 #include <string>
 #include <string_view>
 
+#include "phos/model/closed_form.h"
+
 namespace phos {
 
 enum class Integrator {
@@ -52,12 +55,7 @@ inline constexpr double kRk4StabilityLimitHk = 2.785293563405282;
 // kr (1/s), h (s). Templates so the batch kernels and tests share them.
 template <typename Real>
 inline Real ExactStep(Real r, Real a, Real kr, Real h) {
-  Real k = a + kr;
-  Real x = -k * h;
-  Real decay = std::exp(x);
-  Real rise = -std::expm1(x);                                      // 1 - e^{-kh}, accurate for small kh
-  Real r_inf = a / std::max(k, std::numeric_limits<Real>::min());  // k = 0 means a = 0: r_inf = 0
-  Real next = r * decay + r_inf * rise;
+  const Real next = ChargedState(a, kr, h, r);  // closed_form.h
   // The exact value lies between r and r_inf, inside [0, 1]; the clamp only
   // removes a rounding ulp, it never hides an error.
   return std::min(Real(1), std::max(Real(0), next));
@@ -78,8 +76,8 @@ inline Real Rk4Step(Real r, Real a, Real kr, Real h) {
   return r + h / Real(6) * (k1 + Real(2) * k2 + Real(2) * k3 + k4);
 }
 
-// Closed forms the tests and the error study compare against (double).
-// r(t) for constant a from r(0) = r0.
+// r(t) for constant a from r(0) = r0 in double (ChargedState), for the tests
+// and the error study.
 double ClosedFormState(double r0, double a, double kr, double t);
 
 }  // namespace phos

@@ -48,6 +48,11 @@ struct SimulationResult {
 SimulationResult Simulate(const Material& material, const IrradianceSchedule& schedule,
                           const SimulationOptions& options, const std::string& where);
 
+// Two instants within rounding of each other: a phase boundary summed from
+// durations and a sample m dt (0.1 + 0.2 and 3 x 0.1) are the same time.
+// Relative to the instants, not to dt: a phase of 1e-12 dt is its own.
+bool SameTime(double x, double y);
+
 // Emitted radiance per band of a state vector (Eq. 8.2).
 std::vector<double> EmittedRadiance(const Material& material, const double* r);
 
