@@ -10,6 +10,7 @@
 #include <tuple>
 
 #include "phos/acquire/session_records.h"
+#include "phos/model/closed_form.h"
 #include "phos/model/rate_equation.h"
 #include "phos/model/spectral.h"
 #include "phos/util/error.h"
@@ -349,10 +350,10 @@ Curve CorrectForExposure(const Curve& curve, const DecayFitSummary& fit) {
     for (const DecayComponent& component : fit.components) {
       double amplitude = 0;
       for (double v : component.amplitude) amplitude += v;
-      const double share = amplitude * std::exp(-component.rate * curve.t_s[j]);
-      const double x = component.rate * curve.exposure_s[j] / 2;
-      weighted += share * (x > 1e-8 ? std::sinh(x) / x : 1.0);
-      total += share;
+      // The glow at the exposure's middle, and its mean over the exposure.
+      const double t = curve.t_s[j], e = curve.exposure_s[j];
+      weighted += amplitude * DecayFactor(component.rate, t - e / 2, e);
+      total += amplitude * DecayFactor(component.rate, t);
     }
     const double factor = total > 0 ? weighted / total : 1.0;
     for (int c = 0; c < curve.channel_count(); ++c) corrected.channels[c][j] = curve.channels[c][j] / factor;
@@ -599,7 +600,7 @@ std::optional<std::vector<std::vector<double>>> LambdaPerState(
     const double e = std::max(frame.exposure_s, 1e-12);
     for (std::size_t i = 0; i < kr.size(); ++i) {
       const double r = StateAt(switches, a[i], kr[i], frame.t_start_s);
-      emitting += shares[i] * kr[i] * r * -std::expm1(-kr[i] * e) / (kr[i] * e);
+      emitting += shares[i] * kr[i] * r * DecayFactor(kr[i], 0.0, e);
     }
     for (std::size_t b = 0; b < nb; ++b)
       X[b] += frame.band_radiance[b] / emitting / static_cast<double>(spectrum.frames.size());
@@ -620,7 +621,8 @@ std::vector<std::vector<std::optional<double>>> KeValues(const std::vector<KeEst
 
 // ---- stage 6: the joint refinement ------------------------------------------------
 
-// One decay sample of one channel: w (sum_i A_i e^{-k_i t} sinh(k_i e/2)/(k_i e/2) + B - y).
+// One decay sample of one channel at the middle t of its exposure e:
+// w (sum_i A_i DecayFactor(k_i, t - e/2, e) + B - y), the mean of the glow over the exposure.
 struct JointDecayResidual {
   double t, e, y, w;
   int nc;
@@ -630,10 +632,7 @@ struct JointDecayResidual {
     const T* amplitude_background = p[1];  // A_1..A_nc, B
     T sum = amplitude_background[nc];
     for (int i = 0; i < nc; ++i) {
-      const T k = exp(log_k[i]);
-      const T x = k * e / 2.0;
-      const T factor = x > T(1e-8) ? sinh(x) / x : T(1.0);
-      sum += amplitude_background[i] * exp(-k * t) * factor;
+      sum += amplitude_background[i] * DecayFactor(T(exp(log_k[i])), t - e / 2, e);
     }
     residual[0] = w * (sum - y);
     return true;
