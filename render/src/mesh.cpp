@@ -116,11 +116,13 @@ void CheckVertexLine(std::string_view line, std::size_t line_number, const std::
     const std::string token(line.substr(i, j - i));
     double value = 0;
     if (token.empty())
-      ThrowUserError(where, "", "OBJ '" + name + "' line " + std::to_string(line_number) +
-                                    ": a vertex has fewer than 3 coordinates");
+      ThrowUserError(
+          where, "",
+          "OBJ '" + name + "' line " + std::to_string(line_number) + ": a vertex has fewer than 3 coordinates");
     if (!ParseDouble(token, &value))
-      ThrowUserError(where, "", "OBJ '" + name + "' line " + std::to_string(line_number) + ": vertex coordinate '" +
-                                    token.substr(0, 40) + "' is not a finite number");
+      ThrowUserError(where, "",
+                     "OBJ '" + name + "' line " + std::to_string(line_number) + ": vertex coordinate '" +
+                         token.substr(0, 40) + "' is not a finite number");
     i = j;
   }
 }
@@ -159,8 +161,8 @@ Mesh ParseObj(std::string_view text, const std::filesystem::path& base_dir, cons
     mtl_file = base_dir / mtllib;
     std::error_code ec;
     if (!std::filesystem::exists(mtl_file, ec))
-      ThrowUserError(where, "mtllib", "OBJ '" + name + "' names material file '" + mtl_file.string() +
-                                          "', which does not exist");
+      ThrowUserError(where, "mtllib",
+                     "OBJ '" + name + "' names material file '" + mtl_file.string() + "', which does not exist");
     try {
       mtl_text = ReadFileText(mtl_file);
     } catch (const UserError& e) {
@@ -435,9 +437,9 @@ TextureWraps GltfTextureWraps(const tinygltf::Sampler& sampler, const std::strin
       case TINYGLTF_TEXTURE_WRAP_CLAMP_TO_EDGE: return TextureWrap::kClampToEdge;
       case TINYGLTF_TEXTURE_WRAP_MIRRORED_REPEAT: return TextureWrap::kMirroredRepeat;
       default:
-        ThrowUserError(where, field + "." + name,
-                       "expected 10497 (REPEAT), 33071 (CLAMP_TO_EDGE) or 33648 (MIRRORED_REPEAT), got " +
-                           std::to_string(mode));
+        ThrowUserError(
+            where, field + "." + name,
+            "expected 10497 (REPEAT), 33071 (CLAMP_TO_EDGE) or 33648 (MIRRORED_REPEAT), got " + std::to_string(mode));
     }
   };
   return {wrap(sampler.wrapS, "wrapS"), wrap(sampler.wrapT, "wrapT")};
@@ -447,8 +449,7 @@ TextureWraps GltfTextureWraps(const tinygltf::Sampler& sampler, const std::strin
 // TextureFilter; 9728 NEAREST, 9729 LINEAR, 9984 to 9987 the MIP-mapped
 // minifications; without a sampler or a filter, the renderer's own:
 // bilinear, trilinear).
-TextureFilter GltfTextureFilter(const tinygltf::Sampler& sampler, const std::string& field,
-                                const std::string& where) {
+TextureFilter GltfTextureFilter(const tinygltf::Sampler& sampler, const std::string& field, const std::string& where) {
   TextureFilter filter;
   switch (sampler.magFilter) {
     case -1:
@@ -524,8 +525,8 @@ void ReadGltfTexture(const tinygltf::Model& model, const tinygltf::TextureInfo& 
 
 // The base colour of glTF material `index` (pbrMetallicRoughness
 // baseColorFactor, linear, and baseColorTexture, sRGB), none without one.
-std::optional<BaseColour> GltfBaseColour(const tinygltf::Model& model, int index,
-                                         const std::filesystem::path& base_dir, const std::string& where) {
+std::optional<BaseColour> GltfBaseColour(const tinygltf::Model& model, int index, const std::filesystem::path& base_dir,
+                                         const std::string& where) {
   if (index < 0) return std::nullopt;
   const std::string field = "materials[" + std::to_string(index) + "]";
   if (index >= static_cast<int>(model.materials.size())) ThrowUserError(where, field, "material index out of range");
@@ -610,6 +611,17 @@ tinygltf::Model ReadGltfModel(std::string_view data, bool binary, const std::fil
   if (data.size() > kMaxInputFileBytes)
     ThrowUserError(where, "",
                    "glTF '" + name + "' is more than the limit of " + std::to_string(kMaxInputFileBytes) + " bytes");
+  // tinygltf turns JSON values (extras, extensions) into its own by recursion,
+  // one stack frame per level: 20,000 nested arrays overflowed the stack.
+  // A .glb's JSON is its first chunk (glTF 2.0, 4.4.3: a 12-byte header, then
+  // the chunk's length and type); a malformed header is left to tinygltf.
+  std::string_view json = data;
+  if (binary) {
+    std::uint32_t chunk_bytes = 0;
+    if (data.size() >= 20) std::memcpy(&chunk_bytes, data.data() + 12, 4);
+    json = data.size() >= 20 ? data.substr(20, chunk_bytes) : std::string_view();
+  }
+  CheckJsonNesting(json, where + " (" + name + ")");
   tinygltf::TinyGLTF loader;
   loader.SetFsCallbacks({&GltfFileExists, &GltfExpandPath, &GltfReadFile, &GltfNoWrite, read});
   loader.SetImageLoader(&GltfKeepDataUriImage, nullptr);
@@ -893,8 +905,8 @@ std::vector<PunctualLight> ParseGltfLights(std::string_view data, bool binary, c
       ThrowUserError(file_where, "lights", "light '" + light.name + "' has an unknown type '" + source.type + "'");
     }
     if (!(source.intensity >= 0 && source.intensity <= kMaxIrradiance))
-      ThrowUserError(file_where, "lights", "light '" + light.name + "' has an intensity outside [0, " +
-                                               FormatDouble(kMaxIrradiance) + "]");
+      ThrowUserError(file_where, "lights",
+                     "light '" + light.name + "' has an intensity outside [0, " + FormatDouble(kMaxIrradiance) + "]");
     light.intensity = source.intensity;
     if (source.color.size() == 3) punctual.colour = Eigen::Vector3d(source.color[0], source.color[1], source.color[2]);
     if (!(punctual.colour.array() >= 0).all() || !(punctual.colour.array() <= 1).all())

@@ -310,9 +310,10 @@ TEST(Scenes, BadInputNamesTheFileAndField) {
       std::string::npos);
   EXPECT_NE(ErrorAfterEdit([](nlohmann::json& j) {
               j["bands_nm"] = {400, 500, 600, 700};
-            }).find("the material's bands_nm [400, 437.5, 475, 512.5, 550, 587.5, 625, 662.5, 700] nm differ from "
-                    "the scene's [400, 500, 600, 700] nm; the renderer needs one band grid: give the scene the "
-                    "material's bands_nm, or make the material on the scene's"),
+            })
+                .find("the material's bands_nm [400, 437.5, 475, 512.5, 550, 587.5, 625, 662.5, 700] nm differ from "
+                      "the scene's [400, 500, 600, 700] nm; the renderer needs one band grid: give the scene the "
+                      "material's bands_nm, or make the material on the scene's"),
             std::string::npos);
   // Bounds as written (the float bound read [0.019999999552965164, 1]).
   EXPECT_NE(ErrorAfterEdit([](nlohmann::json& j) {
@@ -321,7 +322,8 @@ TEST(Scenes, BadInputNamesTheFileAndField) {
             std::string::npos);
   EXPECT_EQ(ErrorAfterEdit([](nlohmann::json& j) { j["objects"][0]["roughness"] = 0.02; }), "(no error)");
   // A file that is not there is named at its field, with the folder it was looked in.
-  const std::string no_material = ErrorAfterEdit([](nlohmann::json& j) { j["objects"][2]["phosphor"] = "../materials/none.json"; });
+  const std::string no_material =
+      ErrorAfterEdit([](nlohmann::json& j) { j["objects"][2]["phosphor"] = "../materials/none.json"; });
   EXPECT_NE(no_material.find("objects[2].phosphor: phosphor file '"), std::string::npos) << no_material;
   EXPECT_NE(no_material.find("none.json' does not exist or is not a regular file (a scene's paths are relative to "
                              "its own folder, "),
@@ -539,6 +541,38 @@ TEST(Meshes, CraftedGltfFilesAreRefusedInOneLine) {
   j = Pedestal();
   j["nodes"][0]["translation"] = {0, 2e6, 0};
   EXPECT_TRUE(has(GltfError(j), "has a vertex beyond the limit of 1e+06 m"));
+}
+
+// A 40 KB glTF whose extras held 20,000 nested arrays overflowed the stack in
+// tinygltf's parse (a segfault of phos render, --check and the editor). The
+// nesting is counted before tinygltf reads the JSON, of a .gltf and of a
+// .glb's JSON chunk; a nesting within the limit reads as before.
+TEST(Meshes, GltfJsonNestedPastTheLimitIsRefusedBeforeTinygltfReadsIt) {
+  auto with_extras = [](int depth) {
+    std::string text = Pedestal().dump();
+    text.insert(1, "\"extras\":" + std::string(depth, '[') + std::string(depth, ']') + ",");
+    return text;
+  };
+  auto glb = [](std::string json) {  // glTF 2.0, 4.4: header, then the JSON chunk padded with spaces
+    while (json.size() % 4) json += ' ';
+    auto u32 = [](std::uint32_t v) { return std::string(reinterpret_cast<const char*>(&v), 4); };
+    return "glTF" + u32(2) + u32(static_cast<std::uint32_t>(20 + json.size())) +
+           u32(static_cast<std::uint32_t>(json.size())) + "JSON" + json;
+  };
+  const std::string limit =
+      "arrays and objects nested more than the limit of " + std::to_string(kMaxJsonNesting) + " levels deep";
+  for (const std::string format : {".gltf", ".glb"}) {
+    auto error = [&](int depth) {
+      const std::string text = format == ".glb" ? glb(with_extras(depth)) : with_extras(depth);
+      return ErrorOfType<UserError>([&] {
+        ParseMesh(text, format, Fixture("scenes/meshes"), "deep" + format, "", "scene.json: objects[0].mesh");
+      });
+    };
+    const std::string deep = error(20000);
+    EXPECT_EQ(deep.rfind("scene.json: objects[0].mesh (deep" + format + "): " + limit, 0), 0u) << deep;
+    EXPECT_EQ(deep.find('\n'), std::string::npos) << deep;
+    EXPECT_EQ(error(kMaxJsonNesting - 1), "(no error)") << format;
+  }
 }
 
 // tinyobjloader reads "nan", "inf", "1e999" or a word as 0 or infinity without

@@ -62,5 +62,23 @@ TEST(WriteFileAtomically, ReplacesWholeAndLeavesNoTemporary) {
   EXPECT_THROW(WriteFileAtomically(dir / "no-such-dir" / "a.txt", "x"), UserError);
 }
 
+// Parsers that recurse once per level (tinygltf) overflowed the stack on
+// 20,000 nested arrays: the nesting is counted before any parser runs, and
+// brackets inside strings (escaped quotes included) are not nesting.
+TEST(CheckJsonNesting, RefusesNestingPastTheLimitOutsideStrings) {
+  auto error = [](const std::string& text) {
+    return testing::ErrorOfType<UserError>([&] { ParseJsonText(text, "f.json"); });
+  };
+  const int limit = kMaxJsonNesting;
+  EXPECT_EQ(error(std::string(limit, '[') + std::string(limit, ']')), "(no error)");
+  EXPECT_EQ(error(std::string(limit + 1, '[') + std::string(limit + 1, ']')),
+            "f.json: arrays and objects nested more than the limit of 64 levels deep (at byte 64)");
+  EXPECT_EQ(error(std::string(20000, '[') + std::string(20000, ']')).rfind("f.json: arrays and objects nested", 0), 0u);
+  EXPECT_EQ(error(R"({"a": [{"b": ")" + std::string(1000, '[') + R"(\"[[["}]})"), "(no error)");
+  EXPECT_EQ(error("{\"a\": {\"b\": " + std::string(limit, '[') + std::string(limit, ']') + "}}")
+                .rfind("f.json: arrays and objects nested more than the limit of 64 levels deep", 0),
+            0u);
+}
+
 }  // namespace
 }  // namespace phos

@@ -65,7 +65,31 @@ std::string ReadFileText(const std::filesystem::path& path, std::uintmax_t max_b
   return text;
 }
 
+void CheckJsonNesting(std::string_view text, const std::string& source) {
+  int depth = 0;
+  bool in_string = false;
+  for (std::size_t i = 0; i < text.size(); ++i) {
+    const char c = text[i];
+    if (in_string) {
+      if (c == '\\')
+        ++i;  // the escaped character, a quote or a backslash, is not the string's end
+      else if (c == '"')
+        in_string = false;
+    } else if (c == '"') {
+      in_string = true;
+    } else if (c == '[' || c == '{') {
+      if (++depth > kMaxJsonNesting)
+        ThrowUserError(source, "",
+                       "arrays and objects nested more than the limit of " + std::to_string(kMaxJsonNesting) +
+                           " levels deep (at byte " + std::to_string(i) + ")");
+    } else if ((c == ']' || c == '}') && depth > 0) {
+      --depth;
+    }
+  }
+}
+
 nlohmann::json ParseJsonText(std::string_view text, const std::string& source) {
+  CheckJsonNesting(text, source);
   try {
     return nlohmann::json::parse(text);
   } catch (const nlohmann::json::exception& e) {
