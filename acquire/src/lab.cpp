@@ -265,7 +265,8 @@ std::unique_ptr<OpenedLab> OpenLab(const LabConfig& config) {
   if (!config.pixel_format.empty()) camera.SetPixelFormat(config.pixel_format);
   if (config.binning_x != 1 || config.binning_y != 1) camera.SetBinning(config.binning_x, config.binning_y);
   if (config.region)
-    camera.SetRegion((*config.region)[0], (*config.region)[1], (*config.region)[2], (*config.region)[3]);
+    camera.SetRegion((*config.region)[0], (*config.region)[1], (*config.region)[2], (*config.region)[3],
+                     "camera.region");
   camera.SetTrigger(config.trigger, config.trigger_source);
   if (config.trigger == AravisCamera::Trigger::kHardware) {
     Lights* lights = lab->lights.get();
