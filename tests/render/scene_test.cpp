@@ -367,6 +367,76 @@ TEST(Atlas, OnlyPhosphorsCarryTexelsOfTheAskedSize) {
   // Two triangles whose longest edge is the diagonal sqrt(2): m = ceil(14.14) = 15.
   EXPECT_EQ(atlas.objects()[0].m[0], 15);
   EXPECT_EQ(atlas.total_texels(), 2u * 15 * 15);
+  // CountTexels, which the loader checks the limits with, counts what the atlas lays out.
+  EXPECT_EQ(CountTexels(scene), (std::vector<std::size_t>{0, 2u * 15 * 15}));
+}
+
+// What a scene's memory grows with is counted when it loads (so render
+// --check refuses it too), before anything is allocated: 4 phosphor quads of
+// 1e6 m at texel_size_m 1e-3 (1.1 KB) passed the loader and then asked for
+// 134 million texels (6.4 GiB, "internal error: std::bad_alloc"); 10,000
+// lights took 3.2 GiB and 5,000 phosphor spheres 3.9 GiB.
+TEST(Scenes, WhatMemoryGrowsWithIsCountedAtLoadAndRefusedPastItsLimit) {
+  auto one_line = [](const std::string& error, const std::string& start) {
+    EXPECT_EQ(error.find('\n'), std::string::npos) << error;
+    EXPECT_EQ(error.rfind(start, 0), 0u) << error;
+  };
+  // Each quad: two triangles whose longest edge (the diagonal) is cut into 4096 texels.
+  one_line(ErrorAfterEdit([](nlohmann::json& j) {
+             j["texel_size_m"] = 1e-3;
+             j["objects"] = nlohmann::json::array();
+             for (int i = 0; i < 4; ++i)
+               j["objects"].push_back({{"name", "quad " + std::to_string(i)},
+                                       {"shape", {{"type", "quad"}, {"size", {1e6, 1e6}}}},
+                                       {"albedo", 0.5},
+                                       {"phosphor", "../materials/green.json"}});
+           }),
+           "cornell-phosphor.json: texel_size_m: the phosphors would have " + std::to_string(4 * 2 * 4096 * 4096) +
+               " texels ('quad 0' " + std::to_string(2 * 4096 * 4096) + " of them), more than the limit of " +
+               std::to_string(kMaxTexels) + "; choose a larger texel size");
+  one_line(ErrorAfterEdit([](nlohmann::json& j) { j["objects"][2]["texel_size_m"] = 1e-4; }),
+           "cornell-phosphor.json: objects[2].texel_size_m: the phosphors would have ");
+  // Texels times lights: the solver keeps each light's irradiance per texel.
+  auto with_lights = [](int n) {
+    return [n](nlohmann::json& j) {
+      j["texel_size_m"] = 1e-3;
+      const nlohmann::json light = j["lights"][0];
+      for (int i = 1; i < n; ++i) j["lights"].push_back(light), j["lights"].back()["name"] = "led " + std::to_string(i);
+    };
+  };
+  const Scene few = [&] {
+    nlohmann::json json = ReadJsonFile(Fixture("scenes/cornell-phosphor.json"));
+    with_lights(1)(json);
+    return SceneFromJson(json, Fixture("scenes"), "cornell-phosphor.json");
+  }();
+  std::size_t texels = 0;
+  for (std::size_t n : CountTexels(few)) texels += n;
+  const int lights_past = static_cast<int>(kMaxTexelLights / texels) + 1;
+  ASSERT_LE(lights_past, static_cast<int>(kMaxLights));
+  one_line(ErrorAfterEdit(with_lights(lights_past)), "cornell-phosphor.json: texel_size_m: the phosphors would have " +
+                                                         std::to_string(texels) + " texels ('left wall' ");
+  EXPECT_NE(ErrorAfterEdit(with_lights(lights_past)).find("times " + std::to_string(lights_past) + " lights more"),
+            std::string::npos);
+  EXPECT_EQ(ErrorAfterEdit(with_lights(lights_past - 1)), "(no error)");
+  // Lights and objects by number, before any of them is read.
+  one_line(ErrorAfterEdit([](nlohmann::json& j) {
+             for (int i = 0; i < 5000; ++i) j["lights"].push_back(j["lights"][0]);
+           }),
+           "cornell-phosphor.json: lights: has 5001 lights, more than the limit of 4096 lights");
+  one_line(ErrorAfterEdit([](nlohmann::json& j) {
+             for (int i = 0; i < 5000; ++i) j["objects"].push_back({{"name", std::to_string(i)}});
+           }),
+           "cornell-phosphor.json: objects: has 5007 objects, more than the limit of 1024");
+  // Triangles over all objects: 52 spheres of 20 x 4^7 triangles, 2^24 passed at the 52nd.
+  one_line(ErrorAfterEdit([](nlohmann::json& j) {
+             j["objects"] = nlohmann::json::array();
+             for (int i = 0; i < 52; ++i)
+               j["objects"].push_back({{"name", std::to_string(i)},
+                                       {"shape", {{"type", "sphere"}, {"radius", 0.1}, {"subdivisions", 7}}},
+                                       {"albedo", 0.5}});
+           }),
+           "cornell-phosphor.json: objects[51]: the scene's objects up to this one have 17039360 triangles, more "
+           "than the limit of 16777216");
 }
 
 }  // namespace
