@@ -80,5 +80,21 @@ TEST(CheckJsonNesting, RefusesNestingPastTheLimitOutsideStrings) {
             0u);
 }
 
+// A key given twice in one object: nlohmann keeps the last in silence, so a
+// scene's second "phosphor" or a material's second "kr" won unseen.
+TEST(ParseJsonText, AKeyGivenTwiceInOneObjectIsRefusedNamingIt) {
+  auto error = [](const std::string& text) {
+    return testing::ErrorOfType<UserError>([&] { ParseJsonText(text, "f.json"); });
+  };
+  EXPECT_EQ(error(R"({"kr": 1, "kr": 2})"), "f.json: kr: the key is given twice");
+  EXPECT_EQ(error(R"({"states": [{"kr": 1}, {"ke": [1], "kr": 2, "ke": [3]}]})"),
+            "f.json: states[1].ke: the key is given twice");
+  EXPECT_EQ(error(R"({"a": {"b": [[1], [2, {"c": 1, "d": {}, "c": 2}]]}})"),
+            "f.json: a.b[1][1].c: the key is given twice");
+  // The same key in different objects, or at different depths, is no duplicate.
+  EXPECT_EQ(error(R"({"a": {"a": 1}, "b": [{"a": 1}, {"a": 2}], "c": {"b": {"a": 3}}})"), "(no error)");
+  EXPECT_EQ(ParseJsonText(R"({"x": [1, {"y": 2}], "z": 3})", "f.json")["x"][1]["y"], 2);
+}
+
 }  // namespace
 }  // namespace phos

@@ -41,8 +41,9 @@ inline constexpr int kMaxJsonNesting = 64;
 // run before a parser that recurses; a syntax error is left to the parser.
 void CheckJsonNesting(std::string_view text, const std::string& source);
 
-// Parses JSON text; a syntax error or nesting past kMaxJsonNesting is a
-// UserError naming `source`.
+// Parses JSON text; a syntax error, nesting past kMaxJsonNesting or a key
+// given twice in one object (the last would win in silence) is a UserError
+// naming `source`.
 nlohmann::json ParseJsonText(std::string_view text, const std::string& source);
 
 // Reads (ReadFileText) and parses a JSON file; a missing file or a syntax
