@@ -344,7 +344,7 @@ std::vector<Light> ReadGltfLights(const JsonField& l, const SpectralGrid& bands,
     std::vector<double> factor(colour.size());
     for (std::size_t b = 0; b < colour.size(); ++b) factor[b] = light.intensity * scale * colour[b];
     light.E_per_band = spectrum;
-    ScaleSpectrum(l["intensity_scale"], light, factor);
+    ScaleSpectrum(l.Has("intensity_scale") ? l["intensity_scale"] : l["file"], light, factor);
     light.schedule = schedule;
     lights.push_back(std::move(light));
   }
