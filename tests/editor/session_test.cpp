@@ -19,6 +19,8 @@
 
 #include "phos/editor/server.h"
 #include "phos/editor/session.h"
+#include "phos/editor/solve.h"
+#include "phos/util/json.h"
 #include "phos/util/error.h"
 #include "test_util.h"
 
@@ -52,6 +54,43 @@ TEST(EditSession, ConstraintsSolveAndTheCurvesPassThroughTheTargets) {
   EXPECT_NEAR(material["states"][0]["kr"].get<double>(), std::log(2.5) / 25, 1e-3);
   EXPECT_TRUE(state["objects"][2]["edited"].get<bool>());
   EXPECT_FALSE(c.session.FramePng(40, 1.0).empty());
+}
+
+// phos edit solve grew as n^1.7 in its constraints with no limit (10,000:
+// 20 s), and a target of 1e300 printed a cost of inf, exit 0: a constraints
+// file is refused at load past 1000 constraints, a radiance or weight past
+// 1e6, or a target whose square is 0, each naming the field.
+TEST(EditorConstraintsFile, CountsAndValuesWhoseSquaresOverflowAreRefusedAtLoad) {
+  const nlohmann::json file = ReadJsonFile(Fixture("constraints/glow-sign.json"));
+  auto error = [&](const std::function<void(nlohmann::json&)>& edit) {
+    nlohmann::json copy = file;
+    edit(copy);
+    return ErrorOfType<UserError>([&] { ProblemFromJson(copy, "c.json"); });
+  };
+  auto with_constraints = [](std::size_t n) {
+    return [n](nlohmann::json& c) {
+      while (c["constraints"].size() < n) c["constraints"].push_back(c["constraints"][1]);
+    };
+  };
+  EXPECT_EQ(error(with_constraints(kMaxConstraints)), "(no error)");
+  EXPECT_EQ(error(with_constraints(kMaxConstraints + 1)),
+            "c.json: constraints: has 1001 constraints, more than the limit of 1000");
+  EXPECT_EQ(error([](nlohmann::json& c) { c["constraints"][1]["radiance"][2] = 1e300; }),
+            "c.json: constraints[1].radiance[2]: expected a radiance of at most 1e+06, got 1e+300 (the cost squares "
+            "it)");
+  EXPECT_EQ(error([](nlohmann::json& c) {
+              c["constraints"][1].erase("radiance");
+              c["constraints"][1]["at_least"] = {2e6, 0, 0};
+            }),
+            "c.json: constraints[1].at_least[0]: expected a radiance of at most 1e+06, got 2e+06 (the cost squares "
+            "it)");
+  EXPECT_EQ(error([](nlohmann::json& c) { c["constraints"][0]["weight"] = 1e300; }),
+            "c.json: constraints[0].weight: expected a number in [0, 1e+06], got 1e+300");
+  EXPECT_NE(error([](nlohmann::json& c) {
+              c["constraints"][0]["radiance"] = {1e-200, 0, 0};
+            }).find("c.json: constraints[0].radiance: a target this small"),
+            std::string::npos);
+  EXPECT_EQ(error([](nlohmann::json& c) { c["constraints"][0]["radiance"] = {1e-150, 0, 0}; }), "(no error)");
 }
 
 TEST(EditSession, BadEditsChangeNothing) {
