@@ -321,6 +321,31 @@ TEST_F(AravisFake, ARegionPastTheSensorIsRefusedNamingTheConfigKey) {
             width);
 }
 
+// A lab light's irradiance_csv with a header only was read as a light of 0
+// in every band, in silence: it is refused, as is one row, and a spectrum
+// outside every band; one within the bands is read.
+TEST(LabConfig, AnIrradianceCsvThatGivesNoIrradianceIsRefused) {
+  const testing::TempDir dir;
+  auto error = [&](const std::string& csv) {
+    testing::WriteText(dir / "led.csv", csv);
+    return testing::ErrorOfType<UserError>([&] {
+      LabConfigFromJson(R"({"schema": "phos.lab/1", "camera": {"aravis": "Fake_1"}, "lights": {"backend": "none",
+                           "channels": {"led405": {"line": 1, "irradiance_csv": "led.csv"}}}})",
+                        dir / "lab.json");
+    });
+  };
+  const std::string where =
+      (dir / "lab.json").string() + ": lights.channels.led405.irradiance_csv: '" + (dir / "led.csv").string() + "' ";
+  EXPECT_EQ(error("wavelength_nm,irradiance\n"),
+            where + "has 0 row(s) of wavelength_nm,irradiance; a spectrum needs at least 2");
+  EXPECT_EQ(error("wavelength_nm,irradiance\n405,1\n"),
+            where + "has 1 row(s) of wavelength_nm,irradiance; a spectrum needs at least 2");
+  EXPECT_EQ(
+      error("wavelength_nm,irradiance\n1000,1\n1100,1\n"),
+      where + "gives 0 irradiance in every band of bands_nm (400 to 700 nm): the light would be recorded as dark");
+  EXPECT_EQ(error("wavelength_nm,irradiance\n395,0\n405,1\n415,0\n"), "(no error)");
+}
+
 TEST_F(AravisFake, PixelFormatsBinningAndTheSoftwareTrigger) {
   AravisCamera camera("Fake_1", clock, 2.0);
   const std::vector<std::string> formats = camera.available_pixel_formats();
