@@ -451,6 +451,48 @@ TEST(EditorServer, RequestsAreAnsweredWhileSlowClientsHoldTheirs) {
   EXPECT_LT(cut_s, 4.0);
 }
 
+// docs/editor.md's limits, as the code keeps them: a slow request was cut
+// at 30 s (docs: 5 s of its first byte), 125 KB of headers were read (docs:
+// 64 KiB) and a Content-Length of 1e12 without a body got its 413 only at the
+// 30 s deadline. The bounds below only tell 5 s from 30 s.
+TEST(EditorServer, TheDocumentedLimitsOfTimeHeadersAndBodyHold) {
+  RunningServer server;  // the defaults: idle 30 s, a request 5 s from its first byte
+  const auto elapsed_s = [](std::chrono::steady_clock::time_point since) {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
+  };
+  // A request begun and never finished.
+  int fd = Connect(server.port);
+  auto start = std::chrono::steady_clock::now();
+  const std::string begun = "GET /api/state HTTP/1.1\r\n" + server.Host();
+  ::send(fd, begun.data(), begun.size(), MSG_NOSIGNAL);
+  Reply r = ReadReply(fd, std::chrono::milliseconds(40000));
+  ::close(fd);
+  EXPECT_NE(r.status, 200);
+  EXPECT_LT(elapsed_s(start), 20.0);
+  // 96 KiB of headers, whole and well-formed: past the 64 KiB, not answered 200.
+  fd = Connect(server.port);
+  std::string headers = "GET /api/state HTTP/1.1\r\n" + server.Host();
+  for (int k = 0; headers.size() < 96 * 1024; ++k)
+    headers += "X-Pad-" + std::to_string(k) + ": " + std::string(60, 'p') + "\r\n";
+  headers += "\r\n";
+  ::send(fd, headers.data(), headers.size(), MSG_NOSIGNAL);
+  r = ReadReply(fd, std::chrono::milliseconds(20000));
+  ::close(fd);
+  EXPECT_NE(r.status, 200);
+  // A length past the limit, and no body: 413 at once, not at a deadline.
+  fd = Connect(server.port);
+  start = std::chrono::steady_clock::now();
+  const std::string post = "POST /api/constraints HTTP/1.1\r\n" + server.Host() +
+                           "Content-Type: application/json\r\nContent-Length: 1000000000000\r\n\r\n";
+  ::send(fd, post.data(), post.size(), MSG_NOSIGNAL);
+  r = ReadReply(fd, std::chrono::milliseconds(40000));
+  ::close(fd);
+  EXPECT_EQ(r.status, 413) << r.body;
+  EXPECT_LT(elapsed_s(start), 20.0);
+  // A request within the limits is answered as before.
+  EXPECT_EQ(server.Get("/api/state").status, 200);
+}
+
 TEST(EditorServer, ConnectionsAreBounded) {
   ServerOptions options;
   options.max_connections = 4;
