@@ -611,6 +611,24 @@ TEST(Meshes, CraftedGltfFilesAreRefusedInOneLine) {
   j = Pedestal();
   j["nodes"][0]["translation"] = {0, 2e6, 0};
   EXPECT_TRUE(has(GltfError(j), "has a vertex beyond the limit of 1e+06 m"));
+  // tinygltf read a negative or fractional offset as 0, and an accessor past
+  // its bufferView (within the buffer) read the next view's bytes: each
+  // loaded in silence.
+  j = Pedestal();
+  j["bufferViews"][0]["byteOffset"] = -4;
+  EXPECT_TRUE(has(GltfError(j), "(crafted.gltf): bufferViews[0].byteOffset: expected a whole number >= 0, got -4"));
+  j = Pedestal();
+  j["accessors"][1]["byteOffset"] = 0.5;
+  EXPECT_TRUE(has(GltfError(j), "accessors[1].byteOffset: expected a whole number >= 0, got 0.5"));
+  j = Pedestal();
+  j["accessors"][0]["count"] = 9;  // 108 bytes of a 96-byte view, in a 168-byte buffer
+  EXPECT_TRUE(has(GltfError(j), "POSITION: accessor reaches past the end of bufferView 0 (96 bytes)"));
+  j = Pedestal();
+  j["accessors"][0]["byteOffset"] = 12;
+  EXPECT_TRUE(has(GltfError(j), "POSITION: accessor reaches past the end of bufferView 0 (96 bytes)"));
+  j = Pedestal();
+  j["accessors"][0]["count"] = 7;  // fewer than the view holds: read as given
+  EXPECT_EQ(GltfError(j).find("bufferView"), std::string::npos);
 }
 
 // A 40 KB glTF whose extras held 20,000 nested arrays overflowed the stack in
@@ -674,6 +692,18 @@ TEST(Meshes, ObjRejectionsAreOneLine) {
     EXPECT_EQ(error.rfind("s.json: objects[0].mesh: ", 0), 0u) << error;
     EXPECT_EQ(error.find('\n'), std::string::npos) << error;
   }
+  // tinyobjloader read an index of 99999999999999999999 as -1 (the last
+  // vertex) and 4294967297 as 1: the face loaded in silence.
+  const std::string triangle = "v 0 0 0\nv 1 0 0\nv 0 1 0\n";
+  for (const std::string index : {"99999999999999999999", "-99999999999999999999", "4294967297", "2147483648", "1x"}) {
+    const std::string error = ErrorOfType<UserError>(
+        [&] { ParseMesh(triangle + "f 1 2/1 " + index + "\n", ".obj", ".", "crafted.obj", "", "s.json"); });
+    EXPECT_EQ(error, "s.json: OBJ 'crafted.obj' line 4: face index '" + index +
+                         "' is not a whole number within the vertex range")
+        << index;
+  }
+  EXPECT_EQ(ParseMesh(triangle + "vt 0 0\nf 1/1 2/1 -1/1\n", ".obj", ".", "ok.obj", "", "s.json").triangles,
+            std::vector<Eigen::Vector3i>({Eigen::Vector3i(0, 1, 2)}));
   // The mesh file itself: a regular file only.
   EXPECT_NE(ErrorOfType<UserError>([&] { LoadMesh("/dev/zero.obj", "", "s.json"); }).find("does not exist"),
             std::string::npos);
