@@ -62,7 +62,7 @@ void Run(const EditSolveArgs& args) {
                 FormatShort(s.kr, 4).c_str(), ke.c_str(), Lambda.c_str());
   }
   for (const editor::ConstraintResult& c : solution.constraints)
-    std::printf("  %-24s residual %s\n", c.label.c_str(), FormatShort(c.residual, 3).c_str());
+    std::printf("  %-24s residual %s\n", Printable(c.label).c_str(), FormatShort(c.residual, 3).c_str());
   for (const std::string& note : solution.feedback) std::printf("  note: %s\n", note.c_str());
   if (baseline)
     std::printf("baseline (the paper's grid search): cost %s in %s ms\n", FormatShort(baseline->cost, 4).c_str(),

@@ -73,7 +73,7 @@ LoadedCurve LoadCurve(const std::string& path, const CurveArgs& args) {
   }
   for (std::size_t c = 1; c < table.header.size(); ++c) {
     curve.channels.push_back(table.columns[c]);
-    curve.names.push_back(table.header[c]);
+    curve.names.push_back(Printable(table.header[c]));  // printed in the text: no raw ESC or newline
   }
   loaded.samples_in_file = curve.size();
   if (args.from_s || args.to_s) {
@@ -162,7 +162,7 @@ void PrintTable(const std::vector<std::string>& header, const std::vector<std::v
       line += row[c];
       if (c + 1 < row.size()) line += std::string(width[c] - row[c].size() + 2, ' ');
     }
-    std::printf("%s\n", line.c_str());
+    std::printf("%s\n", Printable(line).c_str());  // column names from the file
   };
   print(header);
   for (const auto& row : rows) print(row);
@@ -182,7 +182,7 @@ void FitEachFile(const CurveArgs& args, const std::vector<std::string>& table_he
   for (const std::string& file : args.files) {
     try {
       const CurveResult result = fit_one(file);
-      for (const std::string& warning : result.warnings) std::fprintf(stderr, "phos: warning: %s\n", warning.c_str());
+      for (const std::string& warning : result.warnings) std::fprintf(stderr, "phos: warning: %s\n", Printable(warning).c_str());
       if (args.json)
         std::printf("%s\n", result.json.dump().c_str());
       else if (args.files.size() == 1)

@@ -52,7 +52,7 @@ namespace fs = std::filesystem;
 
 // Where Slurm's defaults are not the site's, these pass through to every job.
 struct SiteOptions {
-  std::string partition, account;       // "": the cluster's default partition, the user's default account
+  std::string partition, account;          // "": the cluster's default partition, the user's default account
   std::string time_per_task = "01:00:00";  // --time of each job: HH:MM:SS
   std::string mem_per_task = "4G";         // --mem of each job
   int cpus_per_task = 2;
@@ -98,7 +98,7 @@ struct SlurmJob {
   nlohmann::json ToJson() const {
     nlohmann::json stages_json = nlohmann::json::array();
     for (const SlurmStage& s : stages) stages_json.push_back(s.ToJson());
-    return {{"format", kFormat}, {"kind", kind},          {"tasks", tasks},
+    return {{"format", kFormat},  {"kind", kind},          {"tasks", tasks},
             {"command", command}, {"stages", stages_json}, {"submitted_s", submitted_s}};
   }
   static SlurmJob FromJson(const JsonField& j) {
@@ -135,9 +135,12 @@ std::string PhosExecutable() {
 std::string OutFolder(const std::vector<std::string>& command) {
   for (std::size_t i = 0; i < command.size(); ++i) {
     std::string value;
-    if (command[i] == "--out" && i + 1 < command.size()) value = command[i + 1];
-    else if (command[i].rfind("--out=", 0) == 0) value = command[i].substr(6);
-    else continue;
+    if (command[i] == "--out" && i + 1 < command.size())
+      value = command[i + 1];
+    else if (command[i].rfind("--out=", 0) == 0)
+      value = command[i].substr(6);
+    else
+      continue;
     if (value.empty()) ThrowUserError("", "COMMAND", "--out is empty: give the folder for the outputs");
     return fs::absolute(value).lexically_normal().string();
   }
@@ -156,12 +159,61 @@ std::optional<double> SlurmMinutes(const std::string& time) {
   if (!std::regex_match(time, m, form)) return std::nullopt;
   auto number = [&](int i) { return m[i].matched ? std::stod(m[i].str()) : 0.0; };
   const int fields = 1 + m[3].matched + m[4].matched;  // after the day
-  if (m[1].matched) {  // D-HH[:MM[:SS]]
+  if (m[1].matched) {                                  // D-HH[:MM[:SS]]
     return number(1) * 1440 + number(2) * 60 + number(3) + number(4) / 60;
   }
-  if (fields == 1) return number(2);                           // MM
-  if (fields == 2) return number(2) + number(3) / 60;          // MM:SS
-  return number(2) * 60 + number(3) + number(4) / 60;          // HH:MM:SS
+  if (fields == 1) return number(2);                   // MM
+  if (fields == 2) return number(2) + number(3) / 60;  // MM:SS
+  return number(2) * 60 + number(3) + number(4) / 60;  // HH:MM:SS
+}
+
+// Why `time` is not a time limit sbatch takes (sbatch(1), --time: MM, MM:SS,
+// HH:MM:SS, D-HH, D-HH:MM, D-HH:MM:SS or UNLIMITED), "" if it is one. Slurm
+// reads seconds past 59, minutes past 59 after hours and hours past 23 after
+// days as nonsense or refuses them when the job is submitted: refused here.
+std::string SlurmTimeError(const std::string& time) {
+  if (time == "UNLIMITED" || time == "INFINITE" || time == "unlimited" || time == "infinite") return "";
+  static const std::regex form(R"((?:(\d+)-)?(\d+)(?::(\d+))?(?::(\d+))?)");
+  std::smatch m;
+  const std::string expected = "expected a Slurm time (MM, MM:SS, HH:MM:SS, D-HH, D-HH:MM, D-HH:MM:SS or UNLIMITED)";
+  if (time.size() > 32 || !std::regex_match(time, m, form)) return expected + ", got \"" + time + "\"";
+  auto number = [&](int i) { return std::stod(m[i].str()); };
+  const bool days = m[1].matched;
+  const int fields = 1 + m[3].matched + m[4].matched;
+  // Which field each number is: [hours, minutes, seconds] or a part of them.
+  const bool has_hours = days || fields == 3;
+  const int seconds_at = days ? 4 : fields == 1 ? 0 : fields == 2 ? 3 : 4;
+  const int minutes_at = days ? 3 : fields == 3 ? 3 : 2;
+  std::string why;
+  if (days && number(2) >= 24) why = "hours after days must be under 24";
+  if (has_hours && m[minutes_at].matched && number(minutes_at) >= 60) why = "minutes after hours must be under 60";
+  if (seconds_at > 0 && m[seconds_at].matched && number(seconds_at) >= 60) why = "seconds must be under 60";
+  return why.empty() ? "" : expected + ", got \"" + time + "\": " + why;
+}
+
+// Why `memory` is not a --mem sbatch takes (a positive whole number of
+// megabytes, or with a K, M, G or T suffix), "" if it is one. 0 is Slurm's
+// "all of a node's memory", not a task's share: refused.
+std::string SlurmMemoryError(const std::string& memory) {
+  static const std::regex form(R"(0*[1-9]\d{0,15}[KMGTkmgt]?)");
+  if (std::regex_match(memory, form)) return "";
+  return "expected a positive whole amount with an optional K, M, G or T suffix (sbatch --mem: 4G, 500M, 4096), "
+         "got \"" +
+         memory + "\"";
+}
+
+// Refuses a value written into a job script that would not stay one value
+// there: a control character (a newline ends the #SBATCH line, and what follows
+// runs as a command) anywhere, and a space where it would start another option.
+void RequireScriptValue(const std::string& value, const std::string& field, bool spaces_allowed) {
+  for (char c : value) {
+    const auto u = static_cast<unsigned char>(c);
+    if (u < 0x20 || u == 0x7f)
+      ThrowUserError("", field,
+                     "contains a control character (code " + std::to_string(u) + "), which the job script cannot hold");
+    if (c == ' ' && !spaces_allowed)
+      ThrowUserError("", field, "contains a space, which would start another sbatch option in the job script");
+  }
 }
 
 // One sbatch script: the site's options, then `body`.
@@ -191,7 +243,8 @@ std::string Script(const SubmitArgs& args, const std::string& name, int array_ta
   s += "#SBATCH --requeue\n";
   if (!site.partition.empty()) s += "#SBATCH --partition=" + site.partition + "\n";
   if (!site.account.empty()) s += "#SBATCH --account=" + site.account + "\n";
-  for (const std::string& option : site.extra) s += std::string("#SBATCH ") + (option.rfind('-', 0) == 0 ? "" : "--") + option + "\n";
+  for (const std::string& option : site.extra)
+    s += std::string("#SBATCH ") + (option.rfind('-', 0) == 0 ? "" : "--") + option + "\n";
   s += "set -euo pipefail\n" + body + "\n";
   return s;
 }
@@ -263,7 +316,8 @@ std::string Submit(const std::string& sbatch, const std::string& script, const s
       if (line.rfind(prefix, 0) == 0) line.erase(0, std::strlen(prefix));
     if (line.find_first_not_of(" \t\r") != std::string::npos) said += (said.empty() ? "" : "; ") + line;
   }
-  ThrowUserError(script, "sbatch", "refused: " + (said.empty() ? "exit status " + std::to_string(run.exit_code) : said));
+  ThrowUserError(script, "sbatch",
+                 "refused: " + (said.empty() ? "exit status " + std::to_string(run.exit_code) : said));
 }
 
 // Runs the tasks' command with --check (render, fit map, fit batch: every
@@ -276,8 +330,9 @@ void CheckCommand(const std::vector<std::string>& words) {
   if (run.exit_code == 0) return;
   // Its last line that says something: the refusal (warnings come before it).
   const std::string last = LastLine(run.out);
-  ThrowUserError("", "COMMAND", "its tasks would fail (nothing submitted): " +
-                                     (last.empty() ? "exit status " + std::to_string(run.exit_code) : last));
+  ThrowUserError("", "COMMAND",
+                 "its tasks would fail (nothing submitted): " +
+                     (last.empty() ? "exit status " + std::to_string(run.exit_code) : last));
 }
 
 // Cancels jobs already submitted when a later sbatch failed, so that nothing
@@ -299,7 +354,8 @@ void RequireNoJobSubmitted(const fs::path& dir) {
   if (!fs::exists(file)) return;
   const nlohmann::json json = ReadJsonFile(file);
   const SlurmJob job = SlurmJob::FromJson(JsonField(json, file.string()));
-  const bool submitted = std::any_of(job.stages.begin(), job.stages.end(), [](const SlurmStage& s) { return !s.job_id.empty(); });
+  const bool submitted =
+      std::any_of(job.stages.begin(), job.stages.end(), [](const SlurmStage& s) { return !s.job_id.empty(); });
   if (submitted)
     ThrowUserError(file.string(), "",
                    "a job was already submitted from this folder ('phos slurm status " + dir.string() +
@@ -313,6 +369,12 @@ void RunSubmit(const SubmitArgs& args) {
   if (out.empty()) ThrowUserError("", "COMMAND", "needs --out OUT (the tasks' outputs and done records go there)");
   if (args.job_dir.empty()) ThrowUserError("", "--job-dir", "is empty: give the folder for the scripts and logs");
   const fs::path dir = fs::absolute(args.job_dir).lexically_normal();
+  // Every value the scripts hold outside the quoted command (Script).
+  RequireScriptValue(dir.string(), "--job-dir", true);
+  RequireScriptValue(fs::current_path().string(), "the working folder", true);
+  RequireScriptValue(args.site.partition, "--partition", false);
+  RequireScriptValue(args.site.account, "--account", false);
+  for (const std::string& option : args.site.extra) RequireScriptValue(option, "--sbatch-option", true);
   RequireNoJobSubmitted(dir);
   const std::string phos = PhosExecutable(), n = std::to_string(args.tasks), task = "${SLURM_ARRAY_TASK_ID}/" + n;
   std::vector<std::string> base = {phos};
@@ -344,19 +406,24 @@ void RunSubmit(const SubmitArgs& args) {
   };
   std::vector<std::string> task_done;
   if (args.kind == "render") {
-    stage("solve", 0, {"--solve-only", "--checkpoints", states, "--tasks", n}, {(dir / "states" / "done.json").string()});
-    for (int i = 0; i < args.tasks; ++i) task_done.push_back((fs::path(out) / "done" / TaskRecordName("task-", i, args.tasks)).string());
+    stage("solve", 0, {"--solve-only", "--checkpoints", states, "--tasks", n},
+          {(dir / "states" / "done.json").string()});
+    for (int i = 0; i < args.tasks; ++i)
+      task_done.push_back((fs::path(out) / "done" / TaskRecordName("task-", i, args.tasks)).string());
     stage("tasks", args.tasks, {"--task", task, "--checkpoints", states}, task_done);
     // Nothing to assemble: the frames are the outputs. The last job checks that every range is done.
     const fs::path script = dir / "merge.sbatch";
-    WriteFileAtomically(script, Script(a, "merge", 0, Command({phos, "slurm", "status", dir.string(), "--require-done"}), true));
+    WriteFileAtomically(
+        script, Script(a, "merge", 0, Command({phos, "slurm", "status", dir.string(), "--require-done"}), true));
     job.stages.push_back({"merge", script.string(), "", {}});
   } else if (args.kind == "map") {
-    for (int i = 0; i < args.tasks; ++i) task_done.push_back((fs::path(out) / "tiles" / TaskRecordName("tile-", i, args.tasks)).string());
+    for (int i = 0; i < args.tasks; ++i)
+      task_done.push_back((fs::path(out) / "tiles" / TaskRecordName("tile-", i, args.tasks)).string());
     stage("tasks", args.tasks, {"--tile", task}, task_done);
     stage("merge", 0, {"--merge"}, {(fs::path(out) / "decay-map.exr").string(), (fs::path(out) / "kr.png").string()});
   } else {
-    for (int i = 0; i < args.tasks; ++i) task_done.push_back((fs::path(out) / "tasks" / TaskRecordName("task-", i, args.tasks)).string());
+    for (int i = 0; i < args.tasks; ++i)
+      task_done.push_back((fs::path(out) / "tasks" / TaskRecordName("task-", i, args.tasks)).string());
     stage("tasks", args.tasks, {"--task", task}, task_done);
     stage("merge", 0, {"--merge"}, {(fs::path(out) / "summary.csv").string()});
   }
@@ -364,8 +431,9 @@ void RunSubmit(const SubmitArgs& args) {
     const auto start = std::chrono::steady_clock::now();
     std::vector<std::string> submitted;
     try {
-      for (SlurmStage& s : job.stages) submitted.push_back(s.job_id = Submit(args.sbatch, s.script, kDependency,
-                                                                             submitted.empty() ? "" : submitted.back()));
+      for (SlurmStage& s : job.stages)
+        submitted.push_back(s.job_id =
+                                Submit(args.sbatch, s.script, kDependency, submitted.empty() ? "" : submitted.back()));
     } catch (const UserError& e) {
       // The stages before it are queued already: cancelled, so that a retry
       // in this folder (no job.json) does not run the chain twice.
@@ -439,7 +507,7 @@ std::string SlurmState(const std::string& job_id, bool* answering) {
   if (!*answering) return "";
   const ShellRun run = RunShell("timeout 5 scontrol -o show job " + ShellQuote(job_id) + " 2>/dev/null");
   if (run.exit_code == 124) *answering = false;  // timeout(1)'s code
-  std::map<std::string, int> counts;  // array tasks by state (with its reason while pending)
+  std::map<std::string, int> counts;             // array tasks by state (with its reason while pending)
   int tasks = 0;
   std::string line;
   std::istringstream records(run.out);
@@ -530,17 +598,21 @@ void RunStatus(const StatusArgs& args) {
       line += whole ? "done" : "not done";
       if (seconds > 0) line += " (" + FormatShort(seconds, 3) + " s)";
     }
-    text += line + (s.job_id.empty() ? "" : "  [job " + s.job_id + (slurm_state.empty() ? "" : ": " + slurm_state) + "]") + "\n";
+    text += line +
+            (s.job_id.empty() ? "" : "  [job " + s.job_id + (slurm_state.empty() ? "" : ": " + slurm_state) + "]") +
+            "\n";
   }
   if (args.json) {
-    std::printf("%s\n",
-                nlohmann::json({{"kind", job.kind}, {"tasks", job.tasks}, {"done", all}, {"stages", stages}}).dump().c_str());
+    std::printf(
+        "%s\n",
+        nlohmann::json({{"kind", job.kind}, {"tasks", job.tasks}, {"done", all}, {"stages", stages}}).dump().c_str());
   } else {
     std::printf("phos slurm status: %s, %d task(s): %s\n%s", job.kind.c_str(), job.tasks, all ? "done" : "not done",
                 text.c_str());
   }
   if (args.require_done && !all)
-    ThrowUserError(args.dir, "", "not every task is done: " + (not_done.empty() ? std::string("see the lines above") : not_done));
+    ThrowUserError(args.dir, "",
+                   "not every task is done: " + (not_done.empty() ? std::string("see the lines above") : not_done));
 }
 
 void AddSubmit(CLI::App& slurm, const std::string& kind, const std::string& what) {
@@ -558,19 +630,13 @@ void AddSubmit(CLI::App& slurm, const std::string& kind, const std::string& what
   cmd->add_option("--time-per-task", args->site.time_per_task,
                   "sbatch --time of each job: MM, MM:SS, HH:MM:SS, D-HH, D-HH:MM, D-HH:MM:SS or UNLIMITED")
       ->default_str("01:00:00")
-      ->check(CLI::Validator(
-          [](std::string& value) {
-            // Slurm's forms of a time limit (sbatch(1), --time); anything else sbatch refuses after the check.
-            static const std::regex form(R"((\d+|\d+:\d+|\d+:\d+:\d+|\d+-\d+|\d+-\d+:\d+|\d+-\d+:\d+:\d+|)"
-                                         R"(UNLIMITED|INFINITE|unlimited|infinite))");
-            return std::regex_match(value, form)
-                       ? std::string()
-                       : "expected a Slurm time (MM, HH:MM:SS, D-HH:MM:SS, ...), got \"" + value + "\"";
-          },
-          "", "slurm time"));
+      // Slurm's forms of a time limit; anything else sbatch refuses after the check.
+      ->check(CLI::Validator([](std::string& value) { return SlurmTimeError(value); }, "", "slurm time"));
   cmd->add_option("--mem-per-task", args->site.mem_per_task,
-                  "sbatch --mem of each job (docs/scale.md says what each kind needs)")
-      ->default_str("4G");
+                  "sbatch --mem of each job: a positive amount with an optional K, M, G or T suffix\n"
+                  "(docs/scale.md says what each kind needs)")
+      ->default_str("4G")
+      ->check(CLI::Validator([](std::string& value) { return SlurmMemoryError(value); }, "", "slurm memory"));
   cmd->add_option("--cpus-per-task", args->site.cpus_per_task, "sbatch --cpus-per-task")
       ->default_str("2")
       ->check(CLI::Range(1, 1024));
@@ -581,18 +647,19 @@ void AddSubmit(CLI::App& slurm, const std::string& kind, const std::string& what
   cmd->add_option("--sbatch", args->sbatch, "The sbatch to run")->default_str("sbatch");
   cmd->add_flag("--no-submit", args->no_submit, "Write the scripts and job.json only; print the sbatch commands");
   cmd->add_flag("--json", args->json, "Print job.json (the stages, their scripts and job ids)");
-  cmd->add_option("COMMAND", args->command, "After --: the arguments of 'phos " +
-                                                 std::string(kind == "render" ? "render" : "fit " + kind) +
-                                                 "', --out included")
+  cmd->add_option("COMMAND", args->command,
+                  "After --: the arguments of 'phos " + std::string(kind == "render" ? "render" : "fit " + kind) +
+                      "', --out included")
       ->required();
   // An option that is not phos slurm's is most often the command's, given
   // before or without the --: RunCommand adds this footer to CLI11's "not
   // expected" (and --help shows it).
   cmd->footer("The command's own arguments go after --, e.g. phos slurm " + kind + " --tasks 2 --job-dir J -- " +
-              (kind == "render" ? "SCENE" : kind == "map" ? "SESSION" : "CAPTURES") + " --out OUT");
-  cmd->callback([args] {
-    RunSubmit(*args);
-  });
+              (kind == "render" ? "SCENE"
+               : kind == "map"  ? "SESSION"
+                                : "CAPTURES") +
+              " --out OUT");
+  cmd->callback([args] { RunSubmit(*args); });
 }
 
 }  // namespace

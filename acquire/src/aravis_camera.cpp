@@ -41,6 +41,24 @@ std::uint64_t StreamCount(ArvStream* stream, const char* name) {
   return 0;
 }
 
+// The largest width and height of a region at the camera's binning: its
+// WidthMax and HeightMax, and at most the sensor over the binning (Aravis's
+// fake reports the unbinned WidthMax).
+std::pair<int, int> BinnedSensorSize(ArvCamera* camera, const std::string& id) {
+  GError* error = nullptr;
+  gint wmin = 0, wmax = 0, hmin = 0, hmax = 0, dx = 1, dy = 1;
+  arv_camera_get_width_bounds(camera, &wmin, &wmax, &error);
+  Check(error, id, "region");
+  arv_camera_get_height_bounds(camera, &hmin, &hmax, &error);
+  Check(error, id, "region");
+  gint sensor_width = 0, sensor_height = 0;
+  arv_camera_get_sensor_size(camera, &sensor_width, &sensor_height, nullptr);
+  if (arv_camera_is_binning_available(camera, nullptr)) arv_camera_get_binning(camera, &dx, &dy, nullptr);
+  if (sensor_width > 0 && dx > 0) wmax = std::min(wmax, sensor_width / dx);
+  if (sensor_height > 0 && dy > 0) hmax = std::min(hmax, sensor_height / dy);
+  return {wmax, hmax};
+}
+
 // Why a buffer is not a whole frame, or "" when it is: its status, or fewer
 // bytes than its region needs (a trailer that came early).
 std::string WhyIncomplete(ArvBuffer* buffer) {
@@ -159,17 +177,10 @@ void AravisCamera::SetBinning(int dx, int dy) {
   Check(error, impl_->id, "binning");
   // The region is in binned pixels: keep it inside the binned sensor (some
   // cameras clamp it themselves, others, like Aravis's fake, do not).
-  gint x = 0, y = 0, width = 0, height = 0, wmin = 0, wmax = 0, hmin = 0, hmax = 0;
+  gint x = 0, y = 0, width = 0, height = 0;
   arv_camera_get_region(impl_->camera, &x, &y, &width, &height, &error);
   Check(error, impl_->id, "region");
-  arv_camera_get_width_bounds(impl_->camera, &wmin, &wmax, &error);
-  Check(error, impl_->id, "region");
-  arv_camera_get_height_bounds(impl_->camera, &hmin, &hmax, &error);
-  Check(error, impl_->id, "region");
-  gint sensor_width = 0, sensor_height = 0;
-  arv_camera_get_sensor_size(impl_->camera, &sensor_width, &sensor_height, nullptr);
-  if (sensor_width > 0) wmax = std::min(wmax, sensor_width / dx);
-  if (sensor_height > 0) hmax = std::min(hmax, sensor_height / dy);
+  const auto [wmax, hmax] = BinnedSensorSize(impl_->camera, impl_->id);
   if (x + width > wmax || y + height > hmax) {
     x = std::min(x, wmax - 1);
     y = std::min(y, hmax - 1);
@@ -231,7 +242,19 @@ void AravisCamera::SetTrigger(Trigger trigger, const std::string& source) {
   trigger_source_ = source;
 }
 
-void AravisCamera::SetRegion(int x, int y, int width, int height) {
+void AravisCamera::SetRegion(int x, int y, int width, int height, std::string_view field) {
+  // Aravis's fake sets any region and then writes its frames past its buffer
+  // (a segfault of capture at [0, 0, 65536, 65536]); a real camera may
+  // refuse or clamp it. Checked here against what the camera reports.
+  const auto [wmax, hmax] = BinnedSensorSize(impl_->camera, impl_->id);
+  if (x < 0 || y < 0 || width < 1 || height < 1 || width > wmax - x || height > hmax - y) {
+    const auto [dx, dy] = binning();
+    ThrowUserError("camera '" + impl_->id + "'", field,
+                   "[" + std::to_string(x) + ", " + std::to_string(y) + ", " + std::to_string(width) + ", " +
+                       std::to_string(height) + "] reaches past the sensor, which is " + std::to_string(wmax) + " x " +
+                       std::to_string(hmax) + " pixels at binning " + std::to_string(dx) + "x" + std::to_string(dy) +
+                       " (x + width and y + height at most those)");
+  }
   GError* error = nullptr;
   arv_camera_set_region(impl_->camera, x, y, width, height, &error);
   Check(error, impl_->id, "region");

@@ -143,12 +143,22 @@ LabConfig LabConfigFromJson(std::string_view text, const std::filesystem::path& 
       const int nm = table.Find("wavelength_nm"), value = table.Find("irradiance");
       if (nm < 0 || value < 0) f->Fail("'" + csv.string() + "' needs columns wavelength_nm,irradiance");
       SampledSpectrum spectrum{table.columns[nm], table.columns[value]};
+      // A header alone (or one row) integrates to 0 in every band, and the
+      // light was recorded as dark: refused, as is a spectrum that misses
+      // every band of bands_nm.
+      if (spectrum.value.size() < 2)
+        f->Fail("'" + csv.string() + "' has " + std::to_string(spectrum.value.size()) +
+                " row(s) of wavelength_nm,irradiance; a spectrum needs at least 2");
       for (std::size_t i = 0; i < spectrum.value.size(); ++i) {
         if (spectrum.value[i] < 0) f->Fail("'" + csv.string() + "': irradiance must be >= 0");
         if (i > 0 && !(spectrum.wavelength_nm[i] > spectrum.wavelength_nm[i - 1]))
           f->Fail("'" + csv.string() + "': wavelength_nm must increase");
       }
       c.band_irradiance = IntegrateOverBands(spectrum, config.bands);
+      if (std::none_of(c.band_irradiance.begin(), c.band_irradiance.end(), [](double e) { return e > 0; }))
+        f->Fail("'" + csv.string() + "' gives 0 irradiance in every band of bands_nm (" +
+                FormatDouble(config.bands.edges_nm.front()) + " to " + FormatDouble(config.bands.edges_nm.back()) +
+                " nm): the light would be recorded as dark");
     }
     config.channels.push_back(c);
   }
@@ -265,7 +275,8 @@ std::unique_ptr<OpenedLab> OpenLab(const LabConfig& config) {
   if (!config.pixel_format.empty()) camera.SetPixelFormat(config.pixel_format);
   if (config.binning_x != 1 || config.binning_y != 1) camera.SetBinning(config.binning_x, config.binning_y);
   if (config.region)
-    camera.SetRegion((*config.region)[0], (*config.region)[1], (*config.region)[2], (*config.region)[3]);
+    camera.SetRegion((*config.region)[0], (*config.region)[1], (*config.region)[2], (*config.region)[3],
+                     "camera.region");
   camera.SetTrigger(config.trigger, config.trigger_source);
   if (config.trigger == AravisCamera::Trigger::kHardware) {
     Lights* lights = lab->lights.get();

@@ -2,6 +2,7 @@
 // surface's albedo, how many states to solve for, and the constraints.
 
 #include <algorithm>
+#include <cmath>
 #include <nlohmann/json.hpp>
 
 #include "phos/editor/solve.h"
@@ -36,14 +37,15 @@ std::vector<std::vector<double>> ReadIrradiance(const JsonField& irradiance, std
     if (!phase.value().is_object()) phase.Fail("a row among phases: give phases only, or a row per frame");
     phase.RejectUnknownKeys({"duration_s", "irradiance", "label"});
     const double duration_s = phase["duration_s"].NumberInRange(0, static_cast<double>(kMaxFrames) * dt_s);
-    std::vector<double> E = phase.Has("irradiance") ? phase["irradiance"].NumberArray(nb, 0.0)
-                                                    : std::vector<double>(nb, 0.0);
+    std::vector<double> E =
+        phase.Has("irradiance") ? phase["irradiance"].NumberArray(nb, 0.0) : std::vector<double>(nb, 0.0);
     schedule.Add(duration_s, std::move(E), phase.Has("label") ? phase["label"].String() : "");
   }
   const std::optional<long long> count = WholeFrames(schedule.total_s(), dt_s);
   if (!count)
-    irradiance.Fail("the phases last " + FormatDouble(schedule.total_s()) + " s, not a whole number of frames of dt_s = " +
-                    FormatDouble(dt_s) + " s; lengthen or shorten the last phase");
+    irradiance.Fail("the phases last " + FormatDouble(schedule.total_s()) +
+                    " s, not a whole number of frames of dt_s = " + FormatDouble(dt_s) +
+                    " s; lengthen or shorten the last phase");
   if (*count == 0) irradiance.Fail("the phases last 0 s: expected at least one frame");
   if (*count > static_cast<long long>(kMaxFrames)) irradiance.Fail("more than a million frames");
   return FrameIrradiance(schedule, dt_s);
@@ -83,6 +85,9 @@ Problem ProblemFromJson(const nlohmann::json& json, const std::string& source) {
   if (root.Has("states")) p.states = root["states"].Integer(1, 3);
   const JsonField constraints = root["constraints"];
   if (constraints.ArraySize() == 0) constraints.Fail("expected at least one constraint");
+  if (constraints.ArraySize() > kMaxConstraints)
+    constraints.Fail("has " + std::to_string(constraints.ArraySize()) + " constraints, more than the limit of " +
+                     std::to_string(kMaxConstraints));
   for (std::size_t c = 0; c < constraints.ArraySize(); ++c) {
     const JsonField f = constraints.At(c);
     f.RejectUnknownKeys({"t_s", "until_s", "radiance", "at_least", "at_most", "weight", "label"});
@@ -96,19 +101,31 @@ Problem ProblemFromJson(const nlohmann::json& json, const std::string& source) {
                : f.Has("at_least") ? Constraint::Kind::kAtLeast
                                    : Constraint::Kind::kAtMost;
     con.radiance = f[key].NumberArray(nb, 0.0);
+    for (std::size_t b = 0; b < nb; ++b)
+      if (con.radiance[b] > kMaxConstraintRadiance)
+        f[key].At(b).Fail("expected a radiance of at most " + FormatDouble(kMaxConstraintRadiance) + ", got " +
+                          FormatDouble(con.radiance[b]) + " (the cost squares it)");
     // A target's weight is 1 / |T|^2, and a zero target is met with Lambda =
     // 0: the material would not glow at all (the editor page refuses it too).
     if (con.kind == Constraint::Kind::kTarget &&
         std::all_of(con.radiance.begin(), con.radiance.end(), [](double v) { return v == 0; }))
-      f[key].Fail("a target of zero in every band would give Lambda = 0 (no glow at all); give the radiance it "
-                  "should have, or say \"at_most\" for a time it should be dark");
+      f[key].Fail(
+          "a target of zero in every band would give Lambda = 0 (no glow at all); give the radiance it "
+          "should have, or say \"at_most\" for a time it should be dark");
+    // A target's weight 1 / |T|^2 must be finite: a target of 1e-200 squares to 0.
+    double squares = 0;
+    for (double v : con.radiance) squares += v * v;
+    if (con.kind == Constraint::Kind::kTarget && !std::isfinite(1 / squares))  // not all 0: refused above
+      f[key].Fail(
+          "a target this small (its square is 0 in double precision) cannot weigh the cost; give at least "
+          "1e-150 in some band");
     con.until_s = con.t_s;
     if (f.Has("until_s")) {
       if (con.kind == Constraint::Kind::kTarget)
         f["until_s"].Fail("a target holds at one time; ranges are for at_least and at_most");
       con.until_s = f["until_s"].NumberInRange(con.t_s, p.end_s());
     }
-    if (f.Has("weight")) con.weight = f["weight"].NumberAtLeast(0);
+    if (f.Has("weight")) con.weight = f["weight"].NumberInRange(0, kMaxConstraintWeight);
     p.constraints.push_back(con);
   }
   return p;

@@ -116,10 +116,20 @@ void RejectUnknownParameters(const httplib::Request& request, std::initializer_l
 // with every byte).
 class DeadlineStream : public httplib::Stream {
  public:
-  // At most max_read_bytes are read from the connection: httplib bounds each
-  // header line but not their number.
-  DeadlineStream(int fd, Clock::time_point read_deadline, Clock::duration write_timeout, std::size_t max_read_bytes)
-      : fd_(fd), read_deadline_(read_deadline), write_timeout_(write_timeout), left_to_read_(max_read_bytes) {}
+  // The request line and headers may take kMaxHeaderBytes, the body
+  // max_body_bytes: httplib bounds each header line but not their number.
+  // The request must arrive within request_timeout of its first byte; a
+  // connection that sends nothing waits up to `idle_deadline` (a browser
+  // preconnects and may send its request many seconds later).
+  DeadlineStream(int fd, Clock::time_point idle_deadline, Clock::duration request_timeout,
+                 Clock::duration write_timeout, std::size_t max_body_bytes)
+      : fd_(fd),
+        read_deadline_(idle_deadline),
+        request_timeout_(request_timeout),
+        write_timeout_(write_timeout),
+        max_body_bytes_(max_body_bytes) {}
+
+  static constexpr std::size_t kMaxHeaderBytes = 64 * 1024;
 
   bool is_readable() const override { return begin_ < end_ || Wait(POLLIN, read_deadline_); }
   bool is_writable() const override { return Wait(POLLOUT, WriteDeadline()); }
@@ -132,9 +142,23 @@ class DeadlineStream : public httplib::Stream {
         n = ::recv(fd_, buffer_, std::min(sizeof buffer_, left_to_read_), 0);
       } while (n < 0 && errno == EINTR);
       if (n <= 0) return n;
+      if (!started_) {
+        started_ = true;
+        read_deadline_ = std::min(read_deadline_, Clock::now() + request_timeout_);
+      }
       left_to_read_ -= static_cast<std::size_t>(n);
       begin_ = 0;
       end_ = static_cast<std::size_t>(n);
+      // The end of the headers (CRLF CRLF): from there on, the body's allowance.
+      for (std::size_t i = 0; i < end_ && !in_body_; ++i) {
+        const char c = buffer_[i];
+        header_end_matched_ = c == "\r\n\r\n"[header_end_matched_] ? header_end_matched_ + 1 : (c == '\r' ? 1 : 0);
+        if (header_end_matched_ == 4) {
+          in_body_ = true;
+          const std::size_t body_so_far = end_ - i - 1;
+          left_to_read_ = max_body_bytes_ > body_so_far ? max_body_bytes_ - body_so_far : 0;
+        }
+      }
     }
     const std::size_t n = std::min(size, end_ - begin_);
     std::memcpy(ptr, buffer_ + begin_, n);
@@ -186,8 +210,11 @@ class DeadlineStream : public httplib::Stream {
 
   int fd_;
   Clock::time_point read_deadline_;
-  Clock::duration write_timeout_;
-  std::size_t left_to_read_;
+  Clock::duration request_timeout_, write_timeout_;
+  std::size_t max_body_bytes_;
+  std::size_t left_to_read_ = kMaxHeaderBytes;
+  bool started_ = false, in_body_ = false;
+  int header_end_matched_ = 0;
   mutable bool write_started_ = false;
   mutable Clock::time_point write_deadline_;
   char buffer_[4096];
@@ -304,6 +331,18 @@ void Serve(EditSession& session, const ServerOptions& options, const std::functi
     if (request.has_header("Transfer-Encoding")) {
       Error(response, 411, "request: Transfer-Encoding is not accepted; send the body with a Content-Length");
       return httplib::Server::HandlerResponse::Handled;
+    }
+    // A length over the limit is answered before the body is read: httplib
+    // reads (and drops) the whole body first, and a Content-Length of 1e12
+    // without a body got its 413 only at the read deadline.
+    if (request.has_header("Content-Length")) {
+      const std::string length = request.get_header_value("Content-Length");
+      const bool digits = !length.empty() && length.size() <= 19 &&
+                          std::all_of(length.begin(), length.end(), [](char c) { return c >= '0' && c <= '9'; });
+      if (!digits || std::stoull(length) > options.max_body_bytes) {
+        Error(response, 413, "request: the body is larger than " + std::to_string(options.max_body_bytes) + " bytes");
+        return httplib::Server::HandlerResponse::Handled;
+      }
     }
     const std::string here = ":" + std::to_string(port);
     const std::string host = request.get_header_value("Host");
@@ -476,6 +515,8 @@ void Serve(EditSession& session, const ServerOptions& options, const std::functi
       std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(options.read_timeout_s));
   const auto write_timeout =
       std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(options.write_timeout_s));
+  const auto request_timeout =
+      std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(options.request_timeout_s));
   const auto reap = [&] {
     for (auto it = connections.begin(); it != connections.end();) {
       if (*it->done) {
@@ -503,15 +544,16 @@ void Serve(EditSession& session, const ServerOptions& options, const std::functi
     ::setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &yes, sizeof yes);
     Connection& connection = connections.emplace_back();
     // The request line and headers in at most 64 KiB (the page sends under 1 KiB), then the body.
-    const std::size_t max_read_bytes = options.max_body_bytes + 64 * 1024;
-    connection.thread = std::thread([&server, fd, read_timeout, write_timeout, max_read_bytes, done = connection.done] {
-      {
-        DeadlineStream stream(fd, Clock::now() + read_timeout, write_timeout, max_read_bytes);
-        server.HandleOne(stream);
-      }
-      LingerAndClose(fd);
-      *done = true;
-    });
+    const std::size_t max_body_bytes = options.max_body_bytes;
+    connection.thread = std::thread(
+        [&server, fd, read_timeout, request_timeout, write_timeout, max_body_bytes, done = connection.done] {
+          {
+            DeadlineStream stream(fd, Clock::now() + read_timeout, request_timeout, write_timeout, max_body_bytes);
+            server.HandleOne(stream);
+          }
+          LingerAndClose(fd);
+          *done = true;
+        });
   }
   for (Connection& connection : connections) connection.thread.join();
   ::close(listener);

@@ -233,6 +233,10 @@ int EditSession::ObjectIndex(const std::string& name) const {
 }
 
 void EditSession::AddConstraint(int x, int y, double t_s) {
+  if (constraints_.size() >= kMaxConstraints)
+    ThrowUserError(
+        "", "constraints",
+        "the session has " + std::to_string(constraints_.size()) + " constraints, the limit; remove one first");
   const render::Camera& camera = scene_.camera;
   if (x < 0 || y < 0 || x >= camera.width || y >= camera.height)
     ThrowUserError("", "x, y",

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstring>
 #include <functional>
+#include <limits>
 #include <map>
 #include <memory>
 #include <type_traits>
@@ -116,11 +117,38 @@ void CheckVertexLine(std::string_view line, std::size_t line_number, const std::
     const std::string token(line.substr(i, j - i));
     double value = 0;
     if (token.empty())
-      ThrowUserError(where, "", "OBJ '" + name + "' line " + std::to_string(line_number) +
-                                    ": a vertex has fewer than 3 coordinates");
+      ThrowUserError(
+          where, "",
+          "OBJ '" + name + "' line " + std::to_string(line_number) + ": a vertex has fewer than 3 coordinates");
     if (!ParseDouble(token, &value))
-      ThrowUserError(where, "", "OBJ '" + name + "' line " + std::to_string(line_number) + ": vertex coordinate '" +
-                                    token.substr(0, 40) + "' is not a finite number");
+      ThrowUserError(where, "",
+                     "OBJ '" + name + "' line " + std::to_string(line_number) + ": vertex coordinate '" +
+                         token.substr(0, 40) + "' is not a finite number");
+    i = j;
+  }
+}
+
+// A face line's indices ("f v/vt/vn ..."), each a whole number that fits an
+// int: tinyobjloader reads 99999999999999999999 as -1 (strtol saturates, the
+// int wraps), the last vertex, and the face loaded in silence.
+void CheckFaceLine(std::string_view line, std::size_t line_number, const std::string& where, const std::string& name) {
+  for (std::size_t i = 1; i < line.size();) {
+    if (line[i] == ' ' || line[i] == '\t' || line[i] == '/' || line[i] == '\r') {
+      ++i;
+      continue;
+    }
+    if (line[i] == '#') break;  // a comment to the end of the line
+    std::size_t j = i;
+    while (j < line.size() && line[j] != ' ' && line[j] != '\t' && line[j] != '/' && line[j] != '\r') ++j;
+    const std::string_view token = line.substr(i, j - i);
+    const std::string_view digits = token.substr(token[0] == '-' ? 1 : 0);
+    const bool whole = !digits.empty() && std::all_of(digits.begin(), digits.end(), [](char c) {
+      return std::isdigit(static_cast<unsigned char>(c));
+    });
+    if (!whole || digits.size() > 10 || std::stoll(std::string(digits)) > std::numeric_limits<int>::max())
+      ThrowUserError(where, "",
+                     "OBJ '" + name + "' line " + std::to_string(line_number) + ": face index '" +
+                         std::string(token.substr(0, 40)) + "' is not a whole number within the vertex range");
     i = j;
   }
 }
@@ -139,9 +167,11 @@ Mesh ParseObj(std::string_view text, const std::filesystem::path& base_dir, cons
       ++vertex_lines;
       CheckVertexLine(line, line_number, where, name);
     }
-    if (line.size() >= 2 && line[0] == 'f' && (line[1] == ' ' || line[1] == '\t'))
+    if (line.size() >= 2 && line[0] == 'f' && (line[1] == ' ' || line[1] == '\t')) {
       face_fields += static_cast<std::size_t>(std::count(line.begin(), line.end(), ' ') +
                                               std::count(line.begin(), line.end(), '\t'));
+      CheckFaceLine(line, line_number, where, name);
+    }
     a = b + 1;
   }
   CheckCounts(vertex_lines, face_fields, where, name);
@@ -159,8 +189,8 @@ Mesh ParseObj(std::string_view text, const std::filesystem::path& base_dir, cons
     mtl_file = base_dir / mtllib;
     std::error_code ec;
     if (!std::filesystem::exists(mtl_file, ec))
-      ThrowUserError(where, "mtllib", "OBJ '" + name + "' names material file '" + mtl_file.string() +
-                                          "', which does not exist");
+      ThrowUserError(where, "mtllib",
+                     "OBJ '" + name + "' names material file '" + mtl_file.string() + "', which does not exist");
     try {
       mtl_text = ReadFileText(mtl_file);
     } catch (const UserError& e) {
@@ -274,6 +304,15 @@ std::vector<Out> ReadAccessor(const tinygltf::Model& model, int index, int compo
   if (accessor.count > 0 &&
       (element_bytes > size - begin || (accessor.count - 1) > (size - begin - element_bytes) / stride))
     ThrowUserError(where, what, "accessor reaches past the end of its buffer");
+  // Within its bufferView too (glTF 2.0, 3.6.2.4): past it, it read the next
+  // view's bytes (indices as positions) without a word.
+  const std::size_t view_bytes = view.byteLength;
+  if (accessor.byteOffset > view_bytes ||
+      (accessor.count > 0 && (element_bytes > view_bytes - accessor.byteOffset ||
+                              (accessor.count - 1) > (view_bytes - accessor.byteOffset - element_bytes) / stride)))
+    ThrowUserError(where, what,
+                   "accessor reaches past the end of bufferView " + std::to_string(accessor.bufferView) + " (" +
+                       std::to_string(view_bytes) + " bytes)");
   std::vector<Out> out;
   out.reserve(accessor.count * static_cast<std::size_t>(components));
   for (std::size_t e = 0; e < accessor.count; ++e) {
@@ -435,9 +474,9 @@ TextureWraps GltfTextureWraps(const tinygltf::Sampler& sampler, const std::strin
       case TINYGLTF_TEXTURE_WRAP_CLAMP_TO_EDGE: return TextureWrap::kClampToEdge;
       case TINYGLTF_TEXTURE_WRAP_MIRRORED_REPEAT: return TextureWrap::kMirroredRepeat;
       default:
-        ThrowUserError(where, field + "." + name,
-                       "expected 10497 (REPEAT), 33071 (CLAMP_TO_EDGE) or 33648 (MIRRORED_REPEAT), got " +
-                           std::to_string(mode));
+        ThrowUserError(
+            where, field + "." + name,
+            "expected 10497 (REPEAT), 33071 (CLAMP_TO_EDGE) or 33648 (MIRRORED_REPEAT), got " + std::to_string(mode));
     }
   };
   return {wrap(sampler.wrapS, "wrapS"), wrap(sampler.wrapT, "wrapT")};
@@ -447,8 +486,7 @@ TextureWraps GltfTextureWraps(const tinygltf::Sampler& sampler, const std::strin
 // TextureFilter; 9728 NEAREST, 9729 LINEAR, 9984 to 9987 the MIP-mapped
 // minifications; without a sampler or a filter, the renderer's own:
 // bilinear, trilinear).
-TextureFilter GltfTextureFilter(const tinygltf::Sampler& sampler, const std::string& field,
-                                const std::string& where) {
+TextureFilter GltfTextureFilter(const tinygltf::Sampler& sampler, const std::string& field, const std::string& where) {
   TextureFilter filter;
   switch (sampler.magFilter) {
     case -1:
@@ -524,8 +562,8 @@ void ReadGltfTexture(const tinygltf::Model& model, const tinygltf::TextureInfo& 
 
 // The base colour of glTF material `index` (pbrMetallicRoughness
 // baseColorFactor, linear, and baseColorTexture, sRGB), none without one.
-std::optional<BaseColour> GltfBaseColour(const tinygltf::Model& model, int index,
-                                         const std::filesystem::path& base_dir, const std::string& where) {
+std::optional<BaseColour> GltfBaseColour(const tinygltf::Model& model, int index, const std::filesystem::path& base_dir,
+                                         const std::string& where) {
   if (index < 0) return std::nullopt;
   const std::string field = "materials[" + std::to_string(index) + "]";
   if (index >= static_cast<int>(model.materials.size())) ThrowUserError(where, field, "material index out of range");
@@ -597,6 +635,33 @@ void NoteUnreadGltfMaterial(const tinygltf::Model& model, int index, std::vector
     if (std::find(unread.begin(), unread.end(), part) == unread.end()) unread.push_back(std::move(part));
 }
 
+// tinygltf reads an offset, length, stride or count that is not an unsigned
+// integer (a bufferView's byteOffset of -4) as its default in silence: the
+// accessor then read other bytes of the buffer. Each is checked in the JSON
+// first; a syntax error is left to tinygltf, which names it.
+void CheckGltfUnsignedFields(std::string_view json, const std::string& where) {
+  const nlohmann::json document = nlohmann::json::parse(json, nullptr, false);
+  if (document.is_discarded() || !document.is_object()) return;
+  const std::pair<const char*, std::vector<const char*>> lists[] = {
+      {"bufferViews", {"buffer", "byteOffset", "byteLength", "byteStride"}},
+      {"accessors", {"bufferView", "byteOffset", "count"}},
+      {"buffers", {"byteLength"}}};
+  for (const auto& [list, keys] : lists) {
+    const auto items = document.find(list);
+    if (items == document.end() || !items->is_array()) continue;
+    for (std::size_t i = 0; i < items->size(); ++i) {
+      const nlohmann::json& item = (*items)[i];
+      if (!item.is_object()) continue;
+      for (const char* key : keys) {
+        const auto value = item.find(key);
+        if (value != item.end() && !value->is_number_unsigned())
+          ThrowUserError(where, std::string(list) + "[" + std::to_string(i) + "]." + key,
+                         "expected a whole number >= 0, got " + DescribeJson(*value));
+      }
+    }
+  }
+}
+
 // The extensions phos reads: a file that requires any other is refused,
 // since it would be drawn wrong (glTF 2.0 spec, 3.12: a loader must not load
 // an asset whose required extension it does not support).
@@ -610,6 +675,18 @@ tinygltf::Model ReadGltfModel(std::string_view data, bool binary, const std::fil
   if (data.size() > kMaxInputFileBytes)
     ThrowUserError(where, "",
                    "glTF '" + name + "' is more than the limit of " + std::to_string(kMaxInputFileBytes) + " bytes");
+  // tinygltf turns JSON values (extras, extensions) into its own by recursion,
+  // one stack frame per level: 20,000 nested arrays overflowed the stack.
+  // A .glb's JSON is its first chunk (glTF 2.0, 4.4.3: a 12-byte header, then
+  // the chunk's length and type); a malformed header is left to tinygltf.
+  std::string_view json = data;
+  if (binary) {
+    std::uint32_t chunk_bytes = 0;
+    if (data.size() >= 20) std::memcpy(&chunk_bytes, data.data() + 12, 4);
+    json = data.size() >= 20 ? data.substr(20, chunk_bytes) : std::string_view();
+  }
+  CheckJsonNesting(json, where + " (" + name + ")");
+  CheckGltfUnsignedFields(json, where + " (" + name + ")");
   tinygltf::TinyGLTF loader;
   loader.SetFsCallbacks({&GltfFileExists, &GltfExpandPath, &GltfReadFile, &GltfNoWrite, read});
   loader.SetImageLoader(&GltfKeepDataUriImage, nullptr);
@@ -893,8 +970,8 @@ std::vector<PunctualLight> ParseGltfLights(std::string_view data, bool binary, c
       ThrowUserError(file_where, "lights", "light '" + light.name + "' has an unknown type '" + source.type + "'");
     }
     if (!(source.intensity >= 0 && source.intensity <= kMaxIrradiance))
-      ThrowUserError(file_where, "lights", "light '" + light.name + "' has an intensity outside [0, " +
-                                               FormatDouble(kMaxIrradiance) + "]");
+      ThrowUserError(file_where, "lights",
+                     "light '" + light.name + "' has an intensity outside [0, " + FormatDouble(kMaxIrradiance) + "]");
     light.intensity = source.intensity;
     if (source.color.size() == 3) punctual.colour = Eigen::Vector3d(source.color[0], source.color[1], source.color[2]);
     if (!(punctual.colour.array() >= 0).all() || !(punctual.colour.array() <= 1).all())

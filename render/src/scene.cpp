@@ -201,8 +201,7 @@ void ScaleSpectrum(const JsonField& field, Light& light, const std::vector<doubl
 // One entry of "lights": light `index` of the scene (its default name).
 Light ReadLight(const JsonField& l, std::size_t index, const SpectralGrid& bands) {
   l.RejectUnknownKeys({"name", "type", "position", "direction", "intensity", "spectrum", "schedule", "path", "normal",
-                       "thickness_m", "size_m", "tangent", "radius_m", "samples", "inner_cone_deg",
-                       "outer_cone_deg"});
+                       "thickness_m", "size_m", "tangent", "radius_m", "samples", "inner_cone_deg", "outer_cone_deg"});
   Light light;
   light.name = l.Has("name") ? l["name"].NonEmptyString() : "light " + std::to_string(index);
   auto only = [&](const char* key, const char* owners) {
@@ -227,9 +226,7 @@ Light ReadLight(const JsonField& l, std::size_t index, const SpectralGrid& bands
       light.position = ReadVec3(l["position"]);
     }
   };
-  auto read_direction = [&] {
-    light.direction = ReadDirection(l["direction"]);
-  };
+  auto read_direction = [&] { light.direction = ReadDirection(l["direction"]); };
   if (type == "point") {
     light.kind = Light::Kind::kPoint;
     read_place();
@@ -266,8 +263,7 @@ Light ReadLight(const JsonField& l, std::size_t index, const SpectralGrid& bands
       Vec3 tangent = l.Has("tangent") ? ReadVec3(l["tangent"])
                                       : (std::abs(light.normal.x()) < 0.9 ? Vec3(1, 0, 0) : Vec3(0, 0, 1));
       tangent -= tangent.dot(light.normal) * light.normal;
-      if (tangent.norm() < 1e-6 * (1 + tangent.norm()))
-        l["tangent"].Fail("must not be parallel to 'normal'");
+      if (tangent.norm() < 1e-6 * (1 + tangent.norm())) l["tangent"].Fail("must not be parallel to 'normal'");
       light.tangent = tangent.normalized();
     } else {
       light.radius_m = ReadLength(l["radius_m"], 1e-6);
@@ -348,7 +344,7 @@ std::vector<Light> ReadGltfLights(const JsonField& l, const SpectralGrid& bands,
     std::vector<double> factor(colour.size());
     for (std::size_t b = 0; b < colour.size(); ++b) factor[b] = light.intensity * scale * colour[b];
     light.E_per_band = spectrum;
-    ScaleSpectrum(l["intensity_scale"], light, factor);
+    ScaleSpectrum(l.Has("intensity_scale") ? l["intensity_scale"] : l["file"], light, factor);
     light.schedule = schedule;
     lights.push_back(std::move(light));
   }
@@ -566,8 +562,7 @@ bool Scene::AnyLightOnAt(double t_s) const {
 
 std::string BandGridMismatch(const SpectralGrid& material_bands, const SpectralGrid& scene_bands) {
   if (material_bands == scene_bands) return "";
-  return material_bands.EdgesName() + " differ from the scene's " +
-         scene_bands.EdgesName() +
+  return material_bands.EdgesName() + " differ from the scene's " + scene_bands.EdgesName() +
          "; the renderer needs one band grid: give the scene the material's bands_nm, or make the material "
          "on the scene's";
 }
@@ -663,11 +658,18 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
   MaterialCache materials;
   const JsonField objects = root["objects"];
   if (objects.ArraySize() == 0) objects.Fail("expected at least one object");
+  // Each object costs memory in the geometry and the solver whatever its
+  // size (5,000 phosphor spheres took 3.9 GiB): counted before any is read.
+  if (objects.ArraySize() > kMaxObjects)
+    objects.Fail("has " + std::to_string(objects.ArraySize()) + " objects, more than the limit of " +
+                 std::to_string(kMaxObjects));
+  std::size_t triangles = 0;
   for (std::size_t i = 0; i < objects.ArraySize(); ++i) {
     const JsonField o = objects.At(i);
-    o.RejectUnknownKeys({"name", "mesh", "group", "shape", "albedo", "phosphor", "unknown_ke", "initial",
-                         "texel_size_m", "texels", "uv_resolution", "transform", "animation", "subsurface",
-                         "two_sided", "emission", "phosphor_mask", "phosphor_map", "metallic", "roughness"});
+    o.RejectUnknownKeys({"name",          "mesh",          "group",        "shape",        "albedo",
+                         "phosphor",      "unknown_ke",    "initial",      "texel_size_m", "texels",
+                         "uv_resolution", "transform",     "animation",    "subsurface",   "two_sided",
+                         "emission",      "phosphor_mask", "phosphor_map", "metallic",     "roughness"});
     Object object;
     object.name = o.Has("name") ? o["name"].NonEmptyString() : "object " + std::to_string(i);
     // Names pick objects (--material, the editor, the warnings): two objects
@@ -689,6 +691,11 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
       object.mesh = ReadShape(o["shape"]);
     }
     if (object.mesh->triangles.empty()) o.Fail("the mesh has no triangles");
+    triangles += object.mesh->triangles.size();
+    if (triangles > kMaxSceneTriangles)
+      o.Fail("the scene's objects up to this one have " + std::to_string(triangles) +
+             " triangles, more than the limit of " + std::to_string(kMaxSceneTriangles) +
+             " (a mesh used twice counts twice)");
     object.motion = ReadMotion(o);
     ReadPhosphor(o, base_dir, scene.bands, materials, object.phosphor, object.phosphor_path);
     if (auto f = o.Optional("subsurface")) {
@@ -776,13 +783,20 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
     scene.objects.push_back(std::move(object));
   }
 
-  // Lights.
+  // Lights. The solver keeps each light's irradiance per texel: 10,000
+  // lights took 3.2 GiB. Counted before each is read, emitting objects
+  // and a glTF's lights included.
   const JsonField lights = root["lights"];
+  const std::string too_many = "more than the limit of " + std::to_string(kMaxLights) + " lights";
+  if (scene.lights.size() + lights.ArraySize() > kMaxLights)
+    lights.Fail("has " + std::to_string(lights.ArraySize()) + " lights" +
+                (scene.lights.empty() ? "" : " and the objects " + std::to_string(scene.lights.size()) + " more") +
+                ", " + too_many);
   for (std::size_t i = 0; i < lights.ArraySize(); ++i) {
     const JsonField l = lights.At(i);
     if (l.Has("type") && l["type"].String() == "gltf") {
       for (Light& light : ReadGltfLights(l, scene.bands, base_dir)) scene.lights.push_back(std::move(light));
-      if (scene.lights.size() > 4096) l.Fail("more than the limit of 4096 lights");
+      if (scene.lights.size() > kMaxLights) l.Fail("the scene's lights up to this entry are " + too_many);
     } else {
       scene.lights.push_back(ReadLight(l, i, scene.bands));
     }
@@ -840,11 +854,11 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
       ReadPhosphorPolicy(f, v.phosphor != nullptr, v.unknown_ke_as_zero, v.initial);
       for (const Light& light : scene.lights)
         if (light.area())
-          f.Fail("media are lit by point, directional and sheet lights only; '" + light.name +
-                 "' is an area light");
+          f.Fail("media are lit by point, directional and sheet lights only; '" + light.name + "' is an area light");
       scene.volumes.push_back(std::move(v));
     }
   }
+  CheckTexelLimits(scene);
   return scene;
 }
 

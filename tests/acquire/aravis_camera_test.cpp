@@ -15,6 +15,7 @@
 #include <cstdio>
 #include <gtest/gtest.h>
 
+#include "phos/acquire/lab.h"
 #include "phos/acquire/lights.h"
 #include "phos/acquire/protocols.h"
 #include "phos/acquire/session.h"
@@ -288,6 +289,61 @@ TEST_F(AravisFake, RefusedSettingsAndMissingCamerasAreClearErrors) {
     EXPECT_NE(std::string(e.what()).find("camera 'Fake_1': exposure: refuses 1e+07 s"), std::string::npos) << e.what();
   }
   EXPECT_THROW(AravisCamera("No_Such_Camera_42", clock), UserError);
+}
+
+// A lab config's camera.region of [0, 0, 65536, 65536] passed the config's
+// checks (each side at most 65536) and Aravis's fake set it, then wrote its
+// frames past its buffer: a segfault. A region past the (binned) sensor is
+// refused where it is set, naming the config's key; one inside it is set.
+TEST_F(AravisFake, ARegionPastTheSensorIsRefusedNamingTheConfigKey) {
+  const testing::TempDir dir;
+  auto config = [&](const std::string& region, const std::string& binning) {
+    return LabConfigFromJson(R"({"schema": "phos.lab/1", "camera": {"aravis": "Fake_1", "binning": )" + binning +
+                                 R"(, "region": )" + region + R"(, "trigger": "software"},
+                                "lights": {"backend": "none", "channels": {"led405": {"line": 17}}}, "rig": "fixed"})",
+                             dir / "lab.json");
+  };
+  AravisCamera probe("Fake_1", clock, 2.0);
+  const auto [width, height] = probe.sensor_size();
+  const std::string sensor = std::to_string(width) + " x " + std::to_string(height);
+  EXPECT_EQ(testing::ErrorOfType<UserError>([&] { OpenLab(config("[0, 0, 65536, 65536]", "[1, 1]")); }),
+            "camera 'Fake_1': camera.region: [0, 0, 65536, 65536] reaches past the sensor, which is " + sensor +
+                " pixels at binning 1x1 (x + width and y + height at most those)");
+  // Binned 2x2, the whole sensor is past the binned one by one pixel more.
+  const std::string whole = "[1, 0, " + std::to_string(width / 2) + ", " + std::to_string(height / 2) + "]";
+  EXPECT_NE(testing::ErrorOfType<UserError>([&] { OpenLab(config(whole, "[2, 2]")); }).find("camera.region: " + whole),
+            std::string::npos);
+  EXPECT_EQ(testing::ErrorOfType<UserError>([&] { probe.SetRegion(0, 0, width, 0); }).find("camera 'Fake_1': region: "),
+            0u);
+  EXPECT_EQ(OpenLab(config("[0, 0, " + std::to_string(width) + ", " + std::to_string(height) + "]", "[1, 1]"))
+                ->camera->Capture(0.01, 0)
+                .width,
+            width);
+}
+
+// A lab light's irradiance_csv with a header only was read as a light of 0
+// in every band, in silence: it is refused, as is one row, and a spectrum
+// outside every band; one within the bands is read.
+TEST(LabConfig, AnIrradianceCsvThatGivesNoIrradianceIsRefused) {
+  const testing::TempDir dir;
+  auto error = [&](const std::string& csv) {
+    testing::WriteText(dir / "led.csv", csv);
+    return testing::ErrorOfType<UserError>([&] {
+      LabConfigFromJson(R"({"schema": "phos.lab/1", "camera": {"aravis": "Fake_1"}, "lights": {"backend": "none",
+                           "channels": {"led405": {"line": 1, "irradiance_csv": "led.csv"}}}})",
+                        dir / "lab.json");
+    });
+  };
+  const std::string where =
+      (dir / "lab.json").string() + ": lights.channels.led405.irradiance_csv: '" + (dir / "led.csv").string() + "' ";
+  EXPECT_EQ(error("wavelength_nm,irradiance\n"),
+            where + "has 0 row(s) of wavelength_nm,irradiance; a spectrum needs at least 2");
+  EXPECT_EQ(error("wavelength_nm,irradiance\n405,1\n"),
+            where + "has 1 row(s) of wavelength_nm,irradiance; a spectrum needs at least 2");
+  EXPECT_EQ(
+      error("wavelength_nm,irradiance\n1000,1\n1100,1\n"),
+      where + "gives 0 irradiance in every band of bands_nm (400 to 700 nm): the light would be recorded as dark");
+  EXPECT_EQ(error("wavelength_nm,irradiance\n395,0\n405,1\n415,0\n"), "(no error)");
 }
 
 TEST_F(AravisFake, PixelFormatsBinningAndTheSoftwareTrigger) {

@@ -212,8 +212,10 @@ TEST(SlurmCluster, ArraysEqualOneProcessAndARequeuedTaskIsRedoneWhole) {
             0);
 
   // Every job of the three chains ends, and ends well.
-  const bool ended = WaitFor([] { return Shell("squeue -h").out.empty(); }, 360, 0.25);  // the requeue's hold, and the rest
-  ASSERT_TRUE(ended) << Shell("squeue").out << Tail(slurm.dir() / "slurmctld.log") << Logs(render_job) << Logs(map_job) << Logs(batch_job);
+  const bool ended =
+      WaitFor([] { return Shell("squeue -h").out.empty(); }, 360, 0.25);  // the requeue's hold, and the rest
+  ASSERT_TRUE(ended) << Shell("squeue").out << Tail(slurm.dir() / "slurmctld.log") << Logs(render_job) << Logs(map_job)
+                     << Logs(batch_job);
   for (const fs::path& job : {render_job, map_job, batch_job}) {
     const nlohmann::json record = Job(job);  // kept: a loop over Job(job)["stages"] read a destroyed temporary
     for (const auto& stage : record["stages"]) {
@@ -271,10 +273,10 @@ std::string SmallSession(const TempDir& dir) {
 std::string FakeSbatch(const TempDir& dir, int fail_at) {
   const fs::path bin = dir / "bin";
   fs::create_directories(bin);
-  WriteText(bin / "sbatch", "#!/bin/bash\nn=$(( $(cat " + (bin / "count").string() + " 2>/dev/null || echo 0) + 1 ))\n" +
-                                "echo $n > " + (bin / "count").string() + "\n" + "echo \"$@\" >> " +
-                                (bin / "calls").string() + "\n" +
-                                "if [ $n -eq " + std::to_string(fail_at) +
+  WriteText(bin / "sbatch", "#!/bin/bash\nn=$(( $(cat " + (bin / "count").string() +
+                                " 2>/dev/null || echo 0) + 1 ))\n" + "echo $n > " + (bin / "count").string() + "\n" +
+                                "echo \"$@\" >> " + (bin / "calls").string() + "\n" + "if [ $n -eq " +
+                                std::to_string(fail_at) +
                                 " ]; then echo 'sbatch: error: Batch job submission failed' >&2; exit 1; fi\n"
                                 // A note on stderr, as many sites print, on a submission that succeeds.
                                 "echo 'sbatch: info: Setting QOS to normal' >&2\n"
@@ -289,8 +291,8 @@ TEST(SlurmScripts, NoSubmitWritesTheChainAndStatusCountsRecords) {
   TempDir dir;
   const std::string session = SmallSession(dir);
   const CommandResult r = RunPhos("slurm map --tasks 4 --no-submit --job-dir " + (dir / "job").string() +
-                                  " --partition short --account lab7 --sbatch-option qos=low -- " + session + " --out " +
-                                  (dir / "out").string() + " --weights none");
+                                  " --partition short --account lab7 --sbatch-option qos=low -- " + session +
+                                  " --out " + (dir / "out").string() + " --weights none");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const std::string tasks = ReadText(dir / "job" / "tasks.sbatch");
   for (const char* line : {"#SBATCH --array=0-3\n", "#SBATCH --partition=short\n", "#SBATCH --account=lab7\n",
@@ -314,7 +316,8 @@ TEST(SlurmScripts, NoSubmitWritesTheChainAndStatusCountsRecords) {
   // --require-done (the render's last job) names what is missing, after the lines it sums up, in a log too.
   EXPECT_TRUE(IsOneLineUserError(RunPhos("slurm status " + (dir / "job").string() + " --require-done"),
                                  "not every task is done: tasks 0,2 of 4 not done; merge not done"));
-  const std::string log = Shell(std::string(PHOS_BINARY) + " slurm status " + (dir / "job").string() + " --require-done").out;
+  const std::string log =
+      Shell(std::string(PHOS_BINARY) + " slurm status " + (dir / "job").string() + " --require-done").out;
   ASSERT_NE(log.find("not every task is done"), std::string::npos) << log;
   EXPECT_LT(log.find("tasks  2/4 done"), log.find("not every task is done")) << log;
   // Scripts written and never submitted do not block the folder: submitting replaces them.
@@ -350,12 +353,14 @@ TEST(SlurmScripts, EveryStageWaitsForTheOneBeforeToEndHoweverItEnded) {
   EXPECT_NE(tasks.find("#SBATCH --mem=4G\n"), std::string::npos) << tasks;
   // status says what Slurm says of each job (here a stand-in scontrol: the
   // solver pass failed, its array pending), beside the records it counts.
-  WriteText(dir / "bin" / "scontrol",
-            "#!/bin/bash\ncase $4 in\n"
-            "101) echo 'JobId=101 JobName=phos-render-solve JobState=FAILED Reason=NonZeroExitCode Dependency=(null)' ;;\n"
-            // A pending array's tasks are one record (ArrayTaskId=0-1), as Slurm prints them.
-            "102) echo 'JobId=102 ArrayJobId=102 ArrayTaskId=0-1 JobState=PENDING Reason=Dependency Dependency=afterany:101' ;;\n"
-            "*) exit 1 ;;\nesac\n");
+  WriteText(
+      dir / "bin" / "scontrol",
+      "#!/bin/bash\ncase $4 in\n"
+      "101) echo 'JobId=101 JobName=phos-render-solve JobState=FAILED Reason=NonZeroExitCode Dependency=(null)' ;;\n"
+      // A pending array's tasks are one record (ArrayTaskId=0-1), as Slurm prints them.
+      "102) echo 'JobId=102 ArrayJobId=102 ArrayTaskId=0-1 JobState=PENDING Reason=Dependency Dependency=afterany:101' "
+      ";;\n"
+      "*) exit 1 ;;\nesac\n");
   fs::permissions(dir / "bin" / "scontrol", fs::perms::owner_all);
   const CommandResult status = Shell("PATH=" + (dir / "bin").string() + ":$PATH " + std::string(PHOS_BINARY) +
                                      " slurm status " + (dir / "job").string());
@@ -365,8 +370,8 @@ TEST(SlurmScripts, EveryStageWaitsForTheOneBeforeToEndHoweverItEnded) {
   EXPECT_NE(status.out.find("  merge  not done  [job 103]"), std::string::npos) << status.out;  // scontrol: unknown
   // A controller that does not answer (SLURM_CONF still set after the cluster
   // stopped): status asks once, gives up after scontrol's 5 s, and asks no more.
-  WriteText(dir / "bin" / "scontrol", "#!/bin/bash\necho \"$@\" >> " + (dir / "bin" / "asked").string() +
-                                          "\nexec sleep 30\n");
+  WriteText(dir / "bin" / "scontrol",
+            "#!/bin/bash\necho \"$@\" >> " + (dir / "bin" / "asked").string() + "\nexec sleep 30\n");
   const CommandResult silent = Shell("PATH=" + (dir / "bin").string() + ":$PATH " + std::string(PHOS_BINARY) +
                                      " slurm status " + (dir / "job").string());
   EXPECT_NE(silent.out.find("  solve  not done  [job 101]"), std::string::npos) << silent.out;
@@ -374,9 +379,9 @@ TEST(SlurmScripts, EveryStageWaitsForTheOneBeforeToEndHoweverItEnded) {
   // A task whose solver pass left no states folder at all (cancelled before
   // it made one) starts from the scene's start: the same frames, said.
   const std::string scene = Fixture("scenes/cornell-phosphor.json").string();
-  const CommandResult task = RunPhos("render " + scene + " --out " + (dir / "task").string() +
-                                     " --times 20,40 --width 32 --height 24 --task 1/2 --checkpoints " +
-                                     (dir / "no-states").string());
+  const CommandResult task =
+      RunPhos("render " + scene + " --out " + (dir / "task").string() +
+              " --times 20,40 --width 32 --height 24 --task 1/2 --checkpoints " + (dir / "no-states").string());
   ASSERT_EQ(task.exit_code, 0) << task.err;
   EXPECT_NE(task.err.find("no-states: no such folder; the states start from the scene's start"), std::string::npos)
       << task.err;
@@ -414,8 +419,8 @@ TEST(SlurmScripts, ACommandItsTasksWouldRefuseIsRefusedBeforeAnythingIsWritten) 
   refused("batch", (dir / "no-captures").string() + out, "no-captures");
   // More tiles than the session's 30 rows: some tile would have none, and the merge could never run.
   const std::string session = SmallSession(dir);
-  const CommandResult rows = RunPhos("slurm map --tasks 31 --sbatch " + sbatch + " --job-dir " + job + " -- " +
-                                     session + out);
+  const CommandResult rows =
+      RunPhos("slurm map --tasks 31 --sbatch " + sbatch + " --job-dir " + job + " -- " + session + out);
   EXPECT_TRUE(IsOneLineUserError(rows, "has no rows: more tiles than the frames' 30 rows")) << rows.err;
   EXPECT_FALSE(fs::exists(job));
   refused("map", session + out + " --weights bogus", "--weights");
@@ -436,7 +441,8 @@ TEST(SlurmScripts, ACommandItsTasksWouldRefuseIsRefusedBeforeAnythingIsWritten) 
   }
   EXPECT_FALSE(fs::exists(job));
   // What a task would refuse after its scene is loaded: checked too.
-  refused("render", scene + " --out " + (dir / "afile").string(), "--out: '" + (dir / "afile").string() + "' is a file");
+  refused("render", scene + " --out " + (dir / "afile").string(),
+          "--out: '" + (dir / "afile").string() + "' is a file");
   refused("render", scene + out + " --indirect-visibility", "--indirect-visibility: is for --transport dss");
   // A time limit Slurm would refuse, refused before anything else.
   EXPECT_TRUE(IsOneLineUserError(
@@ -463,6 +469,48 @@ TEST(SlurmScripts, ACommandItsTasksWouldRefuseIsRefusedBeforeAnythingIsWritten) 
   EXPECT_TRUE(IsOneLineUserError(RunPhos("slurm render --tasks 2 --job-dir '' -- " + scene + out), "--job-dir"));
   EXPECT_TRUE(IsOneLineUserError(RunPhos("slurm render --tasks 2 --job-dir " + job + " -- " + scene + " --out ''"),
                                  "--out is empty"));
+}
+
+// A newline in --partition or --sbatch-option was written raw into the job
+// script, and what followed it ran as a command of the job; --mem-per-task
+// -4G, 4X and 0 and --time-per-task 99:99:99 were written unchecked. Each
+// value the scripts hold outside the quoted command is one value of the form
+// sbatch takes, or refused in one line before anything is written.
+TEST(SlurmScripts, EveryValueOfAJobScriptIsOneValueOfTheFormSlurmTakes) {
+  TempDir dir;
+  const std::string scene = Fixture("scenes/cornell-phosphor.json").string(),
+                    out = " --out " + (dir / "frames").string();
+  const std::string job = (dir / "job").string(), ran = (dir / "ran").string();
+  auto refused = [&](const std::string& options, const std::string& why) {
+    const CommandResult r =
+        RunPhos("slurm render --tasks 2 --no-submit --job-dir " + job + options + " -- " + scene + out);
+    EXPECT_TRUE(IsOneLineUserError(r, why)) << options;
+    EXPECT_FALSE(fs::exists(job)) << options;
+  };
+  refused(" --partition 'debug\ntouch " + ran + "'", "--partition: contains a control character (code 10)");
+  refused(" --sbatch-option 'qos=short\ntouch " + ran + "'", "--sbatch-option: contains a control character (code 10)");
+  refused(" --account 'lab\rtouch " + ran + "'", "--account: contains a control character (code 13)");
+  refused(" --partition 'debug --mem=1'", "--partition: contains a space");
+  EXPECT_TRUE(IsOneLineUserError(
+      RunPhos("slurm render --tasks 2 --no-submit --job-dir '" + job + "\ntouch " + ran + "' -- " + scene + out),
+      "--job-dir: contains a control character (code 10)"));
+  for (const char* memory : {"-4G", "4X", "0", "00", "4 G", "G", "4.5G", ""})
+    refused(std::string(" --mem-per-task='") + memory + "'", "--mem-per-task: expected a positive whole amount");
+  for (const char* time : {"99:99:99", "5:75", "1-24", "1-2:60", "1-2:3:60", "2:60:00", "-5", "1:2:3:4"})
+    refused(std::string(" --time-per-task='") + time + "'", "--time-per-task: expected a Slurm time");
+  EXPECT_FALSE(fs::exists(ran));
+  // The forms sbatch takes are written as given.
+  for (const auto& [memory, time] : std::vector<std::pair<std::string, std::string>>{
+           {"4096", "100:00:00"}, {"500M", "1-23:59:59"}, {"2t", "59:59"}, {"4G", "7-0"}}) {
+    const fs::path folder = dir / ("ok" + memory);
+    const CommandResult r =
+        RunPhos("slurm render --tasks 2 --no-submit --job-dir " + folder.string() + " --mem-per-task " + memory +
+                " --time-per-task " + time + " --sbatch-option 'comment=two words' -- " + scene + out);
+    ASSERT_EQ(r.exit_code, 0) << memory << " " << time << ": " << r.err;
+    const std::string script = ReadText(folder / "tasks.sbatch");
+    EXPECT_NE(script.find("#SBATCH --mem=" + memory + "\n#"), std::string::npos) << script;
+    EXPECT_NE(script.find("#SBATCH --time=" + time + "\n"), std::string::npos) << script;
+  }
 }
 
 TEST(SlurmScripts, ALaterSbatchThatFailsCancelsTheJobsBeforeIt) {

@@ -19,6 +19,8 @@
 
 #include "phos/editor/server.h"
 #include "phos/editor/session.h"
+#include "phos/editor/solve.h"
+#include "phos/util/json.h"
 #include "phos/util/error.h"
 #include "test_util.h"
 
@@ -52,6 +54,43 @@ TEST(EditSession, ConstraintsSolveAndTheCurvesPassThroughTheTargets) {
   EXPECT_NEAR(material["states"][0]["kr"].get<double>(), std::log(2.5) / 25, 1e-3);
   EXPECT_TRUE(state["objects"][2]["edited"].get<bool>());
   EXPECT_FALSE(c.session.FramePng(40, 1.0).empty());
+}
+
+// phos edit solve grew as n^1.7 in its constraints with no limit (10,000:
+// 20 s), and a target of 1e300 printed a cost of inf, exit 0: a constraints
+// file is refused at load past 1000 constraints, a radiance or weight past
+// 1e6, or a target whose square is 0, each naming the field.
+TEST(EditorConstraintsFile, CountsAndValuesWhoseSquaresOverflowAreRefusedAtLoad) {
+  const nlohmann::json file = ReadJsonFile(Fixture("constraints/glow-sign.json"));
+  auto error = [&](const std::function<void(nlohmann::json&)>& edit) {
+    nlohmann::json copy = file;
+    edit(copy);
+    return ErrorOfType<UserError>([&] { ProblemFromJson(copy, "c.json"); });
+  };
+  auto with_constraints = [](std::size_t n) {
+    return [n](nlohmann::json& c) {
+      while (c["constraints"].size() < n) c["constraints"].push_back(c["constraints"][1]);
+    };
+  };
+  EXPECT_EQ(error(with_constraints(kMaxConstraints)), "(no error)");
+  EXPECT_EQ(error(with_constraints(kMaxConstraints + 1)),
+            "c.json: constraints: has 1001 constraints, more than the limit of 1000");
+  EXPECT_EQ(error([](nlohmann::json& c) { c["constraints"][1]["radiance"][2] = 1e300; }),
+            "c.json: constraints[1].radiance[2]: expected a radiance of at most 1e+06, got 1e+300 (the cost squares "
+            "it)");
+  EXPECT_EQ(error([](nlohmann::json& c) {
+              c["constraints"][1].erase("radiance");
+              c["constraints"][1]["at_least"] = {2e6, 0, 0};
+            }),
+            "c.json: constraints[1].at_least[0]: expected a radiance of at most 1e+06, got 2e+06 (the cost squares "
+            "it)");
+  EXPECT_EQ(error([](nlohmann::json& c) { c["constraints"][0]["weight"] = 1e300; }),
+            "c.json: constraints[0].weight: expected a number in [0, 1e+06], got 1e+300");
+  EXPECT_NE(error([](nlohmann::json& c) {
+              c["constraints"][0]["radiance"] = {1e-200, 0, 0};
+            }).find("c.json: constraints[0].radiance: a target this small"),
+            std::string::npos);
+  EXPECT_EQ(error([](nlohmann::json& c) { c["constraints"][0]["radiance"] = {1e-150, 0, 0}; }), "(no error)");
 }
 
 TEST(EditSession, BadEditsChangeNothing) {
@@ -410,6 +449,48 @@ TEST(EditorServer, RequestsAreAnsweredWhileSlowClientsHoldTheirs) {
   const double cut_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   EXPECT_GT(cut_s, 1.8);
   EXPECT_LT(cut_s, 4.0);
+}
+
+// docs/editor.md's limits, as the code keeps them: a slow request was cut
+// at 30 s (docs: 5 s of its first byte), 125 KB of headers were read (docs:
+// 64 KiB) and a Content-Length of 1e12 without a body got its 413 only at the
+// 30 s deadline. The bounds below only tell 5 s from 30 s.
+TEST(EditorServer, TheDocumentedLimitsOfTimeHeadersAndBodyHold) {
+  RunningServer server;  // the defaults: idle 30 s, a request 5 s from its first byte
+  const auto elapsed_s = [](std::chrono::steady_clock::time_point since) {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
+  };
+  // A request begun and never finished.
+  int fd = Connect(server.port);
+  auto start = std::chrono::steady_clock::now();
+  const std::string begun = "GET /api/state HTTP/1.1\r\n" + server.Host();
+  ::send(fd, begun.data(), begun.size(), MSG_NOSIGNAL);
+  Reply r = ReadReply(fd, std::chrono::milliseconds(40000));
+  ::close(fd);
+  EXPECT_NE(r.status, 200);
+  EXPECT_LT(elapsed_s(start), 20.0);
+  // 96 KiB of headers, whole and well-formed: past the 64 KiB, not answered 200.
+  fd = Connect(server.port);
+  std::string headers = "GET /api/state HTTP/1.1\r\n" + server.Host();
+  for (int k = 0; headers.size() < 96 * 1024; ++k)
+    headers += "X-Pad-" + std::to_string(k) + ": " + std::string(60, 'p') + "\r\n";
+  headers += "\r\n";
+  ::send(fd, headers.data(), headers.size(), MSG_NOSIGNAL);
+  r = ReadReply(fd, std::chrono::milliseconds(20000));
+  ::close(fd);
+  EXPECT_NE(r.status, 200);
+  // A length past the limit, and no body: 413 at once, not at a deadline.
+  fd = Connect(server.port);
+  start = std::chrono::steady_clock::now();
+  const std::string post = "POST /api/constraints HTTP/1.1\r\n" + server.Host() +
+                           "Content-Type: application/json\r\nContent-Length: 1000000000000\r\n\r\n";
+  ::send(fd, post.data(), post.size(), MSG_NOSIGNAL);
+  r = ReadReply(fd, std::chrono::milliseconds(40000));
+  ::close(fd);
+  EXPECT_EQ(r.status, 413) << r.body;
+  EXPECT_LT(elapsed_s(start), 20.0);
+  // A request within the limits is answered as before.
+  EXPECT_EQ(server.Get("/api/state").status, 200);
 }
 
 TEST(EditorServer, ConnectionsAreBounded) {

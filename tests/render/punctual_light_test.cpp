@@ -72,7 +72,9 @@ std::filesystem::path WriteLightsGltf(const std::filesystem::path& dir, nlohmann
        {{"KHR_lights_punctual",
          {{"lights",
            {{{"name", "bulb"}, {"type", "point"}, {"intensity", 40}, {"color", {1, 0, 0}}},
-            {{"name", "torch"}, {"type", "spot"}, {"intensity", 100},
+            {{"name", "torch"},
+             {"type", "spot"},
+             {"intensity", 100},
              {"spot", {{"innerConeAngle", 0.2}, {"outerConeAngle", 0.5}}}},
             {{"name", "sun"}, {"type", "directional"}, {"intensity", 3}}}}}}}},
       {"scene", 0},
@@ -80,9 +82,13 @@ std::filesystem::path WriteLightsGltf(const std::filesystem::path& dir, nlohmann
       {"nodes",
        {{{"name", "parent"}, {"translation", {0, 1, 0}}, {"children", {1}}},
         {{"name", "bulb node"}, {"translation", {1, 2, 3}}, {"extensions", {{"KHR_lights_punctual", {{"light", 0}}}}}},
-        {{"name", "torch node"}, {"translation", {0, 4, 0}}, {"rotation", {-s, 0, 0, s}},
+        {{"name", "torch node"},
+         {"translation", {0, 4, 0}},
+         {"rotation", {-s, 0, 0, s}},
          {"extensions", {{"KHR_lights_punctual", {{"light", 1}}}}}},
-        {{"name", "sun node"}, {"rotation", {0, s, 0, s}}, {"extensions", {{"KHR_lights_punctual", {{"light", 2}}}}}}}}};
+        {{"name", "sun node"},
+         {"rotation", {0, s, 0, s}},
+         {"extensions", {{"KHR_lights_punctual", {{"light", 2}}}}}}}}};
   if (extra.is_object()) gltf.update(extra);
   std::filesystem::create_directories(dir);
   const std::filesystem::path file = dir / "lights.gltf";
@@ -103,7 +109,8 @@ TEST(GltfLights, PlacedByTheirNodesWithTheScenesSpectrumScaleAndColour) {
   for (auto& object : json["objects"])
     for (const char* key : {"mesh", "phosphor"})
       if (object.contains(key))
-        object[key] = (std::filesystem::path(phos::testing::Fixture("scenes")) / object[key].get<std::string>()).string();
+        object[key] =
+            (std::filesystem::path(phos::testing::Fixture("scenes")) / object[key].get<std::string>()).string();
   const Scene scene = SceneFromJson(json, dir, "lights.json");
   ASSERT_EQ(scene.lights.size(), 3u);
   const Light& bulb = scene.lights[0];
@@ -122,7 +129,9 @@ TEST(GltfLights, PlacedByTheirNodesWithTheScenesSpectrumScaleAndColour) {
   EXPECT_EQ(sun.schedule.LevelAt(6), 0.0);
   // Spectrum x intensity x scale x colour: the torch is white (1 in every
   // band), the bulb red.
-  nlohmann::json point = {{"type", "point"}, {"position", {0, 1, 0}}, {"intensity", 1},
+  nlohmann::json point = {{"type", "point"},
+                          {"position", {0, 1, 0}},
+                          {"intensity", 1},
                           {"spectrum", {{"type", "led"}, {"center_nm", 405}, {"fwhm_nm", 15}}}};
   json["lights"] = {point};
   const Scene reference = SceneFromJson(json, dir, "reference.json");
@@ -136,6 +145,15 @@ TEST(GltfLights, PlacedByTheirNodesWithTheScenesSpectrumScaleAndColour) {
     EXPECT_NEAR(bulb.E_per_band[b], spectrum * 40 * 0.01 * red[b], 1e-12 * (1 + spectrum));
   }
   EXPECT_GT(total, 0.5);  // the LED's bands are on the grid
+  // intensity_scale is optional, 1 by default (docs/formats.md): an entry
+  // without it was refused ("intensity_scale: missing (required)").
+  json["lights"] = {{{"type", "gltf"},
+                     {"file", "lights.gltf"},
+                     {"spectrum", {{"type", "led"}, {"center_nm", 405}, {"fwhm_nm", 15}}}}};
+  const Scene unscaled = SceneFromJson(json, dir, "unscaled.json");
+  ASSERT_EQ(unscaled.lights.size(), 3u);
+  for (int b = 0; b < scene.bands.band_count(); ++b)
+    EXPECT_NEAR(unscaled.lights[1].E_per_band[b], reference.lights[0].E_per_band[b] * 100, 1e-10);
 }
 
 TEST(GltfLights, ARequiredExtensionPhosDoesNotReadIsOneLine) {
@@ -174,14 +192,21 @@ TEST(SpotLight, SceneKeysAndBadCones) {
     }
     return std::string("accepted");
   };
-  nlohmann::json spot = {{"type", "spot"},        {"position", {0, 1, 0}}, {"direction", {0, -1, 0}},
-                         {"inner_cone_deg", 10}, {"outer_cone_deg", 30},  {"intensity", 1},
+  nlohmann::json spot = {{"type", "spot"},
+                         {"position", {0, 1, 0}},
+                         {"direction", {0, -1, 0}},
+                         {"inner_cone_deg", 10},
+                         {"outer_cone_deg", 30},
+                         {"intensity", 1},
                          {"spectrum", {{"type", "white_led"}}}};
   EXPECT_EQ(load(spot), "accepted");
   spot["outer_cone_deg"] = 5;
   EXPECT_NE(load(spot).find("outer_cone_deg"), std::string::npos) << load(spot);
-  nlohmann::json point = {{"type", "point"}, {"position", {0, 1, 0}}, {"inner_cone_deg", 10},
-                          {"intensity", 1},  {"spectrum", {{"type", "white_led"}}}};
+  nlohmann::json point = {{"type", "point"},
+                          {"position", {0, 1, 0}},
+                          {"inner_cone_deg", 10},
+                          {"intensity", 1},
+                          {"spectrum", {{"type", "white_led"}}}};
   EXPECT_NE(load(point).find("only a spot"), std::string::npos) << load(point);
 }
 

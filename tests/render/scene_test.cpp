@@ -310,9 +310,10 @@ TEST(Scenes, BadInputNamesTheFileAndField) {
       std::string::npos);
   EXPECT_NE(ErrorAfterEdit([](nlohmann::json& j) {
               j["bands_nm"] = {400, 500, 600, 700};
-            }).find("the material's bands_nm [400, 437.5, 475, 512.5, 550, 587.5, 625, 662.5, 700] nm differ from "
-                    "the scene's [400, 500, 600, 700] nm; the renderer needs one band grid: give the scene the "
-                    "material's bands_nm, or make the material on the scene's"),
+            })
+                .find("the material's bands_nm [400, 437.5, 475, 512.5, 550, 587.5, 625, 662.5, 700] nm differ from "
+                      "the scene's [400, 500, 600, 700] nm; the renderer needs one band grid: give the scene the "
+                      "material's bands_nm, or make the material on the scene's"),
             std::string::npos);
   // Bounds as written (the float bound read [0.019999999552965164, 1]).
   EXPECT_NE(ErrorAfterEdit([](nlohmann::json& j) {
@@ -321,7 +322,8 @@ TEST(Scenes, BadInputNamesTheFileAndField) {
             std::string::npos);
   EXPECT_EQ(ErrorAfterEdit([](nlohmann::json& j) { j["objects"][0]["roughness"] = 0.02; }), "(no error)");
   // A file that is not there is named at its field, with the folder it was looked in.
-  const std::string no_material = ErrorAfterEdit([](nlohmann::json& j) { j["objects"][2]["phosphor"] = "../materials/none.json"; });
+  const std::string no_material =
+      ErrorAfterEdit([](nlohmann::json& j) { j["objects"][2]["phosphor"] = "../materials/none.json"; });
   EXPECT_NE(no_material.find("objects[2].phosphor: phosphor file '"), std::string::npos) << no_material;
   EXPECT_NE(no_material.find("none.json' does not exist or is not a regular file (a scene's paths are relative to "
                              "its own folder, "),
@@ -365,6 +367,76 @@ TEST(Atlas, OnlyPhosphorsCarryTexelsOfTheAskedSize) {
   // Two triangles whose longest edge is the diagonal sqrt(2): m = ceil(14.14) = 15.
   EXPECT_EQ(atlas.objects()[0].m[0], 15);
   EXPECT_EQ(atlas.total_texels(), 2u * 15 * 15);
+  // CountTexels, which the loader checks the limits with, counts what the atlas lays out.
+  EXPECT_EQ(CountTexels(scene), (std::vector<std::size_t>{0, 2u * 15 * 15}));
+}
+
+// What a scene's memory grows with is counted when it loads (so render
+// --check refuses it too), before anything is allocated: 4 phosphor quads of
+// 1e6 m at texel_size_m 1e-3 (1.1 KB) passed the loader and then asked for
+// 134 million texels (6.4 GiB, "internal error: std::bad_alloc"); 10,000
+// lights took 3.2 GiB and 5,000 phosphor spheres 3.9 GiB.
+TEST(Scenes, WhatMemoryGrowsWithIsCountedAtLoadAndRefusedPastItsLimit) {
+  auto one_line = [](const std::string& error, const std::string& start) {
+    EXPECT_EQ(error.find('\n'), std::string::npos) << error;
+    EXPECT_EQ(error.rfind(start, 0), 0u) << error;
+  };
+  // Each quad: two triangles whose longest edge (the diagonal) is cut into 4096 texels.
+  one_line(ErrorAfterEdit([](nlohmann::json& j) {
+             j["texel_size_m"] = 1e-3;
+             j["objects"] = nlohmann::json::array();
+             for (int i = 0; i < 4; ++i)
+               j["objects"].push_back({{"name", "quad " + std::to_string(i)},
+                                       {"shape", {{"type", "quad"}, {"size", {1e6, 1e6}}}},
+                                       {"albedo", 0.5},
+                                       {"phosphor", "../materials/green.json"}});
+           }),
+           "cornell-phosphor.json: texel_size_m: the phosphors would have " + std::to_string(4 * 2 * 4096 * 4096) +
+               " texels ('quad 0' " + std::to_string(2 * 4096 * 4096) + " of them), more than the limit of " +
+               std::to_string(kMaxTexels) + "; choose a larger texel size");
+  one_line(ErrorAfterEdit([](nlohmann::json& j) { j["objects"][2]["texel_size_m"] = 1e-4; }),
+           "cornell-phosphor.json: objects[2].texel_size_m: the phosphors would have ");
+  // Texels times lights: the solver keeps each light's irradiance per texel.
+  auto with_lights = [](int n) {
+    return [n](nlohmann::json& j) {
+      j["texel_size_m"] = 1e-3;
+      const nlohmann::json light = j["lights"][0];
+      for (int i = 1; i < n; ++i) j["lights"].push_back(light), j["lights"].back()["name"] = "led " + std::to_string(i);
+    };
+  };
+  const Scene few = [&] {
+    nlohmann::json json = ReadJsonFile(Fixture("scenes/cornell-phosphor.json"));
+    with_lights(1)(json);
+    return SceneFromJson(json, Fixture("scenes"), "cornell-phosphor.json");
+  }();
+  std::size_t texels = 0;
+  for (std::size_t n : CountTexels(few)) texels += n;
+  const int lights_past = static_cast<int>(kMaxTexelLights / texels) + 1;
+  ASSERT_LE(lights_past, static_cast<int>(kMaxLights));
+  one_line(ErrorAfterEdit(with_lights(lights_past)), "cornell-phosphor.json: texel_size_m: the phosphors would have " +
+                                                         std::to_string(texels) + " texels ('left wall' ");
+  EXPECT_NE(ErrorAfterEdit(with_lights(lights_past)).find("times " + std::to_string(lights_past) + " lights more"),
+            std::string::npos);
+  EXPECT_EQ(ErrorAfterEdit(with_lights(lights_past - 1)), "(no error)");
+  // Lights and objects by number, before any of them is read.
+  one_line(ErrorAfterEdit([](nlohmann::json& j) {
+             for (int i = 0; i < 5000; ++i) j["lights"].push_back(j["lights"][0]);
+           }),
+           "cornell-phosphor.json: lights: has 5001 lights, more than the limit of 4096 lights");
+  one_line(ErrorAfterEdit([](nlohmann::json& j) {
+             for (int i = 0; i < 5000; ++i) j["objects"].push_back({{"name", std::to_string(i)}});
+           }),
+           "cornell-phosphor.json: objects: has 5007 objects, more than the limit of 1024");
+  // Triangles over all objects: 52 spheres of 20 x 4^7 triangles, 2^24 passed at the 52nd.
+  one_line(ErrorAfterEdit([](nlohmann::json& j) {
+             j["objects"] = nlohmann::json::array();
+             for (int i = 0; i < 52; ++i)
+               j["objects"].push_back({{"name", std::to_string(i)},
+                                       {"shape", {{"type", "sphere"}, {"radius", 0.1}, {"subdivisions", 7}}},
+                                       {"albedo", 0.5}});
+           }),
+           "cornell-phosphor.json: objects[51]: the scene's objects up to this one have 17039360 triangles, more "
+           "than the limit of 16777216");
 }
 
 }  // namespace
@@ -539,6 +611,56 @@ TEST(Meshes, CraftedGltfFilesAreRefusedInOneLine) {
   j = Pedestal();
   j["nodes"][0]["translation"] = {0, 2e6, 0};
   EXPECT_TRUE(has(GltfError(j), "has a vertex beyond the limit of 1e+06 m"));
+  // tinygltf read a negative or fractional offset as 0, and an accessor past
+  // its bufferView (within the buffer) read the next view's bytes: each
+  // loaded in silence.
+  j = Pedestal();
+  j["bufferViews"][0]["byteOffset"] = -4;
+  EXPECT_TRUE(has(GltfError(j), "(crafted.gltf): bufferViews[0].byteOffset: expected a whole number >= 0, got -4"));
+  j = Pedestal();
+  j["accessors"][1]["byteOffset"] = 0.5;
+  EXPECT_TRUE(has(GltfError(j), "accessors[1].byteOffset: expected a whole number >= 0, got 0.5"));
+  j = Pedestal();
+  j["accessors"][0]["count"] = 9;  // 108 bytes of a 96-byte view, in a 168-byte buffer
+  EXPECT_TRUE(has(GltfError(j), "POSITION: accessor reaches past the end of bufferView 0 (96 bytes)"));
+  j = Pedestal();
+  j["accessors"][0]["byteOffset"] = 12;
+  EXPECT_TRUE(has(GltfError(j), "POSITION: accessor reaches past the end of bufferView 0 (96 bytes)"));
+  j = Pedestal();
+  j["accessors"][0]["count"] = 7;  // fewer than the view holds: read as given
+  EXPECT_EQ(GltfError(j).find("bufferView"), std::string::npos);
+}
+
+// A 40 KB glTF whose extras held 20,000 nested arrays overflowed the stack in
+// tinygltf's parse (a segfault of phos render, --check and the editor). The
+// nesting is counted before tinygltf reads the JSON, of a .gltf and of a
+// .glb's JSON chunk; a nesting within the limit reads as before.
+TEST(Meshes, GltfJsonNestedPastTheLimitIsRefusedBeforeTinygltfReadsIt) {
+  auto with_extras = [](int depth) {
+    std::string text = Pedestal().dump();
+    text.insert(1, "\"extras\":" + std::string(depth, '[') + std::string(depth, ']') + ",");
+    return text;
+  };
+  auto glb = [](std::string json) {  // glTF 2.0, 4.4: header, then the JSON chunk padded with spaces
+    while (json.size() % 4) json += ' ';
+    auto u32 = [](std::uint32_t v) { return std::string(reinterpret_cast<const char*>(&v), 4); };
+    return "glTF" + u32(2) + u32(static_cast<std::uint32_t>(20 + json.size())) +
+           u32(static_cast<std::uint32_t>(json.size())) + "JSON" + json;
+  };
+  const std::string limit =
+      "arrays and objects nested more than the limit of " + std::to_string(kMaxJsonNesting) + " levels deep";
+  for (const std::string format : {".gltf", ".glb"}) {
+    auto error = [&](int depth) {
+      const std::string text = format == ".glb" ? glb(with_extras(depth)) : with_extras(depth);
+      return ErrorOfType<UserError>([&] {
+        ParseMesh(text, format, Fixture("scenes/meshes"), "deep" + format, "", "scene.json: objects[0].mesh");
+      });
+    };
+    const std::string deep = error(20000);
+    EXPECT_EQ(deep.rfind("scene.json: objects[0].mesh (deep" + format + "): " + limit, 0), 0u) << deep;
+    EXPECT_EQ(deep.find('\n'), std::string::npos) << deep;
+    EXPECT_EQ(error(kMaxJsonNesting - 1), "(no error)") << format;
+  }
 }
 
 // tinyobjloader reads "nan", "inf", "1e999" or a word as 0 or infinity without
@@ -570,6 +692,18 @@ TEST(Meshes, ObjRejectionsAreOneLine) {
     EXPECT_EQ(error.rfind("s.json: objects[0].mesh: ", 0), 0u) << error;
     EXPECT_EQ(error.find('\n'), std::string::npos) << error;
   }
+  // tinyobjloader read an index of 99999999999999999999 as -1 (the last
+  // vertex) and 4294967297 as 1: the face loaded in silence.
+  const std::string triangle = "v 0 0 0\nv 1 0 0\nv 0 1 0\n";
+  for (const std::string index : {"99999999999999999999", "-99999999999999999999", "4294967297", "2147483648", "1x"}) {
+    const std::string error = ErrorOfType<UserError>(
+        [&] { ParseMesh(triangle + "f 1 2/1 " + index + "\n", ".obj", ".", "crafted.obj", "", "s.json"); });
+    EXPECT_EQ(error, "s.json: OBJ 'crafted.obj' line 4: face index '" + index +
+                         "' is not a whole number within the vertex range")
+        << index;
+  }
+  EXPECT_EQ(ParseMesh(triangle + "vt 0 0\nf 1/1 2/1 -1/1\n", ".obj", ".", "ok.obj", "", "s.json").triangles,
+            std::vector<Eigen::Vector3i>({Eigen::Vector3i(0, 1, 2)}));
   // The mesh file itself: a regular file only.
   EXPECT_NE(ErrorOfType<UserError>([&] { LoadMesh("/dev/zero.obj", "", "s.json"); }).find("does not exist"),
             std::string::npos);

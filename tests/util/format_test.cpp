@@ -63,5 +63,26 @@ TEST(JoinComma, JoinsItemsAsTextWithCommas) {
   EXPECT_EQ(Join(std::vector<double>{0.3, 0.015}, ";", [](double v) { return FormatShort(v); }), "0.3;0.015");
 }
 
+// A CSV header or a constraint label with ESC or a newline reached the
+// terminal raw (and a NUL an SVG): Printable escapes control characters
+// and bytes that are not UTF-8, and keeps the rest, multi-byte text included.
+TEST(Printable, EscapesControlCharactersAndBytesThatAreNotUtf8) {
+  EXPECT_EQ(Printable("R\x1b[2Jmeasured\nnext\r\tend"), "R\\x1b[2Jmeasured\\nnext\\r\\tend");
+  EXPECT_EQ(Printable(std::string("a\0b\x7f", 4)), "a\\x00b\\x7f");
+  EXPECT_EQ(Printable("λ 405 nm, Lv ≤ 1 cd/m², 😀"), "λ 405 nm, Lv ≤ 1 cd/m², 😀");
+  EXPECT_EQ(Printable("\xff\xfe x \xc3"), "\\xff\\xfe x \\xc3");  // a lone lead byte at the end
+  EXPECT_EQ(Printable("\xed\xa0\x80"), "\\xed\\xa0\\x80");        // a surrogate, U+D800
+  EXPECT_EQ(Printable("\xc0\xaf"), "\\xc0\\xaf");                 // an overlong '/'
+  // Whatever the bytes, the result is printable ASCII or valid UTF-8, and Printable keeps it.
+  std::mt19937 rng(7);
+  for (int trial = 0; trial < 1000; ++trial) {
+    std::string bytes(16, '\0');
+    for (char& c : bytes) c = static_cast<char>(rng() & 0xff);
+    const std::string printable = Printable(bytes);
+    for (char c : printable) EXPECT_FALSE(static_cast<unsigned char>(c) < 0x20 || c == 0x7f);
+    EXPECT_EQ(Printable(printable), printable);
+  }
+}
+
 }  // namespace
 }  // namespace phos

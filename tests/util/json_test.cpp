@@ -62,5 +62,39 @@ TEST(WriteFileAtomically, ReplacesWholeAndLeavesNoTemporary) {
   EXPECT_THROW(WriteFileAtomically(dir / "no-such-dir" / "a.txt", "x"), UserError);
 }
 
+// Parsers that recurse once per level (tinygltf) overflowed the stack on
+// 20,000 nested arrays: the nesting is counted before any parser runs, and
+// brackets inside strings (escaped quotes included) are not nesting.
+TEST(CheckJsonNesting, RefusesNestingPastTheLimitOutsideStrings) {
+  auto error = [](const std::string& text) {
+    return testing::ErrorOfType<UserError>([&] { ParseJsonText(text, "f.json"); });
+  };
+  const int limit = kMaxJsonNesting;
+  EXPECT_EQ(error(std::string(limit, '[') + std::string(limit, ']')), "(no error)");
+  EXPECT_EQ(error(std::string(limit + 1, '[') + std::string(limit + 1, ']')),
+            "f.json: arrays and objects nested more than the limit of 64 levels deep (at byte 64)");
+  EXPECT_EQ(error(std::string(20000, '[') + std::string(20000, ']')).rfind("f.json: arrays and objects nested", 0), 0u);
+  EXPECT_EQ(error(R"({"a": [{"b": ")" + std::string(1000, '[') + R"(\"[[["}]})"), "(no error)");
+  EXPECT_EQ(error("{\"a\": {\"b\": " + std::string(limit, '[') + std::string(limit, ']') + "}}")
+                .rfind("f.json: arrays and objects nested more than the limit of 64 levels deep", 0),
+            0u);
+}
+
+// A key given twice in one object: nlohmann keeps the last in silence, so a
+// scene's second "phosphor" or a material's second "kr" won unseen.
+TEST(ParseJsonText, AKeyGivenTwiceInOneObjectIsRefusedNamingIt) {
+  auto error = [](const std::string& text) {
+    return testing::ErrorOfType<UserError>([&] { ParseJsonText(text, "f.json"); });
+  };
+  EXPECT_EQ(error(R"({"kr": 1, "kr": 2})"), "f.json: kr: the key is given twice");
+  EXPECT_EQ(error(R"({"states": [{"kr": 1}, {"ke": [1], "kr": 2, "ke": [3]}]})"),
+            "f.json: states[1].ke: the key is given twice");
+  EXPECT_EQ(error(R"({"a": {"b": [[1], [2, {"c": 1, "d": {}, "c": 2}]]}})"),
+            "f.json: a.b[1][1].c: the key is given twice");
+  // The same key in different objects, or at different depths, is no duplicate.
+  EXPECT_EQ(error(R"({"a": {"a": 1}, "b": [{"a": 1}, {"a": 2}], "c": {"b": {"a": 3}}})"), "(no error)");
+  EXPECT_EQ(ParseJsonText(R"({"x": [1, {"y": 2}], "z": 3})", "f.json")["x"][1]["y"], 2);
+}
+
 }  // namespace
 }  // namespace phos

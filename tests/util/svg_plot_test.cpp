@@ -169,5 +169,26 @@ TEST(PlotSvg, TheLogAxisSpansTheData) {
   EXPECT_GT(lowest, std::exp(-0.227 * 300) * 1e-9);  // and not far below it
 }
 
+// plot --log-y on denormal radiances wrote -nan coordinates (the axis began
+// at 10^-324, 0 in double), and a label with a NUL wrote a raw NUL, which no
+// XML reader takes. Denormals are gaps on a log axis like zeros; text is Printable.
+TEST(PlotSvg, DenormalsOnALogAxisAndControlCharactersInLabelsGiveValidNumbersAndText) {
+  PlotSeries s(std::string("glow\0\x1b[31m", 10));
+  s.x = {0, 1, 2, 3};
+  s.y = {1e-3, 5e-324, 1e-310, 1e-5};
+  PlotOptions options;
+  options.log_y = true;
+  options.title = "a\nb";
+  for (double y_min : {std::nan(""), 0.0, 5e-324}) {
+    options.y_min = y_min;
+    const std::string svg = PlotSvg({s}, options);
+    EXPECT_EQ(svg.find("nan"), std::string::npos) << y_min;
+    EXPECT_EQ(svg.find("inf"), std::string::npos) << y_min;
+    for (char c : svg) EXPECT_TRUE(c == '\n' || static_cast<unsigned char>(c) >= 0x20) << int(c);
+    EXPECT_NE(svg.find("glow\\x00\\x1b[31m"), std::string::npos);
+    EXPECT_NE(svg.find("a\\nb"), std::string::npos);
+  }
+}
+
 }  // namespace
 }  // namespace phos

@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <cstring>
 #include <fstream>
+#include <set>
 #include <sstream>
 
 #include <fcntl.h>
@@ -65,9 +66,92 @@ std::string ReadFileText(const std::filesystem::path& path, std::uintmax_t max_b
   return text;
 }
 
+void CheckJsonNesting(std::string_view text, const std::string& source) {
+  int depth = 0;
+  bool in_string = false;
+  for (std::size_t i = 0; i < text.size(); ++i) {
+    const char c = text[i];
+    if (in_string) {
+      if (c == '\\')
+        ++i;  // the escaped character, a quote or a backslash, is not the string's end
+      else if (c == '"')
+        in_string = false;
+    } else if (c == '"') {
+      in_string = true;
+    } else if (c == '[' || c == '{') {
+      if (++depth > kMaxJsonNesting)
+        ThrowUserError(source, "",
+                       "arrays and objects nested more than the limit of " + std::to_string(kMaxJsonNesting) +
+                           " levels deep (at byte " + std::to_string(i) + ")");
+    } else if ((c == ']' || c == '}') && depth > 0) {
+      --depth;
+    }
+  }
+}
+
+namespace {
+
+// Finds a key given twice in one object while nlohmann parses (its DOM keeps
+// the last in silence): one frame per open array or object, with the keys
+// seen so far, the current key or element index for the path in the message.
+class DuplicateKeyCheck {
+ public:
+  explicit DuplicateKeyCheck(const std::string& source) : source_(source) {}
+
+  bool operator()(int, nlohmann::json::parse_event_t event, nlohmann::json& parsed) {
+    using Event = nlohmann::json::parse_event_t;
+    if (event == Event::object_start || event == Event::array_start || event == Event::value) StartElement();
+    switch (event) {
+      case Event::object_start: frames_.push_back({true, {}, "", -1}); break;
+      case Event::array_start: frames_.push_back({false, {}, "", -1}); break;
+      case Event::object_end:
+      case Event::array_end:
+        if (!frames_.empty()) frames_.pop_back();
+        break;
+      case Event::key: {
+        Frame& frame = frames_.back();
+        frame.key = parsed.get<std::string>();
+        if (!frame.keys.insert(frame.key).second) ThrowUserError(source_, Path(), "the key is given twice");
+        break;
+      }
+      case Event::value: break;
+    }
+    return true;
+  }
+
+ private:
+  struct Frame {
+    bool object;
+    std::set<std::string> keys;
+    std::string key;  // an object's current member
+    long index;       // an array's current element
+  };
+
+  void StartElement() {
+    if (!frames_.empty() && !frames_.back().object) ++frames_.back().index;
+  }
+
+  std::string Path() const {
+    std::string path;
+    for (const Frame& frame : frames_) {
+      if (frame.object)
+        path += (path.empty() ? "" : ".") + frame.key;
+      else
+        path += "[" + std::to_string(frame.index) + "]";
+    }
+    return path;
+  }
+
+  const std::string& source_;
+  std::vector<Frame> frames_;
+};
+
+}  // namespace
+
 nlohmann::json ParseJsonText(std::string_view text, const std::string& source) {
+  CheckJsonNesting(text, source);
   try {
-    return nlohmann::json::parse(text);
+    return nlohmann::json::parse(text, DuplicateKeyCheck(source));
   } catch (const nlohmann::json::exception& e) {
     // Drop nlohmann's "[json.exception.parse_error.101] " prefix: the user
     // needs the position and the reason.

@@ -9,6 +9,7 @@
 #include <sstream>
 
 #include "phos/util/colour.h"
+#include "phos/util/format.h"
 
 namespace phos {
 namespace {
@@ -16,7 +17,9 @@ namespace {
 // The visible range (CIE 15): light outside it has no colour.
 constexpr double kVisibleLowerNm = 380, kVisibleUpperNm = 780;
 
-std::string Escape(const std::string& text) {
+// Text for SVG: Printable (a NUL or an ESC is no XML character), then XML's escapes.
+std::string Escape(const std::string& raw) {
+  const std::string text = Printable(raw);
   std::string out;
   for (char c : text) {
     switch (c) {
@@ -67,14 +70,19 @@ struct Axis {
   double Map(double v) const {
     return log ? (std::log10(v) - std::log10(lo)) / (std::log10(hi) - std::log10(lo)) : (v - lo) / (hi - lo);
   }
-  bool Drawable(double v) const { return std::isfinite(v) && (!log || v > 0); }
+  // On a log axis, positive and normal: a denormal radiance (5e-324) made the
+  // axis start at 10^-324, which is 0 in double, and every coordinate -nan.
+  bool Drawable(double v) const { return std::isfinite(v) && (!log || v >= std::numeric_limits<double>::min()); }
 
   // Rounds the range out to nice values and returns the tick positions.
   std::vector<double> Ticks() {
     std::vector<double> ticks;
     if (log) {
-      double e0 = std::floor(std::log10(lo)), e1 = std::ceil(std::log10(hi));
-      if (e1 <= e0) e1 = e0 + 1;
+      // Decades within double's normal range, whatever limits were asked (a
+      // y_min of 0 or a denormal): 10^-307 to 10^308.
+      double e0 = lo > 0 ? std::floor(std::log10(lo)) : -307, e1 = hi > 0 ? std::ceil(std::log10(hi)) : e0 + 1;
+      e0 = std::clamp(e0, -307.0, 307.0);
+      e1 = std::clamp(e1, e0 + 1, 308.0);
       lo = std::pow(10.0, e0);
       hi = std::pow(10.0, e1);
       int step = std::max(1, static_cast<int>(std::ceil((e1 - e0) / 8)));

@@ -8,6 +8,7 @@
 #include <functional>
 #include <memory>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "phos/acquire/camera.h"
@@ -52,8 +53,9 @@ class AravisCamera final : public Camera {
   StreamStatistics stream_statistics() const;
 
   // Region of interest in (binned) pixels (the payload, and so the stream's
-  // buffers, follow it).
-  void SetRegion(int x, int y, int width, int height);
+  // buffers, follow it). One past the binned sensor is a UserError naming
+  // `field` (the lab config names its key).
+  void SetRegion(int x, int y, int width, int height, std::string_view field = "region");
   // Sums dx x dy sensor pixels into one (more signal per pixel for a faint
   // glow); the region shrinks with it.
   void SetBinning(int dx, int dy);

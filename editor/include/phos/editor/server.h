@@ -15,6 +15,7 @@
 //    through a symbolic link: 400 naming the path;
 //  - unknown routes: 404; a route with the wrong method: 405;
 //  - more than max_connections at once: 503; a request slower than
+//    request_timeout_s from its first byte, or a connection silent for
 //    read_timeout_s: the connection is closed.
 //
 // API: GET / (the page), GET /api/state, GET /api/frame?t=S (PNG),
@@ -36,10 +37,12 @@ struct ServerOptions {
   std::string bind = "127.0.0.1";
   int port = 8377;  // 0: any free port; a port in use is refused (no SO_REUSEPORT)
   std::size_t max_body_bytes = 64 * 1024;
-  // A request (line, headers, body) must arrive within read_timeout_s of its
-  // connection, however slowly its bytes come; its response must leave within
+  // A request (line, headers, body) must arrive within request_timeout_s of
+  // its first byte, however slowly its bytes come; a connection that sends
+  // nothing is closed after read_timeout_s; its response must leave within
   // write_timeout_s. One request per connection.
   double read_timeout_s = 30;  // a browser preconnects and may send its request many seconds later (seen under ASan)
+  double request_timeout_s = 5;
   double write_timeout_s = 5;
   // Connections served at once, each on a thread of its own; more are answered
   // 503 at once. Slow clients hold only their own, up to the timeouts.

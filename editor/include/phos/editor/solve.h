@@ -65,6 +65,15 @@ struct Problem {
   double end_s() const { return dt_s * static_cast<double>(frames()); }
 };
 
+// The most constraints a problem may hold, from a file or placed in the
+// editor: the solve's time grows about as n^1.7 (10,000 took 20 s); 1000
+// take a fraction of a second (docs/editor.md).
+inline constexpr std::size_t kMaxConstraints = 1000;
+// The largest band radiance or weight a constraint may give: the cost squares
+// them (1e300 printed a cost of inf, exit 0). The editor page's bounds too.
+inline constexpr double kMaxConstraintRadiance = 1e6;
+inline constexpr double kMaxConstraintWeight = 1e6;
+
 // phos.constraints/1 (DESIGN.md). Bad input: a UserError naming the file and field.
 Problem LoadProblem(const std::filesystem::path& path);
 Problem ProblemFromJson(const nlohmann::json& json, const std::string& source);

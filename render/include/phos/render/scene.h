@@ -44,6 +44,16 @@ inline constexpr std::size_t kMaxPixels = std::size_t{1} << 26;         // width
 inline constexpr std::size_t kMaxMeshVertices = std::size_t{1} << 24;   // per mesh file (16.8 million)
 inline constexpr std::size_t kMaxMeshTriangles = std::size_t{1} << 24;  // per mesh file
 inline constexpr std::size_t kMaxGltfInstances = std::size_t{1} << 16;  // node visits of a glTF scene graph (65536)
+inline constexpr std::size_t kMaxObjects = 1024;                        // objects of a scene
+inline constexpr std::size_t kMaxSceneTriangles = std::size_t{1}
+                                                  << 24;  // over all objects (a mesh used twice counts twice)
+inline constexpr std::size_t kMaxLights = 4096;           // lights of a scene, emitting objects included
+// Texels over all phosphorescent objects (33.5 million; a UV map's
+// resolution^2 each), and texels x lights (268 million: the coupled solver
+// keeps each light's irradiance per texel, 4 bytes each). 4 quads of 1e6 m
+// at texel_size_m 1e-3 asked for 134 million texels, 6.4 GiB.
+inline constexpr std::size_t kMaxTexels = std::size_t{1} << 25;
+inline constexpr std::size_t kMaxTexelLights = std::size_t{1} << 28;
 
 // An object's glossiness (render/bsdf.h): metallic in [0, 1], roughness in
 // [0.02, 1] (glTF's pbrMetallicRoughness factors).
@@ -125,7 +135,7 @@ struct GlossTexture : TextureSource {};
 // factor, times the texture's sRGB-decoded texel when there is one.
 struct BaseColour : TextureSource {
   Eigen::Vector3f factor = Eigen::Vector3f::Ones();  // linear RGB in [0, 1]
-  bool v_up = false;  // OBJ: v = 0 is the image's bottom row; glTF: its top row
+  bool v_up = false;                                 // OBJ: v = 0 is the image's bottom row; glTF: its top row
   bool operator==(const BaseColour& other) const {
     return factor == other.factor && v_up == other.v_up && SameReading(other);
   }
@@ -138,7 +148,7 @@ struct Mesh {
   // The mesh's own UV map, if it has one: per triangle, indices into uvs.
   std::vector<Eigen::Vector2f> uvs;
   std::vector<Eigen::Vector3i> uv_triangles;
-  std::string source;  // file it came from, or the built-in shape (for messages: "file.obj#group")
+  std::string source;          // file it came from, or the built-in shape (for messages: "file.obj#group")
   std::filesystem::path file;  // the file LoadMesh read (empty: a built-in shape or parsed text)
   // The other files it led to: an OBJ's .mtl, a glTF's external buffers and
   // images (a render range's inputs include their content).
@@ -147,8 +157,8 @@ struct Mesh {
   // whose triangles have different ones keeps none and says so.
   std::optional<BaseColour> base_colour;
   std::string base_colours_differ;  // non-empty: why no single base colour was kept
-  bool v_up = false;  // OBJ: v = 0 is an image's bottom row; glTF and built-in shapes: its top row
-  std::optional<Gloss> gloss;  // glTF: its first material's metallic-roughness, when glossy
+  bool v_up = false;                // OBJ: v = 0 is an image's bottom row; glTF and built-in shapes: its top row
+  std::optional<Gloss> gloss;       // glTF: its first material's metallic-roughness, when glossy
   std::optional<GlossTexture> gloss_texture;  // glTF: its first material's metallicRoughnessTexture
   // glTF: the parts of its materials phos does not draw, by field
   // ("materials[0].normalTexture"); phos render warns of them.
@@ -190,7 +200,7 @@ struct Object {
   std::string name;
   std::shared_ptr<const Mesh> mesh;
   RigidMotion motion;
-  std::vector<double> albedo;                // per band, diffuse reflectance in [0, 1]
+  std::vector<double> albedo;  // per band, diffuse reflectance in [0, 1]
   // An albedo that varies across the surface (Sec. 8.5: "parameters per
   // material or, if spatial variation is desired, in textures"): the mesh's
   // base colour texture, looked up at each hit through its UV map. `albedo`
@@ -267,15 +277,15 @@ struct Light {
   std::vector<double> E_per_band;
   double intensity = 1.0;
   LightSchedule schedule;
-  RigidMotion motion;               // a point light moves with the translation of its keys
-  Vec3 position = Vec3::Zero();     // point: object space of `motion`
-  Vec3 direction = Vec3(0, -1, 0);  // directional, sheet: the direction light travels; spot: its axis
+  RigidMotion motion;                              // a point light moves with the translation of its keys
+  Vec3 position = Vec3::Zero();                    // point: object space of `motion`
+  Vec3 direction = Vec3(0, -1, 0);                 // directional, sheet: the direction light travels; spot: its axis
   double inner_cone_deg = 0, outer_cone_deg = 45;  // spot: half-angles from the axis, inner < outer <= 90
   Vec3 sheet_normal = Vec3(1, 0, 0);
   double sheet_thickness_m = 0;
   // Area lights.
-  Vec3 normal = Vec3(0, -1, 0);   // unit: the side that emits
-  Vec3 tangent = Vec3(1, 0, 0);   // quad: unit, perpendicular to normal, along its width
+  Vec3 normal = Vec3(0, -1, 0);  // unit: the side that emits
+  Vec3 tangent = Vec3(1, 0, 0);  // quad: unit, perpendicular to normal, along its width
   double width_m = 0, height_m = 0, radius_m = 0;
   // Shadow rays per shaded point (texel or pixel) for its soft shadow,
   // stratified over the light (geometry.h, UnitIrradiance).
@@ -398,6 +408,15 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
 // past 1, as a glTF's repeating sampler wants) or reuses one region of it
 // on several faces would give one texel's state to several places.
 bool UvMapIsOneToOne(const Mesh& mesh);
+
+// The texels TexelAtlas lays out on each object (0 where not a phosphor), as
+// the atlas computes them at the scene's start, without allocating any: of a
+// UV atlas its resolution^2 cells. CheckTexelLimits refuses a scene past
+// kMaxTexels or kMaxTexelLights in one line naming the largest object's
+// texel_size_m (or uv_resolution); the loader and TexelAtlas both call it, so
+// render --check refuses what the render would.
+std::vector<std::size_t> CountTexels(const Scene& scene);
+void CheckTexelLimits(const Scene& scene);
 
 // Built-in shapes (also usable from scene files as {"shape": ...}).
 Mesh MakeQuad(double size_x, double size_z);                    // in the y = 0 plane, normal +y

@@ -31,6 +31,11 @@ template <class Items, class ToText = std::identity>
 std::string JoinComma(const Items& items, ToText to_text = {}) {
   return Join(items, ", ", to_text);
 }
+// Text from a file or a request made safe to print or to write into SVG: a
+// control character (a newline, ESC, NUL) becomes \n, \r, \t or \xHH, and a
+// byte that is not part of valid UTF-8 \xHH; the rest is kept. What reaches
+// a terminal cannot move its cursor or split a line, and an SVG stays XML.
+std::string Printable(std::string_view text);
 // Parses a whole string as a finite double; false if it is not one.
 bool ParseDouble(const std::string& text, double* value);
 // Parses "a" or "a,b,c" into numbers; false (and *bad = offending item) on error.
