@@ -151,6 +151,8 @@ void PrintComparison(const std::string& compare, const MaterialComparison& c) {
 }
 
 void RunFitSession(const SessionArgs& args) {
+  RequireOutputFile(args.out, "--out");
+  RequireOutputFile(args.report, "--report");
   SessionFitOptions options;
   options.components = args.components;
   options.max_components = args.max_components;
@@ -559,6 +561,7 @@ void CheckFitMap(const MapArgs& args) {
 }
 
 void RunFitMap(const MapArgs& args) {
+  RequireFolderOrNothing(args.out, "--out");
   if (args.merge) return RunFitMapMerge(args);
   if (args.session.empty()) ThrowUserError("", "SESSION", "is required (except with --merge)");
   if (args.check) return CheckFitMap(args);
@@ -687,6 +690,7 @@ std::vector<std::filesystem::path> BatchItems(const std::vector<std::string>& in
 }
 
 void RunFitBatch(const BatchArgs& args) {
+  RequireFolderOrNothing(args.out, "--out");
   namespace fs = std::filesystem;
   SessionFitOptions options;
   options.components = args.components;

@@ -468,6 +468,10 @@ void SayWhenInterrupted() {
 
 void Run(const RenderArgs& args) {
   using namespace phos::render;
+  // Every output before any work: a refusal after the frames would lose them.
+  if (!args.solve_only) RequireFolderOrNothing(args.out, "--out");
+  RequireOutputFile(args.contact_sheet, "--contact-sheet", kImageExtensions);
+  if (args.solve_only) RequireFolderOrNothing(args.checkpoints, "--checkpoints");
   Transport transport = ParseTransport(args.transport);
   const bool choose = args.budget_s > 0 || args.quality > 0;
   if (args.budget_s > 0 && args.quality > 0)
@@ -546,7 +550,6 @@ void Run(const RenderArgs& args) {
   if (!args.solve_only && args.out.empty()) ThrowUserError("", "--out", "is required (except with --solve-only)");
   if (args.indirect_visibility && transport != Transport::kDss)
     ThrowUserError("", "--indirect-visibility", "is for --transport dss");
-  if (!args.solve_only) RequireFolderOrNothing(args.out, "--out");
   if (args.check) {
     std::printf("%s: the command would render %zu frame(s) (--check: nothing written)\n", scene.name.c_str(),
                 args.solve_only ? std::size_t{0} : range.last - range.first);
