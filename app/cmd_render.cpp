@@ -341,6 +341,21 @@ render::Image MeteredFrame(const render::SceneGeometry& geometry, const render::
   return render::BandsToLinearSrgb(render::RenderBands(geometry, solver, options), geometry.scene().bands);
 }
 
+// A number for the exposure at which the glow after dark shows nearly black:
+// its brightest frame's median glowing pixel under 2% of white on the PNGs
+// (auto shows it at 18%), said in one line with what to pass instead.
+void WarnNearlyBlack(double exposure, const render::AutoExposure& dark) {
+  constexpr double kNearlyBlackDisplayLuminance = 0.02;
+  if (dark.glowing_pixels == 0) return;  // nothing glows: black is right
+  const double shown = exposure * dark.metered_luminance / (1 + exposure * dark.metered_luminance);
+  if (shown >= kNearlyBlackDisplayLuminance) return;
+  std::fprintf(stderr,
+               "phos render: warning: exposure %s: the glow after dark is nearly black (the brightest frame's median "
+               "glowing pixel shows at %s%% of white); pass --exposure auto, or --exposure %s\n",
+               FormatShort(exposure).c_str(), FormatShort(100 * shown, 2).c_str(),
+               FormatShort(dark.exposure, 3).c_str());
+}
+
 std::string FrameStem(std::size_t frame) {
   char name[32];
   std::snprintf(name, sizeof name, "frame-%04zu", frame);
@@ -679,6 +694,10 @@ void Run(const RenderArgs& args) {
   ContactSheet sheet;
   // "auto": the views wait for the exposure, which needs every metered frame.
   const MeteredFrames metered = FramesToMeter(scene, times);
+  // "auto" chooses from this meter; a number is checked by it: the glow
+  // after dark at the default exposure 1 is all but black (the Cornell box's
+  // median glowing pixel shows at 0.3% of white), and a first render should
+  // say so and what to pass rather than show black frames.
   ExposureMeter meter;
   // Counted in rows of pixels, so the bar moves inside a long (path-traced) frame.
   ProgressBar progress("render " + scene.name,
@@ -721,7 +740,7 @@ void Run(const RenderArgs& args) {
                             {"rays", stats.rays}};
     if (!scene.camera.exposure_auto)
       WriteFrameViews(args, scene, f, t, scene.camera.exposure, rgb, bands, &entry, &sheet);
-    else if (metered.metered[f])
+    if (metered.metered[f] && (scene.camera.exposure_auto || metered.after_dark))
       meter.Add(MeteredFrame(geometry, solver.get(), options, rgb));
     if (line_per_frame) progress.Print(stdout, FrameLine(entry));
     frames.push_back(entry);
@@ -729,6 +748,7 @@ void Run(const RenderArgs& args) {
   progress.Finish();
   double exposure = scene.camera.exposure;
   AutoExposure chosen;
+  if (!scene.camera.exposure_auto && metered.after_dark) WarnNearlyBlack(exposure, meter.Choose());
   if (scene.camera.exposure_auto) {
     chosen = meter.Choose();
     exposure = chosen.exposure;
