@@ -3,18 +3,20 @@
 #               target phos_demo: not the tests or benchmarks), run the main job
 #   make test   install what is missing, build under ASan+UBSan, run every test (ctest),
 #               then every fuzz harness for FUZZ_CI_SECONDS (4 s) each
-# Other targets: phos (what demo builds), build (Release: everything), bench (benchmarks, Release), study
+#   make install PREFIX=DIR   phos and its data into DIR/bin and DIR/share/phos (default /usr/local)
+# Other targets: phos (what demo and install build), build (Release: everything), bench (benchmarks, Release), study
 # (regenerate the integrator error, Glassner, nc, dss, appearance and path
 # tracer convergence studies in docs/),
 # fuzz (the libFuzzer harnesses for FUZZ_SECONDS each, docs/fuzzing.md), format
 # (clang-format, .clang-format, on every tracked C++ file), clean.
 
 JOBS ?= $(shell nproc)
+PREFIX ?= /usr/local
 FUZZ_SECONDS ?= 60
 FUZZ_CI_SECONDS ?= 4
 FUZZ_JOBS ?= 1
 
-.PHONY: all bootstrap bootstrap-demo phos build demo test bench study fuzz fuzz-build format clean
+.PHONY: all bootstrap bootstrap-demo phos build demo install test bench study fuzz fuzz-build format clean
 
 all: build
 
@@ -36,6 +38,11 @@ phos: bootstrap-demo
 
 demo: phos
 	@bash scripts/demo.sh
+
+# phos, its commands and the data they read (presets, example scenes) into
+# PREFIX/bin and PREFIX/share/phos (cmake --install; docs/install.md).
+install: phos
+	@cmake --install build --prefix $(PREFIX)
 
 test: bootstrap
 	@cmake --preset asan >/dev/null

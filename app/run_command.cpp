@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <cstring>
 #include <exception>
+#include <filesystem>
 #include <string>
 #include <vector>
 
@@ -81,6 +82,16 @@ std::string Mistyped(const CLI::App& app, const std::vector<char*>& args, bool* 
 }
 
 }  // namespace
+
+std::string DataFolder() {
+  std::error_code ec;
+  const std::filesystem::path self = std::filesystem::read_symlink("/proc/self/exe", ec);
+  if (!ec) {
+    const std::filesystem::path installed = self.parent_path() / PHOS_DATA_DIR_FROM_BIN;
+    if (std::filesystem::is_directory(installed / "materials", ec)) return installed.lexically_normal().string();
+  }
+  return PHOS_FIXTURES_DIR;
+}
 
 int RunCommand(int argc, char** argv, const char* command, void (*register_command)(CLI::App&)) {
   CLI::App app{kAbout, "phos"};
