@@ -576,7 +576,7 @@ void RunFitMap(const MapArgs& args) {
 struct BatchArgs {
   std::vector<std::string> inputs;
   std::string out, weights = "poisson", task;
-  int jobs = 0, components = 0;
+  int jobs = 0, components = 0, max_components = 3;
   bool reports = true, json = false, merge = false;
   bool check = false;  // --check: the items and --task checked, nothing fitted or written
 };
@@ -627,7 +627,7 @@ struct BatchDoneRecord {
 
 // What an item's fit is made from, so that a rerun refits an item whose
 // data or options changed and keeps only a fit of these inputs (a folder
-// replaced by another capture, or --components given, kept the old fit).
+// replaced by another capture, or --components or --max-components given, kept the old fit).
 // The data: the XXH3 of every session.json and frames.jsonl of the folder
 // and its parts (frames.jsonl holds each frame's own size and checksum).
 std::string BatchItemInputs(const std::filesystem::path& item, const SessionFitOptions& options) {
@@ -643,6 +643,7 @@ std::string BatchItemInputs(const std::filesystem::path& item, const SessionFitO
       if (fs::is_regular_file(folder / name, ec))
         data[fs::relative(folder / name, item, ec).generic_string()] = DigestFile(folder / name).xxh3;
   return nlohmann::json({{"components", options.components},
+                         {"max_components", options.max_components},
                          {"weights", WeightingName(options.weighting)},
                          {"joint", options.joint},
                          {"data", data}})
@@ -694,6 +695,7 @@ void RunFitBatch(const BatchArgs& args) {
   namespace fs = std::filesystem;
   SessionFitOptions options;
   options.components = args.components;
+  options.max_components = args.max_components;
   options.weighting = ParseWeightsOption(args.weights);
   std::vector<fs::path> items = BatchItems(args.inputs);
   // --task i/N: this array task's share of the items, in order (the items'
@@ -971,8 +973,11 @@ void RegisterFit(CLI::App& app) {
   b->add_option("--out", batch->out, "output folder")->required();
   b->add_option("--jobs", batch->jobs, "items fitted at once, 1 to 1024 (default: the number of cores)")
       ->check(CLI::Range(1, 1024));
-  b->add_option("--components", batch->components, "fix the number of states (1-4; default: BIC)")
-      ->check(CLI::Range(1, 4));
+  auto batch_fixed_nc = b->add_option("--components", batch->components, "fix the number of states (1-4; default: BIC)")
+                            ->check(CLI::Range(1, 4));
+  batch_fixed_nc->excludes(
+      b->add_option("--max-components", batch->max_components, "choose nc by BIC up to N, 1-4 (default 3)")
+          ->check(CLI::Range(1, 4)));
   b->add_option("--weights", batch->weights, "poisson (default) or none");
   b->add_flag("--json", batch->json, "print one JSON object (the rows of the summary table) instead of the table");
   b->add_option("--task", batch->task,
