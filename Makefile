@@ -1,19 +1,22 @@
 # phos: the two set-up commands of the README, and a few more.
-#   make demo   install what is missing (apt), build in Release, run the main job
+#   make demo   install what the build needs (apt), build phos in Release (the
+#               target phos_demo: not the tests or benchmarks), run the main job
 #   make test   install what is missing, build under ASan+UBSan, run every test (ctest),
 #               then every fuzz harness for FUZZ_CI_SECONDS (4 s) each
-# Other targets: build (Release only), bench (benchmarks, Release), study
+#   make install PREFIX=DIR   phos and its data into DIR/bin and DIR/share/phos (default /usr/local)
+# Other targets: phos (what demo and install build), build (Release: everything), bench (benchmarks, Release), study
 # (regenerate the integrator error, Glassner, nc, dss, appearance and path
 # tracer convergence studies in docs/),
 # fuzz (the libFuzzer harnesses for FUZZ_SECONDS each, docs/fuzzing.md), format
 # (clang-format, .clang-format, on every tracked C++ file), clean.
 
 JOBS ?= $(shell nproc)
+PREFIX ?= /usr/local
 FUZZ_SECONDS ?= 60
 FUZZ_CI_SECONDS ?= 4
 FUZZ_JOBS ?= 1
 
-.PHONY: all bootstrap build demo test bench study fuzz fuzz-build format clean
+.PHONY: all bootstrap bootstrap-demo phos build demo install test bench study fuzz fuzz-build format clean
 
 all: build
 
@@ -24,8 +27,22 @@ build: bootstrap
 	@cmake --preset release >/dev/null
 	@cmake --build --preset release -j $(JOBS)
 
-demo: build
+# The packages the Release build needs, not the test suite's browser, Slurm
+# and clang (scripts/bootstrap.sh demo); then only what demo.sh runs.
+bootstrap-demo:
+	@bash scripts/bootstrap.sh demo
+
+phos: bootstrap-demo
+	@cmake --preset release >/dev/null
+	@cmake --build --preset release -j $(JOBS) --target phos_demo
+
+demo: phos
 	@bash scripts/demo.sh
+
+# phos, its commands and the data they read (presets, example scenes) into
+# PREFIX/bin and PREFIX/share/phos (cmake --install; docs/install.md).
+install: phos
+	@cmake --install build --prefix $(PREFIX)
 
 test: bootstrap
 	@cmake --preset asan >/dev/null

@@ -15,6 +15,7 @@
 #include "commands.h"
 #include "phos/editor/solve.h"
 #include "phos/model/material.h"
+#include "phos/util/atomic_file.h"
 #include "phos/util/error.h"
 #include "phos/util/format.h"
 
@@ -28,6 +29,7 @@ struct EditSolveArgs {
 };
 
 void Run(const EditSolveArgs& args) {
+  RequireOutputFile(args.out, "--out");
   editor::Problem problem = editor::LoadProblem(args.constraints);
   if (args.states > 0) problem.states = args.states;
   const editor::Solution solution = editor::Solve(problem);

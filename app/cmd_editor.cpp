@@ -16,8 +16,8 @@ namespace phos::app {
 namespace {
 
 struct EditorArgs {
-  std::string scene = std::string(PHOS_FIXTURES_DIR) + "/scenes/still-life.json";
-  std::string presets = std::string(PHOS_FIXTURES_DIR) + "/materials";
+  std::string scene = DataFolder() + "/scenes/still-life.json";
+  std::string presets = DataFolder() + "/materials";
   std::string bind = "127.0.0.1";
   int port = 8377;
   bool allow_remote = false;

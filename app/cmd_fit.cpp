@@ -150,6 +150,8 @@ void PrintComparison(const std::string& compare, const MaterialComparison& c) {
 }
 
 void RunFitSession(const SessionArgs& args) {
+  RequireOutputFile(args.out, "--out");
+  RequireOutputFile(args.report, "--report");
   SessionFitOptions options;
   options.components = args.components;
   options.max_components = args.max_components;
@@ -536,6 +538,7 @@ void CheckFitMap(const MapArgs& args) {
 }
 
 void RunFitMap(const MapArgs& args) {
+  RequireFolderOrNothing(args.out, "--out");
   if (args.merge) return RunFitMapMerge(args);
   if (args.session.empty()) ThrowUserError("", "SESSION", "is required (except with --merge)");
   if (args.check) return CheckFitMap(args);
@@ -550,7 +553,7 @@ void RunFitMap(const MapArgs& args) {
 struct BatchArgs {
   std::vector<std::string> inputs;
   std::string out, weights = "poisson", task;
-  int jobs = 0, components = 0;
+  int jobs = 0, components = 0, max_components = 3;
   bool reports = true, json = false, merge = false;
   bool check = false;  // --check: the items and --task checked, nothing fitted or written
 };
@@ -603,7 +606,7 @@ struct BatchDoneRecord {
 
 // What an item's fit is made from, so that a rerun refits an item whose
 // data or options changed and keeps only a fit of these inputs (a folder
-// replaced by another capture, or --components given, kept the old fit).
+// replaced by another capture, or --components or --max-components given, kept the old fit).
 // The data: the XXH3 of every session.json and frames.jsonl of the folder
 // and its parts (frames.jsonl holds each frame's own size and checksum).
 std::string BatchItemInputs(const std::filesystem::path& item, const SessionFitOptions& options) {
@@ -619,6 +622,7 @@ std::string BatchItemInputs(const std::filesystem::path& item, const SessionFitO
       if (fs::is_regular_file(folder / name, ec))
         data[fs::relative(folder / name, item, ec).generic_string()] = DigestFile(folder / name).xxh3;
   return nlohmann::json({{"components", options.components},
+                         {"max_components", options.max_components},
                          {"weights", WeightingName(options.weighting)},
                          {"joint", options.joint},
                          {"data", data}})
@@ -666,9 +670,11 @@ std::vector<std::filesystem::path> BatchItems(const std::vector<std::string>& in
 }
 
 void RunFitBatch(const BatchArgs& args) {
+  RequireFolderOrNothing(args.out, "--out");
   namespace fs = std::filesystem;
   SessionFitOptions options;
   options.components = args.components;
+  options.max_components = args.max_components;
   options.weighting = ParseWeightsOption(args.weights);
   std::vector<fs::path> items = BatchItems(args.inputs);
   // --task i/N: this array task's share of the items, in order (the items'
@@ -945,8 +951,11 @@ void RegisterFit(CLI::App& app) {
   b->add_option("--out", batch->out, "output folder")->required();
   b->add_option("--jobs", batch->jobs, "items fitted at once, 1 to 1024 (default: the number of cores)")
       ->check(CLI::Range(1, 1024));
-  b->add_option("--components", batch->components, "fix the number of states (1-4; default: BIC)")
-      ->check(CLI::Range(1, 4));
+  auto batch_fixed_nc = b->add_option("--components", batch->components, "fix the number of states (1-4; default: BIC)")
+                            ->check(CLI::Range(1, 4));
+  batch_fixed_nc->excludes(
+      b->add_option("--max-components", batch->max_components, "choose nc by BIC up to N, 1-4 (default 3)")
+          ->check(CLI::Range(1, 4)));
   b->add_option("--weights", batch->weights, "poisson (default) or none");
   b->add_flag("--json", batch->json, "print one JSON object (the rows of the summary table) instead of the table");
   b->add_option("--task", batch->task,

@@ -17,6 +17,7 @@
 #include "commands.h"
 #include "phos/fit/charge_fit.h"
 #include "phos/fit/decay_fit.h"
+#include "phos/util/atomic_file.h"
 #include "phos/util/csv.h"
 #include "phos/util/error.h"
 #include "phos/util/format.h"
@@ -310,6 +311,7 @@ CurveResult FitDecayFile(const std::string& file, const CurveArgs& args, const D
 }
 
 void RunDecayCurve(const CurveArgs& args) {
+  RequireOutputFile(args.plot, "--plot", kSvgExtension);
   DecayFitOptions options;
   if (args.components != 0) {
     if (args.components < 1 || args.components > 4)
@@ -398,6 +400,7 @@ CurveResult FitChargeFile(const std::string& file, const CurveArgs& args, const 
 }
 
 void RunChargeCurve(const CurveArgs& args) {
+  RequireOutputFile(args.plot, "--plot", kSvgExtension);
   ChargeFitOptions options;
   options.weighting = ParseWeightsOption(args.weights);
   CheckWindow(args);

@@ -14,6 +14,7 @@
 
 #include "commands.h"
 #include "phos/model/spectral.h"
+#include "phos/util/atomic_file.h"
 #include "phos/util/csv.h"
 #include "phos/util/error.h"
 #include "phos/util/format.h"
@@ -51,6 +52,7 @@ std::vector<double> BandEdges(const PlotArgs& args, int bands, const std::string
 }
 
 void RunPlot(const PlotArgs& args) {
+  RequireOutputFile(args.out, "--out", kSvgExtension);
   std::vector<PlotSeries> series;
   nlohmann::json described = nlohmann::json::array();
   for (const std::string& input : args.inputs) {

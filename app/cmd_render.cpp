@@ -61,6 +61,7 @@ struct RenderArgs {
   bool transport_given = false, indirect_visibility = false;
   std::string contact_sheet;
   std::vector<std::string> materials;
+  std::string unknown_ke;  // --unknown-ke: "zero", or "" (refuse, unless the scene's object says zero)
   // Shards (docs/scale.md): a range of frames, or the solver pass.
   std::string frames, task, checkpoints;
   bool solve_only = false;
@@ -143,7 +144,8 @@ std::string RangeInputs(const RenderArgs& a, const render::Scene& scene, const F
          " indirect_visibility=" + std::to_string(a.indirect_visibility) + " materials=" + materials +
          " frames=" + std::to_string(range.first) + ":" + std::to_string(range.last) +
          // Only when not the default, so that ranges rendered before the option stay done.
-         (a.exr_compression == "zip" ? "" : " exr=" + a.exr_compression);
+         (a.exr_compression == "zip" ? "" : " exr=" + a.exr_compression) +
+         (a.unknown_ke.empty() ? "" : " unknown_ke=" + a.unknown_ke);
 }
 
 // Where the solver pass writes the state at frame f.
@@ -270,6 +272,34 @@ void WarnDarkLights(const render::Scene& scene) {
                  "(\"initial\"): every frame is black\n");
 }
 
+// --unknown-ke zero: every phosphor takes a ke not measured as 0 (not
+// charging), as "unknown_ke": "zero" on each object and volume would say in
+// writing; said in one line on stderr, naming each material and the bands
+// something lights (ChargingSources) where it zeroes a ke. Those the scene
+// already takes as zero are its own statement, and not repeated.
+void ZeroUnknownKeEverywhere(render::Scene* scene) {
+  std::vector<std::string> zeroed;
+  const auto take = [&](bool* as_zero, const Material& material, const std::string& path) {
+    if (*as_zero) return;
+    *as_zero = true;
+    std::vector<std::string> bands;
+    for (int b = 0; b < material.band_count(); ++b) {
+      const bool unknown = std::any_of(material.states.begin(), material.states.end(),
+                                       [&](const ExcitedState& state) { return !state.ke_known(b); });
+      if (unknown && !render::ChargingSources(*scene, b).empty()) bands.push_back(material.bands.BandName(b));
+    }
+    const std::string item = "'" + material.name + "' (" + path + ") in " + JoinComma(bands);
+    if (!bands.empty() && std::find(zeroed.begin(), zeroed.end(), item) == zeroed.end()) zeroed.push_back(item);
+  };
+  for (render::Object& object : scene->objects)
+    if (object.phosphor) take(&object.unknown_ke_as_zero, *object.phosphor, object.phosphor_path);
+  for (render::Volume& volume : scene->volumes)
+    if (volume.phosphor) take(&volume.unknown_ke_as_zero, *volume.phosphor, volume.phosphor_path);
+  if (!zeroed.empty())
+    std::fprintf(stderr, "phos render: warning: --unknown-ke zero: ke not measured taken as 0 (not charging): %s\n",
+                 Join(zeroed, "; ").c_str());
+}
+
 // --exposure: "auto" or a positive number, into exposure_auto and exposure.
 void ParseExposureOption(RenderArgs* args) {
   if (!args->exposure_given) return;
@@ -309,6 +339,21 @@ render::Image MeteredFrame(const render::SceneGeometry& geometry, const render::
   options.transport = render::Transport::kDirect;
   options.progress_rows = nullptr;
   return render::BandsToLinearSrgb(render::RenderBands(geometry, solver, options), geometry.scene().bands);
+}
+
+// A number for the exposure at which the glow after dark shows nearly black:
+// its brightest frame's median glowing pixel under 2% of white on the PNGs
+// (auto shows it at 18%), said in one line with what to pass instead.
+void WarnNearlyBlack(double exposure, const render::AutoExposure& dark) {
+  constexpr double kNearlyBlackDisplayLuminance = 0.02;
+  if (dark.glowing_pixels == 0) return;  // nothing glows: black is right
+  const double shown = exposure * dark.metered_luminance / (1 + exposure * dark.metered_luminance);
+  if (shown >= kNearlyBlackDisplayLuminance) return;
+  std::fprintf(stderr,
+               "phos render: warning: exposure %s: the glow after dark is nearly black (the brightest frame's median "
+               "glowing pixel shows at %s%% of white); pass --exposure auto, or --exposure %s\n",
+               FormatShort(exposure).c_str(), FormatShort(100 * shown, 2).c_str(),
+               FormatShort(dark.exposure, 3).c_str());
 }
 
 std::string FrameStem(std::size_t frame) {
@@ -468,6 +513,10 @@ void SayWhenInterrupted() {
 
 void Run(const RenderArgs& args) {
   using namespace phos::render;
+  // Every output before any work: a refusal after the frames would lose them.
+  if (!args.solve_only) RequireFolderOrNothing(args.out, "--out");
+  RequireOutputFile(args.contact_sheet, "--contact-sheet", kImageExtensions);
+  if (args.solve_only) RequireFolderOrNothing(args.checkpoints, "--checkpoints");
   Transport transport = ParseTransport(args.transport);
   const bool choose = args.budget_s > 0 || args.quality > 0;
   if (args.budget_s > 0 && args.quality > 0)
@@ -506,6 +555,7 @@ void Run(const RenderArgs& args) {
     object->phosphor = material;
     object->phosphor_path = file;
   }
+  if (args.unknown_ke == "zero") ZeroUnknownKeEverywhere(&scene);
 
   std::vector<double> times = scene.FrameTimes();
   if (!args.times.empty()) {
@@ -546,7 +596,6 @@ void Run(const RenderArgs& args) {
   if (!args.solve_only && args.out.empty()) ThrowUserError("", "--out", "is required (except with --solve-only)");
   if (args.indirect_visibility && transport != Transport::kDss)
     ThrowUserError("", "--indirect-visibility", "is for --transport dss");
-  if (!args.solve_only) RequireFolderOrNothing(args.out, "--out");
   if (args.check) {
     std::printf("%s: the command would render %zu frame(s) (--check: nothing written)\n", scene.name.c_str(),
                 args.solve_only ? std::size_t{0} : range.last - range.first);
@@ -566,11 +615,6 @@ void Run(const RenderArgs& args) {
     return;
   }
   const auto task_start = std::chrono::steady_clock::now();
-  std::error_code ec;
-  if (!args.solve_only) {
-    std::filesystem::create_directories(args.out, ec);
-    if (ec) ThrowUserError("", "--out", "cannot create '" + args.out + "': " + ec.message());
-  }
 
   SceneGeometry geometry(scene);
   std::unique_ptr<CoupledSolver> solver;
@@ -583,6 +627,10 @@ void Run(const RenderArgs& args) {
     SolveOnly(args, scene, solver.get(), times);
     return;
   }
+  // After the solver's refusals (a ke not measured in a lit band): they leave no folder behind.
+  std::error_code ec;
+  std::filesystem::create_directories(args.out, ec);
+  if (ec) ThrowUserError("", "--out", "cannot create '" + args.out + "': " + ec.message());
   PositionSolver(solver.get(), args.checkpoints, times, range.first);
   {
     // A killed run of these frames (a range, or the whole run: an 82 MB
@@ -646,6 +694,10 @@ void Run(const RenderArgs& args) {
   ContactSheet sheet;
   // "auto": the views wait for the exposure, which needs every metered frame.
   const MeteredFrames metered = FramesToMeter(scene, times);
+  // "auto" chooses from this meter; a number is checked by it: the glow
+  // after dark at the default exposure 1 is all but black (the Cornell box's
+  // median glowing pixel shows at 0.3% of white), and a first render should
+  // say so and what to pass rather than show black frames.
   ExposureMeter meter;
   // Counted in rows of pixels, so the bar moves inside a long (path-traced) frame.
   ProgressBar progress("render " + scene.name,
@@ -688,7 +740,7 @@ void Run(const RenderArgs& args) {
                             {"rays", stats.rays}};
     if (!scene.camera.exposure_auto)
       WriteFrameViews(args, scene, f, t, scene.camera.exposure, rgb, bands, &entry, &sheet);
-    else if (metered.metered[f])
+    if (metered.metered[f] && (scene.camera.exposure_auto || metered.after_dark))
       meter.Add(MeteredFrame(geometry, solver.get(), options, rgb));
     if (line_per_frame) progress.Print(stdout, FrameLine(entry));
     frames.push_back(entry);
@@ -696,6 +748,7 @@ void Run(const RenderArgs& args) {
   progress.Finish();
   double exposure = scene.camera.exposure;
   AutoExposure chosen;
+  if (!scene.camera.exposure_auto && metered.after_dark) WarnNearlyBlack(exposure, meter.Choose());
   if (scene.camera.exposure_auto) {
     chosen = meter.Choose();
     exposure = chosen.exposure;
@@ -826,6 +879,11 @@ void RegisterRender(CLI::App& app) {
   cmd->add_option("--material", args->materials,
                   "OBJECT=FILE: give the object of that name this phosphor material (repeatable),\n"
                   "e.g. one just fitted by 'phos fit', without editing the scene");
+  cmd->add_option("--unknown-ke", args->unknown_ke,
+                  "zero: take every phosphor's ke where it was not measured (Table 8.1's presets, a fit's bands\n"
+                  "no LED reached) as 0, not charging, as \"unknown_ke\": \"zero\" on each object would; one\n"
+                  "line on stderr names each material and band. Default: such a band lit is refused")
+      ->check(CLI::IsMember({"zero"}));
   cmd->add_flag("--json", args->json, "Print one JSON object: frames with t, exr, png and seconds");
   cmd->add_option("--exr-compression", args->exr_compression,
                   "How the EXR frames are compressed: zip, zips, piz, rle or none keep every float (none writes\n"

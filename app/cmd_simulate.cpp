@@ -13,6 +13,7 @@
 #include "commands.h"
 #include "phos/model/material.h"
 #include "phos/model/simulate.h"
+#include "phos/util/atomic_file.h"
 #include "phos/util/error.h"
 #include "phos/util/format.h"
 #include "phos/util/json.h"
@@ -140,6 +141,8 @@ void SampleTheEnd(const Material& material, const std::vector<double>& E, const 
 }
 
 void RunSimulate(const SimulateArgs& args) {
+  RequireOutputFile(args.out, "--out");
+  RequireOutputFile(args.plot, "--plot", kSvgExtension);
   Material material = LoadMaterial(args.material);
   const int nb = material.band_count();
   if (args.charge_s < 0) ThrowUserError("", "--charge-s", "expected seconds >= 0, got " + FormatDouble(args.charge_s));

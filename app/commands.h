@@ -91,6 +91,12 @@ void RegisterEdit(CLI::App& app);
 void RegisterEditor(CLI::App& app);
 void RegisterSlurm(CLI::App& app);
 
+// The folder of phos's data (the presets in materials/, the example scenes
+// in scenes/): <prefix>/share/phos beside an installed phos (cmake
+// --install), found from the executable's own folder; else, in a build
+// tree, the source tree's fixtures/.
+std::string DataFolder();
+
 // --weights of every fit command: none or poisson, else a UserError naming the option.
 Weighting ParseWeightsOption(const std::string& text);
 

@@ -9,9 +9,10 @@
 // from kCommands (commands.h) without linking any of them.
 //
 // Conventions: `phos --version` prints the project version (phos::kVersion).
-// A bare `phos` prints the usage on standard output and exits with 2, like git
+// A bare `phos` prints the usage on standard error and exits with 2, like git
 // (which prints its usage and exits non-zero): no command is a usage mistake,
-// and phos's code for those is 2. An unknown command is one line, exit 2.
+// and phos's code for those is 2, its text on stderr as for every other. An
+// unknown command is one line naming the nearest command, exit 2.
 
 #include <unistd.h>
 
@@ -21,6 +22,7 @@
 #include <cstring>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include <CLI/CLI.hpp>
 
@@ -73,13 +75,18 @@ int main(int argc, char** argv) {
   app.set_version_flag("--version", std::string("phos ") + phos::kVersion, "Print the version and exit");
   for (const phos::app::CommandSummary& c : phos::app::kCommands) app.add_subcommand(c.name, c.summary);
   if (argc < 2) {
-    std::fputs(app.help().c_str(), stdout);
+    std::fputs(app.help().c_str(), stderr);
     return 2;
   }
   if (argv[1][0] != '-') {
-    const std::string names =
-        phos::JoinComma(phos::app::kCommands, [](const phos::app::CommandSummary& c) { return std::string(c.name); });
-    std::fprintf(stderr, "phos: unknown command '%s' (commands: %s; see 'phos --help')\n", argv[1], names.c_str());
+    std::vector<std::string> names;
+    for (const phos::app::CommandSummary& c : phos::app::kCommands) names.push_back(c.name);
+    const std::string nearest = phos::Closest(argv[1], names);
+    if (!nearest.empty())
+      std::fprintf(stderr, "phos: %s: unknown command; did you mean %s?\n", argv[1], nearest.c_str());
+    else
+      std::fprintf(stderr, "phos: %s: unknown command (one of %s; see 'phos --help')\n", argv[1],
+                   phos::JoinComma(names).c_str());
     return 2;
   }
 
@@ -88,7 +95,12 @@ int main(int argc, char** argv) {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     if (e.get_exit_code() == 0) return app.exit(e);  // --help, --version
-    std::fprintf(stderr, "phos: %s (see 'phos --help')\n", e.what());
+    const std::string option = std::string(argv[1]).substr(0, std::string(argv[1]).find('='));
+    const std::string nearest = app.get_option_no_throw(option) ? "" : phos::Closest(option, {"--help", "--version"});
+    if (!nearest.empty())
+      std::fprintf(stderr, "phos: %s: unknown option; did you mean %s?\n", option.c_str(), nearest.c_str());
+    else
+      std::fprintf(stderr, "phos: %s (see 'phos --help')\n", e.what());
     return 2;
   }
   return 0;

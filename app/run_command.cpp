@@ -3,9 +3,11 @@
 // exits with code 2; nothing already written is lost, because every output
 // file is written whole through a rename. An internal error exits with 1.
 
+#include <algorithm>
 #include <cstdio>
 #include <cstring>
 #include <exception>
+#include <filesystem>
 #include <string>
 #include <vector>
 
@@ -14,8 +16,82 @@
 #include "cli_finite.h"
 #include "commands.h"
 #include "phos/util/error.h"
+#include "phos/util/format.h"
 
 namespace phos::app {
+namespace {
+
+// The long and short names of a command's options, with their dashes.
+std::vector<std::string> OptionNames(const CLI::App& level) {
+  std::vector<std::string> names;
+  for (const CLI::Option* option : level.get_options()) {
+    for (const std::string& name : option->get_lnames()) names.push_back("--" + name);
+    for (const std::string& name : option->get_snames()) names.push_back("-" + name);
+  }
+  return names;
+}
+
+// A mistyped word of the command line, one line naming the nearest valid one
+// ("phos simulate: --materal: unknown option; did you mean --material?"), or
+// "" if every word is known. CLI11 reports the first of its own checks that
+// fails, often a consequence of the mistake rather than the mistake: "--material
+// is required" for --materal, "The following arguments were not expected: 1
+// --charg-s", "A subcommand is required" for `phos fit schedule-curv`. So the
+// words are walked here as CLI11 reads them, command by subcommand, up to a
+// --, and the first option or subcommand its level does not know is named.
+// *suggested says whether a nearest word was found.
+std::string Mistyped(const CLI::App& app, const std::vector<char*>& args, bool* suggested) {
+  const CLI::App* level = &app;
+  std::string name = "phos";
+  for (std::size_t i = 1; i < args.size(); ++i) {
+    const std::string word = args[i];
+    if (word == "--") break;  // the words after it are another command's (phos slurm)
+    double number = 0;
+    if (word.size() > 1 && word[0] == '-' && !ParseDouble(word, &number)) {
+      const std::string option = word.substr(0, word.find('='));
+      const CLI::Option* known = level->get_option_no_throw(option);
+      if (known == nullptr) {
+        const std::string nearest = Closest(option, OptionNames(*level));
+        *suggested = !nearest.empty();
+        return name + ": " + option + ": unknown option" +
+               (nearest.empty() ? " (see '" + name + " --help')" : "; did you mean " + nearest + "?");
+      }
+      if (word.find('=') == std::string::npos && known->get_type_size_max() > 0) ++i;  // its value
+      continue;
+    }
+    const std::vector<const CLI::App*> subcommands = level->get_subcommands([](const CLI::App*) { return true; });
+    const auto sub =
+        std::find_if(subcommands.begin(), subcommands.end(), [&](const CLI::App* s) { return s->check_name(word); });
+    if (sub != subcommands.end()) {
+      level = *sub;
+      name += " " + word;
+      continue;
+    }
+    // A word that is no subcommand where only subcommands are taken.
+    const bool takes_words = !level->get_options([](const CLI::Option* o) { return o->get_positional(); }).empty();
+    if (!subcommands.empty() && !takes_words) {
+      std::vector<std::string> names;
+      for (const CLI::App* s : subcommands) names.push_back(s->get_name());
+      const std::string nearest = Closest(word, names);
+      *suggested = !nearest.empty();
+      return name + ": " + word + ": unknown subcommand" +
+             (nearest.empty() ? " (one of " + JoinComma(names) + ")" : "; did you mean " + nearest + "?");
+    }
+  }
+  return "";
+}
+
+}  // namespace
+
+std::string DataFolder() {
+  std::error_code ec;
+  const std::filesystem::path self = std::filesystem::read_symlink("/proc/self/exe", ec);
+  if (!ec) {
+    const std::filesystem::path installed = self.parent_path() / PHOS_DATA_DIR_FROM_BIN;
+    if (std::filesystem::is_directory(installed / "materials", ec)) return installed.lexically_normal().string();
+  }
+  return PHOS_FIXTURES_DIR;
+}
 
 int RunCommand(int argc, char** argv, const char* command, void (*register_command)(CLI::App&)) {
   CLI::App app{kAbout, "phos"};
@@ -45,6 +121,12 @@ int RunCommand(int argc, char** argv, const char* command, void (*register_comma
       name += " " + level->get_name();
     }
     std::fflush(stdout);  // what was printed before comes before the error, in a log too
+    bool suggested = false;
+    const std::string mistyped = Mistyped(app, args, &suggested);
+    if (suggested || (!mistyped.empty() && level->get_footer().empty())) {
+      std::fprintf(stderr, "%s\n", mistyped.c_str());
+      return 2;
+    }
     // Words a command with a footer (phos slurm's: the command's own
     // arguments go after --) does not take: CLI11 lists the words it could
     // not place, often the right ones after the --; name the options before

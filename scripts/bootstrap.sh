@@ -2,6 +2,9 @@
 # Installs, through apt, every Debian package phos needs to build, test and
 # benchmark. Called by the Makefile before every configure; does nothing (and
 # needs no network) when everything is already installed.
+#   bootstrap.sh        everything (make build, test, bench, fuzz)
+#   bootstrap.sh demo   what the Release build and the demo need (make demo):
+#                       not the test suite's browser, Slurm cluster and clang
 set -euo pipefail
 
 PACKAGES=(
@@ -19,21 +22,26 @@ PACKAGES=(
   libxxhash-dev
   # contact-sheet labels
   fonts-dejavu-core
-  # tests and benchmarks
+  # JSON, command line, HTTP (editor)
+  nlohmann-json3-dev libcli11-dev libcpp-httplib-dev
+  # tests and benchmarks (the configure step finds them, make demo included)
   libgtest-dev libgmock-dev libbenchmark-dev
+  # the demo's gallery page (scripts/gallery.py) and the README test (scripts/readme_check.py)
+  python3
+)
+# Only the tests, the fuzzing and the formatting use these.
+TEST_PACKAGES=(
   # the fuzz harnesses (fuzz/): clang 14 with libFuzzer and the sanitizer runtimes
   clang libclang-rt-14-dev
   # make format (.clang-format)
   clang-format
-  # JSON, command line, HTTP (editor)
-  nlohmann-json3-dev libcli11-dev libcpp-httplib-dev
   # the editor page's browser test (Playwright drives Debian's Chromium)
   chromium nodejs
-  # the README test (scripts/readme_check.py)
-  python3
   # phos slurm's test runs a one-node Slurm cluster (munged, slurmctld, slurmd)
   slurm-wlm munge
 )
+
+if [ "${1:-}" != demo ]; then PACKAGES+=("${TEST_PACKAGES[@]}"); fi
 
 missing=()
 for p in "${PACKAGES[@]}"; do

@@ -71,7 +71,7 @@ std::vector<std::vector<double>> FrameIrradiance(const IrradianceSchedule& sched
 }
 
 std::vector<double> ExcitationRates(const Material& material, const std::vector<double>& E, const std::string& where,
-                                    const std::string& remedy) {
+                                    const std::string& remedy, const std::function<std::string(int band)>& charged_by) {
   PHOS_CHECK(static_cast<int>(E.size()) == material.band_count());
   std::vector<double> a(material.states.size(), 0.0);
   for (size_t i = 0; i < material.states.size(); ++i) {
@@ -81,8 +81,8 @@ std::vector<double> ExcitationRates(const Material& material, const std::vector<
       if (!s.ke_known(b))
         ThrowUserError(where, "states[" + std::to_string(i) + "].ke[" + std::to_string(b) + "]",
                        "unknown (not measured) for band " + material.bands.BandName(b) + ": material '" +
-                           material.name + "' cannot be charged by irradiance " + FormatDouble(E[b]) +
-                           " there; " + remedy);
+                           material.name + "' cannot be charged by " +
+                           (charged_by ? charged_by(b) : "irradiance " + FormatDouble(E[b])) + " there; " + remedy);
       a[i] += *s.ke[b] * E[b];
     }
   }

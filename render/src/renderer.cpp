@@ -13,6 +13,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include "phos/model/schedule.h"
 #include "phos/render/transport_quality.h"
 #include "phos/render/volume.h"
 #include "phos/util/atomic_file.h"
@@ -275,6 +276,35 @@ void WriteContactSheet(const std::filesystem::path& path, const std::vector<Imag
   Image display(sheet.spec().width, sheet.spec().height, 3);
   sheet.get_pixels(OIIO::ROI::All(), OIIO::TypeDesc::FLOAT, display.pixels.data());
   WriteDisplayPng(path, display);
+}
+
+std::string ChargingSources(const Scene& scene, int band) {
+  const auto ever_on = [](const LightSchedule& schedule) {
+    return schedule.keys.empty() || std::any_of(schedule.keys.begin(), schedule.keys.end(),
+                                                [](const LightSchedule::Key& k) { return k.level > 0; });
+  };
+  std::vector<std::string> sources;
+  for (const Light& light : scene.lights) {
+    if (!ever_on(light.schedule) || !(light.E_per_band[band] > 0)) continue;
+    const char* value = light.positional() ? "intensity" : light.area() ? "radiance" : "irradiance";
+    sources.push_back("light '" + light.name + "' (" + value + " " + FormatShort(light.E_per_band[band]) +
+                      " in that band)");
+  }
+  if (scene.environment && ever_on(scene.environment->schedule) && scene.environment->L_per_band[band] > 0)
+    sources.push_back("the sky (radiance " + FormatShort(scene.environment->L_per_band[band]) + " in that band)");
+  bool glows = false;
+  for (const Object& object : scene.objects)
+    if (object.phosphor)
+      for (const ExcitedState& state : object.phosphor->states) glows = glows || state.Lambda[band] > 0;
+  if (scene.settings.phosphor_irradiance && glows) sources.push_back("the glow of the scene's phosphors");
+  return JoinComma(sources);
+}
+
+void RequireKnownKe(const Scene& scene, const Material& material, const std::vector<int>& excitation_bands,
+                    const std::string& where) {
+  std::vector<double> probe(static_cast<std::size_t>(material.band_count()), 0.0);
+  for (int band : excitation_bands) probe[static_cast<std::size_t>(band)] = 1.0;
+  ExcitationRates(material, probe, where, kUnknownKeRemedy, [&](int band) { return ChargingSources(scene, band); });
 }
 
 Image ReadImage(const std::filesystem::path& path) {

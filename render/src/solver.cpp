@@ -16,6 +16,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include "phos/render/renderer.h"
 #include "phos/render/volume.h"
 #include "phos/util/atomic_file.h"
 #include "phos/util/error.h"
@@ -84,6 +85,7 @@ CoupledSolver::CoupledSolver(const Scene& scene, SceneGeometry& geometry)
         g.emission_bands.push_back(b);
       }
     }
+    RequireKnownKe(scene, material, g.excitation_bands, where + " lit by the scene's lights");
     g.coefficients = BatchCoefficients<float>::Compile(material, g.excitation_bands, g.emission_bands,
                                                        where + " lit by the scene's lights", kUnknownKeRemedy);
     if (object.phosphor_map) ApplyPhosphorMap(*object.phosphor_map, material, texels.map_pixel, g.coefficients, where);

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "phos/render/renderer.h"
 #include "phos/util/error.h"
 #include "phos/util/random.h"
 
@@ -138,10 +139,11 @@ VolumeMedia::VolumeMedia(const Scene& scene, const SceneGeometry& geometry, Marc
         p->emission_bands.push_back(b);
       }
     }
-    p->coefficients = BatchCoefficients<float>::Compile(
-        material, p->excitation_bands, p->emission_bands,
-        scene.source + ": volume '" + v.name + "' (" + v.phosphor_path + ") lit by the scene's lights",
-        kUnknownKeRemedy);
+    const std::string where =
+        scene.source + ": volume '" + v.name + "' (" + v.phosphor_path + ") lit by the scene's lights";
+    RequireKnownKe(scene, material, p->excitation_bands, where);
+    p->coefficients =
+        BatchCoefficients<float>::Compile(material, p->excitation_bands, p->emission_bands, where, kUnknownKeRemedy);
     const std::size_t n = p->voxels.size();
     p->states = StateBatch<float>(material.state_count(), n, 0.0f);
     p->E.assign(p->excitation_bands.size() * n, 0.0f);

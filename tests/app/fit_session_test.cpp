@@ -217,6 +217,9 @@ TEST(FitSessionCommand, PartialSessionsAndBadInput) {
   EXPECT_TRUE(testing::IsOneLineUserError(RunPhos("fit session " + c + x + " --components 0"), "--components"));
   EXPECT_TRUE(testing::IsOneLineUserError(RunPhos("fit session " + c + x + " --max-components 0"), "--max-components"));
   EXPECT_TRUE(testing::IsOneLineUserError(RunPhos("fit batch " + c + x + " --components 9"), "--components"));
+  EXPECT_TRUE(testing::IsOneLineUserError(RunPhos("fit batch " + c + x + " --max-components 5"), "--max-components"));
+  EXPECT_TRUE(
+      testing::IsOneLineUserError(RunPhos("fit batch " + c + x + " --components 1 --max-components 2"), "excludes"));
   EXPECT_TRUE(testing::IsOneLineUserError(RunPhos("fit batch " + c + x + " --jobs 0"), "--jobs"));
   EXPECT_FALSE(std::filesystem::exists(dir / "x"));
 }
@@ -290,6 +293,18 @@ TEST(FitBatchCommand, FitsInParallelResumesAndSummarizes) {
   EXPECT_EQ(by_item["yellow"]["kr_per_s"], by_item["white"]["kr_per_s"]);  // white's data now: white's rate
   const std::string csv = testing::ReadText(dir / "out" / "summary.csv");
   EXPECT_EQ(csv.substr(0, csv.find('\n')), "item,status,n_components,kr_per_s,seconds,detail,kr_by_state_per_s");
+
+  // --max-components, as fit session has it: BIC chooses up to it, and it is
+  // one of the options a record is kept for.
+  auto sixth = RunPhos(command + " --max-components 1 --json");
+  for (const nlohmann::json& row : nlohmann::json::parse(sixth.out)["items"]) {
+    if (row["item"] == "broken" || row["item"] == "orange") continue;
+    EXPECT_EQ(row["status"], "fitted") << row;
+    EXPECT_EQ(row["n_components"], 1) << row;
+  }
+  auto seventh = RunPhos(command + " --max-components 1 --json");
+  for (const nlohmann::json& row : nlohmann::json::parse(seventh.out)["items"])
+    if (row["item"] != "broken" && row["item"] != "orange") EXPECT_EQ(row["status"], "kept") << row;
 }
 
 TEST(FitMapCommand, TwoStatesMapATwoStateSampleWithAOneStateInset) {

@@ -167,8 +167,9 @@ TEST(RenderCommand, ABudgetPicksTheBestTransportThatFits) {
 
 TEST(RenderCommand, TimesPastTheScenesEndAreRenderedWithAWarning) {
   TempDir dir;
+  // The scene ends at 90 s. At auto: at its exposure 1 the glow after dark is nearly black, and said.
   const CommandResult r = RunPhos("render " + kCornell + " --out " + dir.path().string() +
-                                  " --times 40,3600 --width 8 --height 8 --json");  // the scene ends at 90 s
+                                  " --times 40,3600 --width 8 --height 8 --exposure auto --json");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_EQ(nlohmann::json::parse(r.out)["frames"].size(), 2u);
   EXPECT_EQ(r.err, "phos render: warning: --times: 3600 s is past the scene's end (90 s); rendered all the same\n");
@@ -212,7 +213,9 @@ CommandResult RenderTile(const TempDir& dir, bool flipped, bool roof, bool two_s
   const std::filesystem::path path = dir / (std::string(flipped ? "flipped" : "facing") + (roof ? "-roof" : "") +
                                             (two_sided ? "-two-sided" : "") + ".json");
   WriteText(path, scene.dump());
-  return RunPhos("render " + path.string() + " --out " + (dir / path.stem()).string() + " --times 5,15 --json");
+  // At an exposure that shows the glow after dark (at 1 it is nearly black, and said).
+  return RunPhos("render " + path.string() + " --out " + (dir / path.stem()).string() +
+                 " --times 5,15 --exposure 1000 --json");
 }
 
 // A glTF whose material has a normal map and emission: the render draws it
@@ -230,8 +233,8 @@ TEST(RenderCommand, GltfMaterialPartsNotDrawnAreNamedOnce) {
       "board", {{{"name", "board"}, {"mesh", "board.gltf"}, {"phosphor", Fixture("materials/blue.json").string()}}},
       {0, 2, 0.01});
   WriteText(dir / "board.json", scene.dump());
-  const CommandResult r =
-      RunPhos("render " + (dir / "board.json").string() + " --out " + (dir / "out").string() + " --times 5,15 --json");
+  const CommandResult r = RunPhos("render " + (dir / "board.json").string() + " --out " + (dir / "out").string() +
+                                  " --times 5,15 --exposure auto --json");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;  // once, for two frames
   EXPECT_NE(r.err.find("warning: 'board' ("), std::string::npos) << r.err;
@@ -248,7 +251,7 @@ TEST(RenderCommand, GltfMaterialPartsNotDrawnAreNamedOnce) {
   EXPECT_NE(solve.err.find("board.gltf): not drawn: materials[0].normalTexture"), std::string::npos) << solve.err;
 
   const CommandResult cornell = RunPhos("render " + kCornell + " --out " + (dir / "cornell").string() +
-                                        " --times 40 --width 16 --height 16 --json");
+                                        " --times 40 --width 16 --height 16 --exposure auto --json");
   ASSERT_EQ(cornell.exit_code, 0) << cornell.err;
   EXPECT_EQ(cornell.err, "");
   EXPECT_EQ(nlohmann::json::parse(cornell.out)["unread_material"], nlohmann::json::object());
@@ -503,10 +506,11 @@ TEST(RenderCommand, ADarkSceneIsWarnedAboutAndAnAmbiguousMaterialRefused) {
     for (auto& object : s["objects"])
       if (object.contains("phosphor")) object["initial"] = 0.3;
   });
-  r = RunPhos("render " + precharged + out);
+  // (At auto: at the scene's exposure 1 the glow would be nearly black, and said.)
+  r = RunPhos("render " + precharged + out + " --exposure auto");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_EQ(r.err, "");
-  r = RunPhos("render " + kCornell + out);
+  r = RunPhos("render " + kCornell + out + " --exposure auto");
   EXPECT_EQ(r.err, "");
   const std::string twins =
       CornellEdited(dir, "twins", [](nlohmann::json& s) { s["objects"][1]["name"] = s["objects"][0]["name"]; });

@@ -201,11 +201,11 @@ TEST(PhosCommand, VersionIsTheProjectVersion) {
 
 TEST(PhosCommand, BarePhosPrintsItsUsageAndHelpListsEveryCommand) {
   auto bare = RunPhos("");
-  EXPECT_EQ(bare.exit_code, 2);  // no command is a usage mistake, as for git
-  EXPECT_EQ(bare.err, "");
+  EXPECT_EQ(bare.exit_code, 2);  // no command is a usage mistake, as for git: on stderr, as every mistake
+  EXPECT_EQ(bare.out, "");
   auto help = RunPhos("--help");
   EXPECT_EQ(help.exit_code, 0);
-  EXPECT_EQ(bare.out, help.out);
+  EXPECT_EQ(bare.err, help.out);
   for (const char* command : {"simulate", "plot", "fit", "capture", "render", "edit", "editor", "--version"})
     EXPECT_NE(help.out.find(command), std::string::npos) << command;
   EXPECT_EQ(help.out.find("../"), std::string::npos);  // points nowhere outside the repository
@@ -213,6 +213,43 @@ TEST(PhosCommand, BarePhosPrintsItsUsageAndHelpListsEveryCommand) {
   auto simulate = RunPhos("simulate --help");
   EXPECT_NE(simulate.out.find("Simulate one point of a material"), std::string::npos);
   EXPECT_NE(help.out.find("Simulate one point of a material"), std::string::npos);
+}
+
+TEST(PhosCommand, AMistypedWordIsNamedWithTheNearestValidOne) {
+  // Whatever CLI11 would have said first (a required option missing, words
+  // not expected, a subcommand required), in every command and at every level.
+  const std::string green = " --material " + Green();
+  const std::vector<BadInput> cases = {
+      {"simulate --materal a.json --charge-s 1 --irradiance 0",
+       "phos simulate: --materal: unknown option; did you mean --material?"},
+      {"simulate" + green + " --irradiance 0 --charg-s 1",
+       "phos simulate: --charg-s: unknown option; did you mean --charge-s?"},
+      {"simulate" + green + " --irradiance=0 --charg-s=1", "--charg-s: unknown option; did you mean --charge-s?"},
+      {"simulate" + green + " --irradiance 0 --frobnicate",
+       "phos simulate: --frobnicate: unknown option (see 'phos simulate --help')"},
+      {"plot a.csv --log_y", "phos plot: --log_y: unknown option; did you mean --log-y?"},
+      {"render scene.json --exposre 2", "phos render: --exposre: unknown option; did you mean --exposure?"},
+      {"fit decay-curve --csv a.csv --component 2",
+       "phos fit decay-curve: --component: unknown option; did you mean --components?"},
+      {"fit decay-curv --csv a.csv", "phos fit: decay-curv: unknown subcommand; did you mean decay-curve?"},
+      {"fit schedule-curv",
+       "phos fit: schedule-curv: unknown subcommand (one of decay-curve, charge-curve, session, map, batch)"},
+      {"fit session dir --out m.json --max-component 2",
+       "phos fit session: --max-component: unknown option; did you mean --max-components?"},
+      {"capture decy --out x", "phos capture: decy: unknown subcommand; did you mean decay?"},
+      {"edit solv", "phos edit: solv: unknown subcommand; did you mean solve?"},
+      {"editor --prot 8000", "phos editor: --prot: unknown option; did you mean --port?"},
+      {"slurm rendr", "phos slurm: rendr: unknown subcommand; did you mean render?"},
+      {"slurm render --taks 4 --job-dir j -- scene.json --out f",
+       "phos slurm render: --taks: unknown option; did you mean --tasks?"},
+      {"simulat --dt 1", "phos: simulat: unknown command; did you mean simulate?"},
+      {"frobnicate", "phos: frobnicate: unknown command (one of simulate, plot, fit, capture"},
+      {"--verison", "phos: --verison: unknown option; did you mean --version?"},
+  };
+  for (const BadInput& c : cases) {
+    auto result = RunPhos(c.arguments);
+    EXPECT_TRUE(testing::IsOneLineUserError(result, c.expected)) << c.arguments;
+  }
 }
 
 TEST(PhosCommand, CommandsRunTheSameWithoutTheDispatcher) {

@@ -74,6 +74,55 @@ TEST(WriteAtomically, AFolderThatCannotBeWrittenIsOneUserErrorNamingTheFile) {
   EXPECT_NE(error.find("a.json"), std::string::npos) << error;
 }
 
+TEST(WriteAtomically, MakesTheFoldersOfThePath) {
+  testing::TempDir dir;
+  WriteFileAtomically(dir / "results" / "fitted" / "m.json", "{}");
+  EXPECT_EQ(testing::ReadText(dir / "results" / "fitted" / "m.json"), "{}");
+}
+
+TEST(RequireOutputFile, RefusesWhatCannotBeWrittenThereBeforeAnyWork) {
+  testing::TempDir dir;
+  std::filesystem::create_directory(dir / "adir");
+  testing::WriteText(dir / "afile", "x");
+  const auto error = [&](const std::filesystem::path& path, std::span<const std::string_view> extensions = {}) {
+    return testing::ErrorOfType<UserError>([&] { RequireOutputFile(path, "--report", extensions); });
+  };
+  // Files that can be written: new, old, in folders still to be made, any case of an extension.
+  for (const char* name : {"new.json", "afile", "adir/new.html", "made/later/m.json"})
+    EXPECT_EQ(error(dir / name), "(no error)") << name;
+  EXPECT_EQ(error(dir / "sheet.PNG", kImageExtensions), "(no error)");
+  EXPECT_EQ(error("", kImageExtensions), "(no error)");  // not given
+  EXPECT_EQ(error("m.json"), "(no error)");              // in the working folder
+  // A folder where a file is expected, said as such.
+  EXPECT_EQ(error(dir / "adir"), "--report: '" + (dir / "adir").string() + "' is a folder, not a file");
+  EXPECT_EQ(error((dir / "new").string() + "/"), "--report: '" + (dir / "new").string() + "/' is a folder, not a file");
+  // No extension, or one the writer does not know.
+  EXPECT_EQ(
+      error(dir / "sheet", kImageExtensions),
+      "--report: '" + (dir / "sheet").string() + "': expected a file name ending in .png, .jpg, .jpeg, .tif or .tiff");
+  EXPECT_NE(error(dir / "plot.png", kSvgExtension).find("ending in .svg"), std::string::npos);
+  // Under a file.
+  EXPECT_EQ(error(dir / "afile" / "sub" / "m.json"), "--report: '" + (dir / "afile" / "sub" / "m.json").string() +
+                                                         "' cannot be written: '" + (dir / "afile").string() +
+                                                         "' is a file, not a folder");
+  // The output folders' own check: a file is not a folder, a folder under a file cannot be made.
+  EXPECT_EQ(testing::ErrorOfType<UserError>([&] { RequireFolderOrNothing(dir / "afile", "--out"); }),
+            "--out: '" + (dir / "afile").string() + "' is a file, not a folder");
+  EXPECT_NE(testing::ErrorOfType<UserError>([&] {
+              RequireFolderOrNothing(dir / "afile" / "frames", "--out");
+            }).find("is a file, not a folder"),
+            std::string::npos);
+  EXPECT_EQ(testing::ErrorOfType<UserError>([&] { RequireFolderOrNothing(dir / "adir" / "frames", "--out"); }),
+            "(no error)");
+  // A folder this process may not write into (root may write anywhere).
+  if (::geteuid() != 0) {
+    std::filesystem::permissions(dir / "adir", std::filesystem::perms::owner_read | std::filesystem::perms::owner_exec);
+    const std::string refused = error(dir / "adir" / "m.json");
+    std::filesystem::permissions(dir / "adir", std::filesystem::perms::owner_all);
+    EXPECT_NE(refused.find("cannot be written: folder"), std::string::npos) << refused;
+  }
+}
+
 TEST(SplitMix64, IsTheReferenceGenerator) {
   // The first outputs of Vigna's splitmix64.c from state 0.
   SplitMix64 random(0);

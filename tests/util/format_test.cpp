@@ -82,6 +82,36 @@ TEST(Printable, EscapesControlCharactersAndBytesThatAreNotUtf8) {
     for (char c : printable) EXPECT_FALSE(static_cast<unsigned char>(c) < 0x20 || c == 0x7f);
     EXPECT_EQ(Printable(printable), printable);
   }
+TEST(Closest, NamesTheCandidateOneEditAwayAndNothingFarther) {
+  // Random words, each mistyped by one edit of each kind: the word is found
+  // among others of its length (random words of 8+ letters are many edits apart).
+  std::mt19937_64 rng(11);
+  auto letter = [&] { return static_cast<char>('a' + rng() % 26); };
+  for (int trial = 0; trial < 2000; ++trial) {
+    std::vector<std::string> words(12);
+    for (std::string& w : words)
+      for (std::size_t n = 8 + rng() % 8; w.size() < n;) w += letter();
+    const std::string& word = words[rng() % words.size()];
+    std::string typo = word;
+    const std::size_t at = rng() % (word.size() - 1);
+    switch (trial % 4) {
+      case 0: typo.insert(typo.begin() + static_cast<std::ptrdiff_t>(at), letter()); break;
+      case 1: typo.erase(at, 1); break;
+      case 2: typo[at] = typo[at] == 'a' ? 'b' : 'a'; break;
+      case 3:
+        if (typo[at] == typo[at + 1]) typo[at] = typo[at] == 'a' ? 'b' : 'a';  // a swap that changes nothing
+        std::swap(typo[at], typo[at + 1]);
+        break;
+    }
+    ASSERT_EQ(Closest(typo, words), word) << typo;
+  }
+  // The command line's cases, and words too far from every candidate.
+  EXPECT_EQ(Closest("--materal", {"--help", "--material", "--charge-s"}), "--material");
+  EXPECT_EQ(Closest("--charg-s", {"--material", "--charge-s", "--decay-s"}), "--charge-s");
+  EXPECT_EQ(Closest("rendr", {"render", "map", "batch", "status"}), "render");
+  EXPECT_EQ(Closest("x", {"render", "map"}), "");
+  EXPECT_EQ(Closest("schedule-curv", {"decay-curve", "charge-curve", "session", "map", "batch"}), "");
+  EXPECT_EQ(Closest("anything", {}), "");
 }
 
 }  // namespace

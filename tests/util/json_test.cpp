@@ -59,7 +59,9 @@ TEST(WriteFileAtomically, ReplacesWholeAndLeavesNoTemporary) {
   int files = 0;
   for ([[maybe_unused]] auto& entry : std::filesystem::directory_iterator(dir.path())) ++files;
   EXPECT_EQ(files, 1);
-  EXPECT_THROW(WriteFileAtomically(dir / "no-such-dir" / "a.txt", "x"), UserError);
+  // A folder of the path that cannot be made (a file is in the way); missing ones are made.
+  testing::WriteText(dir / "in-the-way", "");
+  EXPECT_THROW(WriteFileAtomically(dir / "in-the-way" / "a.txt", "x"), UserError);
 }
 
 // Parsers that recurse once per level (tinygltf) overflowed the stack on

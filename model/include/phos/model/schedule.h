@@ -3,6 +3,7 @@
 // band-integrated irradiance E[b] (Eq. 8.1 holds E piecewise constant). A
 // phase with E = 0 everywhere is darkness, where the state decays in closed form.
 
+#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
@@ -49,8 +50,12 @@ std::optional<long long> WholeFrames(double total_s, double dt_s);
 // Irradiance in a band where some ke is unknown is a UserError naming the
 // state, the band and `where`: such a material may decay but not be charged
 // there. `remedy` ends the message: what the caller's user can do about it.
+// `charged_by`, if given, names what puts light into band b (a scene's
+// lights, with their own value there) instead of E[b], for a caller whose E
+// is a probe rather than the user's irradiance.
 inline constexpr const char* kGiveZeroIrradiance = "give 0 irradiance in that band";
 std::vector<double> ExcitationRates(const Material& material, const std::vector<double>& E, const std::string& where,
-                                    const std::string& remedy = kGiveZeroIrradiance);
+                                    const std::string& remedy = kGiveZeroIrradiance,
+                                    const std::function<std::string(int band)>& charged_by = {});
 
 }  // namespace phos

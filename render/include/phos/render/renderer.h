@@ -154,6 +154,18 @@ void WritePng(const std::filesystem::path& path, const Image& rgb, double exposu
 // per row, each under its label (DejaVu Sans when installed). Atomic write.
 void WriteContactSheet(const std::filesystem::path& path, const std::vector<Image>& frames,
                        const std::vector<std::string>& labels, int columns);
+// What puts light into band b of the scene, for a message: the lights ever
+// on with their value there (a point or spot light's intensity, a
+// directional or sheet light's irradiance, an area light's radiance), the
+// sky, and with phosphor_irradiance the phosphors' own glow; "" if nothing
+// does. The refusal of an unknown ke names them, not a unit probe.
+std::string ChargingSources(const Scene& scene, int band);
+// An unknown ke (not measured) of `material` in one of `excitation_bands` is
+// a UserError naming `where`, the state, the band and ChargingSources there,
+// ending with kUnknownKeRemedy; the solver and the media check each
+// phosphor so before compiling it.
+void RequireKnownKe(const Scene& scene, const Material& material, const std::vector<int>& excitation_bands,
+                    const std::string& where);
 // Reads any image OpenImageIO reads, as float (tests, regression references).
 Image ReadImage(const std::filesystem::path& path);
 

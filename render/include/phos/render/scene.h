@@ -387,8 +387,8 @@ struct Scene {
 // The end of the error for a phosphor whose ke is unknown in a band the
 // scene's lights reach: what a scene can do about it.
 inline constexpr const char* kUnknownKeRemedy =
-    "measure ke there, or say \"unknown_ke\": \"zero\" on the object to take it as not charging there "
-    "(docs/render.md), or keep the lights out of that band";
+    "measure ke there, or take it as not charging there: phos render --unknown-ke zero (every phosphor), or say "
+    "\"unknown_ke\": \"zero\" on the object (docs/render.md); or keep the lights out of that band";
 
 // What is wrong when a phosphor material's bands_nm are not the scene's:
 // "[...] nm differ from the scene's [...] nm; ..." with the two ways out

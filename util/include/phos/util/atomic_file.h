@@ -9,6 +9,7 @@
 
 #include <filesystem>
 #include <functional>
+#include <span>
 #include <string_view>
 
 namespace phos {
@@ -19,6 +20,7 @@ struct AtomicWriteOptions {
   bool sync = false;
 };
 
+// Missing folders of `path` are made first.
 // `write` fills the temporary it is given (a regular file, empty, just
 // created); it throws on failure, and then the temporary is removed and the
 // error goes on to the caller with `path` unchanged.
@@ -37,8 +39,24 @@ std::filesystem::path AtomicTemporaryPath(const std::filesystem::path& path);
 // An output folder a command will create or write into: a file already at
 // `path` is a UserError naming `option` ("'X' is a file, not a folder"), so
 // that a check (phos render --check, fit map, fit batch) refuses it before
-// any work.
+// any work; so is a folder that cannot be made or written (as for
+// RequireOutputFile).
 void RequireFolderOrNothing(const std::filesystem::path& path, std::string_view option);
+
+// The 8-bit images phos writes through OpenImageIO (frames' PNGs, contact
+// sheets): it picks the format by the extension, so these are the names it can write.
+inline constexpr std::string_view kImageExtensions[] = {".png", ".jpg", ".jpeg", ".tif", ".tiff"};
+inline constexpr std::string_view kSvgExtension[] = {".svg"};
+
+// An output file a command will write (a material, report, plot, contact
+// sheet), checked at the command's start: a long fit or render must not end
+// in a refusal with nothing written (nor part of its outputs). A UserError
+// naming `option` when `path` is a folder (or ends in '/'), has none of
+// `extensions` (if any are given; any case), or lies under a file or a folder
+// that cannot be written. Its folders need not exist: WriteAtomically makes
+// them. An empty path (the option not given) passes.
+void RequireOutputFile(const std::filesystem::path& path, std::string_view option,
+                       std::span<const std::string_view> extensions = {});
 
 // fsync a file (UserError naming it when the disk refuses) and a folder (its
 // entries: a rename made durable).

@@ -36,6 +36,11 @@ std::string JoinComma(const Items& items, ToText to_text = {}) {
 // byte that is not part of valid UTF-8 \xHH; the rest is kept. What reaches
 // a terminal cannot move its cursor or split a line, and an SVG stays XML.
 std::string Printable(std::string_view text);
+// For "did you mean" in messages: the candidate fewest edits away from `word`
+// (an insertion, deletion, substitution or swap of neighbours counts one:
+// the optimal string alignment distance), if it is at most a third of the
+// word's length (at least 1); "" when none is that close. Ties go to the first.
+std::string Closest(std::string_view word, const std::vector<std::string>& candidates);
 // Parses a whole string as a finite double; false if it is not one.
 bool ParseDouble(const std::string& text, double* value);
 // Parses "a" or "a,b,c" into numbers; false (and *bad = offending item) on error.
