@@ -82,6 +82,8 @@ TEST(Printable, EscapesControlCharactersAndBytesThatAreNotUtf8) {
     for (char c : printable) EXPECT_FALSE(static_cast<unsigned char>(c) < 0x20 || c == 0x7f);
     EXPECT_EQ(Printable(printable), printable);
   }
+}
+
 TEST(Closest, NamesTheCandidateOneEditAwayAndNothingFarther) {
   // Random words, each mistyped by one edit of each kind: the word is found
   // among others of its length (random words of 8+ letters are many edits apart).
