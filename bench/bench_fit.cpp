@@ -14,6 +14,7 @@
 #include "phos/fit/charge_fit.h"
 #include "phos/fit/decay_fit.h"
 #include "phos/fit/decay_map.h"
+#include "phos/model/closed_form.h"
 
 namespace phos {
 namespace {
@@ -92,8 +93,8 @@ DecayMapInput MakeMegapixelStack(bool two_states) {
         for (int x = 0; x < in.width; ++x) {
           const double k = 0.015 * (1 + x / 1024.0), k2 = 8 * k;
           for (int c = 0; c < 3; ++c) {
-            double rate = amplitude[c] * std::exp(-k * start) * -std::expm1(-k * e) / (k * e) + 2;
-            if (two_states) rate += amplitude[c] * std::exp(-k2 * start) * -std::expm1(-k2 * e) / (k2 * e);
+            double rate = amplitude[c] * DecayFactor(k, start, e) + 2;
+            if (two_states) rate += amplitude[c] * DecayFactor(k2, start, e);
             frame[(static_cast<std::size_t>(y) * in.width + x) * 3 + c] =
                 static_cast<float>(rate + unit(rng) * std::sqrt(rate / (4 * e)));
           }

@@ -32,6 +32,7 @@
 #include "phos/util/json.h"
 #include "phos/util/progress.h"
 #include "phos/util/svg_plot.h"
+#include "phos/model/closed_form.h"
 
 namespace phos {
 namespace {
@@ -47,9 +48,10 @@ double Seconds(std::chrono::steady_clock::time_point start) {
 
 // Total emitted radiance at t by the closed form (long double).
 long double TruthL(const Material& m, double a, double t) {
-  const long double kr = m.states[0].kr, k = a + kr, r_inf = a / k;
-  auto charge = [&](long double time) { return r_inf * -std::expm1(-k * time); };
-  long double r = t <= kCharge_s ? charge(t) : charge(kCharge_s) * std::exp(-kr * (t - kCharge_s));
+  const long double kr = m.states[0].kr, a_l = a;
+  const long double r = t <= kCharge_s ? ChargedState(a_l, kr, static_cast<long double>(t))
+                                       : ChargedState(a_l, kr, static_cast<long double>(kCharge_s)) *
+                                             DecayFactor(kr, static_cast<long double>(t - kCharge_s));
   long double lambda = 0;
   for (double l : m.states[0].Lambda) lambda += l;
   return lambda * kr * r;

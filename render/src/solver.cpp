@@ -21,6 +21,7 @@
 #include "phos/util/atomic_file.h"
 #include "phos/util/error.h"
 #include "phos/util/json.h"
+#include "phos/model/closed_form.h"
 
 namespace phos::render {
 namespace {
@@ -248,14 +249,14 @@ void CoupledSolver::InitialStates() {
     if (initial.kind == InitialState::Kind::kUniform) {
       std::fill(g.states.r.begin(), g.states.r.end(), static_cast<float>(initial.r0));
     } else if (initial.kind == InitialState::Kind::kEquilibrium && GatherIrradiance(g, scene_.start_s)) {
-      // dr/dt = 0 in Eq. 8.1: r_i = a_i / (a_i + kr_i), a_i = sum_b ke_i[b] E[b].
+      // dr/dt = 0 in Eq. 8.1 (SteadyState), a_i = sum_b ke_i[b] E[b].
       const BatchCoefficients<float>& c = g.coefficients;
       tbb::parallel_for(std::size_t{0}, n, [&](std::size_t j) {
         for (int i = 0; i < c.nc; ++i) {
           double a = 0;
           for (int b = 0; b < c.n_exc; ++b) a += double(c.ke[i * c.n_exc + b]) * g.E[b * n + j];
           const double kr = c.per_point() ? c.kr_per_point[i * n + j] : c.kr[i];
-          g.states.state(i)[j] = a > 0 ? static_cast<float>(a / (a + kr)) : 0.0f;
+          g.states.state(i)[j] = static_cast<float>(SteadyState(a, kr));
         }
       });
     }

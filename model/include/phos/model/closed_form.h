@@ -20,6 +20,14 @@
 
 namespace phos {
 
+// The state a constant excitation rate a (1/s) holds the state at, where
+// dr/dt = 0 in Eq. 8.1: a / (a + kr); 0 without light.
+template <typename T>
+T SteadyState(const T& a, const T& kr) {
+  const T k = a + kr;
+  return a / std::max(k, std::numeric_limits<T>::min());  // k = 0 means a = 0: 0
+}
+
 // The state t_s seconds after r0 under a constant excitation rate a (1/s):
 // r0 e^{-kt} + r_inf (1 - e^{-kt}), exact. 1 - e^{-kt} is -expm1(-kt), so a
 // short charge or a weak light keeps every digit (charging from r0 = 0 is
@@ -34,8 +42,7 @@ T ChargedState(const T& a, const T& kr, const Seconds& t_s, const R& r0 = R(0)) 
   const T x = -k * t_s;
   const T decay = exp(x);
   const T rise = -expm1(x);                                        // 1 - e^{-kt}, accurate for small kt
-  const T r_inf = a / std::max(k, std::numeric_limits<T>::min());  // k = 0 means a = 0: r_inf = 0
-  return r0 * decay + r_inf * rise;
+  return r0 * decay + SteadyState(a, kr) * rise;
 }
 
 // What is left of a state delay_s seconds after the light went off,
