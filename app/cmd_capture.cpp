@@ -772,16 +772,8 @@ struct SpectrumArgs : CaptureArgs {
   SpectrumProtocolOptions spectrum;
 };
 
-}  // namespace
-
-void RegisterCapture(CLI::App& app) {
-  CLI::App* capture = app.add_subcommand(
-      "capture",
-      "Run a capture protocol (Sec. 8.4) on the simulated lab (--device sim --sim-material M.json) or a real\n"
-      "one (--lab LAB.json) and write its session folder as it goes: session.json, frames.jsonl,\n"
-      "events.jsonl, frames/*.tif (16-bit), stop.json. Lights go off on every way out.");
-  capture->require_subcommand(1);
-
+// phos capture decay.
+void RegisterCaptureDecay(CLI::App* capture) {
   auto decay_args = std::make_shared<DecayArgs>();
   CLI::App* decay = capture->add_subcommand(
       "decay",
@@ -817,7 +809,10 @@ void RegisterCapture(CLI::App& app) {
     if (!args.decay.IsValid(&error)) ThrowUserError("", "decay protocol", error);
     RunNewSession({DecayFrameFields::kProtocol, args.decay.ToJson()}, args);
   });
+}
 
+// phos capture excitation.
+void RegisterCaptureExcitation(CLI::App* capture) {
   auto excitation_args = std::make_shared<ExcitationArgs>();
   CLI::App* excitation = capture->add_subcommand(
       "excitation",
@@ -850,7 +845,10 @@ void RegisterCapture(CLI::App& app) {
     if (!args.excitation.IsValid(&error)) ThrowUserError("", "excitation protocol", error);
     RunNewSession({ExcitationFrameFields::kProtocol, args.excitation.ToJson()}, args);
   });
+}
 
+// phos capture spectrum.
+void RegisterCaptureSpectrum(CLI::App* capture) {
   auto spectrum_args = std::make_shared<SpectrumArgs>();
   CLI::App* spectrum = capture->add_subcommand(
       "spectrum",
@@ -873,7 +871,10 @@ void RegisterCapture(CLI::App& app) {
     if (!args.spectrum.IsValid(&error)) ThrowUserError("", "spectrum protocol", error);
     RunNewSession({SpectrumFrameFields::kProtocol, args.spectrum.ToJson()}, args);
   });
+}
 
+// phos capture lvf-calibration.
+void RegisterCaptureLvfCalibration(CLI::App* capture) {
   auto calibration_args = std::make_shared<CaptureArgs>();
   CLI::App* calibration = capture->add_subcommand(
       "lvf-calibration",
@@ -897,7 +898,10 @@ void RegisterCapture(CLI::App& app) {
     if (!options.IsValid(&error)) ThrowUserError("", "lvf-calibration protocol", error);
     RunNewSession({LvfCalibrationFrameFields::kProtocol, options.ToJson()}, args);
   });
+}
 
+// phos capture all.
+void RegisterCaptureAll(CLI::App* capture) {
   auto all_args = std::make_shared<AllArgs>();
   CLI::App* all = capture->add_subcommand(
       "all",
@@ -918,7 +922,10 @@ void RegisterCapture(CLI::App& app) {
                   "excitation: frames of decay tail after each charge, which split the response into the\n"
                   "excited states (default 6; 0: one frame per charge)");
   all->callback([all_args] { RunCaptureAll(*all_args); });
+}
 
+// phos capture resume, phos capture verify.
+void RegisterCaptureResumeAndVerify(CLI::App* capture) {
   auto resume_dir = std::make_shared<std::string>();
   CLI::App* resume = capture->add_subcommand(
       "resume",
@@ -944,6 +951,23 @@ void RegisterCapture(CLI::App& app) {
     if (const std::size_t problems = RunCaptureVerify(*verify_args); problems > 0)
       ThrowUserError(verify_args->dir, "", std::to_string(problems) + " problem(s) found (listed above)");
   });
+}
+
+}  // namespace
+
+void RegisterCapture(CLI::App& app) {
+  CLI::App* capture = app.add_subcommand(
+      "capture",
+      "Run a capture protocol (Sec. 8.4) on the simulated lab (--device sim --sim-material M.json) or a real\n"
+      "one (--lab LAB.json) and write its session folder as it goes: session.json, frames.jsonl,\n"
+      "events.jsonl, frames/*.tif (16-bit), stop.json. Lights go off on every way out.");
+  capture->require_subcommand(1);
+  RegisterCaptureDecay(capture);
+  RegisterCaptureExcitation(capture);
+  RegisterCaptureSpectrum(capture);
+  RegisterCaptureLvfCalibration(capture);
+  RegisterCaptureAll(capture);
+  RegisterCaptureResumeAndVerify(capture);
   RequireFiniteNumbers(*capture);
   // Each progress line out as it is said, also into a pipe or a log: a
   // signal ends capture with _Exit, which would drop what a full buffer held.

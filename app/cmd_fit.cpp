@@ -31,31 +31,13 @@
 #include "phos/util/atomic_file.h"
 #include "phos/util/error.h"
 #include "phos/util/format.h"
+#include "phos/util/image_file.h"
 #include "phos/util/json.h"
 #include "phos/util/progress.h"
 #include "phos/util/task_record.h"
 
 namespace phos::app {
 namespace {
-
-// Writes a float image with named channels (EXR) or 8-bit grey (PNG), whole or not at all;
-// `annotate` adds header attributes.
-void WriteFloatImage(const std::filesystem::path& path, int width, int height, const std::vector<std::string>& names,
-                     const std::vector<float>& pixels, const std::function<void(OIIO::ImageSpec&)>& annotate = {}) {
-  WriteAtomically(path, [&](const std::filesystem::path& temporary) {
-    auto out = OIIO::ImageOutput::create(temporary.string());
-    if (!out) ThrowUserError(path.string(), "", "no writer: " + OIIO::geterror());
-    const bool png = path.extension() == ".png";
-    OIIO::ImageSpec spec(width, height, static_cast<int>(names.size()),
-                         png ? OIIO::TypeDesc::UINT8 : OIIO::TypeDesc::FLOAT);
-    spec.channelnames = names;
-    if (!png) spec.attribute("compression", "zip");
-    if (annotate) annotate(spec);
-    if (!out->open(temporary.string(), spec) || !out->write_image(OIIO::TypeDesc::FLOAT, pixels.data()) ||
-        !out->close())
-      ThrowUserError(path.string(), "", "could not write (disk full?): " + out->geterror());
-  });
-}
 
 struct SessionArgs {
   std::string dir, out, report, compare, weights = "poisson";
@@ -291,55 +273,18 @@ MapFrames ReadMapFrames(const MapArgs& args, int index, int count) {
   return out;
 }
 
-// A map's parameter image: kr, then amplitude and background per camera
-// channel, then rms, interleaved per pixel (the channels of decay-map.exr);
-// with two states then kr2 and amplitude2 per camera channel.
-struct MapImage {
-  int width = 0, height = 0;
-  std::vector<std::string> names;
-  std::vector<float> pixels;
-  std::size_t no_decay = 0;
-  std::size_t one_state = 0;  // two states: decaying pixels where one state sufficed
-  std::size_t frames = 0;
-  int clipped = 0;
-  double seconds = 0;
-  fit::DecayMapCharge charge;
-};
-
-MapImage MapImageOf(const DecayMap& map, const MapFrames& frames) {
-  const bool two_states = !map.kr2.empty();
-  MapImage image{map.width,
-                 map.height,
-                 fit::DecayMapChannelNames(frames.channel_names, two_states),
-                 {},
-                 map.no_decay,
-                 map.one_state,
-                 frames.input.frames.size(),
-                 frames.clipped,
-                 map.seconds,
-                 frames.charge};
-  const int C = map.channels, nch = 2 + 2 * C + (two_states ? 1 + C : 0);
-  PHOS_CHECK(image.names.size() == static_cast<std::size_t>(nch));
-  const std::size_t pixels = static_cast<std::size_t>(map.width) * map.height;
-  image.pixels.resize(pixels * nch);
-  for (std::size_t p = 0; p < pixels; ++p) {
-    float* out = &image.pixels[p * nch];
-    out[0] = map.kr[p];
-    for (int c = 0; c < C; ++c) {
-      out[1 + c] = map.amplitude[p * C + c];
-      out[1 + C + c] = map.background[p * C + c];
-    }
-    out[1 + 2 * C] = map.rms[p];
-    if (two_states) {
-      out[2 + 2 * C] = map.kr2[p];
-      for (int c = 0; c < C; ++c) out[3 + 2 * C + c] = map.amplitude2[p * C + c];
-    }
-  }
+// A fitted map packed as decay-map.exr holds it (fit/decay_map_file.h), with
+// what its frames were.
+fit::DecayMapImage MapImageOf(const DecayMap& map, const MapFrames& frames) {
+  fit::DecayMapImage image = fit::PackDecayMap(map, frames.channel_names);
+  image.frames = frames.input.frames.size();
+  image.clipped = frames.clipped;
+  image.charge = frames.charge;
   return image;
 }
 
 // decay-map.exr and kr.png of a whole map, and what the command says of it.
-void WriteMapOutputs(const MapArgs& args, const MapImage& map, const std::string& where) {
+void WriteMapOutputs(const MapArgs& args, const fit::DecayMapImage& map, const std::string& where) {
   namespace fs = std::filesystem;
   const std::size_t pixels = static_cast<std::size_t>(map.width) * map.height, nch = map.names.size();
   std::vector<float> kr(pixels);
@@ -352,8 +297,7 @@ void WriteMapOutputs(const MapArgs& args, const MapImage& map, const std::string
   fs::create_directories(args.out, ec);
   if (ec) ThrowUserError(args.out, "", "cannot create the output folder: " + ec.message());
   const fs::path exr = fs::path(args.out) / "decay-map.exr";
-  WriteFloatImage(exr, map.width, map.height, map.names, map.pixels,
-                  [&](OIIO::ImageSpec& spec) { map.charge.Annotate(spec); });
+  fit::WriteDecayMap(exr, map);
   // A look at kr: grey from the 1st to the 99th percentile.
   std::vector<float> finite;
   for (float k : kr)
@@ -365,8 +309,10 @@ void WriteMapOutputs(const MapArgs& args, const MapImage& map, const std::string
   std::vector<float> grey(pixels);
   for (std::size_t p = 0; p < pixels; ++p)
     grey[p] = std::isfinite(kr[p]) ? std::clamp((kr[p] - lo) / std::max(hi - lo, 1e-12f), 0.0f, 1.0f) : 0.0f;
-  WriteFloatImage(fs::path(args.out) / "kr.png", map.width, map.height, {"Y"}, grey);
-  const bool two_states = std::find(map.names.begin(), map.names.end(), fit::kDecayMapKr2) != map.names.end();
+  OIIO::ImageSpec png(map.width, map.height, 1, OIIO::TypeDesc::UINT8);
+  png.channelnames = {"Y"};
+  WriteImageAtomically(fs::path(args.out) / "kr.png", png, OIIO::TypeDesc::FLOAT, grey.data());
+  const bool two_states = map.two_states();
   if (args.json) {
     nlohmann::json json = nlohmann::json({{"width", map.width},
                                           {"height", map.height},
@@ -428,30 +374,12 @@ void RunFitMapTile(const MapArgs& args) {
                     {done.filename().string(), TilePath(args.out, index, count, ".exr").filename().string()});
   const MapFrames frames = ReadMapFrames(args, index, count);
   const std::size_t first_row = frames.first_row, last_row = first_row + frames.input.height;
-  const MapImage tile = MapImageOf(FitMapFrames(args, frames), frames);
+  const fit::DecayMapImage tile = MapImageOf(FitMapFrames(args, frames), frames);
   std::error_code ec;
   std::filesystem::create_directories(done.parent_path(), ec);
   if (ec) ThrowUserError(done.parent_path().string(), "", "cannot create the folder: " + ec.message());
   const std::filesystem::path exr = TilePath(args.out, index, count, ".exr");
-  WriteAtomically(exr, [&](const std::filesystem::path& temporary) {
-    auto out = OIIO::ImageOutput::create(temporary.string());
-    if (!out) ThrowUserError(exr.string(), "", "no writer: " + OIIO::geterror());
-    OIIO::ImageSpec spec(tile.width, tile.height, static_cast<int>(tile.names.size()), OIIO::TypeDesc::FLOAT);
-    spec.channelnames = tile.names;
-    spec.attribute("compression", "zip");
-    spec.attribute(fit::kDecayMapFirstRow, static_cast<int>(first_row));
-    spec.attribute("phos:map_height", frames.full_height);
-    spec.attribute("phos:pixels_without_decay", static_cast<int>(tile.no_decay));
-    if (std::find(tile.names.begin(), tile.names.end(), fit::kDecayMapKr2) != tile.names.end())
-      spec.attribute("phos:pixels_with_one_state", static_cast<int>(tile.one_state));
-    spec.attribute("phos:frames", static_cast<int>(tile.frames));
-    spec.attribute("phos:clipped_frames", tile.clipped);
-    spec.attribute("phos:seconds", static_cast<float>(tile.seconds));
-    tile.charge.Annotate(spec);
-    if (!out->open(temporary.string(), spec) || !out->write_image(OIIO::TypeDesc::FLOAT, tile.pixels.data()) ||
-        !out->close())
-      ThrowUserError(exr.string(), "", "could not write (disk full?): " + out->geterror());
-  });
+  fit::WriteDecayMapTile(exr, tile, static_cast<int>(first_row), frames.full_height);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   WriteTaskDone(done, {"fit map tile " + args.tile, inputs, {exr.string()}, seconds, HostName()});
   std::printf("phos fit map: tile %d/%d, rows %zu-%zu of %d, %zu frames, fitted in %s s -> %s\n", index, count,
@@ -487,33 +415,9 @@ void RunFitMapMerge(const MapArgs& args) {
     ThrowUserError(tiles.string(), "",
                    "tile(s) " + missing + " of " + std::to_string(count) +
                        " not done for these inputs (session, --weights, --no-background, --states): nothing merged");
-  MapImage map;
-  for (int i = 0; i < count; ++i) {
-    const fs::path exr = TilePath(args.out, i, count, ".exr");
-    auto in = OIIO::ImageInput::open(exr.string());
-    if (!in) ThrowUserError(exr.string(), "", "cannot read: " + OIIO::geterror());
-    const OIIO::ImageSpec& spec = in->spec();
-    const int first_row = spec.get_int_attribute(fit::kDecayMapFirstRow, -1);
-    if (i == 0) {
-      map.width = spec.width;
-      map.height = spec.get_int_attribute("phos:map_height", 0);
-      map.names = spec.channelnames;
-      map.frames = static_cast<std::size_t>(spec.get_int_attribute("phos:frames", 0));
-      map.clipped = spec.get_int_attribute("phos:clipped_frames", 0);
-      map.charge = fit::DecayMapCharge::FromSpec(spec, exr.string(), "", "");
-      map.pixels.resize(static_cast<std::size_t>(map.width) * map.height * map.names.size());
-    }
-    if (spec.width != map.width || spec.channelnames != map.names || first_row < 0 ||
-        first_row + spec.height > map.height)
-      ThrowUserError(exr.string(), "", "does not fit the other tiles (size, channels or rows)");
-    const std::size_t row_values = static_cast<std::size_t>(map.width) * map.names.size();
-    if (!in->read_image(0, 0, 0, static_cast<int>(map.names.size()), OIIO::TypeDesc::FLOAT,
-                        map.pixels.data() + first_row * row_values))
-      ThrowUserError(exr.string(), "", "cannot read: " + in->geterror());
-    map.no_decay += static_cast<std::size_t>(spec.get_int_attribute("phos:pixels_without_decay", 0));
-    map.one_state += static_cast<std::size_t>(spec.get_int_attribute("phos:pixels_with_one_state", 0));
-    map.seconds += spec.get_float_attribute("phos:seconds", 0.0f);
-  }
+  std::vector<fs::path> exrs;
+  for (int i = 0; i < count; ++i) exrs.push_back(TilePath(args.out, i, count, ".exr"));
+  const fit::DecayMapImage map = fit::MergeDecayMapTiles(exrs);
   WriteMapOutputs(args, map, tiles.string());
 }
 
@@ -669,152 +573,173 @@ std::vector<std::filesystem::path> BatchItems(const std::vector<std::string>& in
   return items;
 }
 
-void RunFitBatch(const BatchArgs& args) {
-  RequireFolderOrNothing(args.out, "--out");
-  namespace fs = std::filesystem;
-  SessionFitOptions options;
-  options.components = args.components;
-  options.max_components = args.max_components;
-  options.weighting = ParseWeightsOption(args.weights);
-  std::vector<fs::path> items = BatchItems(args.inputs);
-  // --task i/N: this array task's share of the items, in order (the items'
-  // own done records make it idempotent; the summary is the merge's).
-  int task_index = 0, task_count = 0;
-  if (!args.task.empty()) {
-    if (!ParseTaskIndex(args.task, &task_index, &task_count))
-      ThrowUserError("", "--task", "expected i/N with 0 <= i < N, got \"" + args.task + "\"");
-    const auto [first, last] = TaskShare(items.size(), task_index, task_count);
-    items = std::vector<fs::path>(items.begin() + first, items.begin() + last);
-  }
-  if (args.check) {
-    RequireFolderOrNothing(args.out, "--out");
-    std::printf("phos fit batch: %zu item(s) to fit or keep (--check: nothing fitted)\n", items.size());
-    return;
-  }
-  const auto task_start = std::chrono::steady_clock::now();
-  std::error_code ec;
-  fs::create_directories(args.out, ec);
-  if (ec) ThrowUserError(args.out, "", "cannot create the output folder: " + ec.message());
-  const int jobs = args.jobs > 0 ? args.jobs : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+// One item of a batch and what became of it: kept (its done record is for
+// these inputs), fitted now, or failed with why.
+struct BatchRow {
+  std::string name, status, detail, inputs;
+  int nc = 0;
+  double kr = 0, seconds = 0;
+  std::vector<double> kr_by_state;
+};
 
-  // An item is done when its record (<name>.done.json, written last and
-  // atomically, after the material and the report) exists: a crash
-  // mid-batch leaves the unfinished items without one, and only they rerun.
-  struct Row {
-    std::string name, status, detail, inputs;
-    int nc = 0;
-    double kr = 0, seconds = 0;
-    std::vector<double> kr_by_state;
-  };
-  std::vector<Row> rows(items.size());
+// The items this run (or --task share) has, each with its row, and those to fit.
+struct BatchPlan {
+  std::vector<std::filesystem::path> items;
+  int task_index = 0, task_count = 0;
+  std::vector<BatchRow> rows;
   std::vector<std::size_t> todo;
-  for (std::size_t i = 0; i < items.size(); ++i) {
-    rows[i].name = items[i].filename().string();
-    rows[i].inputs = BatchItemInputs(items[i], options);
-    const fs::path done = fs::path(args.out) / (rows[i].name + ".done.json");
+};
+
+// --task i/N: this array task's share of the items, in order (the items'
+// own done records make it idempotent; the summary is the merge's).
+BatchPlan ShareOfItems(const BatchArgs& args) {
+  BatchPlan plan;
+  plan.items = BatchItems(args.inputs);
+  if (!args.task.empty()) {
+    if (!ParseTaskIndex(args.task, &plan.task_index, &plan.task_count))
+      ThrowUserError("", "--task", "expected i/N with 0 <= i < N, got \"" + args.task + "\"");
+    const auto [first, last] = TaskShare(plan.items.size(), plan.task_index, plan.task_count);
+    plan.items = std::vector<std::filesystem::path>(plan.items.begin() + first, plan.items.begin() + last);
+  }
+  return plan;
+}
+
+// An item is done when its record (<name>.done.json, written last and
+// atomically, after the material and the report) exists for the same
+// inputs: a crash mid-batch leaves the unfinished items without one, and
+// only they rerun.
+void ReadDoneRecords(const BatchArgs& args, const SessionFitOptions& options, BatchPlan* plan) {
+  namespace fs = std::filesystem;
+  plan->rows.resize(plan->items.size());
+  for (std::size_t i = 0; i < plan->items.size(); ++i) {
+    BatchRow& row = plan->rows[i];
+    row.name = plan->items[i].filename().string();
+    row.inputs = BatchItemInputs(plan->items[i], options);
     std::string why;
-    const std::optional<BatchDoneRecord> record = ReadBatchDone(done, &why);
-    if (record && record->inputs == rows[i].inputs) {
-      rows[i].status = "kept";
-      rows[i].nc = record->n_components;
-      rows[i].kr = record->kr_per_s;
-      rows[i].kr_by_state = record->kr_by_state_per_s;
-      rows[i].seconds = record->seconds;
-      rows[i].detail = args.merge ? "fitted before this merge (its task's record)" : "done in an earlier run";
+    const std::optional<BatchDoneRecord> record = ReadBatchDone(fs::path(args.out) / (row.name + ".done.json"), &why);
+    if (record && record->inputs == row.inputs) {
+      row.status = "kept";
+      row.nc = record->n_components;
+      row.kr = record->kr_per_s;
+      row.kr_by_state = record->kr_by_state_per_s;
+      row.seconds = record->seconds;
+      row.detail = args.merge ? "fitted before this merge (its task's record)" : "done in an earlier run";
     } else {
       if (record)
-        rows[i].detail = "its .done.json was made from other inputs (the data or the options): fitted again";
+        row.detail = "its .done.json was made from other inputs (the data or the options): fitted again";
       else if (!why.empty())
-        rows[i].detail = "its .done.json " + why + ": fitted again";
-      todo.push_back(i);
+        row.detail = "its .done.json " + why + ": fitted again";
+      plan->todo.push_back(i);
     }
   }
-  if (!args.task.empty()) {
-    // A killed run of this task left the temporary of the file it was writing: gone first.
-    std::vector<std::string> names;
-    for (std::size_t i : todo)
-      for (const char* suffix : {".json", ".html", ".done.json", ".failed.txt"}) names.push_back(rows[i].name + suffix);
-    RemoveTemporaries(args.out, names);
-    // And an earlier run's failure of an item this task fits again: the merge
-    // reads .failed.txt as this chain's word, so a task killed before the
-    // item must leave it "not fitted yet", not failed for an old reason.
-    for (std::size_t i : todo) fs::remove(fs::path(args.out) / (rows[i].name + ".failed.txt"), ec);
-  }
-  if (args.merge) {
-    // An item its task could not fit (its .failed.txt, the task's own words)
-    // is a failed row of the summary, as in one process's batch; one no task
-    // has tried yet is refused, naming it.
-    std::vector<std::size_t> untried;
-    for (std::size_t i : todo) {
-      const fs::path failed = fs::path(args.out) / (rows[i].name + ".failed.txt");
-      std::error_code exists_error;
-      const std::string why = fs::is_regular_file(failed, exists_error) ? ReadFileText(failed, 1 << 20) : "";
-      if (why.empty()) {
-        untried.push_back(i);
-        continue;
-      }
-      rows[i].status = "failed";
-      rows[i].detail = why.substr(0, why.find_last_not_of("\n") + 1);
+}
+
+// A task's leftovers of the items it fits again: the temporary of the file a
+// killed run was writing, and an earlier run's failure (the merge reads
+// .failed.txt as this chain's word, so a task killed before the item must
+// leave it "not fitted yet", not failed for an old reason).
+void ClearTaskLeftovers(const BatchArgs& args, const BatchPlan& plan) {
+  std::vector<std::string> names;
+  for (std::size_t i : plan.todo)
+    for (const char* suffix : {".json", ".html", ".done.json", ".failed.txt"})
+      names.push_back(plan.rows[i].name + suffix);
+  RemoveTemporaries(args.out, names);
+  std::error_code ec;
+  for (std::size_t i : plan.todo)
+    std::filesystem::remove(std::filesystem::path(args.out) / (plan.rows[i].name + ".failed.txt"), ec);
+}
+
+// --merge: an item its task could not fit (its .failed.txt, the task's own
+// words) is a failed row of the summary, as in one process's batch; one no
+// task has tried yet is refused, naming it. Nothing is fitted.
+void MergeTaskFailures(const BatchArgs& args, BatchPlan* plan) {
+  std::vector<std::size_t> untried;
+  for (std::size_t i : plan->todo) {
+    const std::filesystem::path failed = std::filesystem::path(args.out) / (plan->rows[i].name + ".failed.txt");
+    std::error_code exists_error;
+    const std::string why = std::filesystem::is_regular_file(failed, exists_error) ? ReadFileText(failed, 1 << 20) : "";
+    if (why.empty()) {
+      untried.push_back(i);
+      continue;
     }
-    if (!untried.empty()) {
-      const std::string missing = JoinComma(untried, [&](std::size_t i) { return rows[i].name; });
-      ThrowUserError(args.out, "--merge", "item(s) not fitted yet: " + missing + " (nothing merged)");
-    }
-    todo.clear();
+    plan->rows[i].status = "failed";
+    plan->rows[i].detail = why.substr(0, why.find_last_not_of("\n") + 1);
   }
-  ProgressBar progress("fit batch", todo.size());
+  if (!untried.empty()) {
+    const std::string missing = JoinComma(untried, [&](std::size_t i) { return plan->rows[i].name; });
+    ThrowUserError(args.out, "--merge", "item(s) not fitted yet: " + missing + " (nothing merged)");
+  }
+  plan->todo.clear();
+}
+
+// Fits one item into its row, writing its material, report and done record;
+// one item's bad data is said in its row and .failed.txt, never thrown.
+void FitBatchItem(const BatchArgs& args, const SessionFitOptions& options, const std::filesystem::path& item,
+                  BatchRow* row) {
+  const std::filesystem::path base = std::filesystem::path(args.out) / row->name;
+  std::error_code ec;
+  try {
+    const SessionFit fit = FitSession(item, options);
+    SaveMaterial(fit.material, base.string() + ".json");
+    if (args.reports)
+      WriteFileAtomically(base.string() + ".html", SessionReportHtml(fit, "phos fit batch: " + row->name));
+    row->status = "fitted";
+    row->nc = fit.decay->n_components;
+    row->kr = fit.material.states[0].kr;
+    row->kr_by_state.clear();
+    for (const ExcitedState& state : fit.material.states) row->kr_by_state.push_back(state.kr);
+    row->seconds = fit.seconds;
+    const std::string earlier = row->detail;
+    row->detail = fit.notes.empty() ? "" : std::to_string(fit.notes.size()) + " note(s): " + fit.notes.front();
+    if (!earlier.empty()) row->detail = earlier + (row->detail.empty() ? "" : "; " + row->detail);
+    const BatchDoneRecord done{item.string(), row->nc, row->kr, row->seconds, row->kr_by_state, fit.notes, row->inputs};
+    WriteFileAtomically(base.string() + ".done.json", done.ToJson().dump(2) + "\n");
+    std::filesystem::remove(base.string() + ".failed.txt", ec);
+  } catch (const std::exception& e) {
+    row->status = "failed";
+    row->detail = e.what();
+    try {
+      WriteFileAtomically(base.string() + ".failed.txt", std::string(e.what()) + "\n");
+    } catch (...) {}
+  }
+}
+
+// The items to fit, --jobs at a time.
+void FitBatchItems(const BatchArgs& args, const SessionFitOptions& options, BatchPlan* plan) {
+  const int jobs = args.jobs > 0 ? args.jobs : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  ProgressBar progress("fit batch", plan->todo.size());
   std::atomic<std::size_t> next{0};
   auto worker = [&] {
-    for (std::size_t k = next++; k < todo.size(); k = next++) {
-      const std::size_t i = todo[k];
-      Row& row = rows[i];
-      const fs::path base = fs::path(args.out) / row.name;
-      try {
-        const SessionFit fit = FitSession(items[i], options);
-        SaveMaterial(fit.material, base.string() + ".json");
-        if (args.reports)
-          WriteFileAtomically(base.string() + ".html", SessionReportHtml(fit, "phos fit batch: " + row.name));
-        row.status = "fitted";
-        row.nc = fit.decay->n_components;
-        row.kr = fit.material.states[0].kr;
-        row.kr_by_state.clear();
-        for (const ExcitedState& state : fit.material.states) row.kr_by_state.push_back(state.kr);
-        row.seconds = fit.seconds;
-        const std::string earlier = row.detail;
-        row.detail = fit.notes.empty() ? "" : std::to_string(fit.notes.size()) + " note(s): " + fit.notes.front();
-        if (!earlier.empty()) row.detail = earlier + (row.detail.empty() ? "" : "; " + row.detail);
-        const BatchDoneRecord done{items[i].string(), row.nc,    row.kr,    row.seconds,
-                                   row.kr_by_state,   fit.notes, row.inputs};
-        WriteFileAtomically(base.string() + ".done.json", done.ToJson().dump(2) + "\n");
-        fs::remove(base.string() + ".failed.txt", ec);
-      } catch (const std::exception& e) {
-        // One item's bad data must not stop the others; it is said, and kept.
-        row.status = "failed";
-        row.detail = e.what();
-        try {
-          WriteFileAtomically(base.string() + ".failed.txt", std::string(e.what()) + "\n");
-        } catch (...) {}
-      }
+    for (std::size_t k = next++; k < plan->todo.size(); k = next++) {
+      const std::size_t i = plan->todo[k];
+      FitBatchItem(args, options, plan->items[i], &plan->rows[i]);
       progress.Advance();
     }
   };
   std::vector<std::thread> threads;
-  for (int t = 0; t < std::min<int>(jobs, static_cast<int>(todo.size())); ++t) threads.emplace_back(worker);
+  for (int t = 0; t < std::min<int>(jobs, static_cast<int>(plan->todo.size())); ++t) threads.emplace_back(worker);
   for (std::thread& t : threads) t.join();
   progress.Finish();
+}
 
-  // One summary table, on screen and as CSV.
-  // kr_per_s is the first state's (as before); kr_by_state_per_s every
-  // state's, ';'-separated, last so that readers of the older columns go on.
-  std::string csv = "item,status,n_components,kr_per_s,seconds,detail,kr_by_state_per_s\n";
-  if (!args.json) std::printf("%-24s %-7s %3s %16s %8s  %s\n", "item", "status", "nc", "kr (1/s)", "s", "detail");
+struct BatchCounts {
   int failed = 0;
   std::size_t fitted_now = 0, kept = 0;
+};
+
+// One summary table, on screen (or as JSON) and as summary.csv (one process's
+// or a merge's; a task writes none). kr_per_s is the first state's (as
+// before); kr_by_state_per_s every state's, ';'-separated, last so that
+// readers of the older columns go on.
+BatchCounts SummarizeBatch(const BatchArgs& args, const std::vector<BatchRow>& rows) {
+  std::string csv = "item,status,n_components,kr_per_s,seconds,detail,kr_by_state_per_s\n";
+  if (!args.json) std::printf("%-24s %-7s %3s %16s %8s  %s\n", "item", "status", "nc", "kr (1/s)", "s", "detail");
+  BatchCounts counts;
   nlohmann::json json_rows = nlohmann::json::array();
-  for (const Row& row : rows) {
-    failed += row.status == "failed";
-    fitted_now += row.status == "fitted";
-    kept += row.status == "kept";
+  for (const BatchRow& row : rows) {
+    counts.failed += row.status == "failed";
+    counts.fitted_now += row.status == "fitted";
+    counts.kept += row.status == "kept";
     json_rows.push_back({{"item", row.name},
                          {"status", row.status},
                          {"n_components", row.nc},
@@ -828,49 +753,65 @@ void RunFitBatch(const BatchArgs& args) {
                   row.status == "failed" ? "-" : kr_text.c_str(), FormatShort(row.seconds).c_str(), row.detail.c_str());
     std::string detail = row.detail;
     std::replace(detail.begin(), detail.end(), '"', '\'');
-    csv.append(row.name)
-        .append(",")
-        .append(row.status)
-        .append(",")
-        .append(std::to_string(row.nc))
-        .append(",")
-        .append(FormatDouble(row.kr))
-        .append(",")
-        .append(FormatDouble(row.seconds))
-        .append(",\"")
-        .append(detail)
-        .append("\",")
-        .append(Join(row.kr_by_state, ";", FormatDouble))
-        .append("\n");
+    csv.append(row.name + "," + row.status + "," + std::to_string(row.nc) + "," + FormatDouble(row.kr) + "," +
+               FormatDouble(row.seconds) + ",\"" + detail + "\"," + Join(row.kr_by_state, ";", FormatDouble) + "\n");
   }
-  if (args.task.empty()) WriteFileAtomically(fs::path(args.out) / "summary.csv", csv);
+  if (args.task.empty()) WriteFileAtomically(std::filesystem::path(args.out) / "summary.csv", csv);
   if (args.json)
-    std::printf(
-        "%s\n",
-        nlohmann::json(
-            {{"items", json_rows}, {"fitted_now", fitted_now}, {"kept", kept}, {"failed", failed}, {"out", args.out}})
-            .dump()
-            .c_str());
+    std::printf("%s\n", nlohmann::json({{"items", json_rows},
+                                        {"fitted_now", counts.fitted_now},
+                                        {"kept", counts.kept},
+                                        {"failed", counts.failed},
+                                        {"out", args.out}})
+                            .dump()
+                            .c_str());
   else
     std::printf("phos fit batch: %zu item(s)%s, %zu fitted now, %zu kept, %d failed -> %s%s\n", rows.size(),
-                args.task.empty() ? "" : (" (task " + args.task + ")").c_str(), fitted_now, kept, failed,
-                args.out.c_str(), args.task.empty() ? " (summary.csv)" : "");
-  if (failed > 0)
-    ThrowUserError(
-        "", "fit batch",
-        std::to_string(failed) + " item(s) could not be fitted (see the table and " + args.out + "/<item>.failed.txt)");
-  if (!args.task.empty()) {
-    // The task's record (phos slurm status counts them), after its items' own.
-    TaskDoneRecord record{"fit batch task " + args.task, "", {}, 0, HostName()};
-    for (const fs::path& item : items) {
-      record.inputs += item.string() + ";";
-      record.outputs.push_back((fs::path(args.out) / (item.filename().string() + ".json")).string());
-    }
-    record.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - task_start).count();
-    WriteTaskDone(fs::path(args.out) / "tasks" /
-                      ("task-" + std::to_string(task_index) + "-of-" + std::to_string(task_count) + ".json"),
-                  record);
+                args.task.empty() ? "" : (" (task " + args.task + ")").c_str(), counts.fitted_now, counts.kept,
+                counts.failed, args.out.c_str(), args.task.empty() ? " (summary.csv)" : "");
+  return counts;
+}
+
+// The task's record (phos slurm status counts them), after its items' own.
+void WriteBatchTaskRecord(const BatchArgs& args, const BatchPlan& plan, double seconds) {
+  TaskDoneRecord record{"fit batch task " + args.task, "", {}, 0, HostName()};
+  for (const std::filesystem::path& item : plan.items) {
+    record.inputs += item.string() + ";";
+    record.outputs.push_back((std::filesystem::path(args.out) / (item.filename().string() + ".json")).string());
   }
+  record.seconds = seconds;
+  WriteTaskDone(std::filesystem::path(args.out) / "tasks" /
+                    ("task-" + std::to_string(plan.task_index) + "-of-" + std::to_string(plan.task_count) + ".json"),
+                record);
+}
+
+void RunFitBatch(const BatchArgs& args) {
+  RequireFolderOrNothing(args.out, "--out");
+  SessionFitOptions options;
+  options.components = args.components;
+  options.max_components = args.max_components;
+  options.weighting = ParseWeightsOption(args.weights);
+  BatchPlan plan = ShareOfItems(args);
+  if (args.check) {
+    std::printf("phos fit batch: %zu item(s) to fit or keep (--check: nothing fitted)\n", plan.items.size());
+    return;
+  }
+  const auto task_start = std::chrono::steady_clock::now();
+  std::error_code ec;
+  std::filesystem::create_directories(args.out, ec);
+  if (ec) ThrowUserError(args.out, "", "cannot create the output folder: " + ec.message());
+  ReadDoneRecords(args, options, &plan);
+  if (!args.task.empty()) ClearTaskLeftovers(args, plan);
+  if (args.merge) MergeTaskFailures(args, &plan);
+  FitBatchItems(args, options, &plan);
+  const BatchCounts counts = SummarizeBatch(args, plan.rows);
+  if (counts.failed > 0)
+    ThrowUserError("", "fit batch",
+                   std::to_string(counts.failed) + " item(s) could not be fitted (see the table and " + args.out +
+                       "/<item>.failed.txt)");
+  if (!args.task.empty())
+    WriteBatchTaskRecord(args, plan,
+                         std::chrono::duration<double>(std::chrono::steady_clock::now() - task_start).count());
 }
 
 }  // namespace
