@@ -18,6 +18,7 @@
 #include "phos/acquire/lights.h"
 #include "phos/acquire/protocol_records.h"
 #include "phos/util/error.h"
+#include "phos/util/image_file.h"
 #include "phos/util/json.h"
 
 namespace phos {
@@ -284,25 +285,21 @@ std::string SessionWriter::WriteFrame(const Frame& frame, nlohmann::json extra) 
   const std::filesystem::path final_path = dir_ / name;
   // Complete on disk before it has a name, and named before it has a record.
   FileDigest digest;
-  WriteAtomically(final_path, [&](const std::filesystem::path& temporary) {
-    auto out = OIIO::ImageOutput::create(temporary.string());
-    if (!out) ThrowUserError(temporary.string(), "", "no TIFF writer: " + OIIO::geterror());
-    OIIO::ImageSpec spec(frame.width, frame.height, frame.channels, OIIO::TypeDesc::UINT16);
-    spec.channelnames = frame.channel_names;
-    spec.attribute("compression", "zip");  // lossless
-    spec.attribute("oiio:BitsPerSample", 16);
-    spec.attribute("ExposureTime", static_cast<float>(frame.exposure_s));  // EXIF; frames.jsonl holds the rest
-    if (!out->open(temporary.string(), spec) || !out->write_image(OIIO::TypeDesc::UINT16, frame.pixels.data()) ||
-        !out->close())
-      ThrowUserError(final_path.string(), "", "could not write the frame (disk full?): " + out->geterror());
-    try {
-      SyncFile(temporary);
-      digest = DigestFile(temporary);
-    } catch (const UserError&) {
-      ThrowUserError(final_path.string(), "",
-                     "could not write the frame (disk full?): it did not reach the disk whole");
-    }
-  });
+  OIIO::ImageSpec spec(frame.width, frame.height, frame.channels, OIIO::TypeDesc::UINT16);
+  spec.channelnames = frame.channel_names;
+  spec.attribute("compression", "zip");  // lossless
+  spec.attribute("oiio:BitsPerSample", 16);
+  spec.attribute("ExposureTime", static_cast<float>(frame.exposure_s));  // EXIF; frames.jsonl holds the rest
+  WriteImageAtomically(final_path, spec, OIIO::TypeDesc::UINT16, frame.pixels.data(),
+                       [&](const std::filesystem::path& temporary) {
+                         try {
+                           SyncFile(temporary);
+                           digest = DigestFile(temporary);
+                         } catch (const UserError&) {
+                           ThrowUserError(final_path.string(), "",
+                                          "could not write the frame (disk full?): it did not reach the disk whole");
+                         }
+                       });
   SyncDirectory(dir_ / "frames");
   frames_ = seq;  // the number is used, with or without its record
   FrameRecord record;

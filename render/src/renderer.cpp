@@ -19,6 +19,7 @@
 #include "phos/util/atomic_file.h"
 #include "phos/util/colour.h"
 #include "phos/util/error.h"
+#include "phos/util/image_file.h"
 #include "phos/util/format.h"
 #include "phos/util/math.h"
 #include "phos/util/progress.h"
@@ -181,20 +182,6 @@ Image BandsToLinearSrgb(const Image& bands, const SpectralGrid& grid) {
   });
   return rgb;
 }
-
-namespace {
-
-void WriteImageAtomically(const std::filesystem::path& path, const OIIO::ImageSpec& spec, OIIO::TypeDesc type,
-                          const void* data) {
-  WriteAtomically(path, [&](const std::filesystem::path& temporary) {
-    auto out = OIIO::ImageOutput::create(temporary.string());
-    if (!out) ThrowUserError(path.string(), "", "no image writer for this format: " + OIIO::geterror());
-    if (!out->open(temporary.string(), spec) || !out->write_image(type, data) || !out->close())
-      ThrowUserError(path.string(), "", "could not write the image: " + out->geterror());
-  });
-}
-
-}  // namespace
 
 void WriteExr(const std::filesystem::path& path, const Image& rgb, const Image& bands, const SpectralGrid& grid,
               const std::string& compression) {

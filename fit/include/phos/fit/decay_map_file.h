@@ -6,10 +6,15 @@
 // library (phos_decay_map_file), so that a reader links OpenImageIO and
 // nothing of the fits.
 
+#include <filesystem>
 #include <string>
 #include <vector>
 
 #include <OpenImageIO/imageio.h>
+
+namespace phos {
+struct DecayMap;
+}  // namespace phos
 
 namespace phos::fit {
 
@@ -46,5 +51,33 @@ struct DecayMapCharge {
   static DecayMapCharge FromSpec(const OIIO::ImageSpec& spec, const std::string& where, const std::string& field,
                                  const std::string& subject);
 };
+
+// A map's parameter image as decay-map.exr holds it: DecayMapChannelNames'
+// channels interleaved per pixel, with what its header records.
+struct DecayMapImage {
+  int width = 0, height = 0;
+  std::vector<std::string> names;
+  std::vector<float> pixels;
+  std::size_t no_decay = 0;   // pixels without a decay
+  std::size_t one_state = 0;  // two states: decaying pixels where one state sufficed
+  std::size_t frames = 0;
+  int clipped = 0;  // clipped frames left out
+  double seconds = 0;
+  DecayMapCharge charge;
+
+  bool two_states() const;
+};
+
+// Packs a fitted map (decay_map.h) of these camera channels.
+DecayMapImage PackDecayMap(const DecayMap& map, const std::vector<std::string>& camera_channels);
+
+// decay-map.exr of a whole map: its channels (zip) and the charge.
+void WriteDecayMap(const std::filesystem::path& path, const DecayMapImage& map);
+// A tile of a map (phos fit map --tile): its rows from first_row of a map
+// map_height rows high, and its counts, for the merge.
+void WriteDecayMapTile(const std::filesystem::path& path, const DecayMapImage& tile, int first_row, int map_height);
+// The tiles of one map, in any order, merged: a tile that does not fit the
+// others (size, channels, rows) or does not read is one line naming it.
+DecayMapImage MergeDecayMapTiles(const std::vector<std::filesystem::path>& tiles);
 
 }  // namespace phos::fit
