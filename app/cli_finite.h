@@ -1,5 +1,5 @@
 #pragma once
-// NaN and infinity in a numeric option (issue 18 item 5): CLI11 converts
+// NaN and infinity in a numeric option: CLI11 converts
 // "nan", "inf" and "1e999" to doubles without a word, and a time, rate or
 // irradiance of NaN then runs silently into every later computation. Every
 // numeric option of every command takes this check:

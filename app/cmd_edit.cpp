@@ -1,5 +1,5 @@
 // phos edit solve: the material that meets an artist's space-time constraints
-// at one point (DESIGN.md contract, Sec. 8.6):
+// at one point (Sec. 8.6; its output: docs/formats.md, "What the commands write"):
 //   phos edit solve CONSTRAINTS.json --json
 //   JSON: {"material": {...}, "cost":.., "residuals":[..], "seconds":..,
 //          "baseline": {"cost":.., "seconds":..}}

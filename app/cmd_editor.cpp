@@ -1,4 +1,4 @@
-// phos editor: the page (DESIGN.md: binds 127.0.0.1). Apart from phos edit solve
+// phos editor: the page (docs/editor.md: binds 127.0.0.1). Apart from phos edit solve
 // (cmd_edit.cpp), which links only the solver, not the renderer.
 
 #include <cstdio>

@@ -1,5 +1,5 @@
 // phos simulate: one point of a material under a charge-then-dark schedule
-// (DESIGN.md contract). CSV t,r_1..r_nc,L_1..L_n or JSON {"t","r","L"}.
+// (docs/formats.md, "What the commands write"). CSV t,r_1..r_nc,L_1..L_n or JSON {"t","r","L"}.
 
 #include <algorithm>
 #include <cstdio>

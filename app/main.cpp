@@ -5,7 +5,7 @@
 // /proc/self/exe), with the same arguments. Each of those links only the parts
 // its command needs, so `phos simulate` or `phos fit decay-curve` start in a
 // few milliseconds without loading OpenImageIO, Embree, Aravis or OpenCV
-// (issue 17; bench/startup.sh measures it). `phos --help` lists every command
+// (bench/startup.sh measures it). `phos --help` lists every command
 // from kCommands (commands.h) without linking any of them.
 //
 // Conventions: `phos --version` prints the project version (phos::kVersion).

@@ -427,8 +427,8 @@ std::string FamilySection(const std::vector<Result>& results) {
   const std::vector<double> one = TwoStateAverages(results, 0), two = TwoStateAverages(results, 1);
   md += "\nTwo-state materials (fixtures and random family together, " + std::to_string(two.size()) +
         " fitted with nc = 2): average dE00 **" + Cell(StatsOf(one).mean) + " for nc = 1, " + Cell(StatsOf(two).mean) +
-        " for nc = 2**. The paper, on photographs of measured materials: 13.16 for nc = 1, 5.46 for nc = 2. Goal "
-        "(issue 13): nc = 2 fits of two-state truths under 1. Seen by the CIE observer instead of the camera "
+        " for nc = 2**. The paper, on photographs of measured materials: 13.16 for nc = 1, 5.46 for nc = 2. Goal: "
+        "nc = 2 fits of two-state truths under 1. Seen by the CIE observer instead of the camera "
         "(XYZ straight from the band radiance, same exposure; column dE00_cie_observer of the CSV): " +
         Cell(StatsOf(TwoStateAverages(results, 0, true)).mean) + " for nc = 1, " +
         Cell(StatsOf(TwoStateAverages(results, 1, true)).mean) + " for nc = 2.\n\n";
@@ -468,7 +468,7 @@ std::string MaterialSection(const std::vector<Result>& results, int random_count
   }
   md += "\nThe random family is `RandomTwoStateMaterial(seed)` (model/synthetic.h) for seeds 1 to " +
         std::to_string(random_count) +
-        ": rate ratios 2-50, fast shares 10-90%, as issue 13 asks the pipeline "
+        ": rate ratios 2-50, fast shares 10-90%, the ranges the pipeline is held "
         "to recover. " +
         std::to_string(material_count) + " materials, " + FormatShort(total_s, 3) + " s on " + std::to_string(threads) +
         " threads.\n\n"

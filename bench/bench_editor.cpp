@@ -2,7 +2,7 @@
 // frames over a 200-frame sequence, nc = 1 in RGB, and the same edit solved
 // with two states (nc = 2). The paper needed 80 ms on a GPU for its grid
 // search; the goal here is at most 10 ms on 2 CPU cores for nc = 1 and nc = 2
-// (issue 13) with a cost no higher than the grid's. All are timed in this run
+// with a cost no higher than the grid's. All are timed in this run
 // and their costs printed as counters (cost; and for ours, cost_vs_grid =
 // ours / grid's).
 //

@@ -1,5 +1,5 @@
-// Speed of the decay and charge fits (issue: a 1000-point, 3-component decay
-// fit in well under 1 ms). Synthetic curves with Gaussian noise, fixed seed.
+// Speed of the decay and charge fits (the goal: a 1000-point, 3-component
+// decay fit in well under 1 ms). Synthetic curves with Gaussian noise, fixed seed.
 //
 // Run: build/bin/bench_fit (make bench saves the output in docs/bench/).
 
@@ -70,7 +70,7 @@ BENCHMARK(BM_ChargeFit)->Unit(benchmark::kMicrosecond);
 // A 1-megapixel, 36-frame decay session (3 channels), as the decay
 // protocol's schedule and exposures give it, rates varying across the
 // image, with Gaussian noise of photon-counting size (Poisson sampling of
-// 113 million values would take longer than the fit). The issue's target:
+// 113 million values would take longer than the fit). The target:
 // a map of it in at most 2 s on 2 cores, in at most twice its memory.
 // With `two_states`, every pixel also has a fast state of 8 times the rate
 // and the same colour, as bright as the slow one at t = 0 (two-state maps,

@@ -6,7 +6,7 @@
 // between random points of the box: the two ends of what a renderer casts).
 //
 // Two ratios are measured by alternating the two sides inside one benchmark,
-// so the machine's noise hits both alike (DESIGN.md's "model only what the
+// so the machine's noise hits both alike (docs/render.md's "only what the
 // scene requires", Sec. 8.5's 454 vs 448 ms):
 //   BM_PhosphorescenceOverhead: a frame (coupled step + direct render) with
 //     phosphorescence over one without; counter `ratio`.
@@ -16,12 +16,12 @@
 //     fixture (fixtures/scenes/textured-plane.json, its albedo a glTF
 //     baseColorTexture through OpenImageIO's TextureSystem) over the same
 //     scene untextured (the texture's factor as a constant albedo); counter
-//     `ratio` (issue 14: at most 1.5). /1: the same for the glTF sign
+//     `ratio` (the goal: at most 1.5). /1: the same for the glTF sign
 //     (fixtures/scenes/glow-sign.json at 640 x 480: textured sign, an area
 //     light and a point light), a scene whose untextured pixel costs more.
 //   BM_PathAgainstBareEmbree: a path-traced frame over bare rtcIntersect1 /
 //     rtcOccluded1 calls on the very rays that frame cast (recorded, then
-//     replayed in the same order); counter `ratio` (issue 17: at most 1.5).
+//     replayed in the same order); counter `ratio` (the goal: at most 1.5).
 //   BM_PathAgainstBareEmbreeBySize/s: the same after dark, with a plain
 //     white icosphere of 20 x 4^s triangles floating in the box: how the
 //     ratio moves as Embree's traversal costs more per ray and the shading

@@ -1,5 +1,5 @@
-// The speed/accuracy trade of the four integrators of Eq. 8.1 (issue:
-// "measure that trade"). For the eight Table 8.1 presets whose ke is known,
+// The speed/accuracy trade of the four integrators of Eq. 8.1
+// (docs/integrator-study.md). For the eight Table 8.1 presets whose ke is known,
 // under a charge-then-dark schedule, and steps from 1 ms to 100 s:
 //   error: max over the samples of |L - L*| / max L*, L the total emitted
 //          radiance (Eq. 8.2) and L* the closed form in long double;

@@ -1,6 +1,6 @@
-// The path tracer's error against its cost (issue 17, "time to a given
-// error"): the Cornell fixture while its LED is on (t = 20 s) and after it
-// went off (t = 40 s: only the phosphors light the box), rendered at 1 to
+// The path tracer's error against its cost ("time to a given error"): the
+// Cornell fixture while its LED is on (t = 20 s) and after it went off
+// (t = 40 s: only the phosphors light the box), rendered at 1 to
 // 256 samples per pixel and compared with the same tracer at 4096 samples
 // per pixel from another seed. Error: RMSE of the band sum, relative to the
 // reference's brightest pixel (the convention of docs/dss-trade.md). Time:

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Start-up of the phos command (issue 17, target 1): wall time and peak memory
+# Start-up of the phos command (app/main.cpp's dispatch): wall time and peak memory
 # of the whole process, `phos` and the phos-<command> it runs, measured with
 # /usr/bin/time over RUNS runs (median), on small inputs, in the Release tree.
 # Also lists what each command loads at run time (LD_DEBUG=libs, the dispatcher

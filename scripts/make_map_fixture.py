@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Writes the measured-tile fixture (issue 14 items 2 and 7): an object that
+"""Writes the measured-tile fixture (docs/render.md, "Phosphor maps"): an object that
 wears the `phos fit map` of a simulated sample whose material varies across
 its surface, so the whole path is a script anyone can rerun.
 

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Writes the glow-sign fixture (issue 14 items 2, 4 and 7), so its origin is plain.
+"""Writes the glow-sign fixture (a textured sign, glow paint, lights), so its origin is plain.
 
 fixtures/scenes/glow-sign/board.png: the sign's base colour, 128 x 128 sRGB:
 a dark green board with a cream border (glTF baseColorTexture).

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Writes the textured-plane fixture (issue 14 item 1), so its origin is plain.
+"""Writes the textured-plane fixture (albedo textures), so its origin is plain.
 
 fixtures/scenes/textured/checker.png: 64 x 64 sRGB texels, four 32 x 32
 quadrants of known 8-bit colours (QUADRANTS below; row 0 is the image's top).

@@ -1,4 +1,4 @@
-// phos.constraints/1 (DESIGN.md): the irradiance at one point over time, the
+// phos.constraints/1 (docs/formats.md): the irradiance at one point over time, the
 // surface's albedo, how many states to solve for, and the constraints.
 
 #include <algorithm>

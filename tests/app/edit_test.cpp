@@ -1,4 +1,4 @@
-// `phos edit solve` as DESIGN.md specifies it: the JSON keys, the material it
+// `phos edit solve` as docs/formats.md specifies it: the JSON keys, the material it
 // returns, the baseline beside it, and one-line errors; and `phos editor` on a
 // port in use.
 

@@ -42,7 +42,7 @@ Recovery CaptureAndFit(const std::filesystem::path& material, const testing::Tem
   return {fit.exit_code == 0 ? nlohmann::json::parse(fit.out) : nlohmann::json(), ReadJsonFile(material)};
 }
 
-// Issue 13's bar, for any number of states.
+// What a fit must recover of a simulated truth, for any number of states.
 void ExpectRecovered(const Recovery& r) {
   ASSERT_TRUE(r.result.is_object());
   const std::size_t nc = r.truth["states"].size();

@@ -1,4 +1,4 @@
-// `phos render` as users and checks call it (DESIGN.md contract): the JSON
+// `phos render` as users and checks call it (docs/formats.md): the JSON
 // keys, the files it writes, --no-phosphorescence, and one-line errors with
 // exit code 2 for bad scenes and options.
 
@@ -703,8 +703,8 @@ void WriteUniformMap(const std::filesystem::path& exr, float kr_per_s, float amp
   out->close();
 }
 
-// Issue 14: "An object driven by a uniform map renders the same frames as the
-// uniform material (oiiotool --diff)", lit and ten seconds after dark.
+// An object driven by a uniform map renders the same frames as the uniform
+// material (as oiiotool --diff would see), lit and ten seconds after dark.
 TEST(RenderCommand, AUniformMapRendersAsTheUniformMaterial) {
   TempDir dir;
   const std::string green = Fixture("materials/green.json").string();
@@ -723,7 +723,7 @@ TEST(RenderCommand, AUniformMapRendersAsTheUniformMaterial) {
   }
 }
 
-// The whole path of issue 14, item 2: a simulated sample whose centre is
+// The whole path of a measured map: a simulated sample whose centre is
 // another phosphor (4x the rate, half the re-radiation, the same charge
 // rates: twice the glow at a full charge, but the lab's charge leaves it at a
 // lower level) is captured, fitted per pixel, and worn by a quad. Its glow

@@ -1,5 +1,6 @@
-// `phos simulate` and `phos plot` as a user runs them: the DESIGN.md
-// contract, and one clear line with exit code 2 for every kind of bad input.
+// `phos simulate` and `phos plot` as a user runs them: their output as
+// docs/formats.md gives it, and one clear line with exit code 2 for every
+// kind of bad input.
 
 #include <array>
 #include <cmath>
@@ -272,7 +273,7 @@ std::string SharedLibraries(const std::string& executable) {
 }
 
 TEST(PhosCommand, QuickCommandsLinkNoImageRenderOrCameraLibrary) {
-  // Issue 17: these start in milliseconds because they load none of these.
+  // These start in milliseconds because they load none of these (app/CMakeLists.txt).
   const std::array<const char*, 4> heavy = {"libOpenImageIO", "libembree", "libaravis", "libopencv"};
   for (const char* executable : {"phos", "phos-simulate", "phos-plot", "phos-fit-curve", "phos-edit"}) {
     const std::string libraries = SharedLibraries(executable);

@@ -1,4 +1,4 @@
-// phos slurm against a real Slurm (issue 15): a one-node cluster on this
+// phos slurm against a real Slurm (docs/scale.md): a one-node cluster on this
 // machine (munged, slurmctld, slurmd, with a slurm.conf written here, on
 // ports of its own), stopped by PID afterwards, even when a check fails.
 // Arrays for a render, a decay map and a fit batch give what one process

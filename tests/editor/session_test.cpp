@@ -1,8 +1,8 @@
 // The editing session behind the page, without HTTP: placing constraints by
 // pixel, re-solving on every edit, colours as band spectra, presets, edit
 // propagation, and refusing bad edits without changing anything. Then the
-// server over loopback sockets (EditorServer): each attack of issue 16 item
-// 10 and issue 18 item 5 as a test.
+// server over loopback sockets (EditorServer): each attack docs/editor.md
+// says the server refuses ("The page") as a test.
 
 #include <gtest/gtest.h>
 

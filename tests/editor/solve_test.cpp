@@ -150,7 +150,7 @@ TEST(EditorSolve, TwoStatesInEightBands) {
 }
 
 TEST(EditorSolve, ReachesTheLookOfRandomTwoStateMaterials) {
-  // Seeded random two-state truths over the ranges of issue 13: kr ratios 2
+  // Seeded random two-state truths over the ranges of model/synthetic.h: kr ratios 2
   // to 50, ke and Lambda per state and band; their own look at a lit target,
   // just after the light goes off and through the decay. The truth meets
   // every target, so the solve must too, each within 1% (the feedback calls

@@ -1,5 +1,5 @@
-// Every input that ever crashed, hung or gave an internal error (issue 16,
-// found by mutating the fixtures and by the fuzz harnesses) is kept in
+// Every input that ever crashed, hung or gave an internal error (found by
+// mutating the fixtures by hand and by the fuzz harnesses, docs/fuzzing.md) is kept in
 // fuzz/regressions/<target>/ and run here through the harness's own function
 // (fuzz/targets.h), under the ASan + UBSan build of CI: each must be refused
 // in one line. The loaders' unit tests check the messages of most of them;
@@ -36,10 +36,10 @@ TEST(FuzzRegressions, EveryInputThatEverCrashedIsRefusedInOneLine) {
       ++inputs;
     }
   }
-  EXPECT_GE(inputs, 15);  // the cases of issue 16, and what the harnesses found
+  EXPECT_GE(inputs, 15);  // the hand-mutated cases, and what the harnesses found
 }
 
-// Issue 16: a lab config with a camera region of 1e9 crashed (ASan SEGV in
+// A lab config with a camera region of 1e9 crashed (ASan SEGV in
 // the camera); 1e10 does not even fit the int it was cast to.
 TEST(FuzzRegressions, ALabCameraRegionIsWholePixelsOfARealSensor) {
   testing::TempDir dir;
@@ -81,7 +81,7 @@ TEST(FuzzRegressions, ALabConfigFromMemoryIsTheSameAsFromItsFile) {
   }
 }
 
-// Issue 18 item 5: NaN and infinity in a numeric option.
+// NaN and infinity in a numeric option (app/cli_finite.h).
 TEST(FuzzRegressions, NonFiniteOptionValuesAreRefused) {
   const std::string curve = testing::Fixture("curves/charge.csv").string();
   EXPECT_TRUE(testing::IsOneLineUserError(testing::RunPhos("fit decay-curve " + curve + " --from nan"),

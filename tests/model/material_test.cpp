@@ -133,7 +133,7 @@ TEST(Material, NumbersTooLargeForADoubleAreRejected) {
   EXPECT_EQ(message.rfind((dir / "huge.json").string(), 0), 0u) << message;
 }
 
-// Issue 16: kr = 1e308 was accepted and the output was not finite. Rates and
+// kr = 1e308 was accepted and the output was not finite. Rates and
 // Lambda have finite ranges (material.h), and the message names the limit.
 TEST(Material, RatesOutsideTheFiniteRangeAreRefused) {
   const nlohmann::json green = nlohmann::json::parse(testing::ReadText(testing::Fixture("materials/green.json")));
@@ -166,7 +166,7 @@ TEST(Material, RatesOutsideTheFiniteRangeAreRefused) {
   EXPECT_EQ(MaterialFromJson(j, "m.json").states[0].kr, kMaxRate);
 }
 
-// Issue 16: a material path that is a FIFO hung; /dev/zero exhausted memory.
+// A material path that is a FIFO hung; /dev/zero exhausted memory.
 TEST(Material, OnlyRegularFilesAreRead) {
   testing::TempDir dir;
   ASSERT_EQ(::mkfifo((dir / "fifo.json").c_str(), 0600), 0);

@@ -1,5 +1,4 @@
-// Numerical stability at the extremes (issue: "test numerical stability at
-// the extremes"): rates kr and ke*E from 1e-6 to 1e6 per second (and 1e12
+// Numerical stability at the extremes: rates kr and ke*E from 1e-6 to 1e6 per second (and 1e12
 // from huge irradiance), steps from 1e-6 to 1e5 s, irradiance 0 and 1e12, r
 // near 0 and 1, and runs of 1e7 steps. Every state must stay finite and in
 // [0, 1]; the exact update must match the closed form to 1e-12 relative.

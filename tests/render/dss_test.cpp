@@ -1,4 +1,4 @@
-// Deep screen space against analytic truths (issue 6's "done when"): an
+// Deep screen space against analytic truths (docs/render.md, "Deep screen space"): an
 // unoccluded plane has no occlusion; a closed box seen from inside is fully
 // occluded; a disk of known radiosity gives the known irradiance on its axis,
 // E = B R^2 / (R^2 + h^2). And the hierarchy against the exact gather it

@@ -500,7 +500,7 @@ TEST(UvAtlas, SolverChargesUvTexelsLikeTheClosedForm) {
   EXPECT_NEAR(solver.State(0, 0, texel), r, 1e-5);
 }
 
-// Issue 16, found by mutating the fixtures: each input that crashed, hung or
+// Found by mutating the fixtures (docs/fuzzing.md): each input that crashed, hung or
 // ran out of memory is refused at load time in one line naming the field
 // and the limit.
 TEST(Scenes, CoordinatesTimesAndCountsOutsideTheLimitsAreRefused) {
@@ -544,7 +544,7 @@ TEST(Scenes, CoordinatesTimesAndCountsOutsideTheLimitsAreRefused) {
                         "volumes[0].bounds.min[0]"));
 }
 
-// Issue 18: a phosphorescent volume of density 0 aborted with "check failed"
+// A phosphorescent volume of density 0 aborted with "check failed"
 // in model/src/batch.cpp. An empty glowing medium has no voxels to glow and
 // renders as empty space.
 TEST(Scenes, AnEmptyGlowingMediumRenders) {
@@ -568,7 +568,7 @@ std::string GltfError(const nlohmann::json& gltf) {
       [&] { ParseMesh(text, ".gltf", Fixture("scenes/meshes"), "crafted.gltf", "", "scene.json: objects[0].mesh"); });
 }
 
-// Issue 16: crafted glTF files gave an ASan error (an accessor count that
+// Crafted glTF files gave an ASan error (an accessor count that
 // wraps), ran out of memory (a node graph of 2^40 instances), ended in
 // "internal error: vector::reserve" (a 2^62 count) or "internal error"
 // (missing buffers). Each is now one line naming the field.
@@ -682,7 +682,7 @@ TEST(Meshes, AnObjVertexThatIsNotAFiniteNumberIsRefused) {
   EXPECT_NO_THROW(ParseMesh("v 0 0 0 1\r\nv 1 0 0\r\nv 0 1 0\r\nf 1 2 3\r\n", ".obj", ".", "w.obj", "", "s.json"));
 }
 
-// Issue 16: 92 mesh-loader rejections printed several lines.
+// 92 mesh-loader rejections printed several lines (every rejection is one line).
 TEST(Meshes, ObjRejectionsAreOneLine) {
   const std::string bad[] = {"v 0 0 0\nv 1 0 0\nf 1 2 7\n", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nv 1e39 0 0\n",
                              "f 1 2 3\nf 4 5 6\n", "v 1e7 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"};

@@ -1,4 +1,4 @@
-// Albedo textures (issue 14 item 1) against closed forms:
+// Albedo textures (docs/render.md, "Textures") against closed forms:
 //  - the spectral upsampling: white is 1 in every band, every band lies
 //    between the smallest and largest of r, g, b;
 //  - the textured-plane fixture (a 2 x 2 checker of known sRGB colours,

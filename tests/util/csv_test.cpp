@@ -111,7 +111,7 @@ TEST(ReadCsv, ADecimalCommaIsNamed) {
       std::string::npos);
 }
 
-// Limits before allocation (issue 16 item 2): columns and rows are counted
+// Limits before allocation (docs/design.md, "Errors"): columns and rows are counted
 // as they are read, and only regular files are read.
 TEST(ReadCsv, ColumnsRowsAndFileKindsHaveLimits) {
   testing::TempDir dir;

@@ -32,7 +32,7 @@ TEST(ReadJsonFile, MissingAndMalformedFilesAreUserErrors) {
   EXPECT_NE(message.find("bad.json: not valid JSON: parse error at line 1"), std::string::npos) << message;
 }
 
-// Issue 16: a FIFO as a material path hung, and /dev/zero exhausted memory.
+// A FIFO as a material path hung, and /dev/zero exhausted memory.
 TEST(ReadFileText, ReadsOnlyRegularFilesWithinTheLimit) {
   testing::TempDir dir;
   testing::WriteText(dir / "a.json", "{\"a\": 1}");

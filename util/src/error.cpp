@@ -13,8 +13,8 @@ void ThrowUserError(std::string_view where, std::string_view field, std::string_
   if (!field.empty()) text.append(field).append(": ");
   text.append(message);
   // One line, whatever the input held: a value quoted from a file or a
-  // request may carry a newline or a carriage return (issue 16: every
-  // rejection is one line), or an escape sequence for the terminal.
+  // request may carry a newline or a carriage return (every rejection is
+  // one line: docs/design.md, "Errors"), or an escape sequence for the terminal.
   const std::string line = Printable(text);
   throw UserError(line);
 }

@@ -1,5 +1,5 @@
 #pragma once
-// Capture sessions: directories written as they go (DESIGN.md), so a crash,
+// Capture sessions: directories written as they go (docs/capture.md), so a crash,
 // a kill -9 or a full disk loses nothing already recorded.
 //
 //   session.json   start record: protocol, sample, devices, settings, versions, uid

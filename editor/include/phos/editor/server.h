@@ -1,7 +1,7 @@
 #pragma once
 // The editor page's HTTP server (cpp-httplib): the page itself and a small
 // JSON API over an EditSession. It listens on 127.0.0.1 unless told
-// otherwise, and refuses what it should (DESIGN.md editor/, issue "editor"):
+// otherwise, and refuses what it should (docs/editor.md, "The page"):
 //  - requests whose Origin is not the page's own, or whose Host is not the
 //    address it listens on (cross-site requests, DNS rebinding): 403;
 //  - a Host or Origin header given twice: 400;

@@ -4,7 +4,7 @@
 // "this bright, this colour, 1 s after the light goes off; still this bright
 // at 60 s", given the irradiance there over time.
 //
-// Radiance at the point (DESIGN.md, phos.constraints/1):
+// Radiance at the point (docs/editor.md, "The problem"):
 //   L_b(t) = albedo_b E_b(t) / pi + sum_i Lambda_i[b] kr_i r_i(t)     (Eq. 8.2, diffuse)
 // with r_i from Eq. 8.1 under the frames' piecewise-constant irradiance.
 //
@@ -74,7 +74,7 @@ inline constexpr std::size_t kMaxConstraints = 1000;
 inline constexpr double kMaxConstraintRadiance = 1e6;
 inline constexpr double kMaxConstraintWeight = 1e6;
 
-// phos.constraints/1 (DESIGN.md). Bad input: a UserError naming the file and field.
+// phos.constraints/1 (docs/formats.md). Bad input: a UserError naming the file and field.
 Problem LoadProblem(const std::filesystem::path& path);
 Problem ProblemFromJson(const nlohmann::json& json, const std::string& source);
 

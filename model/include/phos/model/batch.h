@@ -5,7 +5,7 @@
 // chunks that stay in L1 and vectorize (Eigen packet math for exp/expm1), and
 // chunks run in parallel with TBB.
 //
-// "Model only what the scene requires" (DESIGN.md): a BatchCoefficients is
+// "Only what the scene requires" (docs/render.md): a BatchCoefficients is
 // compiled for the bands that actually carry irradiance and the bands that
 // are actually emitted; a dark step needs no irradiance at all (DecayBatch).
 

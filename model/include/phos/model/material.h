@@ -1,6 +1,6 @@
 #pragma once
 // A phosphorescent material (Sec. 8.3, Eq. 8.1-8.2) and its file format
-// `phos.material/1` (DESIGN.md, "Files").
+// `phos.material/1` (docs/formats.md, "Material").
 //
 // Per excited state i (nc = 1..4 of them):
 //   kr      decay rate, 1/s

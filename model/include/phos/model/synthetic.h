@@ -49,8 +49,8 @@ struct TwoStateSpec {
 };
 
 // The ranges the random generator draws from (log-uniform for rates and
-// ratios): rate ratios 2-50 and amplitude mixes 10/90 to 90/10, as issue 13
-// asks the pipeline to recover.
+// ratios): rate ratios 2-50 and amplitude mixes 10/90 to 90/10, the ranges
+// the fits are held to recover (docs/appearance.md).
 struct TwoStateRanges {
   double slow_kr_min = 0.01, slow_kr_max = 0.05;
   double rate_ratio_min = 2, rate_ratio_max = 50;

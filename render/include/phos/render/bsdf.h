@@ -1,5 +1,5 @@
 #pragma once
-// Glossy surfaces (glTF 2.0 metallic-roughness, issue 14 item 3): a GGX
+// Glossy surfaces (glTF 2.0 metallic-roughness, docs/render.md): a GGX
 // microfacet lobe over the diffuse base, energy-conserving, for the direct
 // and path transports. The glow stays isotropic (Sec. 8.3.4): only the
 // reflection of light changes.

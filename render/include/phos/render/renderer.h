@@ -2,7 +2,7 @@
 // Frames: light transport from the lights and the glowing texels to the
 // camera, per band of the scene's grid, then colour, EXR and PNG.
 //
-// Transports (DESIGN.md render/):
+// Transports (docs/render.md, "Transports"):
 //  - direct: primary rays; reflected light from the lights (shadow rays) plus
 //    the phosphors' own emission Lp (Eq. 8.2). No interreflection: the glow
 //    lights nothing else. Fast; the interactive and animation path.

@@ -1,5 +1,5 @@
 #pragma once
-// A scene (`phos.scene/1`, DESIGN.md render/): meshes with materials, lights
+// A scene (`phos.scene/1`, docs/formats.md): meshes with materials, lights
 // with spectra and time schedules, rigid animation, a camera and a time range.
 // Everything spectral lives on one band grid, the scene's, which every
 // phosphor material must share: the coupled solver then needs no resampling.
@@ -298,8 +298,8 @@ struct Light {
   Vec3 DirectionAt(double t_s) const { return (motion.At(t_s).linear() * direction).normalized(); }
 };
 
-// A participating medium on a regular grid (Sec. on volumes of the issue's
-// seeds): density per voxel (trilinear between voxel centres), extinction
+// A participating medium on a regular grid (docs/render.md, "Media"):
+// density per voxel (trilinear between voxel centres), extinction
 // sigma_t = density * sigma_t_per_m, single-scattering albedo per band and a
 // Henyey-Greenstein phase function. A phosphorescent medium (dust, a glowing
 // liquid) carries one rate-equation state per voxel where density > 0: its
@@ -357,9 +357,9 @@ struct RenderSettings {
   int direct_spp = 1;  // direct transport: jittered samples per pixel
   unsigned seed = 1;
   double max_step_s = 0.0;  // coupled solver's longest step while something moves (0: 1/fps)
-  // The phosphors' own glow charges the other phosphors (DESIGN.md: "optionally
-  // including the other phosphors' emission"). Costs steps of max_step_s in the
-  // dark too, since darkness is then no longer dark.
+  // The phosphors' own glow charges the other phosphors (docs/render.md, "Glow
+  // on glow"). Costs steps of max_step_s in the dark too, since darkness is
+  // then no longer dark.
   bool phosphor_irradiance = false;
 };
 

@@ -3,7 +3,7 @@
 // phosphorescent texel, advanced through the scene's time while lights switch
 // and objects move.
 //
-// Model only what the scene requires (DESIGN.md render/):
+// Model only what the scene requires (docs/render.md, "The coupled solver"):
 //  - only phosphorescent objects have texels and states;
 //  - a material's batch coefficients keep only the bands the scene's lights
 //    reach (excitation) and the bands it emits (Lambda > 0);
@@ -108,8 +108,8 @@ class CoupledSolver {
   // checkpoint that does not fit the scene's texels is a UserError naming `source`.
   void Restore(const SolverCheckpoint& checkpoint, const std::string& source);
 
-  // Phosphors that a light never charged (issue 14: a triangle wound away
-  // from its light is lit but never glows, and nothing said why). Since this
+  // Phosphors that a light never charged (a triangle wound away from its
+  // light is lit but never glows, and nothing said why). Since this
   // solver started, for each object slot: was a light (or the sky) that
   // reaches the material's excitation bands on, and did any texel of the
   // object receive its irradiance? If not, were some texels lit on their

@@ -2,7 +2,7 @@
 // The one way phos reports a mistake in what the user gave it (a file, an
 // option, a field, a request). Every loader and command throws UserError with
 // a message that names where the mistake is; the `phos` command prints it as
-// one line and exits with code 2 (DESIGN.md, "Errors in input").
+// one line and exits with code 2 (docs/design.md, "Errors").
 //
 // Message form: "<where>: <field>: <what is wrong>", for example
 //   fixtures/materials/green.json: states[0].kr: expected a number >= 0, got -1
