@@ -278,6 +278,28 @@ void SessionWriter::AppendLine(const std::string& file, const nlohmann::json& li
 
 void SessionWriter::Event(nlohmann::json event) { AppendLine("events.jsonl", event); }
 
+namespace {
+// A frame's file as written, before it has a name: on disk (fsync), and read
+// back whole, every pixel as captured. OpenImageIO's TIFF writer reports
+// success for a file a full disk cut short (no image directory after 8 KiB),
+// so its word is not enough; a frame that does not read back is never named
+// nor listed. Returns the file's checksum.
+FileDigest CheckWrittenFrame(const std::filesystem::path& temporary, const Frame& frame,
+                             const std::filesystem::path& final_path) {
+  const std::string cut = "could not write the frame (disk full?): it did not reach the disk whole";
+  try {
+    SyncFile(temporary);
+    const Frame back = ReadFrame(temporary);
+    if (back.width != frame.width || back.height != frame.height || back.channels != frame.channels ||
+        back.pixels != frame.pixels)
+      ThrowUserError(final_path.string(), "", cut);
+    return DigestFile(temporary);
+  } catch (const UserError&) {
+    ThrowUserError(final_path.string(), "", cut);
+  }
+}
+}  // namespace
+
 std::string SessionWriter::WriteFrame(const Frame& frame, nlohmann::json extra) {
   const int seq = frames_ + 1;
   char name[32];
@@ -290,16 +312,9 @@ std::string SessionWriter::WriteFrame(const Frame& frame, nlohmann::json extra) 
   spec.attribute("compression", "zip");  // lossless
   spec.attribute("oiio:BitsPerSample", 16);
   spec.attribute("ExposureTime", static_cast<float>(frame.exposure_s));  // EXIF; frames.jsonl holds the rest
-  WriteImageAtomically(final_path, spec, OIIO::TypeDesc::UINT16, frame.pixels.data(),
-                       [&](const std::filesystem::path& temporary) {
-                         try {
-                           SyncFile(temporary);
-                           digest = DigestFile(temporary);
-                         } catch (const UserError&) {
-                           ThrowUserError(final_path.string(), "",
-                                          "could not write the frame (disk full?): it did not reach the disk whole");
-                         }
-                       });
+  WriteImageAtomically(
+      final_path, spec, OIIO::TypeDesc::UINT16, frame.pixels.data(),
+      [&](const std::filesystem::path& temporary) { digest = CheckWrittenFrame(temporary, frame, final_path); });
   SyncDirectory(dir_ / "frames");
   frames_ = seq;  // the number is used, with or without its record
   FrameRecord record;

@@ -5,7 +5,11 @@
 // and inside its last record, then resumed and verified.
 
 #include <sys/mount.h>
+#include <sys/resource.h>
+#include <sys/wait.h>
 #include <unistd.h>
+
+#include <csignal>
 
 #include <cstdio>
 #include <filesystem>
@@ -364,6 +368,78 @@ TEST(SessionRecords, AFullDiskLosesNothingListedAndResumeFinishesOnARoomyOne) {
   testing::TempDir reference;
   CaptureExcitation(reference / "s");
   EXPECT_EQ(Measured(dir / "roomy"), Measured(reference / "s"));
+}
+
+// A write cut short at every byte of a frame's file (RLIMIT_FSIZE: every
+// write past N bytes of any file fails, EFBIG, as a disk that fills up at
+// that point). OpenImageIO's TIFF writer reported success for a frame the
+// full disk had cut short, and the cut frame was listed with its checksum: a
+// decay then could never complete. Whatever byte the write stops at, what
+// the session lists is whole, and the capture says so in one line.
+TEST(SessionRecords, AWriteCutAtAnyByteOfAFrameListsNothingBroken) {
+  testing::TempDir dir;
+  // A decay of tiny frames (8x8, about 700 bytes each) under a start record
+  // smaller than one, so the limit first cuts a frame's file.
+  // One lab, made before the children fork (each capture runs on its copy).
+  VirtualClock clock;
+  CameraModel camera = DefaultCameraModel();
+  camera.width = camera.height = 8;
+  SimulatedLab lab(LoadMaterial(testing::Fixture("materials/orange.json")), std::vector<double>(8, 0.8),
+                   DefaultLights(), camera, clock);
+  auto capture = [&](const fs::path& out) {
+    DecayProtocolOptions options;
+    options.charge_light = "led405";
+    options.charge_s = 60;
+    options.duration_s = 20;
+    SessionWriter session(out, {{"protocol", "decay"}});
+    RunDecayProtocol(lab, lab.lights(), clock, session, options);
+  };
+  // The cut sessions on a tmpfs where one can be mounted (as root, as CI
+  // is): hundreds of captures, each fsync'ing its records.
+  const fs::path cuts = dir / "cuts";
+  fs::create_directories(cuts);
+  struct Unmount {
+    fs::path path;
+    bool mounted;
+    ~Unmount() {
+      if (mounted) ::umount2(path.c_str(), MNT_DETACH);
+    }
+  } unmount{cuts, ::mount("tmpfs", cuts.c_str(), "tmpfs", 0, "size=64m") == 0};
+  capture(dir / "whole");
+  const std::uint64_t frame_bytes = fs::file_size(dir / "whole" / "frames" / "000001.tif");
+  const std::uint64_t start_bytes = fs::file_size(dir / "whole" / "session.json");
+  ASSERT_LT(start_bytes + 16, frame_bytes);
+  int cut = 0;
+  for (std::uint64_t limit = start_bytes + 1; limit <= frame_bytes + 1; ++limit) {
+    const fs::path s = cuts / ("cut-" + std::to_string(limit));
+    const pid_t child = ::fork();
+    ASSERT_GE(child, 0);
+    if (child == 0) {
+      std::signal(SIGXFSZ, SIG_IGN);
+      const rlimit r{limit, limit};
+      ::setrlimit(RLIMIT_FSIZE, &r);
+      try {
+        capture(s);
+      } catch (const UserError&) {
+        std::_Exit(3);
+      } catch (...) {
+        std::_Exit(4);
+      }
+      std::_Exit(0);
+    }
+    int status = 0;
+    ::waitpid(child, &status, 0);
+    ASSERT_TRUE(WIFEXITED(status)) << limit;
+    ASSERT_NE(WEXITSTATUS(status), 4) << "not a UserError at " << limit;
+    cut += WEXITSTATUS(status) == 3;
+    // Everything listed reads back whole.
+    const SessionCheck check = CheckSession(s);
+    EXPECT_TRUE(check.bad_frames.empty())
+        << "limit " << limit << ": " << check.bad_frames.front().frame.file << " " << check.bad_frames.front().problem;
+    fs::remove_all(s);
+  }
+  EXPECT_GT(cut, 0);
+  std::printf("writes cut at each of %d bytes of a frame: nothing listed is broken\n", cut);
 }
 
 }  // namespace
