@@ -53,9 +53,9 @@ class ChargeCost final : public ceres::CostFunction {
   int c_, n_;
 };
 
-// One channel in the fit's units: values divided by their largest |value|
-// (parameters of order 1 for Ceres), weights multiplied by it (the objective
-// stays in the data's units).
+// One channel in the fit's units: the scaled curve's values (curve.h:
+// CurveScale) divided by their largest |value| (parameters of order 1 for
+// Ceres), weights multiplied by it (channels weigh as they do in the data).
 struct Channel {
   Eigen::ArrayXd y, w;
   Eigen::ArrayXd w2, w2y;  // w^2 and w^2 y, for the scan
@@ -87,17 +87,22 @@ double SolveLevels(const Eigen::ArrayXd& t, double k, Channel* channel) {
 ChargeFitSummary FitCharge(const Curve& curve, const ChargeFitOptions& options, const std::string& where) {
   const auto start = std::chrono::steady_clock::now();
   ValidateCurve(curve, 4, where);
+  // Solved in the curve's own units, so nothing below (the scan's
+  // determinant test, Ceres's absolute gradient tolerance and trust region)
+  // depends on the units of the data or of the time.
+  const CurveScale units = ScaleOfCurve(curve, where);
+  const Curve scaled = ScaledCurve(curve, units);
   const int m = static_cast<int>(curve.size()), C = curve.channel_count();
-  const Eigen::ArrayXd t = Eigen::Map<const Eigen::ArrayXd>(curve.t_s.data(), m);
+  const Eigen::ArrayXd t = Eigen::Map<const Eigen::ArrayXd>(scaled.t_s.data(), m);
   std::vector<Channel> channels(C);
   bool any_variation = false;
   for (int c = 0; c < C; ++c) {
-    const Eigen::ArrayXd raw = Eigen::Map<const Eigen::ArrayXd>(curve.channels[c].data(), m);
+    const Eigen::ArrayXd raw = Eigen::Map<const Eigen::ArrayXd>(scaled.channels[c].data(), m);
     const double scale = raw.abs().maxCoeff();
     any_variation = any_variation || (scale > 0 && raw.maxCoeff() - raw.minCoeff() > 1e-12 * scale);
     channels[c].scale = scale > 0 ? scale : 1.0;
     channels[c].y = raw / channels[c].scale;
-    const std::vector<double> weights = SampleWeights(curve.channels[c], options.weighting);
+    const std::vector<double> weights = SampleWeights(scaled.channels[c], options.weighting);
     channels[c].w = Eigen::Map<const Eigen::ArrayXd>(weights.data(), m) * channels[c].scale;
     channels[c].w2 = channels[c].w.square();
     channels[c].w2y = channels[c].w2 * channels[c].y;
@@ -107,8 +112,8 @@ ChargeFitSummary FitCharge(const Curve& curve, const ChargeFitOptions& options, 
   if (!any_variation) ThrowUserError(where, "", "every value is the same: there is no growth to fit");
 
   // Scan log k; the levels of every channel by linear least squares for each.
-  const double span = curve.t_s.back() - curve.t_s.front();
-  const double k_lo = 0.02 / span, k_hi = std::max(3.0 / SmallestTimeStep(curve), 10 * k_lo);
+  const double span = scaled.t_s.back() - scaled.t_s.front();
+  const double k_lo = 0.02 / span, k_hi = std::max(3.0 / SmallestTimeStep(scaled), 10 * k_lo);
   double best_cost = std::numeric_limits<double>::infinity(), log_k = 0;
   std::vector<std::array<double, 2>> best_levels(C, {0.0, 0.0});
   for (int g = 0; g < options.rate_grid_size; ++g) {
@@ -140,7 +145,7 @@ ChargeFitSummary FitCharge(const Curve& curve, const ChargeFitOptions& options, 
 
   ChargeFitSummary summary;
   log_k = params[0];
-  summary.rate = std::exp(log_k);
+  summary.rate = std::exp(log_k) / units.time_s;
   summary.iterations = static_cast<int>(solver_summary.iterations.size());
   // A level that is not reached and a rate at the edge of what the samples
   // resolve mean the curve shows no saturating growth.
@@ -151,10 +156,7 @@ ChargeFitSummary FitCharge(const Curve& curve, const ChargeFitOptions& options, 
 
   const int n = static_cast<int>(params.size());
   std::vector<double> variance(n, 0.0);
-  ceres::Covariance::Options covariance_options;
-  covariance_options.algorithm_type = ceres::DENSE_SVD;
-  covariance_options.null_space_rank = -1;
-  ceres::Covariance covariance(covariance_options);
+  ceres::Covariance covariance(SmallDenseCovarianceOptions());
   std::vector<std::pair<const double*, const double*>> pairs = {{params.data(), params.data()}};
   if (covariance.Compute(pairs, &problem)) {
     const double reduced_chi2 = 2 * solver_summary.final_cost / std::max(1, m * C - n);
@@ -163,17 +165,22 @@ ChargeFitSummary FitCharge(const Curve& curve, const ChargeFitOptions& options, 
     for (int i = 0; i < n; ++i) variance[i] = block[i * n + i] * reduced_chi2;
   }
   summary.rate_stderr = summary.rate * std::sqrt(std::max(0.0, variance[0]));
+  // Back to the data's units; the residuals summed in the scaled curve's,
+  // where their squares cannot overflow or underflow.
+  double rss = 0;
   for (int c = 0; c < C; ++c) {
-    const double s = channels[c].scale;
-    ChargeLevels levels{params[1 + 2 * c] * s, params[2 + 2 * c] * s, s * std::sqrt(std::max(0.0, variance[1 + 2 * c])),
-                        s * std::sqrt(std::max(0.0, variance[2 + 2 * c]))};
+    const double s = channels[c].scale, L0 = params[1 + 2 * c] * s, Linf = params[2 + 2 * c] * s;
     for (int j = 0; j < m; ++j) {
-      const double e = std::exp(-summary.rate * t[j]);
-      const double r = curve.channels[c][j] - (levels.L0 * e + levels.Linf * (1 - e));
-      summary.rss += r * r;
+      const double e = std::exp(-std::exp(log_k) * t[j]);
+      const double r = scaled.channels[c][j] - (L0 * e + Linf * (1 - e));
+      rss += r * r;
     }
-    summary.levels.push_back(levels);
+    const double to_data = s * units.value;
+    summary.levels.push_back({L0 * units.value, Linf * units.value,
+                              to_data * std::sqrt(std::max(0.0, variance[1 + 2 * c])),
+                              to_data * std::sqrt(std::max(0.0, variance[2 + 2 * c]))});
   }
+  summary.rss = rss * units.value * units.value;
   summary.L0 = summary.levels[0].L0;
   summary.Linf = summary.levels[0].Linf;
   summary.L0_stderr = summary.levels[0].L0_stderr;

@@ -3,11 +3,13 @@
 #include <algorithm>
 #include <cmath>
 #include <cctype>
+#include <limits>
 #include <numeric>
 #include <string>
 
 #include "phos/fit/curve.h"
 #include "phos/util/error.h"
+#include "phos/util/format.h"
 
 namespace phos {
 namespace {
@@ -93,6 +95,40 @@ void KeepTimeWindow(Curve* curve, double from_s, double to_s) {
   for (std::size_t j = 0; j < curve->t_s.size(); ++j)
     if (curve->t_s[j] >= from_s && curve->t_s[j] <= to_s) kept.push_back(j);
   Select(curve, kept);
+}
+
+CurveScale ScaleOfCurve(const Curve& curve, const std::string& where) {
+  CurveScale scale;
+  double largest = 0;
+  for (const auto& channel : curve.channels)
+    for (double v : channel) largest = std::max(largest, std::fabs(v));
+  // Divided by a subnormal, values keep only the bits it has (none at
+  // 4.9e-324): the fit would see garbage. All zeros stay for the fits to name.
+  constexpr double kSmallestNormal = std::numeric_limits<double>::min();
+  if (largest > 0 && largest < kSmallestNormal)
+    ThrowUserError(where, "",
+                   "every |value| is at most " + FormatDouble(largest) + ", below " + FormatShort(kSmallestNormal, 2) +
+                       " (the smallest normal double), too small to fit with precision: give the values in a "
+                       "smaller unit");
+  if (largest > 0) scale.value = largest;
+  scale.time_s = curve.t_s.back() - curve.t_s.front();
+  if (!(scale.time_s >= kSmallestNormal))
+    ThrowUserError(where, "t",
+                   "the times span " + FormatDouble(scale.time_s) +
+                       " s, too short to fit with precision: give the times in a smaller unit");
+  double longest = 0;
+  for (double e : curve.exposure_s) longest = std::max(longest, e);
+  if (longest > 0) scale.exposure_s = longest;
+  return scale;
+}
+
+Curve ScaledCurve(const Curve& curve, const CurveScale& scale) {
+  Curve scaled = curve;
+  for (double& t : scaled.t_s) t /= scale.time_s;
+  for (auto& channel : scaled.channels)
+    for (double& v : channel) v /= scale.value;
+  for (double& e : scaled.exposure_s) e /= scale.exposure_s;
+  return scaled;
 }
 
 double SmallestTimeStep(const Curve& curve) {

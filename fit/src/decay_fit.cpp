@@ -30,10 +30,11 @@ bool DecayFitOptions::IsValid(std::string* error) const {
 
 namespace {
 
-// The curve in the fit's own units: each channel divided by its largest
-// |value| so every parameter is of order 1 for Ceres, and weights multiplied
-// by the same factor, so the weighted residuals are those of the data's
-// units and the objective is unchanged.
+// The curve in the fit's own units: times and values divided by the
+// curve's scales (ScaleOfCurve: the span, the largest |value|), then each
+// channel divided by its own largest |value| so every parameter is of order
+// 1, and weights multiplied by the same factor, so the weighted residuals are
+// those of the scaled curve and channels weigh as they do in the data.
 struct Data {
   int m = 0, C = 0;
   bool background = false;
@@ -597,14 +598,26 @@ DecayFitSummary FitDecayWith(const Curve& curve, const DecayFitOptions& options,
   const std::size_t parameters = static_cast<std::size_t>(max_nc) * (1 + C) + (options.background ? C : 0);
   ValidateCurve(curve, std::max<std::size_t>(3, parameters / C + 1), where);
 
+  // Solved in the curve's own units (curve.h: CurveScale), so nothing below
+  // depends on the units of the data or of the time.
+  const CurveScale units = ScaleOfCurve(curve, where);
+  const Curve scaled = ScaledCurve(curve, units);
   Data d;
   d.m = static_cast<int>(curve.size());
   d.C = C;
   d.background = options.background;
-  d.t = Eigen::Map<const Eigen::ArrayXd>(curve.t_s.data(), d.m);
+  d.t = Eigen::Map<const Eigen::ArrayXd>(scaled.t_s.data(), d.m);
+  const bool exposures = options.weighting == Weighting::kPoisson && scaled.exposure_s.size() == curve.size();
+  // A weighted squared residual of the data per one of the scaled curve, as
+  // its log (value scales of 1e200 square to infinity): the data's Poisson
+  // weights, 1 / sqrt(value / exposure), are the scaled ones over
+  // sqrt(value scale / exposure scale).
+  const double log_weighted_unit = options.weighting == Weighting::kNone
+                                       ? 2 * std::log(units.value)
+                                       : std::log(units.value) + (exposures ? std::log(units.exposure_s) : 0.0);
   bool any_variation = false;
   for (int c = 0; c < C; ++c) {
-    const auto& v = curve.channels[c];
+    const auto& v = scaled.channels[c];
     Eigen::ArrayXd y = Eigen::Map<const Eigen::ArrayXd>(v.data(), d.m);
     const double scale = y.abs().maxCoeff();
     any_variation = any_variation || (scale > 0 && (y.maxCoeff() - y.minCoeff()) > 1e-12 * scale);
@@ -612,8 +625,8 @@ DecayFitSummary FitDecayWith(const Curve& curve, const DecayFitOptions& options,
     d.scale.push_back(s);
     d.y.push_back(y / s);
     std::vector<double> w = SampleWeights(v, options.weighting);
-    if (options.weighting == Weighting::kPoisson && curve.exposure_s.size() == v.size())
-      for (std::size_t j = 0; j < w.size(); ++j) w[j] *= std::sqrt(curve.exposure_s[j]);
+    if (exposures)
+      for (std::size_t j = 0; j < w.size(); ++j) w[j] *= std::sqrt(scaled.exposure_s[j]);
     d.w.push_back(Eigen::Map<const Eigen::ArrayXd>(w.data(), d.m) * s);
   }
   if (!any_variation) ThrowUserError(where, "", "every value is the same: there is no decay to fit");
@@ -621,8 +634,8 @@ DecayFitSummary FitDecayWith(const Curve& curve, const DecayFitOptions& options,
   // Rates the data can resolve: from a twentieth of one per span (slower
   // looks constant) to three per smallest step between distinct times
   // (faster is over before the second one; replicates are no step).
-  const double span = curve.t_s.back() - curve.t_s.front();
-  const double spacing = SmallestTimeStep(curve);
+  const double span = scaled.t_s.back() - scaled.t_s.front();
+  const double spacing = SmallestTimeStep(scaled);
   const double k_lo = 0.02 / span, k_hi = std::max(3.0 / spacing, 10 * k_lo);
   Eigen::ArrayXd grid_rates(options.rate_grid_size);
   for (int g = 0; g < grid_rates.size(); ++g)
@@ -706,7 +719,9 @@ DecayFitSummary FitDecayWith(const Curve& curve, const DecayFitOptions& options,
   for (std::size_t f = 0; f < fits.size(); ++f) {
     const double nc = static_cast<double>(f + 1);
     const double P = nc * (1 + C) + (options.background ? C : 0);
-    const double bic = N * std::log(std::max(fits[f].wrss / N, 1e-300)) + P * std::log(N);
+    // In the data's units (the same log_weighted_unit added to every
+    // count's, which leaves their differences, and so the choice, as they are).
+    const double bic = N * (std::log(std::max(fits[f].wrss / N, 1e-300)) + log_weighted_unit) + P * std::log(N);
     summary.bic.push_back(fits[f].valid ? bic : std::numeric_limits<double>::quiet_NaN());
   }
   int chosen = -1;
@@ -735,9 +750,7 @@ DecayFitSummary FitDecayWith(const Curve& curve, const DecayFitOptions& options,
   std::vector<std::vector<double>> amplitude_var(C, std::vector<double>(nc, 0.0));
   const double dof = std::max(1.0, N - (nc * (1 + C) + (options.background ? C : 0)));
   const double reduced_chi2 = fit.wrss / dof;
-  ceres::Covariance::Options covariance_options;
-  covariance_options.algorithm_type = ceres::DENSE_SVD;
-  covariance_options.null_space_rank = -1;  // a vanished component must not fail the rest
+  const ceres::Covariance::Options covariance_options = SmallDenseCovarianceOptions();
   if (options.compute_uncertainties && solver == Solver::kOwn) {
     // Rates: as below, (J'J)^+ from the normal equations the refinement
     // solves, with the same rule for a degenerate direction as Ceres's
@@ -794,32 +807,38 @@ DecayFitSummary FitDecayWith(const Curve& curve, const DecayFitOptions& options,
     }
   }
 
-  // Back to the data's units, fastest component first.
+  // Back to the data's units, fastest component first. The residuals are
+  // summed in the scaled curve's units (EvaluateDecay's model, a column at a
+  // time), where their squares cannot overflow or underflow, then scaled.
   std::vector<int> order(nc);
   std::iota(order.begin(), order.end(), 0);
   std::sort(order.begin(), order.end(), [&](int a, int b) { return fit.theta[a] > fit.theta[b]; });
+  std::vector<Eigen::ArrayXd> model(C, Eigen::ArrayXd::Zero(d.m));
+  for (int c = 0; c < C; ++c) model[c].setConstant(fit.B[c] * d.scale[c]);
   for (int i : order) {
     DecayComponent component;
-    component.rate = std::exp(fit.theta[i]);
+    const double rate = std::exp(fit.theta[i]);  // per unit of scaled time
+    component.rate = rate / units.time_s;
     component.rate_stderr = component.rate * std::sqrt(std::max(0.0, theta_var[i]));  // d k = k d(log k)
+    const Eigen::ArrayXd column = (-rate * d.t).exp();
     for (int c = 0; c < C; ++c) {
-      component.amplitude.push_back(fit.A[c][i] * d.scale[c]);
-      component.amplitude_stderr.push_back(std::sqrt(std::max(0.0, amplitude_var[c][i])) * d.scale[c]);
+      const double scale = d.scale[c] * units.value;
+      component.amplitude.push_back(fit.A[c][i] * scale);
+      component.amplitude_stderr.push_back(std::sqrt(std::max(0.0, amplitude_var[c][i])) * scale);
+      model[c] += (fit.A[c][i] * d.scale[c]) * column;
     }
     summary.components.push_back(component);
   }
-  for (int c = 0; c < C; ++c) summary.background.push_back(fit.B[c] * d.scale[c]);
+  for (int c = 0; c < C; ++c) summary.background.push_back(fit.B[c] * d.scale[c] * units.value);
   summary.n_components = nc;
-  summary.weighted_rss = fit.wrss;
+  summary.weighted_rss = options.weighting == Weighting::kNone
+                             ? fit.wrss * units.value * units.value
+                             : fit.wrss * units.value * (exposures ? units.exposure_s : 1.0);
   summary.iterations = iterations;
-  // The plain residual in data units (EvaluateDecay's model, a column at a time).
-  summary.rss = 0;
-  for (int c = 0; c < C; ++c) {
-    Eigen::ArrayXd model = Eigen::ArrayXd::Constant(d.m, summary.background[c]);
-    for (const DecayComponent& component : summary.components)
-      model += component.amplitude[c] * (-component.rate * d.t).exp();
-    summary.rss += (Eigen::Map<const Eigen::ArrayXd>(curve.channels[c].data(), d.m) - model).square().sum();
-  }
+  double rss = 0;
+  for (int c = 0; c < C; ++c)
+    rss += (Eigen::Map<const Eigen::ArrayXd>(scaled.channels[c].data(), d.m) - model[c]).square().sum();
+  summary.rss = rss * units.value * units.value;
   summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return summary;
 }

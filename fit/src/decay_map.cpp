@@ -82,11 +82,13 @@ DecayMap EmptyMap(const DecayMapInput& in) {
 
 // Photon counting: a rate's variance is value / exposure, with a floor (a
 // thousandth of the channel's peak) so a dark sample does not get an
-// infinite weight.
+// infinite weight. Relative only: the values may be radiances of 1e-12 and
+// below, and a floor in absolute units gave their samples equal weights. A
+// channel that is 0 throughout gets equal weights (any floor does).
 double SampleWeight(double y, double exposure, double floor, Weighting weighting) {
   return weighting == Weighting::kPoisson ? exposure / std::max(std::fabs(y), floor) : 1.0;
 }
-double WeightFloor(double peak) { return std::max(1e-3 * peak, 1e-12); }
+double WeightFloor(double peak) { return peak > 0 ? 1e-3 * peak : 1.0; }
 
 // One channel's amplitude and background for one rate, from the weighted
 // sums of basis b, constant 1 and values y: a 2x2 linear least-squares

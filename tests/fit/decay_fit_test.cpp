@@ -171,12 +171,16 @@ TEST(DecayFit, FastRefinementIsNeverWorseThanCeres) {
       if (fast.choice.find("warning") != std::string::npos) continue;
       EXPECT_LE(fast.rss, reference.rss * (1 + 1e-9));
       if (reference.choice.find("warning") != std::string::npos) continue;  // the reference's own fit is unsound
-      if (fast.rss < reference.rss * (1 - 1e-9)) continue;  // a better minimum than the reference's
+      if (fast.rss < reference.rss * (1 - 1e-9)) continue;                  // a better minimum than the reference's
       ++sound;
       for (int i = 0; i < fast.n_components; ++i) {
         // Converged to the same point: far closer than the rate's own
         // uncertainty, which both compute alike.
         EXPECT_NEAR(fast.components[i].rate, reference.components[i].rate, 0.01 * reference.components[i].rate_stderr);
+        // A rate less certain than itself lies in a flat valley (a count
+        // forced above the truth whose rates stayed 2% apart): its covariance
+        // is near singular, and two points of the valley differ in it.
+        if (reference.components[i].rate_stderr > reference.components[i].rate) continue;
         EXPECT_NEAR(fast.components[i].rate_stderr, reference.components[i].rate_stderr,
                     0.01 * reference.components[i].rate_stderr);
       }

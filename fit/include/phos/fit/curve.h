@@ -79,6 +79,28 @@ double SmallestTimeStep(const Curve& curve);
 // neighbours) and by more than 2% of the peak.
 std::optional<double> PeakAfterRise(const Curve& curve);
 
+// The units a fit solves in. A curve's values may be radiances of 1e-9
+// W/(sr m^2) or counts of 1e5 DN, its times milliseconds or hours: every
+// fit divides the times by `time_s` and the values by `value` before it
+// solves, so that rates, amplitudes, residuals and weights are of order 1
+// there whatever the data's units, and so are the solvers' absolute
+// tolerances, floors and initial trust regions. The results are multiplied
+// back (rates by 1 / time_s, levels by value, squared residuals by value^2):
+// a fit of the curve in other units is the same fit, its parameters in
+// those units.
+struct CurveScale {
+  double time_s = 1;      // the span of the times (last - first)
+  double value = 1;       // the largest |value| of any channel (1 if all are 0)
+  double exposure_s = 1;  // the longest exposure (1 without exposures)
+};
+// Of a curve that passed ValidateCurve. Values too small to keep their
+// precision when divided (largest |value| a subnormal double, below 2.2e-308)
+// and times that span less than that are UserErrors naming `where`.
+CurveScale ScaleOfCurve(const Curve& curve, const std::string& where);
+// The curve in those units: times / time_s, values / value, exposures /
+// exposure_s.
+Curve ScaledCurve(const Curve& curve, const CurveScale& scale);
+
 // Per-sample weights of one channel (1 for kNone). For kPoisson the floor is
 // 1e-3 of the channel's largest |value| (so a zero or slightly negative
 // sample, which photon noise makes common at the end of a decay, does not get
