@@ -84,6 +84,87 @@ std::string WhyIncomplete(ArvBuffer* buffer) {
   return "";
 }
 
+// Sets the exposure and the gain, each refused (naming the camera's range)
+// when the camera does not take it.
+void SetExposureAndGain(ArvCamera* camera, const std::string& id, double exposure_s, double gain) {
+  GError* error = nullptr;
+  double lo = 0, hi = 0;
+  arv_camera_get_exposure_time_bounds(camera, &lo, &hi, &error);
+  Check(error, id, "exposure bounds");
+  const double us = exposure_s * 1e6;
+  if (!(us >= lo && us <= hi))
+    ThrowUserError("camera '" + id + "'", "exposure",
+                   "refuses " + FormatDouble(exposure_s) + " s (it takes " + FormatShort(lo * 1e-6) + " to " +
+                       FormatShort(hi * 1e-6) + " s)");
+  arv_camera_set_exposure_time(camera, us, &error);
+  Check(error, id, "exposure");
+  arv_camera_get_gain_bounds(camera, &lo, &hi, &error);
+  Check(error, id, "gain bounds");
+  if (!(gain >= lo && gain <= hi))
+    ThrowUserError("camera '" + id + "'", "gain",
+                   "refuses " + FormatDouble(gain) + " (it takes " + FormatShort(lo) + " to " + FormatShort(hi) + ")");
+  arv_camera_set_gain(camera, gain, &error);
+  Check(error, id, "gain");
+}
+
+// The frame of the try that began at try_started_ns, or null when none came
+// within try_timeout_us.
+ArvBuffer* PopThisFrame(ArvStream* stream, gint64 try_timeout_us, gint64 try_started_ns) {
+  const gint64 deadline_us = g_get_monotonic_time() + try_timeout_us;
+  for (gint64 left_us = try_timeout_us; left_us > 0; left_us = deadline_us - g_get_monotonic_time()) {
+    ArvBuffer* popped = arv_stream_timeout_pop_buffer(stream, static_cast<guint64>(left_us));
+    if (popped == nullptr) return nullptr;
+    // A whole frame whose first packet reached the host before this try
+    // began was exposed before it (one that came in behind a frame held
+    // back while its lost packets were awaited, or one from earlier
+    // settings): it is dropped, so t_start_s and the settings are the
+    // frame's own. An incomplete one is retaken whatever its age.
+    if (arv_buffer_get_status(popped) != ARV_BUFFER_STATUS_SUCCESS ||
+        arv_buffer_get_system_timestamp(popped) >= static_cast<guint64>(try_started_ns))
+      return popped;
+    arv_stream_push_buffer(stream, popped);
+  }
+  return nullptr;
+}
+
+// A whole frame's pixels, region, bit depth, channel, timestamp and sensor
+// temperature into `frame`.
+void ReadFrame(ArvCamera* camera, const std::string& id, ArvBuffer* buffer, Frame& frame) {
+  gint x = 0, y = 0, width = 0, height = 0;
+  arv_buffer_get_image_region(buffer, &x, &y, &width, &height);
+  const ArvPixelFormat format = arv_buffer_get_image_pixel_format(buffer);
+  size_t size = 0;
+  const auto* data = static_cast<const unsigned char*>(arv_buffer_get_image_data(buffer, &size));
+  frame.width = width;
+  frame.height = height;
+  frame.channels = 1;
+  frame.pixels.resize(static_cast<std::size_t>(width) * height);
+  // Unpacked formats only: 8 bits per pixel, or 10-16 significant bits in 16.
+  const int container_bits = ARV_PIXEL_FORMAT_BIT_PER_PIXEL(format);
+  const char* name_now = arv_camera_get_pixel_format_as_string(camera, nullptr);
+  const std::string format_name = name_now ? name_now : "";
+  const bool bayer = format_name.rfind("Bayer", 0) == 0;
+  if (format_name.find("Packed") != std::string::npos || (!format_name.empty() && format_name.back() == 'p') ||
+      (container_bits != 8 && container_bits != 16))
+    ThrowUserError("camera '" + id + "'", "pixel format",
+                   "'" + format_name + "' is packed or not 8/16-bit (use Mono8-16 or unpacked Bayer)");
+  if (container_bits == 16 && size >= frame.pixels.size() * 2) {
+    std::memcpy(frame.pixels.data(), data, frame.pixels.size() * 2);
+  } else if (container_bits == 8 && size >= frame.pixels.size()) {
+    std::copy(data, data + frame.pixels.size(), frame.pixels.begin());
+  } else {
+    ThrowUserError("camera '" + id + "'", "acquisition", "frame smaller than its region (" + format_name + ")");
+  }
+  // Significant bits: the number in the format's name (Mono12 -> 12).
+  const std::size_t digits = format_name.find_first_of("0123456789");
+  frame.adc_bits = digits == std::string::npos ? container_bits : std::atoi(format_name.c_str() + digits);
+  if (frame.adc_bits < 1 || frame.adc_bits > 16) frame.adc_bits = container_bits;
+  frame.channel_names = {bayer ? format_name.substr(0, format_name.find_first_of("0123456789")) : std::string("Y")};
+  frame.camera_timestamp_ns = arv_buffer_get_timestamp(buffer);
+  if (arv_camera_is_feature_available(camera, "DeviceTemperature", nullptr))
+    frame.sensor_temperature_c = arv_camera_get_float(camera, "DeviceTemperature", nullptr);
+}
+
 }  // namespace
 
 void AravisCamera::EnableFakeInterface() { arv_enable_interface("Fake"); }
@@ -328,25 +409,9 @@ double AravisCamera::gain() const {
 }
 
 Frame AravisCamera::Capture(double exposure_s, double gain) {
-  GError* error = nullptr;
-  double lo = 0, hi = 0;
-  arv_camera_get_exposure_time_bounds(impl_->camera, &lo, &hi, &error);
-  Check(error, impl_->id, "exposure bounds");
-  const double us = exposure_s * 1e6;
-  if (!(us >= lo && us <= hi))
-    ThrowUserError("camera '" + impl_->id + "'", "exposure",
-                   "refuses " + FormatDouble(exposure_s) + " s (it takes " + FormatShort(lo * 1e-6) + " to " +
-                       FormatShort(hi * 1e-6) + " s)");
-  arv_camera_set_exposure_time(impl_->camera, us, &error);
-  Check(error, impl_->id, "exposure");
-  arv_camera_get_gain_bounds(impl_->camera, &lo, &hi, &error);
-  Check(error, impl_->id, "gain bounds");
-  if (!(gain >= lo && gain <= hi))
-    ThrowUserError("camera '" + impl_->id + "'", "gain",
-                   "refuses " + FormatDouble(gain) + " (it takes " + FormatShort(lo) + " to " + FormatShort(hi) + ")");
-  arv_camera_set_gain(impl_->camera, gain, &error);
-  Check(error, impl_->id, "gain");
+  SetExposureAndGain(impl_->camera, impl_->id, exposure_s, gain);
 
+  GError* error = nullptr;
   Frame frame;
   frame.t_start_s = clock_.now_s();
   frame.exposure_s = arv_camera_get_exposure_time(impl_->camera, &error) * 1e-6;  // what the camera set
@@ -361,23 +426,6 @@ Frame AravisCamera::Capture(double exposure_s, double gain) {
   gint64 try_started_ns = 0;
   const StreamStatistics before = stream_statistics();
   const gint64 try_timeout_us = static_cast<gint64>((exposure_s + timeout_s_) * 1e6);
-  auto pop_this_frame = [&]() -> ArvBuffer* {
-    const gint64 deadline_us = g_get_monotonic_time() + try_timeout_us;
-    for (gint64 left_us = try_timeout_us; left_us > 0; left_us = deadline_us - g_get_monotonic_time()) {
-      ArvBuffer* popped = arv_stream_timeout_pop_buffer(impl_->stream, static_cast<guint64>(left_us));
-      if (popped == nullptr) return nullptr;
-      // A whole frame whose first packet reached the host before this try
-      // began was exposed before it (one that came in behind a frame held
-      // back while its lost packets were awaited, or one from earlier
-      // settings): it is dropped, so t_start_s and the settings are the
-      // frame's own. An incomplete one is retaken whatever its age.
-      if (arv_buffer_get_status(popped) != ARV_BUFFER_STATUS_SUCCESS ||
-          arv_buffer_get_system_timestamp(popped) >= static_cast<guint64>(try_started_ns))
-        return popped;
-      arv_stream_push_buffer(impl_->stream, popped);
-    }
-    return nullptr;
-  };
   ArvBuffer* buffer = nullptr;
   for (int retakes = 0;; ++retakes) {
     frame.t_start_s = clock_.now_s();
@@ -393,7 +441,7 @@ Frame AravisCamera::Capture(double exposure_s, double gain) {
       frame.t_start_s = clock_.now_s();
       fire_hardware_trigger();
     }
-    buffer = pop_this_frame();
+    buffer = PopThisFrame(impl_->stream, try_timeout_us, try_started_ns);
     arv_camera_stop_acquisition(impl_->camera, nullptr);
     if (buffer == nullptr && trigger_ == Trigger::kHardware)
       ThrowUserError("camera '" + impl_->id + "'", "acquisition",
@@ -423,39 +471,7 @@ Frame AravisCamera::Capture(double exposure_s, double gain) {
     ArvBuffer* buffer;
     ~Requeue() { arv_stream_push_buffer(stream, buffer); }
   } requeue{impl_->stream, buffer};
-  gint x = 0, y = 0, width = 0, height = 0;
-  arv_buffer_get_image_region(buffer, &x, &y, &width, &height);
-  const ArvPixelFormat format = arv_buffer_get_image_pixel_format(buffer);
-  size_t size = 0;
-  const auto* data = static_cast<const unsigned char*>(arv_buffer_get_image_data(buffer, &size));
-  frame.width = width;
-  frame.height = height;
-  frame.channels = 1;
-  frame.pixels.resize(static_cast<std::size_t>(width) * height);
-  // Unpacked formats only: 8 bits per pixel, or 10-16 significant bits in 16.
-  const int container_bits = ARV_PIXEL_FORMAT_BIT_PER_PIXEL(format);
-  const char* name_now = arv_camera_get_pixel_format_as_string(impl_->camera, nullptr);
-  const std::string format_name = name_now ? name_now : "";
-  const bool bayer = format_name.rfind("Bayer", 0) == 0;
-  if (format_name.find("Packed") != std::string::npos || (!format_name.empty() && format_name.back() == 'p') ||
-      (container_bits != 8 && container_bits != 16))
-    ThrowUserError("camera '" + impl_->id + "'", "pixel format",
-                   "'" + format_name + "' is packed or not 8/16-bit (use Mono8-16 or unpacked Bayer)");
-  if (container_bits == 16 && size >= frame.pixels.size() * 2) {
-    std::memcpy(frame.pixels.data(), data, frame.pixels.size() * 2);
-  } else if (container_bits == 8 && size >= frame.pixels.size()) {
-    std::copy(data, data + frame.pixels.size(), frame.pixels.begin());
-  } else {
-    ThrowUserError("camera '" + impl_->id + "'", "acquisition", "frame smaller than its region (" + format_name + ")");
-  }
-  // Significant bits: the number in the format's name (Mono12 -> 12).
-  const std::size_t digits = format_name.find_first_of("0123456789");
-  frame.adc_bits = digits == std::string::npos ? container_bits : std::atoi(format_name.c_str() + digits);
-  if (frame.adc_bits < 1 || frame.adc_bits > 16) frame.adc_bits = container_bits;
-  frame.channel_names = {bayer ? format_name.substr(0, format_name.find_first_of("0123456789")) : std::string("Y")};
-  frame.camera_timestamp_ns = arv_buffer_get_timestamp(buffer);
-  if (arv_camera_is_feature_available(impl_->camera, "DeviceTemperature", nullptr))
-    frame.sensor_temperature_c = arv_camera_get_float(impl_->camera, "DeviceTemperature", nullptr);
+  ReadFrame(impl_->camera, impl_->id, buffer, frame);
   last_frame_id_ = arv_buffer_get_frame_id(buffer);
   last_camera_timestamp_ns_ = arv_buffer_get_timestamp(buffer);
   return frame;

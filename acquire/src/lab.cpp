@@ -53,16 +53,10 @@ nlohmann::json LabConfig::ToJson() const {
 
 LabConfig LoadLabConfig(const std::filesystem::path& path) { return LabConfigFromJson(ReadFileText(path), path); }
 
-LabConfig LabConfigFromJson(std::string_view text, const std::filesystem::path& path) {
-  const nlohmann::json document = ParseJsonText(text, path.string());
-  JsonField root(document, path.string());
-  root.RejectUnknownKeys(
-      {"schema", "camera", "lights", "charge_light", "calibration_lines", "flat_field", "rig", "bands_nm", "note"});
-  if (root["schema"].String() != "phos.lab/1") root["schema"].Fail("expected \"phos.lab/1\"");
-  LabConfig config;
-  config.source = path;
+namespace {
 
-  JsonField camera = root["camera"];
+// "camera": the Aravis device and how it is set up.
+void ReadLabCamera(const JsonField& camera, LabConfig& config) {
   camera.RejectUnknownKeys({"aravis", "pixel_format", "binning", "region", "trigger", "timeout_s", "note"});
   config.camera = camera["aravis"].NonEmptyString();
   if (auto f = camera.Optional("pixel_format")) config.pixel_format = f->NonEmptyString();
@@ -101,18 +95,51 @@ LabConfig LabConfigFromJson(std::string_view text, const std::filesystem::path& 
       config.trigger_channel = (*f)["gpio_channel"].NonEmptyString();
     }
   }
+}
 
-  if (auto f = root.Optional("bands_nm")) {
-    if (f->ArraySize() > static_cast<std::size_t>(kMaxBands) + 1)
-      f->Fail("more than the limit of " + std::to_string(kMaxBands) + " bands");
-    config.bands.edges_nm = f->NumberArray(0, 100);
-    if (config.bands.edges_nm.size() < 2) f->Fail("expected at least 2 band edges");
-    for (std::size_t i = 0; i < config.bands.edges_nm.size(); ++i)
-      if (config.bands.edges_nm[i] > kMaxWavelengthNm) f->At(i).Fail("expected a wavelength of at most 1e5 nm");
-    for (std::size_t i = 1; i < config.bands.edges_nm.size(); ++i)
-      if (!(config.bands.edges_nm[i] > config.bands.edges_nm[i - 1])) f->Fail("band edges must increase");
+// "bands_nm": the band edges the lights' irradiance is integrated over.
+void ReadLabBands(const JsonField& f, LabConfig& config) {
+  if (f.ArraySize() > static_cast<std::size_t>(kMaxBands) + 1)
+    f.Fail("more than the limit of " + std::to_string(kMaxBands) + " bands");
+  config.bands.edges_nm = f.NumberArray(0, 100);
+  if (config.bands.edges_nm.size() < 2) f.Fail("expected at least 2 band edges");
+  for (std::size_t i = 0; i < config.bands.edges_nm.size(); ++i)
+    if (config.bands.edges_nm[i] > kMaxWavelengthNm) f.At(i).Fail("expected a wavelength of at most 1e5 nm");
+  for (std::size_t i = 1; i < config.bands.edges_nm.size(); ++i)
+    if (!(config.bands.edges_nm[i] > config.bands.edges_nm[i - 1])) f.Fail("band edges must increase");
+}
+
+// A channel's "irradiance_csv", integrated over the bands.
+std::vector<double> ReadIrradianceCsv(const JsonField& f, const std::filesystem::path& path,
+                                      const SpectralGrid& bands) {
+  // Relative to the config file, as a user writes it next to the config.
+  std::filesystem::path csv = f.NonEmptyString();
+  if (csv.is_relative()) csv = path.parent_path() / csv;
+  const CsvTable table = ReadCsv(csv);
+  const int nm = table.Find("wavelength_nm"), value = table.Find("irradiance");
+  if (nm < 0 || value < 0) f.Fail("'" + csv.string() + "' needs columns wavelength_nm,irradiance");
+  SampledSpectrum spectrum{table.columns[nm], table.columns[value]};
+  // A header alone (or one row) integrates to 0 in every band, and the
+  // light was recorded as dark: refused, as is a spectrum that misses
+  // every band of bands_nm.
+  if (spectrum.value.size() < 2)
+    f.Fail("'" + csv.string() + "' has " + std::to_string(spectrum.value.size()) +
+           " row(s) of wavelength_nm,irradiance; a spectrum needs at least 2");
+  for (std::size_t i = 0; i < spectrum.value.size(); ++i) {
+    if (spectrum.value[i] < 0) f.Fail("'" + csv.string() + "': irradiance must be >= 0");
+    if (i > 0 && !(spectrum.wavelength_nm[i] > spectrum.wavelength_nm[i - 1]))
+      f.Fail("'" + csv.string() + "': wavelength_nm must increase");
   }
-  JsonField lights = root["lights"];
+  std::vector<double> band_irradiance = IntegrateOverBands(spectrum, bands);
+  if (std::none_of(band_irradiance.begin(), band_irradiance.end(), [](double e) { return e > 0; }))
+    f.Fail("'" + csv.string() + "' gives 0 irradiance in every band of bands_nm (" +
+           FormatDouble(bands.edges_nm.front()) + " to " + FormatDouble(bands.edges_nm.back()) +
+           " nm): the light would be recorded as dark");
+  return band_irradiance;
+}
+
+// "lights": the backend, its chip and the named channels (each GPIO line once).
+void ReadLabLights(const JsonField& lights, const std::filesystem::path& path, LabConfig& config) {
   lights.RejectUnknownKeys({"backend", "chip", "channels", "note"});
   if (auto f = lights.Optional("backend")) {
     config.lights_backend = f->String();
@@ -135,49 +162,43 @@ LabConfig LabConfigFromJson(std::string_view text, const std::filesystem::path& 
     }
     if (!used.insert(c.line).second)
       channel["line"].Fail("GPIO line " + std::to_string(c.line) + " is used by two channels");
-    if (auto f = channel.Optional("irradiance_csv")) {
-      // Relative to the config file, as a user writes it next to the config.
-      std::filesystem::path csv = f->NonEmptyString();
-      if (csv.is_relative()) csv = path.parent_path() / csv;
-      const CsvTable table = ReadCsv(csv);
-      const int nm = table.Find("wavelength_nm"), value = table.Find("irradiance");
-      if (nm < 0 || value < 0) f->Fail("'" + csv.string() + "' needs columns wavelength_nm,irradiance");
-      SampledSpectrum spectrum{table.columns[nm], table.columns[value]};
-      // A header alone (or one row) integrates to 0 in every band, and the
-      // light was recorded as dark: refused, as is a spectrum that misses
-      // every band of bands_nm.
-      if (spectrum.value.size() < 2)
-        f->Fail("'" + csv.string() + "' has " + std::to_string(spectrum.value.size()) +
-                " row(s) of wavelength_nm,irradiance; a spectrum needs at least 2");
-      for (std::size_t i = 0; i < spectrum.value.size(); ++i) {
-        if (spectrum.value[i] < 0) f->Fail("'" + csv.string() + "': irradiance must be >= 0");
-        if (i > 0 && !(spectrum.wavelength_nm[i] > spectrum.wavelength_nm[i - 1]))
-          f->Fail("'" + csv.string() + "': wavelength_nm must increase");
-      }
-      c.band_irradiance = IntegrateOverBands(spectrum, config.bands);
-      if (std::none_of(c.band_irradiance.begin(), c.band_irradiance.end(), [](double e) { return e > 0; }))
-        f->Fail("'" + csv.string() + "' gives 0 irradiance in every band of bands_nm (" +
-                FormatDouble(config.bands.edges_nm.front()) + " to " + FormatDouble(config.bands.edges_nm.back()) +
-                " nm): the light would be recorded as dark");
-    }
+    if (auto f = channel.Optional("irradiance_csv")) c.band_irradiance = ReadIrradianceCsv(*f, path, config.bands);
     config.channels.push_back(c);
   }
-  auto has_channel = [&](const std::string& name) {
-    return std::any_of(config.channels.begin(), config.channels.end(),
-                       [&](const LabChannel& c) { return c.name == name; });
-  };
-  if (config.trigger == AravisCamera::Trigger::kHardware && !has_channel(config.trigger_channel))
+}
+
+bool HasChannel(const LabConfig& config, const std::string& name) {
+  return std::any_of(config.channels.begin(), config.channels.end(),
+                     [&](const LabChannel& c) { return c.name == name; });
+}
+
+}  // namespace
+
+LabConfig LabConfigFromJson(std::string_view text, const std::filesystem::path& path) {
+  const nlohmann::json document = ParseJsonText(text, path.string());
+  JsonField root(document, path.string());
+  root.RejectUnknownKeys(
+      {"schema", "camera", "lights", "charge_light", "calibration_lines", "flat_field", "rig", "bands_nm", "note"});
+  if (root["schema"].String() != "phos.lab/1") root["schema"].Fail("expected \"phos.lab/1\"");
+  LabConfig config;
+  config.source = path;
+
+  JsonField camera = root["camera"];
+  ReadLabCamera(camera, config);
+  if (auto f = root.Optional("bands_nm")) ReadLabBands(*f, config);
+  ReadLabLights(root["lights"], path, config);
+  if (config.trigger == AravisCamera::Trigger::kHardware && !HasChannel(config, config.trigger_channel))
     camera["trigger"]["gpio_channel"].Fail("no light channel '" + config.trigger_channel + "' in lights.channels");
 
   if (auto f = root.Optional("charge_light")) config.charge_light = f->NonEmptyString();
-  if (!has_channel(config.charge_light))
+  if (!HasChannel(config, config.charge_light))
     root.Fail("charge_light '" + config.charge_light + "' is not a channel of lights.channels");
   if (auto f = root.Optional("calibration_lines")) {
     for (std::size_t i = 0; i < f->ArraySize(); ++i) {
       JsonField line = f->At(i);
       line.RejectUnknownKeys({"light", "wavelength_nm", "note"});
       CalibrationLine l{line["light"].NonEmptyString(), line["wavelength_nm"].NumberInRange(200, 1200)};
-      if (!has_channel(l.light)) line["light"].Fail("'" + l.light + "' is not a channel of lights.channels");
+      if (!HasChannel(config, l.light)) line["light"].Fail("'" + l.light + "' is not a channel of lights.channels");
       config.calibration_lines.push_back(l);
     }
   }

@@ -306,182 +306,211 @@ void LingerAndClose(int fd) {
   ::close(fd);
 }
 
-}  // namespace
-
-void Serve(EditSession& session, const ServerOptions& options, const std::function<void(int)>& on_listening) {
-  Router server;
-  std::mutex mutex;  // connections run on threads of their own; the session is not thread-safe
-  const int listener = Listen(options.bind, options.port);
-  const int port = BoundPort(listener);
-  server.set_payload_max_length(options.max_body_bytes);
-
-  // Origin and Host: only the page itself, at the address it was served from.
-  // Each exactly once (Origin at most once): with two, a check of the first
-  // let a bad second one through to whatever reads the other.
-  server.set_pre_routing_handler([&](const httplib::Request& request, httplib::Response& response) {
-    for (const char* header : {"Host", "Origin"})
-      if (request.get_header_value_count(header) > 1) {
-        Error(response, 400,
-              std::string("request: ") + header + ": given " + std::to_string(request.get_header_value_count(header)) +
-                  " times; expected once");
-        return httplib::Server::HandlerResponse::Handled;
-      }
-    // cpp-httplib 0.11 applies max_body_bytes to Content-Length only: a
-    // chunked body of 13 MB was read whole. The page always sends a length.
-    if (request.has_header("Transfer-Encoding")) {
-      Error(response, 411, "request: Transfer-Encoding is not accepted; send the body with a Content-Length");
+// Origin and Host: only the page itself, at the address it was served from.
+// Each exactly once (Origin at most once): with two, a check of the first
+// let a bad second one through to whatever reads the other.
+httplib::Server::HandlerResponse CheckHeaders(const httplib::Request& request, httplib::Response& response,
+                                              const ServerOptions& options, int port) {
+  for (const char* header : {"Host", "Origin"})
+    if (request.get_header_value_count(header) > 1) {
+      Error(response, 400,
+            std::string("request: ") + header + ": given " + std::to_string(request.get_header_value_count(header)) +
+                " times; expected once");
       return httplib::Server::HandlerResponse::Handled;
     }
-    // A length over the limit is answered before the body is read: httplib
-    // reads (and drops) the whole body first, and a Content-Length of 1e12
-    // without a body got its 413 only at the read deadline.
-    if (request.has_header("Content-Length")) {
-      const std::string length = request.get_header_value("Content-Length");
-      const bool digits = !length.empty() && length.size() <= 19 &&
-                          std::all_of(length.begin(), length.end(), [](char c) { return c >= '0' && c <= '9'; });
-      if (!digits || std::stoull(length) > options.max_body_bytes) {
-        Error(response, 413, "request: the body is larger than " + std::to_string(options.max_body_bytes) + " bytes");
-        return httplib::Server::HandlerResponse::Handled;
-      }
-    }
-    const std::string here = ":" + std::to_string(port);
-    const std::string host = request.get_header_value("Host");
-    const bool loopback = options.bind == "127.0.0.1" || options.bind == "localhost";
-    if (loopback && host != "127.0.0.1" + here && host != "localhost" + here) {
-      Error(response, 403, "Host '" + host.substr(0, 80) + "' is not this editor's address");
+  // cpp-httplib 0.11 applies max_body_bytes to Content-Length only: a
+  // chunked body of 13 MB was read whole. The page always sends a length.
+  if (request.has_header("Transfer-Encoding")) {
+    Error(response, 411, "request: Transfer-Encoding is not accepted; send the body with a Content-Length");
+    return httplib::Server::HandlerResponse::Handled;
+  }
+  // A length over the limit is answered before the body is read: httplib
+  // reads (and drops) the whole body first, and a Content-Length of 1e12
+  // without a body got its 413 only at the read deadline.
+  if (request.has_header("Content-Length")) {
+    const std::string length = request.get_header_value("Content-Length");
+    const bool digits = !length.empty() && length.size() <= 19 &&
+                        std::all_of(length.begin(), length.end(), [](char c) { return c >= '0' && c <= '9'; });
+    if (!digits || std::stoull(length) > options.max_body_bytes) {
+      Error(response, 413, "request: the body is larger than " + std::to_string(options.max_body_bytes) + " bytes");
       return httplib::Server::HandlerResponse::Handled;
     }
-    if (request.has_header("Origin")) {
-      const std::string origin = request.get_header_value("Origin");
-      if (origin != "http://" + host) {
-        Error(response, 403, "requests from other origins are refused ('" + origin.substr(0, 80) + "')");
-        return httplib::Server::HandlerResponse::Handled;
-      }
+  }
+  const std::string here = ":" + std::to_string(port);
+  const std::string host = request.get_header_value("Host");
+  const bool loopback = options.bind == "127.0.0.1" || options.bind == "localhost";
+  if (loopback && host != "127.0.0.1" + here && host != "localhost" + here) {
+    Error(response, 403, "Host '" + host.substr(0, 80) + "' is not this editor's address");
+    return httplib::Server::HandlerResponse::Handled;
+  }
+  if (request.has_header("Origin")) {
+    const std::string origin = request.get_header_value("Origin");
+    if (origin != "http://" + host) {
+      Error(response, 403, "requests from other origins are refused ('" + origin.substr(0, 80) + "')");
+      return httplib::Server::HandlerResponse::Handled;
     }
-    return httplib::Server::HandlerResponse::Unhandled;
-  });
-  // What httplib answers by itself (a body over the limit, a malformed
-  // request line, a URI too long) gets the same one-line JSON as ours.
-  server.set_error_handler(
-      httplib::Server::HandlerWithResponse([&](const httplib::Request&, httplib::Response& response) {
-        if (!response.body.empty()) return httplib::Server::HandlerResponse::Unhandled;
-        std::string message = "request: malformed HTTP request";
-        if (response.status == 413)
-          message = "request: the body is larger than " + std::to_string(options.max_body_bytes) + " bytes";
-        if (response.status == 414) message = "request: the URI is too long";
-        if (response.status == 404) message = "request: no such route";
-        Error(response, response.status, message);
-        return httplib::Server::HandlerResponse::Handled;
-      }));
+  }
+  return httplib::Server::HandlerResponse::Unhandled;
+}
 
-  // Every handler: one lock, and user errors become 400 with nothing changed
-  // (the session validates a request completely before it edits anything).
-  auto handle = [&](std::function<void(const httplib::Request&, httplib::Response&)> body) {
-    return [&, body](const httplib::Request& request, httplib::Response& response) {
+// What httplib answers by itself (a body over the limit, a malformed
+// request line, a URI too long) gets the same one-line JSON as ours.
+httplib::Server::HandlerResponse AnswerHttplibError(httplib::Response& response, const ServerOptions& options) {
+  if (!response.body.empty()) return httplib::Server::HandlerResponse::Unhandled;
+  std::string message = "request: malformed HTTP request";
+  if (response.status == 413)
+    message = "request: the body is larger than " + std::to_string(options.max_body_bytes) + " bytes";
+  if (response.status == 414) message = "request: the URI is too long";
+  if (response.status == 404) message = "request: no such route";
+  Error(response, response.status, message);
+  return httplib::Server::HandlerResponse::Handled;
+}
+
+// ---- The routes: each answers one request with the session locked ----------
+
+void ReplyState(EditSession& session, httplib::Response& response) {
+  response.set_content(Dump(session.State()), "application/json");
+}
+
+void GetPage(EditSession&, const httplib::Request& request, httplib::Response& response) {
+  RejectUnknownParameters(request, {});
+  response.set_content(EditorPage(), "text/html; charset=utf-8");
+}
+
+void GetState(EditSession& session, const httplib::Request& request, httplib::Response& response) {
+  RejectUnknownParameters(request, {});
+  ReplyState(session, response);
+}
+
+void GetFrame(EditSession& session, const httplib::Request& request, httplib::Response& response) {
+  RejectUnknownParameters(request, {"t", "exposure", "v"});  // v: the page's cache breaker
+  const double t = request.has_param("t") ? QueryNumber(request, "t") : session.scene().start_s;
+  double exposure = session.scene().camera.exposure;
+  if (request.has_param("exposure")) {
+    exposure = QueryNumber(request, "exposure");
+    if (!(exposure > 0 && exposure < 1e6))
+      ThrowUserError("request", "exposure",
+                     "expected a number > 0 and < 1e6, got " + request.get_param_value("exposure"));
+  }
+  const std::vector<unsigned char> png = session.FramePng(t, exposure);
+  response.set_content(std::string(png.begin(), png.end()), "image/png");
+  response.set_header("Cache-Control", "no-store");  // a frame changes with every edit
+}
+
+void PostConstraint(EditSession& session, const httplib::Request& request, httplib::Response& response) {
+  const nlohmann::json body = ParseBody(request.body);
+  const JsonField f(body, "request");
+  f.RejectUnknownKeys({"x", "y", "t_s"});
+  const int x = f["x"].Integer(-1000000, 1000000), y = f["y"].Integer(-1000000, 1000000);
+  session.AddConstraint(x, y, f["t_s"].Number());
+  ReplyState(session, response);
+}
+
+void PostConstraintUpdate(EditSession& session, const httplib::Request& request, httplib::Response& response) {
+  const nlohmann::json body = ParseBody(request.body);
+  const JsonField f(body, "request");
+  f.RejectUnknownKeys({"index", "rgb", "t_s", "weight", "kind"});
+  session.UpdateConstraint(static_cast<std::size_t>(f["index"].Integer(0, 1000000)), body);
+  ReplyState(session, response);
+}
+
+void PostConstraintRemove(EditSession& session, const httplib::Request& request, httplib::Response& response) {
+  const nlohmann::json body = ParseBody(request.body);
+  const JsonField f(body, "request");
+  f.RejectUnknownKeys({"index"});
+  session.RemoveConstraint(static_cast<std::size_t>(f["index"].Integer(0, 1000000)));
+  ReplyState(session, response);
+}
+
+void PostPreset(EditSession& session, const httplib::Request& request, httplib::Response& response) {
+  const nlohmann::json body = ParseBody(request.body);
+  const JsonField f(body, "request");
+  f.RejectUnknownKeys({"object", "preset"});
+  session.SetPreset(Name(f["object"]), Name(f["preset"]));
+  ReplyState(session, response);
+}
+
+void PostSettings(EditSession& session, const httplib::Request& request, httplib::Response& response) {
+  const nlohmann::json body = ParseBody(request.body);
+  const JsonField f(body, "request");
+  f.RejectUnknownKeys({"states", "falloff"});
+  // Both read before either is applied: a bad falloff leaves the states as they were.
+  const std::optional<int> states = f.Has("states") ? std::optional<int>(f["states"].Integer(1, 3)) : std::nullopt;
+  const std::optional<double> falloff =
+      f.Has("falloff") ? std::optional<double>(f["falloff"].NumberInRange(0, 10)) : std::nullopt;
+  if (states) session.SetStates(*states);
+  if (falloff) session.SetPropagation(*falloff);
+  ReplyState(session, response);
+}
+
+void GetMaterial(EditSession& session, const httplib::Request& request, httplib::Response& response) {
+  RejectUnknownParameters(request, {"object"});
+  const std::string object = request.get_param_value("object");
+  if (object.size() > kMaxNameBytes)
+    ThrowUserError("request", "object", "longer than " + std::to_string(kMaxNameBytes) + " characters");
+  const nlohmann::json material = session.MaterialJson(object);
+  response.set_content(Dump(material, 2) + "\n", "application/json");
+  // Named after the object (lower case, '-' for the rest): no quote or
+  // control character reaches the header.
+  response.set_header("Content-Disposition", "attachment; filename=\"" + session.ExportFileName(object) + "\"");
+}
+
+void PostExport(EditSession& session, const httplib::Request& request, httplib::Response& response) {
+  const nlohmann::json body = ParseBody(request.body);
+  const JsonField f(body, "request");
+  f.RejectUnknownKeys({"object", "path"});
+  const std::string object = Name(f["object"]);
+  const std::filesystem::path written = session.ExportMaterial(object, f["path"].String());
+  response.set_content(Dump(nlohmann::json{{"written", written.string()}}), "application/json");
+}
+
+using RouteHandler = void (*)(EditSession&, const httplib::Request&, httplib::Response&);
+struct Route {
+  bool post;  // else GET
+  const char* path;
+  RouteHandler handler;
+};
+// The routes, by method (also for 404 and 405: RegisterUnrouted).
+constexpr Route kRoutes[] = {
+    {false, "/", GetPage},
+    {false, "/api/state", GetState},
+    {false, "/api/frame", GetFrame},
+    {true, "/api/constraints", PostConstraint},
+    {true, "/api/constraints/update", PostConstraintUpdate},
+    {true, "/api/constraints/remove", PostConstraintRemove},
+    {true, "/api/preset", PostPreset},
+    {true, "/api/settings", PostSettings},
+    {false, "/api/material", GetMaterial},
+    {true, "/api/export", PostExport},
+};
+
+// Every handler: one lock, and user errors become 400 with nothing changed
+// (the session validates a request completely before it edits anything).
+void RegisterRoutes(Router& server, EditSession& session, std::mutex& mutex) {
+  for (const Route& route : kRoutes) {
+    auto handle = [&session, &mutex, body = route.handler](const httplib::Request& request,
+                                                           httplib::Response& response) {
       std::lock_guard<std::mutex> lock(mutex);
       try {
-        body(request, response);
+        body(session, request, response);
       } catch (const UserError& e) {
         Error(response, 400, e.what());
       } catch (const std::exception& e) {
         Error(response, 500, std::string("internal error: ") + e.what());
       }
     };
-  };
-  auto state = [&](httplib::Response& response) { response.set_content(Dump(session.State()), "application/json"); };
-  auto body_of = [](const httplib::Request& request) { return ParseBody(request.body); };
+    if (route.post)
+      server.Post(route.path, handle);
+    else
+      server.Get(route.path, handle);
+  }
+}
 
-  // The routes, by method, for 404 and 405 below.
-  const std::set<std::string> get_routes = {"/", "/api/state", "/api/frame", "/api/material"};
-  const std::set<std::string> post_routes = {"/api/constraints", "/api/constraints/update", "/api/constraints/remove",
-                                             "/api/preset",      "/api/settings",           "/api/export"};
-
-  server.Get("/", handle([](const httplib::Request& request, httplib::Response& response) {
-               RejectUnknownParameters(request, {});
-               response.set_content(EditorPage(), "text/html; charset=utf-8");
-             }));
-  server.Get("/api/state", handle([&](const httplib::Request& request, httplib::Response& response) {
-               RejectUnknownParameters(request, {});
-               state(response);
-             }));
-  server.Get("/api/frame", handle([&](const httplib::Request& request, httplib::Response& response) {
-               RejectUnknownParameters(request, {"t", "exposure", "v"});  // v: the page's cache breaker
-               const double t = request.has_param("t") ? QueryNumber(request, "t") : session.scene().start_s;
-               double exposure = session.scene().camera.exposure;
-               if (request.has_param("exposure")) {
-                 exposure = QueryNumber(request, "exposure");
-                 if (!(exposure > 0 && exposure < 1e6))
-                   ThrowUserError("request", "exposure",
-                                  "expected a number > 0 and < 1e6, got " + request.get_param_value("exposure"));
-               }
-               const std::vector<unsigned char> png = session.FramePng(t, exposure);
-               response.set_content(std::string(png.begin(), png.end()), "image/png");
-               response.set_header("Cache-Control", "no-store");  // a frame changes with every edit
-             }));
-  server.Post("/api/constraints", handle([&](const httplib::Request& request, httplib::Response& response) {
-                const nlohmann::json body = body_of(request);
-                const JsonField f(body, "request");
-                f.RejectUnknownKeys({"x", "y", "t_s"});
-                const int x = f["x"].Integer(-1000000, 1000000), y = f["y"].Integer(-1000000, 1000000);
-                session.AddConstraint(x, y, f["t_s"].Number());
-                state(response);
-              }));
-  server.Post("/api/constraints/update", handle([&](const httplib::Request& request, httplib::Response& response) {
-                const nlohmann::json body = body_of(request);
-                const JsonField f(body, "request");
-                f.RejectUnknownKeys({"index", "rgb", "t_s", "weight", "kind"});
-                session.UpdateConstraint(static_cast<std::size_t>(f["index"].Integer(0, 1000000)), body);
-                state(response);
-              }));
-  server.Post("/api/constraints/remove", handle([&](const httplib::Request& request, httplib::Response& response) {
-                const nlohmann::json body = body_of(request);
-                const JsonField f(body, "request");
-                f.RejectUnknownKeys({"index"});
-                session.RemoveConstraint(static_cast<std::size_t>(f["index"].Integer(0, 1000000)));
-                state(response);
-              }));
-  server.Post("/api/preset", handle([&](const httplib::Request& request, httplib::Response& response) {
-                const nlohmann::json body = body_of(request);
-                const JsonField f(body, "request");
-                f.RejectUnknownKeys({"object", "preset"});
-                session.SetPreset(Name(f["object"]), Name(f["preset"]));
-                state(response);
-              }));
-  server.Post("/api/settings", handle([&](const httplib::Request& request, httplib::Response& response) {
-                const nlohmann::json body = body_of(request);
-                const JsonField f(body, "request");
-                f.RejectUnknownKeys({"states", "falloff"});
-                // Both read before either is applied: a bad falloff leaves the states as they were.
-                const std::optional<int> states =
-                    f.Has("states") ? std::optional<int>(f["states"].Integer(1, 3)) : std::nullopt;
-                const std::optional<double> falloff =
-                    f.Has("falloff") ? std::optional<double>(f["falloff"].NumberInRange(0, 10)) : std::nullopt;
-                if (states) session.SetStates(*states);
-                if (falloff) session.SetPropagation(*falloff);
-                state(response);
-              }));
-  server.Get("/api/material", handle([&](const httplib::Request& request, httplib::Response& response) {
-               RejectUnknownParameters(request, {"object"});
-               const std::string object = request.get_param_value("object");
-               if (object.size() > kMaxNameBytes)
-                 ThrowUserError("request", "object", "longer than " + std::to_string(kMaxNameBytes) + " characters");
-               const nlohmann::json material = session.MaterialJson(object);
-               response.set_content(Dump(material, 2) + "\n", "application/json");
-               // Named after the object (lower case, '-' for the rest): no quote or
-               // control character reaches the header.
-               response.set_header("Content-Disposition",
-                                   "attachment; filename=\"" + session.ExportFileName(object) + "\"");
-             }));
-  server.Post("/api/export", handle([&](const httplib::Request& request, httplib::Response& response) {
-                const nlohmann::json body = body_of(request);
-                const JsonField f(body, "request");
-                f.RejectUnknownKeys({"object", "path"});
-                const std::string object = Name(f["object"]);
-                const std::filesystem::path written = session.ExportMaterial(object, f["path"].String());
-                response.set_content(Dump(nlohmann::json{{"written", written.string()}}), "application/json");
-              }));
-  // Anything else: 405 naming the methods of a route that exists, else 404.
-  const auto unrouted = [&](const httplib::Request& request, httplib::Response& response) {
+// Anything else: 405 naming the methods of a route that exists, else 404.
+void RegisterUnrouted(Router& server) {
+  std::set<std::string> get_routes, post_routes;
+  for (const Route& route : kRoutes) (route.post ? post_routes : get_routes).insert(route.path);
+  const auto unrouted = [get_routes, post_routes](const httplib::Request& request, httplib::Response& response) {
     const bool get = get_routes.count(request.path) > 0, post = post_routes.count(request.path) > 0;
     if (get || post) {
       response.set_header("Allow", get ? "GET" : "POST");
@@ -498,14 +527,14 @@ void Serve(EditSession& session, const ServerOptions& options, const std::functi
   server.Patch(".*", unrouted);
   server.Delete(".*", unrouted);
   server.Options(".*", unrouted);
+}
 
-  on_listening(port);
-
-  // Our own listener: a thread per connection, at most max_connections of
-  // them (more are answered 503 at once), each request read under a deadline
-  // and the connection closed after its response. So slow clients hold only
-  // their own threads, for at most the deadline, and the page is answered
-  // beside them.
+// Our own listener: a thread per connection, at most max_connections of
+// them (more are answered 503 at once), each request read under a deadline
+// and the connection closed after its response. So slow clients hold only
+// their own threads, for at most the deadline, and the page is answered
+// beside them.
+void ServeConnections(Router& server, int listener, const ServerOptions& options) {
   struct Connection {
     std::thread thread;
     std::shared_ptr<std::atomic<bool>> done = std::make_shared<std::atomic<bool>>(false);
@@ -556,6 +585,25 @@ void Serve(EditSession& session, const ServerOptions& options, const std::functi
         });
   }
   for (Connection& connection : connections) connection.thread.join();
+}
+
+}  // namespace
+
+void Serve(EditSession& session, const ServerOptions& options, const std::function<void(int)>& on_listening) {
+  Router server;
+  std::mutex mutex;  // connections run on threads of their own; the session is not thread-safe
+  const int listener = Listen(options.bind, options.port);
+  const int port = BoundPort(listener);
+  server.set_payload_max_length(options.max_body_bytes);
+  server.set_pre_routing_handler([&](const httplib::Request& request, httplib::Response& response) {
+    return CheckHeaders(request, response, options, port);
+  });
+  server.set_error_handler(httplib::Server::HandlerWithResponse(
+      [&](const httplib::Request&, httplib::Response& response) { return AnswerHttplibError(response, options); }));
+  RegisterRoutes(server, session, mutex);
+  RegisterUnrouted(server);
+  on_listening(port);
+  ServeConnections(server, listener, options);
   ::close(listener);
 }
 

@@ -372,15 +372,23 @@ void RequireOneToOneUvMap(const JsonField& f, const Mesh& mesh) {
            "would each lie in several places");
 }
 
+// A phosphor's mask or map (`what`) lies on the mesh's UV map, and its texels
+// are then the UV map's: `texels` must say "uv" (`adjective`: "masked", ...).
+void RequireUvTexels(const JsonField& f, const Mesh& mesh, const std::string& texels, const char* what,
+                     const char* adjective) {
+  if (!mesh.has_uvs())
+    f.Fail(std::string("the ") + what + " lies on the mesh's UV map, and the mesh (" + mesh.source + ") has none");
+  if (texels == "auto")
+    f.Fail(std::string("a ") + adjective + " phosphor's texels are its UV map's: use \"texels\": \"uv\"");
+  RequireOneToOneUvMap(f, mesh);
+}
+
 // "phosphor_map": a decay map of `phos fit map` over the mesh's UV map
 // (phosphor_map.h): one texel per map pixel along its longer side unless
 // "uv_resolution" says fewer.
 void ReadPhosphorMapField(const JsonField& f, const std::filesystem::path& base_dir, Object& object) {
   if (!object.phosphor) f.Fail("a map gives a phosphor's rates and levels per texel: give the material ('phosphor')");
-  if (!object.mesh->has_uvs())
-    f.Fail("the map lies on the mesh's UV map, and the mesh (" + object.mesh->source + ") has none");
-  if (object.texels == "auto") f.Fail("a mapped phosphor's texels are its UV map's: use \"texels\": \"uv\"");
-  RequireOneToOneUvMap(f, *object.mesh);
+  RequireUvTexels(f, *object.mesh, object.texels, "map", "mapped");
   const std::filesystem::path file = SceneFile(f, base_dir, "map");
   auto map = std::make_shared<PhosphorMap>(ReadPhosphorMap(file, f.source(), f.path()));
   const int nc = object.phosphor->state_count();
@@ -478,6 +486,319 @@ std::vector<float> ReadDensity(const JsonField& f, const Volume& v) {
         density[(static_cast<std::size_t>(z) * v.ny + y) * v.nx + x] = static_cast<float>(d);
       }
   return density;
+}
+
+// "bands_nm": the band edges of the scene's spectra.
+void ReadBands(const JsonField& f, SpectralGrid& bands) {
+  if (f.ArraySize() > static_cast<std::size_t>(kMaxBands) + 1)
+    f.Fail("more than the limit of " + std::to_string(kMaxBands) + " bands");
+  bands.edges_nm = f.NumberArray(0, 1.0);
+  if (bands.edges_nm.size() < 2) f.Fail("expected at least two band edges");
+  for (std::size_t i = 0; i < bands.edges_nm.size(); ++i)
+    if (bands.edges_nm[i] > kMaxWavelengthNm)
+      f.At(i).Fail("expected a wavelength of at most " + FormatDouble(kMaxWavelengthNm) + " nm");
+  for (std::size_t i = 1; i < bands.edges_nm.size(); ++i)
+    if (!(bands.edges_nm[i] > bands.edges_nm[i - 1])) f.At(i).Fail("band edges must increase");
+}
+
+// "time": the sequence's start, end and frame rate.
+void ReadTimes(const JsonField& time, Scene& scene) {
+  time.RejectUnknownKeys({"start_s", "end_s", "fps"});
+  if (time.Has("start_s")) scene.start_s = ReadTime(time["start_s"]);
+  if (time.Has("end_s")) scene.end_s = ReadTime(time["end_s"]);
+  if (time.Has("fps")) scene.fps = time["fps"].NumberInRange(1e-6, 1e4);
+  if (!(scene.end_s >= scene.start_s)) time["end_s"].Fail("must not be before start_s");
+  if ((scene.end_s - scene.start_s) * scene.fps > 1e6) time["fps"].Fail("more than a million frames");
+}
+
+void ReadCamera(const JsonField& camera, Camera& out) {
+  camera.RejectUnknownKeys({"position", "look_at", "up", "fov_deg", "width", "height", "exposure", "path"});
+  CameraKey first;
+  first.position = ReadVec3(camera["position"]);
+  first.look_at = ReadVec3(camera["look_at"]);
+  if ((first.position - first.look_at).norm() == 0) camera["look_at"].Fail("must differ from position");
+  out.keys.push_back(first);
+  if (auto path = camera.Optional("path")) {
+    out.keys.clear();
+    for (std::size_t i = 0; i < path->ArraySize(); ++i) {
+      const JsonField key = path->At(i);
+      key.RejectUnknownKeys({"t_s", "position", "look_at"});
+      out.keys.push_back({ReadTime(key["t_s"]), ReadVec3(key["position"]), ReadVec3(key["look_at"])});
+      if ((out.keys.back().position - out.keys.back().look_at).norm() == 0)
+        key["look_at"].Fail("must differ from position");
+    }
+    if (out.keys.empty()) path->Fail("expected at least one keyframe");
+    RequireIncreasingTimes(*path, out.keys);
+  }
+  if (auto f = camera.Optional("up")) out.up = ReadVec3(*f);
+  if (out.up.norm() == 0) camera["up"].Fail("must not be zero");
+  if (auto f = camera.Optional("fov_deg")) out.fov_deg = f->NumberInRange(1, 170);
+  if (auto f = camera.Optional("width")) out.width = f->Integer(1, 16384);
+  if (auto f = camera.Optional("height")) out.height = f->Integer(1, 16384);
+  if (auto f = camera.Optional("exposure")) {
+    const nlohmann::json& value = f->value();
+    if (value == "auto")
+      out.exposure_auto = true;
+    else if (value.is_number() && value.get<double>() >= 0 && value.get<double>() <= 1e9)
+      out.exposure = value.get<double>();
+    else
+      f->Fail("expected \"auto\" or a number in [0, 1e9], got " + DescribeJson(value));
+  }
+  if (static_cast<double>(out.width) * out.height > kMaxPixels)
+    camera.Fail(std::to_string(out.width) + " x " + std::to_string(out.height) + " pixels is more than the limit of " +
+                std::to_string(kMaxPixels) + " pixels per frame");
+}
+
+void ReadRenderSettings(const JsonField& render, RenderSettings& s) {
+  render.RejectUnknownKeys({"spp", "max_depth", "direct_spp", "seed", "max_step_s", "phosphor_irradiance"});
+  if (render.Has("spp")) s.spp = render["spp"].Integer(1, 1 << 20);
+  if (render.Has("max_depth")) s.max_depth = render["max_depth"].Integer(1, 1000);
+  if (render.Has("direct_spp")) s.direct_spp = render["direct_spp"].Integer(1, 1024);
+  if (render.Has("seed")) s.seed = static_cast<unsigned>(render["seed"].Integer(0, 1 << 30));
+  if (render.Has("max_step_s")) s.max_step_s = render["max_step_s"].NumberInRange(1e-6, 1e9);
+  s.phosphor_irradiance = ReadBool(render, "phosphor_irradiance", false);
+}
+
+// Meshes used twice are loaded once: by file and group.
+using MeshCache = std::map<std::string, std::shared_ptr<const Mesh>>;
+
+// An object's "mesh" (a file, with its "group") or "shape".
+std::shared_ptr<const Mesh> ReadObjectMesh(const JsonField& o, const std::filesystem::path& base_dir,
+                                           MeshCache& meshes) {
+  if (o.Has("mesh") == o.Has("shape")) o.Fail("give exactly one of 'mesh' (a file) or 'shape'");
+  if (!o.Has("mesh")) return ReadShape(o["shape"]);
+  const std::filesystem::path file = SceneFile(o["mesh"], base_dir, "mesh");
+  const std::string group = o.Has("group") ? o["group"].NonEmptyString() : "";
+  const std::string key = file.string() + "#" + group;
+  auto& mesh = meshes[key];
+  if (!mesh) mesh = std::make_shared<Mesh>(LoadMesh(file, group, o["mesh"].source() + ": " + o["mesh"].path()));
+  return mesh;
+}
+
+// A number, or one value per band, each above zero.
+std::vector<double> ReadPerBand(const JsonField& field, double lower, int nb) {
+  if (field.value().is_number()) return std::vector<double>(nb, field.NumberInRange(lower, 1e9));
+  std::vector<double> values = field.NumberArray(static_cast<std::size_t>(nb), lower);
+  for (std::size_t b = 0; b < values.size(); ++b)
+    if (!(values[b] > 0)) field.At(b).Fail("must be above zero");
+  return values;
+}
+
+// An object's albedo: from its "subsurface", its "albedo", its mesh's base
+// colour or its phosphor's, in that order.
+void ReadObjectAlbedo(const JsonField& o, const SpectralGrid& bands, Object& object) {
+  const int nb = bands.band_count();
+  if (auto f = o.Optional("subsurface")) {
+    f->RejectUnknownKeys({"sigma_a_per_m", "sigma_s_prime_per_m", "eta"});
+    if (o.Has("albedo")) o["albedo"].Fail("a translucent object's albedo follows from 'subsurface'; give one of them");
+    Subsurface sss;
+    sss.sigma_a_per_m = ReadPerBand((*f)["sigma_a_per_m"], 1e-9, nb);
+    sss.sigma_s_prime_per_m = ReadPerBand((*f)["sigma_s_prime_per_m"], 1e-9, nb);
+    if (f->Has("eta")) sss.eta = (*f)["eta"].NumberInRange(1.0, 3.0);
+    for (int b = 0; b < nb; ++b)
+      object.albedo.push_back(
+          Dipole::From(sss.sigma_a_per_m[b], sss.sigma_s_prime_per_m[b], sss.eta).TotalReflectance());
+    object.subsurface = sss;
+  } else if (o.Has("albedo")) {
+    // The scene's own word wins over the mesh file's material: an explicit
+    // override, and scenes written before textures render as they did.
+    object.albedo = ReadAlbedo(o["albedo"], nb);
+  } else if (object.mesh->base_colour) {
+    ReadBaseColour(o, *object.mesh, bands, object);
+  } else if (!object.mesh->base_colours_differ.empty()) {
+    o.Fail("missing 'albedo': the mesh (" + object.mesh->source + ") has no single base colour, " +
+           object.mesh->base_colours_differ + "; give 'albedo' or pick one part with 'group'");
+  } else if (object.phosphor && object.phosphor->albedo) {
+    object.albedo = *object.phosphor->albedo;
+  } else {
+    o.Fail("missing 'albedo' (a number or one value per band)");
+  }
+}
+
+// "two_sided", "texel_size_m", "texels" and "uv_resolution": how a
+// phosphor's state is kept over the object.
+void ReadObjectTexels(const JsonField& o, Object& object) {
+  if (auto f = o.Optional("two_sided")) {
+    object.two_sided = f->Boolean();
+    if (object.two_sided && !object.phosphor)
+      f->Fail("only a phosphor is one- or two-sided (every object reflects on both faces)");
+  }
+  if (auto f = o.Optional("texel_size_m")) object.texel_size_m = f->NumberInRange(1e-6, 1e6);
+  if (auto f = o.Optional("texels")) {
+    object.texels = f->String();
+    if (object.texels != "auto" && object.texels != "uv")
+      f->Fail("expected \"auto\" or \"uv\", got \"" + object.texels + "\"");
+    if (object.texels == "uv" && !object.mesh->has_uvs())
+      f->Fail("the mesh has no UV map (" + object.mesh->source + "); use \"auto\"");
+    if (object.texels == "uv") RequireOneToOneUvMap(*f, *object.mesh);
+  }
+  if (auto f = o.Optional("uv_resolution")) object.uv_resolution = f->Integer(1, 16384);
+}
+
+// Gloss: the scene's factors over the mesh's glTF material's; its
+// texture, if any, multiplies them at each hit.
+void ReadObjectGloss(const JsonField& o, Object& object) {
+  object.gloss = object.mesh->gloss;
+  object.gloss_texture = object.mesh->gloss_texture;
+  if (object.gloss_texture && !object.mesh->has_uvs())
+    o["mesh"].Fail("the mesh (" + object.mesh->source + ") has a gloss texture (" + object.gloss_texture->field +
+                   ") but no UV map (TEXCOORD_0 on every corner)");
+  if (o.Has("metallic") || o.Has("roughness")) {
+    Gloss gloss = object.gloss.value_or(Gloss{});
+    if (auto f = o.Optional("metallic")) gloss.metallic = static_cast<float>(f->NumberInRange(0, 1));
+    if (auto f = o.Optional("roughness")) {
+      // The bound as a person writes it: kMinRoughness is a float, and
+      // promoted it read "expected a number in [0.019999999552965164, 1]".
+      constexpr double kMinRoughnessAsWritten = 0.02;
+      static_assert(static_cast<float>(kMinRoughnessAsWritten) == kMinRoughness);
+      gloss.roughness = std::max(kMinRoughness, static_cast<float>(f->NumberInRange(kMinRoughnessAsWritten, 1)));
+    }
+    object.gloss = gloss;
+  }
+  if (object.gloss && object.subsurface)
+    o["subsurface"].Fail("a translucent object is not glossy too (drop 'metallic' and 'roughness')");
+}
+
+// "phosphor_mask": an image over the mesh's UV map.
+void ReadPhosphorMask(const JsonField& f, const std::filesystem::path& base_dir, Object& object) {
+  if (!object.phosphor) f.Fail("only a phosphor has a mask (give 'phosphor')");
+  RequireUvTexels(f, *object.mesh, object.texels, "mask", "masked");
+  const std::filesystem::path file = SceneFile(f, base_dir, "mask");
+  object.phosphor_mask = file;
+  object.texels = "uv";
+}
+
+// What the objects of a scene share as they are read.
+struct ObjectsRead {
+  MeshCache meshes;
+  std::size_t triangles = 0;  // of the objects so far
+};
+
+// Entry i of "objects" (its emission, if any, is the caller's).
+Object ReadObject(const JsonField& o, std::size_t i, const Scene& scene, const std::filesystem::path& base_dir,
+                  MaterialCache& materials, ObjectsRead& read) {
+  o.RejectUnknownKeys({"name",          "mesh",          "group",        "shape",        "albedo",
+                       "phosphor",      "unknown_ke",    "initial",      "texel_size_m", "texels",
+                       "uv_resolution", "transform",     "animation",    "subsurface",   "two_sided",
+                       "emission",      "phosphor_mask", "phosphor_map", "metallic",     "roughness"});
+  Object object;
+  object.name = o.Has("name") ? o["name"].NonEmptyString() : "object " + std::to_string(i);
+  // Names pick objects (--material, the editor, the warnings): two objects
+  // of one name were both given a --material, silently.
+  for (std::size_t k = 0; k < scene.objects.size(); ++k)
+    if (scene.objects[k].name == object.name)
+      (o.Has("name") ? o["name"] : o)
+          .Fail("'" + object.name + "' is the name of objects[" + std::to_string(k) +
+                "] too; give each object a name of its own");
+  object.mesh = ReadObjectMesh(o, base_dir, read.meshes);
+  if (object.mesh->triangles.empty()) o.Fail("the mesh has no triangles");
+  read.triangles += object.mesh->triangles.size();
+  if (read.triangles > kMaxSceneTriangles)
+    o.Fail("the scene's objects up to this one have " + std::to_string(read.triangles) +
+           " triangles, more than the limit of " + std::to_string(kMaxSceneTriangles) +
+           " (a mesh used twice counts twice)");
+  object.motion = ReadMotion(o);
+  ReadPhosphor(o, base_dir, scene.bands, materials, object.phosphor, object.phosphor_path);
+  ReadObjectAlbedo(o, scene.bands, object);
+  ReadPhosphorPolicy(o, object.phosphor != nullptr, object.unknown_ke_as_zero, object.initial);
+  ReadObjectTexels(o, object);
+  ReadObjectGloss(o, object);
+  if (auto f = o.Optional("phosphor_mask")) ReadPhosphorMask(*f, base_dir, object);
+  if (auto f = o.Optional("phosphor_map")) ReadPhosphorMapField(*f, base_dir, object);
+  return object;
+}
+
+// Objects. Meshes and materials used twice are loaded once.
+void ReadObjects(const JsonField& objects, const std::filesystem::path& base_dir, MaterialCache& materials,
+                 Scene& scene) {
+  ObjectsRead read;
+  if (objects.ArraySize() == 0) objects.Fail("expected at least one object");
+  // Each object costs memory in the geometry and the solver whatever its
+  // size (5,000 phosphor spheres took 3.9 GiB): counted before any is read.
+  if (objects.ArraySize() > kMaxObjects)
+    objects.Fail("has " + std::to_string(objects.ArraySize()) + " objects, more than the limit of " +
+                 std::to_string(kMaxObjects));
+  for (std::size_t i = 0; i < objects.ArraySize(); ++i) {
+    const JsonField o = objects.At(i);
+    Object object = ReadObject(o, i, scene, base_dir, materials, read);
+    if (auto f = o.Optional("emission")) scene.lights.push_back(ReadEmission(*f, object.name, i, scene.bands));
+    scene.objects.push_back(std::move(object));
+  }
+}
+
+// Lights. The solver keeps each light's irradiance per texel: 10,000
+// lights took 3.2 GiB. Counted before each is read, emitting objects
+// and a glTF's lights included.
+void ReadLights(const JsonField& lights, const std::filesystem::path& base_dir, Scene& scene) {
+  const std::string too_many = "more than the limit of " + std::to_string(kMaxLights) + " lights";
+  if (scene.lights.size() + lights.ArraySize() > kMaxLights)
+    lights.Fail("has " + std::to_string(lights.ArraySize()) + " lights" +
+                (scene.lights.empty() ? "" : " and the objects " + std::to_string(scene.lights.size()) + " more") +
+                ", " + too_many);
+  for (std::size_t i = 0; i < lights.ArraySize(); ++i) {
+    const JsonField l = lights.At(i);
+    if (l.Has("type") && l["type"].String() == "gltf") {
+      for (Light& light : ReadGltfLights(l, scene.bands, base_dir)) scene.lights.push_back(std::move(light));
+      if (scene.lights.size() > kMaxLights) l.Fail("the scene's lights up to this entry are " + too_many);
+    } else {
+      scene.lights.push_back(ReadLight(l, i, scene.bands));
+    }
+  }
+}
+
+// The sky.
+Environment ReadEnvironment(const JsonField& f, const SpectralGrid& bands) {
+  f.RejectUnknownKeys({"spectrum", "radiance", "gradient", "schedule"});
+  Environment env;
+  env.L_per_band = ReadSpectrum(f["spectrum"], bands);
+  const double radiance = f["radiance"].NumberInRange(0, kMaxIrradiance);
+  for (double& l : env.L_per_band) {
+    l *= radiance;
+    if (!(l <= kMaxIrradiance))
+      f["radiance"].Fail("gives a radiance of " + FormatDouble(l) + " in a band, more than the limit of " +
+                         FormatDouble(kMaxIrradiance));
+  }
+  if (f.Has("gradient")) env.gradient = f["gradient"].NumberInRange(-1, 1);
+  if (auto sf = f.Optional("schedule")) env.schedule = ReadSchedule(*sf);
+  return env;
+}
+
+// Entry i of "volumes"; `voxels`: those of the volumes up to this one.
+Volume ReadVolume(const JsonField& f, std::size_t i, const Scene& scene, const std::filesystem::path& base_dir,
+                  MaterialCache& materials, double& voxels) {
+  f.RejectUnknownKeys(
+      {"name", "bounds", "resolution", "density", "sigma_t_per_m", "albedo", "g", "phosphor", "unknown_ke", "initial"});
+  Volume v;
+  v.name = f.Has("name") ? f["name"].NonEmptyString() : "volume " + std::to_string(i);
+  const JsonField bounds = f["bounds"];
+  bounds.RejectUnknownKeys({"min", "max"});
+  v.min_m = ReadVec3(bounds["min"]);
+  v.max_m = ReadVec3(bounds["max"]);
+  if (!(v.max_m.array() > v.min_m.array()).all()) bounds["max"].Fail("must exceed 'min' on every axis");
+  const JsonField resolution = f["resolution"];
+  if (resolution.ArraySize() != 3) resolution.Fail("expected [nx, ny, nz]");
+  v.nx = resolution.At(0).Integer(1, 4096);
+  v.ny = resolution.At(1).Integer(1, 4096);
+  v.nz = resolution.At(2).Integer(1, 4096);
+  voxels += static_cast<double>(v.nx) * v.ny * v.nz;
+  if (voxels > kMaxVoxels)
+    resolution.Fail("the scene's volumes have " + FormatDouble(voxels) + " voxels, more than the limit of " +
+                    std::to_string(kMaxVoxels));
+  v.density = ReadDensity(f["density"], v);
+  v.sigma_t_per_m = f["sigma_t_per_m"].NumberInRange(0, 1e9);
+  ReadPhosphor(f, base_dir, scene.bands, materials, v.phosphor, v.phosphor_path);
+  if (f.Has("albedo"))
+    v.albedo = ReadAlbedo(f["albedo"], scene.bands.band_count());
+  else if (v.phosphor && v.phosphor->albedo)
+    v.albedo = *v.phosphor->albedo;
+  else
+    f.Fail("missing 'albedo' (the single-scattering albedo: a number or one value per band)");
+  if (auto g = f.Optional("g")) v.g = g->NumberInRange(-0.99, 0.99);
+  ReadPhosphorPolicy(f, v.phosphor != nullptr, v.unknown_ke_as_zero, v.initial);
+  for (const Light& light : scene.lights)
+    if (light.area())
+      f.Fail("media are lit by point, directional and sheet lights only; '" + light.name + "' is an area light");
+  return v;
 }
 
 }  // namespace
@@ -581,282 +902,19 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
   scene.source = source;
   scene.name = root.Has("name") ? root["name"].String() : std::filesystem::path(source).stem().string();
   scene.bands = SpectralGrid::Paper();
-  if (auto f = root.Optional("bands_nm")) {
-    if (f->ArraySize() > static_cast<std::size_t>(kMaxBands) + 1)
-      f->Fail("more than the limit of " + std::to_string(kMaxBands) + " bands");
-    scene.bands.edges_nm = f->NumberArray(0, 1.0);
-    if (scene.bands.edges_nm.size() < 2) f->Fail("expected at least two band edges");
-    for (std::size_t i = 0; i < scene.bands.edges_nm.size(); ++i)
-      if (scene.bands.edges_nm[i] > kMaxWavelengthNm)
-        f->At(i).Fail("expected a wavelength of at most " + FormatDouble(kMaxWavelengthNm) + " nm");
-    for (std::size_t i = 1; i < scene.bands.edges_nm.size(); ++i)
-      if (!(scene.bands.edges_nm[i] > scene.bands.edges_nm[i - 1])) f->At(i).Fail("band edges must increase");
-  }
-  const int nb = scene.bands.band_count();
-
-  if (auto time = root.Optional("time")) {
-    time->RejectUnknownKeys({"start_s", "end_s", "fps"});
-    if (time->Has("start_s")) scene.start_s = ReadTime((*time)["start_s"]);
-    if (time->Has("end_s")) scene.end_s = ReadTime((*time)["end_s"]);
-    if (time->Has("fps")) scene.fps = (*time)["fps"].NumberInRange(1e-6, 1e4);
-    if (!(scene.end_s >= scene.start_s)) (*time)["end_s"].Fail("must not be before start_s");
-    if ((scene.end_s - scene.start_s) * scene.fps > 1e6) (*time)["fps"].Fail("more than a million frames");
-  }
+  if (auto f = root.Optional("bands_nm")) ReadBands(*f, scene.bands);
+  if (auto time = root.Optional("time")) ReadTimes(*time, scene);
   if (auto f = root.Optional("texel_size_m")) scene.texel_size_m = f->NumberInRange(1e-6, 1e6);
-
-  // Camera.
-  const JsonField camera = root["camera"];
-  camera.RejectUnknownKeys({"position", "look_at", "up", "fov_deg", "width", "height", "exposure", "path"});
-  CameraKey first;
-  first.position = ReadVec3(camera["position"]);
-  first.look_at = ReadVec3(camera["look_at"]);
-  if ((first.position - first.look_at).norm() == 0) camera["look_at"].Fail("must differ from position");
-  scene.camera.keys.push_back(first);
-  if (auto path = camera.Optional("path")) {
-    scene.camera.keys.clear();
-    for (std::size_t i = 0; i < path->ArraySize(); ++i) {
-      const JsonField key = path->At(i);
-      key.RejectUnknownKeys({"t_s", "position", "look_at"});
-      scene.camera.keys.push_back({ReadTime(key["t_s"]), ReadVec3(key["position"]), ReadVec3(key["look_at"])});
-      if ((scene.camera.keys.back().position - scene.camera.keys.back().look_at).norm() == 0)
-        key["look_at"].Fail("must differ from position");
-    }
-    if (scene.camera.keys.empty()) path->Fail("expected at least one keyframe");
-    RequireIncreasingTimes(*path, scene.camera.keys);
-  }
-  if (auto f = camera.Optional("up")) scene.camera.up = ReadVec3(*f);
-  if (scene.camera.up.norm() == 0) camera["up"].Fail("must not be zero");
-  if (auto f = camera.Optional("fov_deg")) scene.camera.fov_deg = f->NumberInRange(1, 170);
-  if (auto f = camera.Optional("width")) scene.camera.width = f->Integer(1, 16384);
-  if (auto f = camera.Optional("height")) scene.camera.height = f->Integer(1, 16384);
-  if (auto f = camera.Optional("exposure")) {
-    const nlohmann::json& value = f->value();
-    if (value == "auto")
-      scene.camera.exposure_auto = true;
-    else if (value.is_number() && value.get<double>() >= 0 && value.get<double>() <= 1e9)
-      scene.camera.exposure = value.get<double>();
-    else
-      f->Fail("expected \"auto\" or a number in [0, 1e9], got " + DescribeJson(value));
-  }
-  if (static_cast<double>(scene.camera.width) * scene.camera.height > kMaxPixels)
-    camera.Fail(std::to_string(scene.camera.width) + " x " + std::to_string(scene.camera.height) +
-                " pixels is more than the limit of " + std::to_string(kMaxPixels) + " pixels per frame");
-
-  if (auto render = root.Optional("render")) {
-    render->RejectUnknownKeys({"spp", "max_depth", "direct_spp", "seed", "max_step_s", "phosphor_irradiance"});
-    RenderSettings& s = scene.settings;
-    if (render->Has("spp")) s.spp = (*render)["spp"].Integer(1, 1 << 20);
-    if (render->Has("max_depth")) s.max_depth = (*render)["max_depth"].Integer(1, 1000);
-    if (render->Has("direct_spp")) s.direct_spp = (*render)["direct_spp"].Integer(1, 1024);
-    if (render->Has("seed")) s.seed = static_cast<unsigned>((*render)["seed"].Integer(0, 1 << 30));
-    if (render->Has("max_step_s")) s.max_step_s = (*render)["max_step_s"].NumberInRange(1e-6, 1e9);
-    s.phosphor_irradiance = ReadBool(*render, "phosphor_irradiance", false);
-  }
-
-  // Objects. Meshes and materials used twice are loaded once.
-  std::map<std::string, std::shared_ptr<const Mesh>> meshes;
-  MaterialCache materials;
-  const JsonField objects = root["objects"];
-  if (objects.ArraySize() == 0) objects.Fail("expected at least one object");
-  // Each object costs memory in the geometry and the solver whatever its
-  // size (5,000 phosphor spheres took 3.9 GiB): counted before any is read.
-  if (objects.ArraySize() > kMaxObjects)
-    objects.Fail("has " + std::to_string(objects.ArraySize()) + " objects, more than the limit of " +
-                 std::to_string(kMaxObjects));
-  std::size_t triangles = 0;
-  for (std::size_t i = 0; i < objects.ArraySize(); ++i) {
-    const JsonField o = objects.At(i);
-    o.RejectUnknownKeys({"name",          "mesh",          "group",        "shape",        "albedo",
-                         "phosphor",      "unknown_ke",    "initial",      "texel_size_m", "texels",
-                         "uv_resolution", "transform",     "animation",    "subsurface",   "two_sided",
-                         "emission",      "phosphor_mask", "phosphor_map", "metallic",     "roughness"});
-    Object object;
-    object.name = o.Has("name") ? o["name"].NonEmptyString() : "object " + std::to_string(i);
-    // Names pick objects (--material, the editor, the warnings): two objects
-    // of one name were both given a --material, silently.
-    for (std::size_t k = 0; k < scene.objects.size(); ++k)
-      if (scene.objects[k].name == object.name)
-        (o.Has("name") ? o["name"] : o)
-            .Fail("'" + object.name + "' is the name of objects[" + std::to_string(k) +
-                  "] too; give each object a name of its own");
-    if (o.Has("mesh") == o.Has("shape")) o.Fail("give exactly one of 'mesh' (a file) or 'shape'");
-    if (o.Has("mesh")) {
-      const std::filesystem::path file = SceneFile(o["mesh"], base_dir, "mesh");
-      const std::string group = o.Has("group") ? o["group"].NonEmptyString() : "";
-      const std::string key = file.string() + "#" + group;
-      auto& mesh = meshes[key];
-      if (!mesh) mesh = std::make_shared<Mesh>(LoadMesh(file, group, o["mesh"].source() + ": " + o["mesh"].path()));
-      object.mesh = mesh;
-    } else {
-      object.mesh = ReadShape(o["shape"]);
-    }
-    if (object.mesh->triangles.empty()) o.Fail("the mesh has no triangles");
-    triangles += object.mesh->triangles.size();
-    if (triangles > kMaxSceneTriangles)
-      o.Fail("the scene's objects up to this one have " + std::to_string(triangles) +
-             " triangles, more than the limit of " + std::to_string(kMaxSceneTriangles) +
-             " (a mesh used twice counts twice)");
-    object.motion = ReadMotion(o);
-    ReadPhosphor(o, base_dir, scene.bands, materials, object.phosphor, object.phosphor_path);
-    if (auto f = o.Optional("subsurface")) {
-      f->RejectUnknownKeys({"sigma_a_per_m", "sigma_s_prime_per_m", "eta"});
-      if (o.Has("albedo"))
-        o["albedo"].Fail("a translucent object's albedo follows from 'subsurface'; give one of them");
-      auto per_band = [&](const JsonField& field, double lower) {
-        if (field.value().is_number()) return std::vector<double>(nb, field.NumberInRange(lower, 1e9));
-        std::vector<double> values = field.NumberArray(static_cast<std::size_t>(nb), lower);
-        for (std::size_t b = 0; b < values.size(); ++b)
-          if (!(values[b] > 0)) field.At(b).Fail("must be above zero");
-        return values;
-      };
-      Subsurface sss;
-      sss.sigma_a_per_m = per_band((*f)["sigma_a_per_m"], 1e-9);
-      sss.sigma_s_prime_per_m = per_band((*f)["sigma_s_prime_per_m"], 1e-9);
-      if (f->Has("eta")) sss.eta = (*f)["eta"].NumberInRange(1.0, 3.0);
-      for (int b = 0; b < nb; ++b)
-        object.albedo.push_back(
-            Dipole::From(sss.sigma_a_per_m[b], sss.sigma_s_prime_per_m[b], sss.eta).TotalReflectance());
-      object.subsurface = sss;
-    } else if (o.Has("albedo")) {
-      // The scene's own word wins over the mesh file's material: an explicit
-      // override, and scenes written before textures render as they did.
-      object.albedo = ReadAlbedo(o["albedo"], nb);
-    } else if (object.mesh->base_colour) {
-      ReadBaseColour(o, *object.mesh, scene.bands, object);
-    } else if (!object.mesh->base_colours_differ.empty()) {
-      o.Fail("missing 'albedo': the mesh (" + object.mesh->source + ") has no single base colour, " +
-             object.mesh->base_colours_differ + "; give 'albedo' or pick one part with 'group'");
-    } else if (object.phosphor && object.phosphor->albedo) {
-      object.albedo = *object.phosphor->albedo;
-    } else {
-      o.Fail("missing 'albedo' (a number or one value per band)");
-    }
-    ReadPhosphorPolicy(o, object.phosphor != nullptr, object.unknown_ke_as_zero, object.initial);
-    if (auto f = o.Optional("two_sided")) {
-      object.two_sided = f->Boolean();
-      if (object.two_sided && !object.phosphor)
-        f->Fail("only a phosphor is one- or two-sided (every object reflects on both faces)");
-    }
-    if (auto f = o.Optional("texel_size_m")) object.texel_size_m = f->NumberInRange(1e-6, 1e6);
-    if (auto f = o.Optional("texels")) {
-      object.texels = f->String();
-      if (object.texels != "auto" && object.texels != "uv")
-        f->Fail("expected \"auto\" or \"uv\", got \"" + object.texels + "\"");
-      if (object.texels == "uv" && !object.mesh->has_uvs())
-        f->Fail("the mesh has no UV map (" + object.mesh->source + "); use \"auto\"");
-      if (object.texels == "uv") RequireOneToOneUvMap(*f, *object.mesh);
-    }
-    if (auto f = o.Optional("uv_resolution")) object.uv_resolution = f->Integer(1, 16384);
-    // Gloss: the scene's factors over the mesh's glTF material's; its
-    // texture, if any, multiplies them at each hit.
-    object.gloss = object.mesh->gloss;
-    object.gloss_texture = object.mesh->gloss_texture;
-    if (object.gloss_texture && !object.mesh->has_uvs())
-      o["mesh"].Fail("the mesh (" + object.mesh->source + ") has a gloss texture (" + object.gloss_texture->field +
-                     ") but no UV map (TEXCOORD_0 on every corner)");
-    if (o.Has("metallic") || o.Has("roughness")) {
-      Gloss gloss = object.gloss.value_or(Gloss{});
-      if (auto f = o.Optional("metallic")) gloss.metallic = static_cast<float>(f->NumberInRange(0, 1));
-      if (auto f = o.Optional("roughness")) {
-        // The bound as a person writes it: kMinRoughness is a float, and
-        // promoted it read "expected a number in [0.019999999552965164, 1]".
-        constexpr double kMinRoughnessAsWritten = 0.02;
-        static_assert(static_cast<float>(kMinRoughnessAsWritten) == kMinRoughness);
-        gloss.roughness = std::max(kMinRoughness, static_cast<float>(f->NumberInRange(kMinRoughnessAsWritten, 1)));
-      }
-      object.gloss = gloss;
-    }
-    if (object.gloss && object.subsurface)
-      o["subsurface"].Fail("a translucent object is not glossy too (drop 'metallic' and 'roughness')");
-    if (auto f = o.Optional("phosphor_mask")) {
-      if (!object.phosphor) f->Fail("only a phosphor has a mask (give 'phosphor')");
-      if (!object.mesh->has_uvs())
-        f->Fail("the mask lies on the mesh's UV map, and the mesh (" + object.mesh->source + ") has none");
-      if (object.texels == "auto") f->Fail("a masked phosphor's texels are its UV map's: use \"texels\": \"uv\"");
-      RequireOneToOneUvMap(*f, *object.mesh);
-      const std::filesystem::path file = SceneFile(*f, base_dir, "mask");
-      object.phosphor_mask = file;
-      object.texels = "uv";
-    }
-    if (auto f = o.Optional("phosphor_map")) ReadPhosphorMapField(*f, base_dir, object);
-    if (auto f = o.Optional("emission")) scene.lights.push_back(ReadEmission(*f, object.name, i, scene.bands));
-    scene.objects.push_back(std::move(object));
-  }
-
-  // Lights. The solver keeps each light's irradiance per texel: 10,000
-  // lights took 3.2 GiB. Counted before each is read, emitting objects
-  // and a glTF's lights included.
-  const JsonField lights = root["lights"];
-  const std::string too_many = "more than the limit of " + std::to_string(kMaxLights) + " lights";
-  if (scene.lights.size() + lights.ArraySize() > kMaxLights)
-    lights.Fail("has " + std::to_string(lights.ArraySize()) + " lights" +
-                (scene.lights.empty() ? "" : " and the objects " + std::to_string(scene.lights.size()) + " more") +
-                ", " + too_many);
-  for (std::size_t i = 0; i < lights.ArraySize(); ++i) {
-    const JsonField l = lights.At(i);
-    if (l.Has("type") && l["type"].String() == "gltf") {
-      for (Light& light : ReadGltfLights(l, scene.bands, base_dir)) scene.lights.push_back(std::move(light));
-      if (scene.lights.size() > kMaxLights) l.Fail("the scene's lights up to this entry are " + too_many);
-    } else {
-      scene.lights.push_back(ReadLight(l, i, scene.bands));
-    }
-  }
-  // The sky.
-  if (auto f = root.Optional("environment")) {
-    f->RejectUnknownKeys({"spectrum", "radiance", "gradient", "schedule"});
-    Environment env;
-    env.L_per_band = ReadSpectrum((*f)["spectrum"], scene.bands);
-    const double radiance = (*f)["radiance"].NumberInRange(0, kMaxIrradiance);
-    for (double& l : env.L_per_band) {
-      l *= radiance;
-      if (!(l <= kMaxIrradiance))
-        (*f)["radiance"].Fail("gives a radiance of " + FormatDouble(l) + " in a band, more than the limit of " +
-                              FormatDouble(kMaxIrradiance));
-    }
-    if (f->Has("gradient")) env.gradient = (*f)["gradient"].NumberInRange(-1, 1);
-    if (auto sf = f->Optional("schedule")) env.schedule = ReadSchedule(*sf);
-    scene.environment = env;
-  }
-
-  // Volumes.
+  ReadCamera(root["camera"], scene.camera);
+  if (auto render = root.Optional("render")) ReadRenderSettings(*render, scene.settings);
+  MaterialCache materials;  // of objects and volumes: each file loaded once
+  ReadObjects(root["objects"], base_dir, materials, scene);
+  ReadLights(root["lights"], base_dir, scene);
+  if (auto f = root.Optional("environment")) scene.environment = ReadEnvironment(*f, scene.bands);
   if (auto volumes = root.Optional("volumes")) {
     double voxels = 0;  // over every volume: they are all in memory at once
-    for (std::size_t i = 0; i < volumes->ArraySize(); ++i) {
-      const JsonField f = volumes->At(i);
-      f.RejectUnknownKeys({"name", "bounds", "resolution", "density", "sigma_t_per_m", "albedo", "g", "phosphor",
-                           "unknown_ke", "initial"});
-      Volume v;
-      v.name = f.Has("name") ? f["name"].NonEmptyString() : "volume " + std::to_string(i);
-      const JsonField bounds = f["bounds"];
-      bounds.RejectUnknownKeys({"min", "max"});
-      v.min_m = ReadVec3(bounds["min"]);
-      v.max_m = ReadVec3(bounds["max"]);
-      if (!(v.max_m.array() > v.min_m.array()).all()) bounds["max"].Fail("must exceed 'min' on every axis");
-      const JsonField resolution = f["resolution"];
-      if (resolution.ArraySize() != 3) resolution.Fail("expected [nx, ny, nz]");
-      v.nx = resolution.At(0).Integer(1, 4096);
-      v.ny = resolution.At(1).Integer(1, 4096);
-      v.nz = resolution.At(2).Integer(1, 4096);
-      voxels += static_cast<double>(v.nx) * v.ny * v.nz;
-      if (voxels > kMaxVoxels)
-        resolution.Fail("the scene's volumes have " + FormatDouble(voxels) + " voxels, more than the limit of " +
-                        std::to_string(kMaxVoxels));
-      v.density = ReadDensity(f["density"], v);
-      v.sigma_t_per_m = f["sigma_t_per_m"].NumberInRange(0, 1e9);
-      ReadPhosphor(f, base_dir, scene.bands, materials, v.phosphor, v.phosphor_path);
-      if (f.Has("albedo"))
-        v.albedo = ReadAlbedo(f["albedo"], nb);
-      else if (v.phosphor && v.phosphor->albedo)
-        v.albedo = *v.phosphor->albedo;
-      else
-        f.Fail("missing 'albedo' (the single-scattering albedo: a number or one value per band)");
-      if (auto g = f.Optional("g")) v.g = g->NumberInRange(-0.99, 0.99);
-      ReadPhosphorPolicy(f, v.phosphor != nullptr, v.unknown_ke_as_zero, v.initial);
-      for (const Light& light : scene.lights)
-        if (light.area())
-          f.Fail("media are lit by point, directional and sheet lights only; '" + light.name + "' is an area light");
-      scene.volumes.push_back(std::move(v));
-    }
+    for (std::size_t i = 0; i < volumes->ArraySize(); ++i)
+      scene.volumes.push_back(ReadVolume(volumes->At(i), i, scene, base_dir, materials, voxels));
   }
   CheckTexelLimits(scene);
   return scene;

@@ -210,8 +210,20 @@ double ColorDistance(const std::string& a, const std::string& b) {
   return std::sqrt((x[0] - y[0]) * (x[0] - y[0]) + (x[1] - y[1]) * (x[1] - y[1]) + (x[2] - y[2]) * (x[2] - y[2]));
 }
 
-std::string PlotSvg(const std::vector<PlotSeries>& series, const PlotOptions& options) {
-  Axis ax{options.log_x}, ay{options.log_y};
+namespace {
+
+// Where PlotSvg draws: the axes, rounded out to their ticks, the plot area and
+// the document's size.
+struct PlotLayout {
+  Axis ax, ay;
+  std::vector<double> xticks, yticks;
+  double left = 0, top = 0, bottom = 0, pw = 0, ph = 0, W = 0, H = 0;
+  double px(double x) const { return left + ax.Map(x) * pw; }
+  double py(double y) const { return top + (1 - ay.Map(y)) * ph; }
+};
+
+// The axes' ranges: the drawable data's, or the options' limits where given.
+void FitAxes(const std::vector<PlotSeries>& series, const PlotOptions& options, Axis& ax, Axis& ay) {
   double xlo = INFINITY, xhi = -INFINITY, ylo = INFINITY, yhi = -INFINITY;
   for (const PlotSeries& s : series)
     for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) {
@@ -234,13 +246,24 @@ std::string PlotSvg(const std::vector<PlotSeries>& series, const PlotOptions& op
   ax.hi = std::isnan(options.x_max) ? xhi : options.x_max;
   ay.lo = std::isnan(options.y_min) ? ylo : options.y_min;
   ay.hi = std::isnan(options.y_max) ? yhi : options.y_max;
-  std::vector<double> xticks = ax.Ticks(), yticks = ay.Ticks();
+}
+
+PlotLayout LayOutPlot(const std::vector<PlotSeries>& series, const PlotOptions& options) {
+  PlotLayout l;
+  l.ax = Axis{options.log_x};
+  l.ay = Axis{options.log_y};
+  FitAxes(series, options, l.ax, l.ay);
+  l.xticks = l.ax.Ticks();
+  l.yticks = l.ay.Ticks();
 
   // The plot area is what width_px and height_px leave beside a legend of
   // 190 px; a legend that needs more, or a longer title, widens the document,
   // and more legend lines than the plot is tall make it taller.
-  const double left = 78, top = options.title.empty() ? 20 : 42, bottom = 56;
-  const double pw = options.width_px - left - 190, ph = options.height_px - top - bottom;
+  l.left = 78;
+  l.top = options.title.empty() ? 20 : 42;
+  l.bottom = 56;
+  l.pw = options.width_px - l.left - 190;
+  l.ph = options.height_px - l.top - l.bottom;
   double legend_width = 0;
   int legend_lines = 0;
   for (const PlotSeries& s : series)
@@ -249,12 +272,14 @@ std::string PlotSvg(const std::vector<PlotSeries>& series, const PlotOptions& op
       ++legend_lines;
     }
   const double right = std::max(190.0, 14 + legend_width + 10);
-  const double W = std::max(left + pw + right, TextWidth(options.title, 15) + 20);
-  const double H = std::max<double>(options.height_px, top + 8 + 18.0 * legend_lines + 8);
-  auto px = [&](double x) { return left + ax.Map(x) * pw; };
-  auto py = [&](double y) { return top + (1 - ay.Map(y)) * ph; };
+  l.W = std::max(l.left + l.pw + right, TextWidth(options.title, 15) + 20);
+  l.H = std::max<double>(options.height_px, l.top + 8 + 18.0 * legend_lines + 8);
+  return l;
+}
 
-  std::ostringstream svg;
+// The document's head, the title, the grid, the ticks and the axis labels.
+void WriteFrame(std::ostringstream& svg, const PlotLayout& l, const PlotOptions& options) {
+  const double left = l.left, top = l.top, bottom = l.bottom, pw = l.pw, ph = l.ph, W = l.W, H = l.H;
   svg << "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"" << W << "\" height=\"" << H << "\" viewBox=\"0 0 " << W
       << " " << H << "\" font-family=\"sans-serif\" font-size=\"12\">\n"
       << "<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n";
@@ -265,45 +290,52 @@ std::string PlotSvg(const std::vector<PlotSeries>& series, const PlotOptions& op
         << "\" y=\"24\" text-anchor=\"middle\" font-size=\"15\">" << Escape(options.title) << "</text>\n";
   // Grid and ticks.
   svg << "<g stroke=\"#e3e3e3\" stroke-width=\"1\">\n";
-  for (double t : xticks)
-    svg << "<line x1=\"" << Num(px(t)) << "\" y1=\"" << Num(top) << "\" x2=\"" << Num(px(t)) << "\" y2=\""
+  for (double t : l.xticks)
+    svg << "<line x1=\"" << Num(l.px(t)) << "\" y1=\"" << Num(top) << "\" x2=\"" << Num(l.px(t)) << "\" y2=\""
         << Num(top + ph) << "\"/>\n";
-  for (double t : yticks)
-    svg << "<line x1=\"" << Num(left) << "\" y1=\"" << Num(py(t)) << "\" x2=\"" << Num(left + pw) << "\" y2=\""
-        << Num(py(t)) << "\"/>\n";
+  for (double t : l.yticks)
+    svg << "<line x1=\"" << Num(left) << "\" y1=\"" << Num(l.py(t)) << "\" x2=\"" << Num(left + pw) << "\" y2=\""
+        << Num(l.py(t)) << "\"/>\n";
   svg << "</g>\n<rect x=\"" << Num(left) << "\" y=\"" << Num(top) << "\" width=\"" << Num(pw) << "\" height=\""
       << Num(ph) << "\" fill=\"none\" stroke=\"#333\"/>\n";
-  for (double t : xticks)
-    svg << "<text x=\"" << Num(px(t)) << "\" y=\"" << Num(top + ph + 16) << "\" text-anchor=\"middle\">" << TickLabel(t)
-        << "</text>\n";
-  for (double t : yticks)
-    svg << "<text x=\"" << Num(left - 6) << "\" y=\"" << Num(py(t) + 4) << "\" text-anchor=\"end\">" << TickLabel(t)
+  for (double t : l.xticks)
+    svg << "<text x=\"" << Num(l.px(t)) << "\" y=\"" << Num(top + ph + 16) << "\" text-anchor=\"middle\">"
+        << TickLabel(t) << "</text>\n";
+  for (double t : l.yticks)
+    svg << "<text x=\"" << Num(left - 6) << "\" y=\"" << Num(l.py(t) + 4) << "\" text-anchor=\"end\">" << TickLabel(t)
         << "</text>\n";
   svg << "<text x=\"" << Num(left + pw / 2) << "\" y=\"" << Num(top + ph + bottom - 14) << "\" text-anchor=\"middle\">"
       << Escape(options.x_label) << "</text>\n";
   svg << "<text transform=\"translate(18," << Num(top + ph / 2) << ") rotate(-90)\" text-anchor=\"middle\">"
       << Escape(options.y_label) << "</text>\n";
+}
 
-  // Data, clipped to the plot area.
-  svg << "<clipPath id=\"plotarea\"><rect x=\"" << Num(left) << "\" y=\"" << Num(top) << "\" width=\"" << Num(pw)
-      << "\" height=\"" << Num(ph) << "\"/></clipPath>\n<g clip-path=\"url(#plotarea)\">\n";
+// Series k's colour: its own, else its channel's or the palette's.
+std::string SeriesColor(const PlotSeries& s, size_t k) {
+  return s.color.empty() ? ChannelOrPaletteColor(s.label, static_cast<int>(k)) : s.color;
+}
+
+// Data, clipped to the plot area.
+void WriteData(std::ostringstream& svg, const PlotLayout& l, const std::vector<PlotSeries>& series) {
+  svg << "<clipPath id=\"plotarea\"><rect x=\"" << Num(l.left) << "\" y=\"" << Num(l.top) << "\" width=\"" << Num(l.pw)
+      << "\" height=\"" << Num(l.ph) << "\"/></clipPath>\n<g clip-path=\"url(#plotarea)\">\n";
   for (size_t k = 0; k < series.size(); ++k) {
     const PlotSeries& s = series[k];
-    const std::string color = s.color.empty() ? ChannelOrPaletteColor(s.label, static_cast<int>(k)) : s.color;
+    const std::string color = SeriesColor(s, k);
     if (s.line) {
       std::string path;
       bool pen_down = false;
       for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) {
-        if (!ax.Drawable(s.x[i]) || !ay.Drawable(s.y[i])) {
+        if (!l.ax.Drawable(s.x[i]) || !l.ay.Drawable(s.y[i])) {
           pen_down = false;
           continue;
         }
         // Appended piece by piece: "L" + std::string trips GCC 12's false
         // -Wrestrict (its bug 105329) in Release builds.
         path += pen_down ? 'L' : 'M';
-        path += Num(px(s.x[i]));
+        path += Num(l.px(s.x[i]));
         path += ' ';
-        path += Num(py(s.y[i]));
+        path += Num(l.py(s.y[i]));
         path += ' ';
         pen_down = true;
       }
@@ -313,18 +345,20 @@ std::string PlotSvg(const std::vector<PlotSeries>& series, const PlotOptions& op
     }
     if (s.markers)
       for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i)
-        if (ax.Drawable(s.x[i]) && ay.Drawable(s.y[i]))
-          svg << "<circle cx=\"" << Num(px(s.x[i])) << "\" cy=\"" << Num(py(s.y[i])) << "\" r=\"2.6\" fill=\"" << color
-              << "\"/>\n";
+        if (l.ax.Drawable(s.x[i]) && l.ay.Drawable(s.y[i]))
+          svg << "<circle cx=\"" << Num(l.px(s.x[i])) << "\" cy=\"" << Num(l.py(s.y[i])) << "\" r=\"2.6\" fill=\""
+              << color << "\"/>\n";
   }
   svg << "</g>\n";
-  // Legend.
-  double ly = top + 8;
+}
+
+void WriteLegend(std::ostringstream& svg, const PlotLayout& l, const std::vector<PlotSeries>& series) {
+  double ly = l.top + 8;
   for (size_t k = 0; k < series.size(); ++k) {
     const PlotSeries& s = series[k];
     if (s.label.empty()) continue;
-    const std::string color = s.color.empty() ? ChannelOrPaletteColor(s.label, static_cast<int>(k)) : s.color;
-    double lx = left + pw + 14;
+    const std::string color = SeriesColor(s, k);
+    double lx = l.left + l.pw + 14;
     if (s.line)
       svg << "<line x1=\"" << Num(lx) << "\" y1=\"" << Num(ly) << "\" x2=\"" << Num(lx + 22) << "\" y2=\"" << Num(ly)
           << "\" stroke=\"" << color << "\" stroke-width=\"2\"" << (s.dashed ? " stroke-dasharray=\"6 4\"" : "")
@@ -334,6 +368,16 @@ std::string PlotSvg(const std::vector<PlotSeries>& series, const PlotOptions& op
     svg << "<text x=\"" << Num(lx + 28) << "\" y=\"" << Num(ly + 4) << "\">" << Escape(s.label) << "</text>\n";
     ly += 18;
   }
+}
+
+}  // namespace
+
+std::string PlotSvg(const std::vector<PlotSeries>& series, const PlotOptions& options) {
+  const PlotLayout layout = LayOutPlot(series, options);
+  std::ostringstream svg;
+  WriteFrame(svg, layout, options);
+  WriteData(svg, layout, series);
+  WriteLegend(svg, layout, series);
   svg << "</svg>\n";
   return svg.str();
 }
