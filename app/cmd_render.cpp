@@ -54,7 +54,7 @@ struct RenderArgs {
   int spp = 0, width = 0, height = 0;
   std::string exposure_text;  // --exposure as given: a number or "auto"
   bool exposure_given = false;
-  double exposure = 0;        // --exposure's number (0: not given or "auto")
+  double exposure = 0;         // --exposure's number (0: not given or "auto")
   bool exposure_auto = false;  // --exposure auto
   double night_vision_cd = 0;
   double budget_s = 0, quality = 0;
@@ -138,8 +138,8 @@ std::string RangeInputs(const RenderArgs& a, const render::Scene& scene, const F
   std::string materials;
   for (const std::string& m : a.materials) materials += m + ";";
   return "files=" + SceneFileDigests(a, scene).dump() + " scene=" + a.scene + " times=" + a.times +
-         " transport=" + a.transport + " spp=" + std::to_string(a.spp) +
-         " size=" + std::to_string(a.width) + "x" + std::to_string(a.height) + " exposure=" + FormatDouble(a.exposure) +
+         " transport=" + a.transport + " spp=" + std::to_string(a.spp) + " size=" + std::to_string(a.width) + "x" +
+         std::to_string(a.height) + " exposure=" + FormatDouble(a.exposure) +
          " night=" + FormatDouble(a.night_vision_cd) + " no_phosphorescence=" + std::to_string(a.no_phosphorescence) +
          " indirect_visibility=" + std::to_string(a.indirect_visibility) + " materials=" + materials +
          " frames=" + std::to_string(range.first) + ":" + std::to_string(range.last) +
@@ -163,7 +163,8 @@ std::size_t LatestCheckpoint(const std::string& dir, std::size_t frame) {
     // A solver pass that failed or was cancelled before it made the folder
     // (phos slurm's tasks run after it however it ended): the states start
     // from the scene's start, the same frames, later.
-    std::fprintf(stderr, "phos render: warning: --checkpoints %s: no such folder; the states start from the scene's start\n",
+    std::fprintf(stderr,
+                 "phos render: warning: --checkpoints %s: no such folder; the states start from the scene's start\n",
                  dir.c_str());
     return best;
   }
@@ -251,8 +252,8 @@ nlohmann::json WarnUnreadMaterial(const render::Scene& scene) {
 // phosphors all start uncharged: its frames are black, which it rendered
 // without a word.
 void WarnDarkLights(const render::Scene& scene) {
-  const std::string bands = FormatDouble(scene.bands.edges_nm.front()) + "-" +
-                            FormatDouble(scene.bands.edges_nm.back()) + " nm";
+  const std::string bands =
+      FormatDouble(scene.bands.edges_nm.front()) + "-" + FormatDouble(scene.bands.edges_nm.back()) + " nm";
   for (const render::Light& light : scene.lights)
     if (std::all_of(light.E_per_band.begin(), light.E_per_band.end(), [](double e) { return e == 0; }))
       std::fprintf(stderr,
@@ -261,11 +262,10 @@ void WarnDarkLights(const render::Scene& scene) {
                    light.name.c_str(), bands.c_str());
   if (!scene.lights.empty() || scene.environment) return;
   const auto charged = [](const render::InitialState& s) { return s.kind != render::InitialState::Kind::kZero; };
-  const bool any_charged =
-      std::any_of(scene.objects.begin(), scene.objects.end(),
-                  [&](const render::Object& o) { return o.phosphor && charged(o.initial); }) ||
-      std::any_of(scene.volumes.begin(), scene.volumes.end(),
-                  [&](const render::Volume& v) { return v.phosphor && charged(v.initial); });
+  const bool any_charged = std::any_of(scene.objects.begin(), scene.objects.end(),
+                                       [&](const render::Object& o) { return o.phosphor && charged(o.initial); }) ||
+                           std::any_of(scene.volumes.begin(), scene.volumes.end(),
+                                       [&](const render::Volume& v) { return v.phosphor && charged(v.initial); });
   if (!any_charged)
     std::fprintf(stderr,
                  "phos render: warning: the scene has no light and no sky, and no phosphor starts charged "
@@ -372,8 +372,7 @@ struct ContactSheet {
 // frame-NNNN-night.png (its path goes into `entry`), and its cell of the
 // contact sheet (with --contact-sheet).
 void WriteFrameViews(const RenderArgs& args, const render::Scene& scene, std::size_t frame, double t, double exposure,
-                     const render::Image& rgb, const render::Image& bands, nlohmann::json* entry,
-                     ContactSheet* sheet) {
+                     const render::Image& rgb, const render::Image& bands, nlohmann::json* entry, ContactSheet* sheet) {
   using namespace phos::render;
   const std::filesystem::path out = args.out;
   WritePng(out / (FrameStem(frame) + ".png"), rgb, exposure);
@@ -511,34 +510,57 @@ void SayWhenInterrupted() {
   for (int signal_number : {SIGINT, SIGTERM}) sigaction(signal_number, &action, nullptr);
 }
 
-void Run(const RenderArgs& args) {
+// What one render run works on, filled stage by stage (Run).
+struct RenderRun {
+  render::Scene scene;
+  render::Transport transport = render::Transport::kDirect;
+  bool choose = false;  // --budget-s or --quality: the transport is measured and picked
+  std::vector<double> times;
+  FrameRange range;
+  std::filesystem::path done;  // a range's done record (none for a whole run)
+  std::string inputs;          // what a range is made from
+  std::chrono::steady_clock::time_point started;
+  std::unique_ptr<render::SceneGeometry> geometry;
+  std::unique_ptr<render::CoupledSolver> solver;
+  render::FrameOptions options;
+  nlohmann::json choice_json;  // --budget-s / --quality: what was measured and chosen
+  std::string choice_line;
+};
+
+// Every output before any work (a refusal after the frames would lose them),
+// and the transport options that go together.
+void CheckOutputsAndTransport(const RenderArgs& args, RenderRun& r) {
   using namespace phos::render;
-  // Every output before any work: a refusal after the frames would lose them.
   if (!args.solve_only) RequireFolderOrNothing(args.out, "--out");
   RequireOutputFile(args.contact_sheet, "--contact-sheet", kImageExtensions);
   if (args.solve_only) RequireFolderOrNothing(args.checkpoints, "--checkpoints");
-  Transport transport = ParseTransport(args.transport);
-  const bool choose = args.budget_s > 0 || args.quality > 0;
+  r.transport = ParseTransport(args.transport);
+  r.choose = args.budget_s > 0 || args.quality > 0;
   if (args.budget_s > 0 && args.quality > 0)
     ThrowUserError("", "--budget-s", "give a time budget or a quality (--quality), not both");
-  if (choose && (args.transport_given || args.spp > 0))
+  if (r.choose && (args.transport_given || args.spp > 0))
     ThrowUserError("", args.budget_s > 0 ? "--budget-s" : "--quality",
                    "picks the transport and its samples itself: leave out --transport and --spp");
-  Scene scene = LoadScene(args.scene);
-  if (args.width > 0) scene.camera.width = args.width;
-  if (args.height > 0) scene.camera.height = args.height;
+}
+
+// The scene with the options that change it: size, exposure, --material, --unknown-ke.
+void PrepareScene(const RenderArgs& args, RenderRun& r) {
+  using namespace phos::render;
+  r.scene = LoadScene(args.scene);
+  if (args.width > 0) r.scene.camera.width = args.width;
+  if (args.height > 0) r.scene.camera.height = args.height;
   // The scene file's limit holds for the options too: 16384 x 16384 passed
   // each option's own range and took 12.7 GB before its first frame.
-  if (static_cast<double>(scene.camera.width) * scene.camera.height > render::kMaxPixels)
+  if (static_cast<double>(r.scene.camera.width) * r.scene.camera.height > render::kMaxPixels)
     ThrowUserError("", args.width > 0 ? "--width" : "--height",
-                   std::to_string(scene.camera.width) + " x " + std::to_string(scene.camera.height) +
+                   std::to_string(r.scene.camera.width) + " x " + std::to_string(r.scene.camera.height) +
                        " pixels is more than the limit of " + std::to_string(render::kMaxPixels) +
                        " pixels per frame (8192 x 8192)");
   if (args.exposure > 0) {
-    scene.camera.exposure = args.exposure;
-    scene.camera.exposure_auto = false;
+    r.scene.camera.exposure = args.exposure;
+    r.scene.camera.exposure_auto = false;
   }
-  if (args.exposure_auto) scene.camera.exposure_auto = true;
+  if (args.exposure_auto) r.scene.camera.exposure_auto = true;
   // --material OBJECT=FILE: try another (say, a freshly fitted) material in the scene.
   for (const std::string& assignment : args.materials) {
     const auto equals = assignment.find('=');
@@ -546,47 +568,54 @@ void Run(const RenderArgs& args) {
       ThrowUserError("", "--material", "expected OBJECT=FILE, got \"" + assignment + "\"");
     const std::string name = assignment.substr(0, equals), file = assignment.substr(equals + 1);
     auto object =
-        std::find_if(scene.objects.begin(), scene.objects.end(), [&](const Object& o) { return o.name == name; });
-    if (object == scene.objects.end()) ThrowUserError("", "--material", "the scene has no object '" + name + "'");
+        std::find_if(r.scene.objects.begin(), r.scene.objects.end(), [&](const Object& o) { return o.name == name; });
+    if (object == r.scene.objects.end()) ThrowUserError("", "--material", "the scene has no object '" + name + "'");
     // One object: a scene's names are its objects' own (LoadScene refuses two alike).
     auto material = std::make_shared<Material>(LoadMaterial(file));
-    if (const std::string mismatch = render::BandGridMismatch(material->bands, scene.bands); !mismatch.empty())
+    if (const std::string mismatch = render::BandGridMismatch(material->bands, r.scene.bands); !mismatch.empty())
       ThrowUserError(file, "bands_nm", mismatch);
     object->phosphor = material;
     object->phosphor_path = file;
   }
-  if (args.unknown_ke == "zero") ZeroUnknownKeEverywhere(&scene);
+  if (args.unknown_ke == "zero") ZeroUnknownKeEverywhere(&r.scene);
+}
 
-  std::vector<double> times = scene.FrameTimes();
+// The frames' times: the scene's, or --times (increasing, from the scene's start).
+void FrameTimesOf(const RenderArgs& args, RenderRun& r) {
+  r.times = r.scene.FrameTimes();
   if (!args.times.empty()) {
     std::string bad;
-    if (!ParseDoubleList(args.times, &times, &bad))
+    if (!ParseDoubleList(args.times, &r.times, &bad))
       ThrowUserError("", "--times", "expected a comma-separated list of seconds, got \"" + bad + "\"");
     // Frames are numbered in the order given and the states only advance:
     // times out of order are refused rather than silently re-sorted.
-    for (std::size_t i = 0; i < times.size(); ++i) {
-      if (times[i] < scene.start_s)
+    for (std::size_t i = 0; i < r.times.size(); ++i) {
+      if (r.times[i] < r.scene.start_s)
         ThrowUserError("", "--times",
-                       FormatDouble(times[i]) + " s is before the scene's start (" + FormatDouble(scene.start_s) +
+                       FormatDouble(r.times[i]) + " s is before the scene's start (" + FormatDouble(r.scene.start_s) +
                            " s): states are only known from there on");
-      if (i > 0 && times[i] < times[i - 1])
+      if (i > 0 && r.times[i] < r.times[i - 1])
         ThrowUserError("", "--times",
-                       "expected times in increasing order, got " + FormatDouble(times[i]) + " after " +
-                           FormatDouble(times[i - 1]));
+                       "expected times in increasing order, got " + FormatDouble(r.times[i]) + " after " +
+                           FormatDouble(r.times[i - 1]));
     }
     // Past the scene's end is allowed (the frame an hour after lights-out), and said.
-    if (!times.empty() && times.back() > scene.end_s)
+    if (!r.times.empty() && r.times.back() > r.scene.end_s)
       std::fprintf(stderr,
                    "phos render: warning: --times: %s s is past the scene's end (%s s); rendered all the same\n",
-                   FormatDouble(times.back()).c_str(), FormatDouble(scene.end_s).c_str());
+                   FormatDouble(r.times.back()).c_str(), FormatDouble(r.scene.end_s).c_str());
   }
-  const FrameRange range = SelectFrames(args, times.size());
-  if (!range.whole && choose)
+}
+
+// The frames this process renders, and the options a range refuses.
+void SelectRange(const RenderArgs& args, RenderRun& r) {
+  r.range = SelectFrames(args, r.times.size());
+  if (!r.range.whole && r.choose)
     ThrowUserError("", args.budget_s > 0 ? "--budget-s" : "--quality",
                    "is timed on each machine, so ranges could choose differently: give --transport");
-  if (!range.whole && !args.contact_sheet.empty())
+  if (!r.range.whole && !args.contact_sheet.empty())
     ThrowUserError("", "--contact-sheet", "needs every frame: not with --frames or --task");
-  if (!range.whole && !args.solve_only && scene.camera.exposure_auto) {
+  if (!r.range.whole && !args.solve_only && r.scene.camera.exposure_auto) {
     const std::string why = "\"auto\" meters every frame after dark: not with --frames or --task; give a number";
     if (args.exposure_auto) ThrowUserError("", "--exposure", why);
     ThrowUserError(args.scene, "camera.exposure", why + " with --exposure");
@@ -594,73 +623,59 @@ void Run(const RenderArgs& args) {
   if (args.solve_only && args.checkpoints.empty())
     ThrowUserError("", "--solve-only", "writes the states to --checkpoints DIR: give it");
   if (!args.solve_only && args.out.empty()) ThrowUserError("", "--out", "is required (except with --solve-only)");
-  if (args.indirect_visibility && transport != Transport::kDss)
+  if (args.indirect_visibility && r.transport != render::Transport::kDss)
     ThrowUserError("", "--indirect-visibility", "is for --transport dss");
-  if (args.check) {
-    std::printf("%s: the command would render %zu frame(s) (--check: nothing written)\n", scene.name.c_str(),
-                args.solve_only ? std::size_t{0} : range.last - range.first);
-    return;
-  }
-  const std::filesystem::path done =
-      range.whole ? std::filesystem::path() : std::filesystem::path(args.out) / "done" / range.done_name;
-  const std::string inputs = range.whole ? "" : RangeInputs(args, scene, range);
-  if (!range.whole && !args.solve_only && TaskIsDone(done, inputs)) {
+}
+
+// A range already rendered from these very inputs: said, and true.
+bool RangeDoneBefore(const RenderArgs& args, RenderRun& r) {
+  r.done = r.range.whole ? std::filesystem::path() : std::filesystem::path(args.out) / "done" / r.range.done_name;
+  r.inputs = r.range.whole ? "" : RangeInputs(args, r.scene, r.range);
+  if (!r.range.whole && !args.solve_only && TaskIsDone(r.done, r.inputs)) {
     // A rerun of a finished range (Slurm's requeue, a resubmitted array) does nothing.
     if (args.json)
-      std::cout << nlohmann::json({{"scene", args.scene}, {"done_before", true}, {"done", done.string()}}).dump()
+      std::cout << nlohmann::json({{"scene", args.scene}, {"done_before", true}, {"done", r.done.string()}}).dump()
                 << "\n";
     else
-      std::printf("%s: frames %zu:%zu already rendered (%s): nothing to do\n", scene.name.c_str(), range.first,
-                  range.last, done.c_str());
-    return;
+      std::printf("%s: frames %zu:%zu already rendered (%s): nothing to do\n", r.scene.name.c_str(), r.range.first,
+                  r.range.last, r.done.c_str());
+    return true;
   }
-  const auto task_start = std::chrono::steady_clock::now();
+  return false;
+}
 
-  SceneGeometry geometry(scene);
-  std::unique_ptr<CoupledSolver> solver;
-  if (!args.no_phosphorescence && scene.HasPhosphors()) solver = std::make_unique<CoupledSolver>(scene, geometry);
-  if (args.solve_only) {
-    // Said at the solve too: on a cluster it is the first task to run, and
-    // its log the first a user reads.
-    WarnUnreadMaterial(scene);
-    WarnDarkLights(scene);
-    SolveOnly(args, scene, solver.get(), times);
-    return;
-  }
-  // After the solver's refusals (a ke not measured in a lit band): they leave no folder behind.
-  std::error_code ec;
-  std::filesystem::create_directories(args.out, ec);
-  if (ec) ThrowUserError("", "--out", "cannot create '" + args.out + "': " + ec.message());
-  PositionSolver(solver.get(), args.checkpoints, times, range.first);
-  {
-    // A killed run of these frames (a range, or the whole run: an 82 MB
-    // frame-0000.exr.tmp.<pid>.exr outlived a timeout) left the temporary of
-    // the frame it was writing: gone first.
-    std::vector<std::string> names;
-    for (std::size_t f = range.first; f < range.last; ++f) {
-      char name[32];
-      for (const char* suffix : {".exr", ".png", "-night.png"}) {
-        std::snprintf(name, sizeof name, "frame-%04zu%s", f, suffix);
-        names.push_back(name);
-      }
+// A killed run of these frames (a range, or the whole run: an 82 MB
+// frame-0000.exr.tmp.<pid>.exr outlived a timeout) left the temporary of the
+// frame it was writing: gone first.
+void RemoveFrameTemporaries(const RenderArgs& args, const FrameRange& range) {
+  std::vector<std::string> names;
+  for (std::size_t f = range.first; f < range.last; ++f) {
+    char name[32];
+    for (const char* suffix : {".exr", ".png", "-night.png"}) {
+      std::snprintf(name, sizeof name, "frame-%04zu%s", f, suffix);
+      names.push_back(name);
     }
-    RemoveTemporaries(args.out, names);
   }
-  FrameOptions options = DefaultFrameOptions(scene, transport);
-  if (args.spp > 0) options.spp = options.direct_spp = args.spp;
-  options.indirect_visibility = args.indirect_visibility;
-  nlohmann::json choice_json;
-  std::string choice_line;
-  if (choose) {
+  RemoveTemporaries(args.out, names);
+}
+
+// The frame options of the transport asked for, or (--budget-s, --quality)
+// of the one measured and picked on this scene at the first frame.
+void ChooseFrameOptions(const RenderArgs& args, RenderRun& r) {
+  using namespace phos::render;
+  r.options = DefaultFrameOptions(r.scene, r.transport);
+  if (args.spp > 0) r.options.spp = r.options.direct_spp = args.spp;
+  r.options.indirect_visibility = args.indirect_visibility;
+  if (r.choose) {
     // Measure each transport's cost on this scene at the first frame, then pick.
-    if (solver)
-      solver->AdvanceTo(times.front());
+    if (r.solver)
+      r.solver->AdvanceTo(r.times.front());
     else
-      geometry.SetTime(times.front());
-    const TransportChoice choice =
-        ChooseTransport(MeasureTransportCandidates(geometry, solver.get(), options), args.budget_s, args.quality);
-    options = choice.chosen.options;
-    transport = options.transport;
+      r.geometry->SetTime(r.times.front());
+    const TransportChoice choice = ChooseTransport(MeasureTransportCandidates(*r.geometry, r.solver.get(), r.options),
+                                                   args.budget_s, args.quality);
+    r.options = choice.chosen.options;
+    r.transport = r.options.transport;
     nlohmann::json candidates = nlohmann::json::array();
     std::string costs;
     for (const TransportCandidate& c : choice.candidates) {
@@ -669,119 +684,165 @@ void Run(const RenderArgs& args) {
       if (c.label != "path 16 spp" && c.label != "path 256 spp" && c.label != "path 1024 spp")
         costs += (costs.empty() ? "" : ", ") + c.label + " " + FormatShort(c.estimated_s, 2) + " s";
     }
-    choice_json = {{"chosen", choice.chosen.label},
-                   {"estimated_s", choice.chosen.estimated_s},
-                   {"expected_ssim", choice.chosen.expected_ssim},
-                   {"fits", choice.fits},
-                   {"candidates", candidates}};
+    r.choice_json = {{"chosen", choice.chosen.label},
+                     {"estimated_s", choice.chosen.estimated_s},
+                     {"expected_ssim", choice.chosen.expected_ssim},
+                     {"fits", choice.fits},
+                     {"candidates", candidates}};
     if (args.budget_s > 0)
-      choice_json["budget_s"] = args.budget_s;
+      r.choice_json["budget_s"] = args.budget_s;
     else
-      choice_json["quality"] = args.quality;
-    choice_line = std::string(args.budget_s > 0 ? "budget " + FormatShort(args.budget_s) + " s per frame"
-                                                : "quality (SSIM) " + FormatShort(args.quality)) +
-                  ": " + choice.chosen.label + " (estimated " + FormatShort(choice.chosen.estimated_s, 2) +
-                  " s, expected SSIM " + FormatShort(choice.chosen.expected_ssim, 3) + ")" +
-                  (choice.fits         ? ""
-                   : args.budget_s > 0 ? " - nothing fits, the fastest"
-                                       : " - nothing reaches it, the best") +
-                  "; measured: " + costs;
+      r.choice_json["quality"] = args.quality;
+    r.choice_line = std::string(args.budget_s > 0 ? "budget " + FormatShort(args.budget_s) + " s per frame"
+                                                  : "quality (SSIM) " + FormatShort(args.quality)) +
+                    ": " + choice.chosen.label + " (estimated " + FormatShort(choice.chosen.estimated_s, 2) +
+                    " s, expected SSIM " + FormatShort(choice.chosen.expected_ssim, 3) + ")" +
+                    (choice.fits         ? ""
+                     : args.budget_s > 0 ? " - nothing fits, the fastest"
+                                         : " - nothing reaches it, the best") +
+                    "; measured: " + costs;
   }
+}
 
-  const nlohmann::json unread_material = WarnUnreadMaterial(scene);
-  WarnDarkLights(scene);
+// The frames rendered: each one's JSON entry (its files, times and rays), and
+// what "auto" exposure meters of them.
+struct RenderedFrames {
   nlohmann::json frames = nlohmann::json::array();
+  nlohmann::json unread_material;
   ContactSheet sheet;
-  // "auto": the views wait for the exposure, which needs every metered frame.
-  const MeteredFrames metered = FramesToMeter(scene, times);
+  MeteredFrames metered;
   // "auto" chooses from this meter; a number is checked by it: the glow
   // after dark at the default exposure 1 is all but black (the Cornell box's
   // median glowing pixel shows at 0.3% of white), and a first render should
   // say so and what to pass rather than show black frames.
-  ExposureMeter meter;
-  // Counted in rows of pixels, so the bar moves inside a long (path-traced) frame.
-  ProgressBar progress("render " + scene.name,
-                       (range.last - range.first) * static_cast<std::size_t>(scene.camera.height));
-  options.progress_rows = &progress;
-  SayWhenInterrupted();
+  render::ExposureMeter meter;
   // With a fixed exposure each frame's line is known as soon as its files
   // are written, and printed then (flushed): a cluster job's log, or a run
   // killed half-way, shows the frames done. With "auto" the views wait for
   // every metered frame, so the lines come at the end.
-  const bool line_per_frame = !args.json && !scene.camera.exposure_auto;
-  if (line_per_frame)
-    progress.Print(stdout, SummaryHead(scene, solver.get(), range.last - range.first, transport, choice_line));
-  for (std::size_t f = range.first; f < range.last; ++f) {
-    const double t = times[f];
-    options.frame = f;  // the path tracer's seed: pixel, frame and sample
-    const auto start = std::chrono::steady_clock::now();
-    if (solver)
-      solver->AdvanceTo(t);
-    else
-      geometry.SetTime(t);
-    const double solver_s = Seconds(start);
-    const auto render_start = std::chrono::steady_clock::now();
-    FrameStats stats;
-    const Image bands = RenderBands(geometry, solver.get(), options, &stats);
-    const Image rgb = BandsToLinearSrgb(bands, scene.bands);
-    const double render_s = Seconds(render_start);
-    const double seconds = Seconds(start);
+  bool line_per_frame = false;
+};
 
-    const std::filesystem::path exr = std::filesystem::path(args.out) / (FrameStem(f) + ".exr");
-    const std::filesystem::path png = std::filesystem::path(args.out) / (FrameStem(f) + ".png");
-    WriteExr(exr, rgb, bands, scene.bands, args.exr_compression);
-    nlohmann::json entry = {{"t", t},
-                            {"exr", exr.string()},
-                            {"png", png.string()},
-                            {"seconds", seconds},
-                            {"solver_seconds", solver_s},
-                            {"render_seconds", render_s},
-                            {"setup_seconds", stats.setup_s},
-                            {"rays", stats.rays}};
-    if (!scene.camera.exposure_auto)
-      WriteFrameViews(args, scene, f, t, scene.camera.exposure, rgb, bands, &entry, &sheet);
-    if (metered.metered[f] && (scene.camera.exposure_auto || metered.after_dark))
-      meter.Add(MeteredFrame(geometry, solver.get(), options, rgb));
-    if (line_per_frame) progress.Print(stdout, FrameLine(entry));
-    frames.push_back(entry);
+// One frame: the states advanced to t, the bands rendered, the EXR written
+// and, at a fixed exposure, its views; its JSON entry.
+nlohmann::json RenderFrame(const RenderArgs& args, RenderRun& r, std::size_t f, RenderedFrames* out) {
+  using namespace phos::render;
+  const double t = r.times[f];
+  r.options.frame = f;  // the path tracer's seed: pixel, frame and sample
+  const auto start = std::chrono::steady_clock::now();
+  if (r.solver)
+    r.solver->AdvanceTo(t);
+  else
+    r.geometry->SetTime(t);
+  const double solver_s = Seconds(start);
+  const auto render_start = std::chrono::steady_clock::now();
+  FrameStats stats;
+  const Image bands = RenderBands(*r.geometry, r.solver.get(), r.options, &stats);
+  const Image rgb = BandsToLinearSrgb(bands, r.scene.bands);
+  const double render_s = Seconds(render_start);
+  const double seconds = Seconds(start);
+
+  const std::filesystem::path exr = std::filesystem::path(args.out) / (FrameStem(f) + ".exr");
+  const std::filesystem::path png = std::filesystem::path(args.out) / (FrameStem(f) + ".png");
+  WriteExr(exr, rgb, bands, r.scene.bands, args.exr_compression);
+  nlohmann::json entry = {{"t", t},
+                          {"exr", exr.string()},
+                          {"png", png.string()},
+                          {"seconds", seconds},
+                          {"solver_seconds", solver_s},
+                          {"render_seconds", render_s},
+                          {"setup_seconds", stats.setup_s},
+                          {"rays", stats.rays}};
+  if (!r.scene.camera.exposure_auto)
+    WriteFrameViews(args, r.scene, f, t, r.scene.camera.exposure, rgb, bands, &entry, &out->sheet);
+  if (out->metered.metered[f] && (r.scene.camera.exposure_auto || out->metered.after_dark))
+    out->meter.Add(MeteredFrame(*r.geometry, r.solver.get(), r.options, rgb));
+  return entry;
+}
+
+// The range's frames, one after the other, with a progress bar.
+void RenderFrames(const RenderArgs& args, RenderRun& r, RenderedFrames* out) {
+  out->unread_material = WarnUnreadMaterial(r.scene);
+  WarnDarkLights(r.scene);
+  // "auto": the views wait for the exposure, which needs every metered frame.
+  out->metered = FramesToMeter(r.scene, r.times);
+  // Counted in rows of pixels, so the bar moves inside a long (path-traced) frame.
+  ProgressBar progress("render " + r.scene.name,
+                       (r.range.last - r.range.first) * static_cast<std::size_t>(r.scene.camera.height));
+  r.options.progress_rows = &progress;
+  SayWhenInterrupted();
+  out->line_per_frame = !args.json && !r.scene.camera.exposure_auto;
+  if (out->line_per_frame)
+    progress.Print(stdout,
+                   SummaryHead(r.scene, r.solver.get(), r.range.last - r.range.first, r.transport, r.choice_line));
+  for (std::size_t f = r.range.first; f < r.range.last; ++f) {
+    nlohmann::json entry = RenderFrame(args, r, f, out);
+    if (out->line_per_frame) progress.Print(stdout, FrameLine(entry));
+    out->frames.push_back(entry);
   }
   progress.Finish();
-  double exposure = scene.camera.exposure;
-  AutoExposure chosen;
-  if (!scene.camera.exposure_auto && metered.after_dark) WarnNearlyBlack(exposure, meter.Choose());
-  if (scene.camera.exposure_auto) {
-    chosen = meter.Choose();
-    exposure = chosen.exposure;
-    if (chosen.glowing_pixels == 0)
+  r.options.progress_rows = nullptr;
+}
+
+// The exposure the views are shown at: the fixed one (said when the glow
+// after dark is nearly black at it), or "auto"'s from the meter, with the
+// views written now from the EXRs (the frames need not all stay in memory).
+struct ShownExposure {
+  double exposure = 1;
+  render::AutoExposure chosen;
+};
+ShownExposure WriteViews(const RenderArgs& args, const RenderRun& r, RenderedFrames* rendered) {
+  ShownExposure shown{r.scene.camera.exposure, {}};
+  if (!r.scene.camera.exposure_auto && rendered->metered.after_dark)
+    WarnNearlyBlack(shown.exposure, rendered->meter.Choose());
+  if (r.scene.camera.exposure_auto) {
+    shown.chosen = rendered->meter.Choose();
+    shown.exposure = shown.chosen.exposure;
+    if (shown.chosen.glowing_pixels == 0)
       std::fprintf(stderr, "phos render: warning: exposure auto: the %zu %s are black (no pixel glows): exposure 1\n",
-                   chosen.metered_frames,
-                   metered.after_dark ? "frame(s) after dark" : "frame(s) (none is after dark)");
-    // The views now, from the EXRs: the frames need not all stay in memory.
-    for (std::size_t f = range.first; f < range.last; ++f) {
-      Image rgb, bands;
-      ReadFrameExr(frames[f - range.first]["exr"].get<std::string>(), scene.bands.band_count(), &rgb, &bands);
-      WriteFrameViews(args, scene, f, times[f], exposure, rgb, bands, &frames[f - range.first], &sheet);
+                   shown.chosen.metered_frames,
+                   rendered->metered.after_dark ? "frame(s) after dark" : "frame(s) (none is after dark)");
+    for (std::size_t f = r.range.first; f < r.range.last; ++f) {
+      render::Image rgb, bands;
+      nlohmann::json& entry = rendered->frames[f - r.range.first];
+      ReadFrameExr(entry["exr"].get<std::string>(), r.scene.bands.band_count(), &rgb, &bands);
+      WriteFrameViews(args, r.scene, f, r.times[f], shown.exposure, rgb, bands, &entry, &rendered->sheet);
     }
   }
-  if (!args.contact_sheet.empty()) WriteContactSheet(args.contact_sheet, sheet.frames, sheet.labels, 4);
-  if (!range.whole) {
-    // Last, after every frame is whole on disk: the range is done.
-    TaskDoneRecord record{"render frames " + std::to_string(range.first) + ":" + std::to_string(range.last),
-                          inputs,
-                          {},
-                          Seconds(task_start),
-                          HostName()};
-    for (const auto& frame : frames) record.outputs.push_back(frame["exr"].get<std::string>());
-    WriteTaskDone(done, record);
-  }
+  if (!args.contact_sheet.empty())
+    render::WriteContactSheet(args.contact_sheet, rendered->sheet.frames, rendered->sheet.labels, 4);
+  return shown;
+}
 
-  nlohmann::json result = {
-      {"scene", args.scene},         {"transport", TransportName(transport)}, {"phosphorescence", solver != nullptr},
-      {"width", scene.camera.width}, {"height", scene.camera.height},         {"frames", frames}};
-  if (choose) result["transport_choice"] = choice_json;
-  result["unread_material"] = unread_material;
+// Last, after every frame is whole on disk: the range is done.
+void WriteRangeDone(const RenderRun& r, const nlohmann::json& frames) {
+  TaskDoneRecord record{"render frames " + std::to_string(r.range.first) + ":" + std::to_string(r.range.last),
+                        r.inputs,
+                        {},
+                        Seconds(r.started),
+                        HostName()};
+  for (const auto& frame : frames) record.outputs.push_back(frame["exr"].get<std::string>());
+  WriteTaskDone(r.done, record);
+}
+
+// What the command says: the JSON object, or the summary and a line per frame
+// (unless each was said as it was written).
+void ReportRun(const RenderArgs& args, const RenderRun& r, const RenderedFrames& rendered, const ShownExposure& shown) {
+  using namespace phos::render;
+  const nlohmann::json& frames = rendered.frames;
+  const MeteredFrames& metered = rendered.metered;
+  const AutoExposure& chosen = shown.chosen;
+  const double exposure = shown.exposure;
+  nlohmann::json result = {{"scene", args.scene},
+                           {"transport", TransportName(r.transport)},
+                           {"phosphorescence", r.solver != nullptr},
+                           {"width", r.scene.camera.width},
+                           {"height", r.scene.camera.height},
+                           {"frames", frames}};
+  if (r.choose) result["transport_choice"] = r.choice_json;
+  result["unread_material"] = rendered.unread_material;
   result["exposure"] = exposure;
-  if (scene.camera.exposure_auto)
+  if (r.scene.camera.exposure_auto)
     result["exposure_auto"] = {{"metered", metered.after_dark ? "after dark" : "all frames"},
                                {"metered_frames", chosen.metered_frames},
                                {"metered_transport", "direct"},
@@ -790,15 +851,12 @@ void Run(const RenderArgs& args) {
                                {"percentile", kMeteredPercentile * 100},
                                {"frame", "brightest"},
                                {"display_luminance", kMeteredDisplayLuminance}};
-  if (solver) {
-    const SolverStats& s = solver->stats();
-    result["solver"] = {{"texels", s.texels},
-                        {"lit_steps", s.steps},
-                        {"dark_jumps", s.dark_jumps},
-                        {"irradiance_updates", s.irradiance_updates},
-                        {"shadow_rays", s.shadow_rays},
-                        {"never_charged", WarnNeverCharged(scene, *solver)}};
-    if (const VolumeMedia* media = solver->media()) {
+  if (r.solver) {
+    const SolverStats& s = r.solver->stats();
+    result["solver"] = {{"texels", s.texels},           {"lit_steps", s.steps},
+                        {"dark_jumps", s.dark_jumps},   {"irradiance_updates", s.irradiance_updates},
+                        {"shadow_rays", s.shadow_rays}, {"never_charged", WarnNeverCharged(r.scene, *r.solver)}};
+    if (const VolumeMedia* media = r.solver->media()) {
       const VolumeStats& v = media->stats();
       result["solver"]["volumes"] = {{"voxels", v.voxels},         {"phosphor_voxels", v.phosphor_voxels},
                                      {"lit_voxels", v.lit_voxels}, {"lit_steps", v.steps},
@@ -809,16 +867,56 @@ void Run(const RenderArgs& args) {
     std::cout << result.dump() << "\n";
     return;
   }
-  if (line_per_frame) return;  // said frame by frame
-  std::printf("%s\n", SummaryHead(scene, solver.get(), frames.size(), transport, choice_line).c_str());
-  if (scene.camera.exposure_auto)
-    std::printf("  exposure auto: %s, metered on %zu %s%s: the brightest frame's median glowing pixel "
-                "(luminance %s) shown as mid-grey (%s)\n",
-                FormatShort(exposure, 4).c_str(), chosen.metered_frames,
-                metered.after_dark ? "frame(s) after dark" : "frame(s) (none is after dark)",
-                transport == Transport::kDirect ? "" : " (their direct-transport frames)",
-                FormatShort(chosen.metered_luminance, 4).c_str(), FormatShort(kMeteredDisplayLuminance).c_str());
+  if (rendered.line_per_frame) return;  // said frame by frame
+  std::printf("%s\n", SummaryHead(r.scene, r.solver.get(), frames.size(), r.transport, r.choice_line).c_str());
+  if (r.scene.camera.exposure_auto)
+    std::printf(
+        "  exposure auto: %s, metered on %zu %s%s: the brightest frame's median glowing pixel "
+        "(luminance %s) shown as mid-grey (%s)\n",
+        FormatShort(exposure, 4).c_str(), chosen.metered_frames,
+        metered.after_dark ? "frame(s) after dark" : "frame(s) (none is after dark)",
+        r.transport == Transport::kDirect ? "" : " (their direct-transport frames)",
+        FormatShort(chosen.metered_luminance, 4).c_str(), FormatShort(kMeteredDisplayLuminance).c_str());
   for (const auto& frame : frames) std::printf("%s\n", FrameLine(frame).c_str());
+}
+
+void Run(const RenderArgs& args) {
+  using namespace phos::render;
+  RenderRun r;
+  CheckOutputsAndTransport(args, r);
+  PrepareScene(args, r);
+  FrameTimesOf(args, r);
+  SelectRange(args, r);
+  if (args.check) {
+    std::printf("%s: the command would render %zu frame(s) (--check: nothing written)\n", r.scene.name.c_str(),
+                args.solve_only ? std::size_t{0} : r.range.last - r.range.first);
+    return;
+  }
+  if (RangeDoneBefore(args, r)) return;
+  r.started = std::chrono::steady_clock::now();
+  r.geometry = std::make_unique<SceneGeometry>(r.scene);
+  if (!args.no_phosphorescence && r.scene.HasPhosphors())
+    r.solver = std::make_unique<CoupledSolver>(r.scene, *r.geometry);
+  if (args.solve_only) {
+    // Said at the solve too: on a cluster it is the first task to run, and
+    // its log the first a user reads.
+    WarnUnreadMaterial(r.scene);
+    WarnDarkLights(r.scene);
+    SolveOnly(args, r.scene, r.solver.get(), r.times);
+    return;
+  }
+  // After the solver's refusals (a ke not measured in a lit band): they leave no folder behind.
+  std::error_code ec;
+  std::filesystem::create_directories(args.out, ec);
+  if (ec) ThrowUserError("", "--out", "cannot create '" + args.out + "': " + ec.message());
+  PositionSolver(r.solver.get(), args.checkpoints, r.times, r.range.first);
+  RemoveFrameTemporaries(args, r.range);
+  ChooseFrameOptions(args, r);
+  RenderedFrames rendered;
+  RenderFrames(args, r, &rendered);
+  const ShownExposure shown = WriteViews(args, r, &rendered);
+  if (!r.range.whole) WriteRangeDone(r, rendered.frames);
+  ReportRun(args, r, rendered, shown);
 }
 
 }  // namespace
