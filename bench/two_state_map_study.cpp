@@ -29,6 +29,7 @@
 #include <CLI/CLI.hpp>
 
 #include "phos/fit/captured_sample.h"
+#include "phos/model/closed_form.h"
 #include "phos/acquire/session.h"
 #include "phos/acquire/session_records.h"
 #include "phos/model/material.h"
@@ -117,8 +118,7 @@ PixelCurve ReadPixelCurve(const fs::path& session, int x, int y) {
 double Model(const MapFile& map, int x, int y, const std::string& channel, double t, double e) {
   auto term = [](double k, double amplitude, double t_mid, double exposure) {
     if (!std::isfinite(k) || !(amplitude > 0)) return 0.0;
-    const double h = k * exposure / 2;
-    return amplitude * std::exp(-k * t_mid) * (h > 1e-8 ? std::sinh(h) / h : 1.0);
+    return amplitude * DecayFactor(k, t_mid - exposure / 2, exposure);
   };
   return term(map.at(x, y, "kr"), map.at(x, y, "amplitude." + channel), t, e) +
          term(map.at(x, y, "kr2"), map.at(x, y, "amplitude2." + channel), t, e) + map.at(x, y, "background." + channel);

@@ -14,17 +14,17 @@
 #include <limits>
 #include <utility>
 
+#include "phos/model/closed_form.h"
 #include "phos/util/error.h"
 
 namespace phos {
 namespace {
 
-// The exposure-averaged basis exp(-k t) sinh(k e / 2) / (k e / 2).
+// The exposure-averaged basis at the exposure's middle t: the glow's mean
+// over the exposure e, DecayFactor(k, t - e/2, e) (model/closed_form.h),
+// which is exp(-k t) sinh(k e / 2) / (k e / 2).
 void Basis(double k, const std::vector<double>& t, const std::vector<double>& e, double* out) {
-  for (std::size_t j = 0; j < t.size(); ++j) {
-    const double x = k * e[j] / 2;
-    out[j] = std::exp(-k * t[j]) * (x > 1e-8 ? std::sinh(x) / x : 1.0);
-  }
+  for (std::size_t j = 0; j < t.size(); ++j) out[j] = DecayFactor(k, t[j] - e[j] / 2, e[j]);
 }
 
 void Validate(const DecayMapInput& in, const std::string& where) {
