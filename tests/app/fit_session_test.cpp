@@ -296,15 +296,22 @@ TEST(FitBatchCommand, FitsInParallelResumesAndSummarizes) {
 
   // --max-components, as fit session has it: BIC chooses up to it, and it is
   // one of the options a record is kept for.
+  // The parsed replies are kept: a range-for over a member of a temporary
+  // reads freed memory (ASan caught it).
   auto sixth = RunPhos(command + " --max-components 1 --json");
-  for (const nlohmann::json& row : nlohmann::json::parse(sixth.out)["items"]) {
+  const nlohmann::json sixth_json = nlohmann::json::parse(sixth.out);
+  for (const nlohmann::json& row : sixth_json["items"]) {
     if (row["item"] == "broken" || row["item"] == "orange") continue;
     EXPECT_EQ(row["status"], "fitted") << row;
     EXPECT_EQ(row["n_components"], 1) << row;
   }
   auto seventh = RunPhos(command + " --max-components 1 --json");
-  for (const nlohmann::json& row : nlohmann::json::parse(seventh.out)["items"])
-    if (row["item"] != "broken" && row["item"] != "orange") EXPECT_EQ(row["status"], "kept") << row;
+  const nlohmann::json seventh_json = nlohmann::json::parse(seventh.out);
+  for (const nlohmann::json& row : seventh_json["items"]) {
+    if (row["item"] != "broken" && row["item"] != "orange") {
+      EXPECT_EQ(row["status"], "kept") << row;
+    }
+  }
 }
 
 TEST(FitMapCommand, TwoStatesMapATwoStateSampleWithAOneStateInset) {
