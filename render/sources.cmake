@@ -10,6 +10,7 @@ set(PHOS_RENDER_SOURCES
   src/phosphor_map.cpp
   src/bsdf.cpp
   src/geometry.cpp
+  src/texel_count.cpp
   src/solver.cpp
   src/renderer.cpp
   src/shading.cpp
