@@ -479,6 +479,8 @@ void RegisterFitCurve(CLI::App& fit) {
           "JSON: {\"file\",\"L0\",\"Linf\",\"rate\",\"rss\",\"seconds\",\"levels\" (several channels),..}");
   c->add_option("--weights", charge->weights, "none or poisson")->capture_default_str();
   AddCurveOptions(c, charge, RunChargeCurve);
+
+  RegisterFitSchedule(fit);
 }
 
 }  // namespace phos::app
