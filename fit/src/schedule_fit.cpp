@@ -320,7 +320,7 @@ Stage Refine(const Data& d, Params p, const ScheduleFitOptions& options) {
   for (int k = 0; k < n * C; ++k) problem.SetParameterLowerBound(p.S.data(), k, 0.0);
   for (int c = 0; c < C; ++c) problem.SetParameterLowerBound(p.P.data(), c, 0.0);
   ceres::Solver::Summary summary;
-  ceres::Solve(SmallDenseSolverOptions(options.max_iterations, 1e-12), &problem, &summary);
+  ceres::Solve(SmallDenseSolverOptions(options.max_iterations, 1e-10), &problem, &summary);
   Stage stage;
   stage.usable = summary.IsSolutionUsable();
   stage.converged = stage.usable && summary.termination_type == ceres::CONVERGENCE;
@@ -448,6 +448,10 @@ ScheduleFitSummary Unscale(const Data& d, const Stage& stage, const CurveScale& 
     state.kr_stderr = state.kr * std::sqrt(stage.var_log_kr[i]);
     state.charge_rate = std::exp(p.log_a[i]) / units.time_s;
     state.charge_rate_stderr = state.charge_rate * std::sqrt(stage.var_log_a[i]);
+    // At a bound the covariance means nothing: the rate is only known to be
+    // beyond what the samples resolve.
+    if (std::fabs(p.log_a[i] - std::log(d.a_lo / 10)) < 1e-6 || std::fabs(p.log_a[i] - std::log(d.a_hi * 10)) < 1e-6)
+      state.charge_rate_stderr = std::numeric_limits<double>::infinity();
     for (int c = 0; c < C; ++c) {
       state.emission.push_back(p.S[i * C + c] * units.value);
       state.emission_stderr.push_back(std::sqrt(stage.var_S[i * C + c]) * units.value);
@@ -498,6 +502,34 @@ std::vector<DecadeResidual> ResidualByDecade(const Curve& curve, const std::vect
                          sum.second > 0 ? std::sqrt(sum.first / sum.second) : 0.0});
   }
   return decades;
+}
+
+// Whether the samples before the first light fall clearly: the sample was
+// still glowing from an earlier charge, against the fit's dark start. The
+// sum over channels, the mean of the first third of those samples against
+// the last third's, more than 5 standard errors apart (the noise from the
+// median step between neighbours) and more than 1% of the curve's peak.
+std::string DecayBeforeTheFirstLight(const Curve& curve, double first_on_s) {
+  std::vector<double> sum;
+  double peak = 0;
+  for (std::size_t j = 0; j < curve.size(); ++j) {
+    double value = 0;
+    for (const auto& channel : curve.channels) value += channel[j];
+    peak = std::max(peak, std::fabs(value));
+    if (curve.t_s[j] < first_on_s) sum.push_back(value);
+  }
+  const std::size_t third = sum.size() / 3;
+  if (third < 3) return "";
+  std::vector<double> steps;
+  for (std::size_t j = 1; j < sum.size(); ++j) steps.push_back(std::fabs(sum[j] - sum[j - 1]));
+  std::nth_element(steps.begin(), steps.begin() + steps.size() / 2, steps.end());
+  const double sigma = steps[steps.size() / 2] / (0.6745 * std::sqrt(2.0));  // a step's median |N(0, 2 s^2)|
+  const double early = std::accumulate(sum.begin(), sum.begin() + third, 0.0) / third;
+  const double late = std::accumulate(sum.end() - third, sum.end(), 0.0) / third;
+  if (early - late > 5 * sigma * std::sqrt(2.0 / third) && early - late > 0.01 * peak)
+    return "the curve falls before the first light (from " + FormatShort(early, 4) + " to " + FormatShort(late, 4) +
+           "): the sample was not dark at the start, as the fit assumes (r = 0 at the first sample)";
+  return "";
 }
 
 }  // namespace
@@ -585,6 +617,8 @@ ScheduleFitSummary FitSchedule(const Curve& curve, const ScheduleFitOptions& opt
   fit.bic = choice.bic;
   fit.choice = choice.text;
   fit.warnings = choice.warnings;
+  if (std::string glowing = DecayBeforeTheFirstLight(curve, options.lights.front().on_s); !glowing.empty())
+    fit.warnings.push_back(std::move(glowing));
   for (const Stage& stage : stages) fit.iterations += stage.iterations;
   fit.weighted_rss = stages[choice.index].cost * std::exp(log_unit);
   const std::vector<std::vector<double>> model = EvaluateSchedule(fit, options.lights, curve.t_s.front(), curve.t_s);

@@ -280,5 +280,17 @@ TEST(ScheduleFit, MoreStatesThanTheCurveSupportsAreFittedFewer) {
   EXPECT_NE(fit.warnings[0].find("more parameters than samples"), std::string::npos) << fit.warnings[0];
 }
 
+TEST(ScheduleFit, AGlowBeforeTheFirstLightIsWarnedAbout) {
+  // The two-state curve with the sample still glowing at the start (a decay
+  // of 200 e^{-0.01 t} on top): warned about; without it, no warning.
+  const Truth truth = RandomTwoState(2, 1);
+  Curve curve = Simulate(truth, 60, 300, 900, 1, 2e-3, 2);
+  EXPECT_TRUE(FitSchedule(curve, OneLight(60, 360), "dark").warnings.empty());
+  for (std::size_t j = 0; j < curve.size(); ++j) curve.channels[0][j] += 200 * std::exp(-0.01 * curve.t_s[j]);
+  const ScheduleFitSummary fit = FitSchedule(curve, OneLight(60, 360), "glowing");
+  ASSERT_EQ(fit.warnings.size(), 1u);
+  EXPECT_NE(fit.warnings[0].find("the curve falls before the first light"), std::string::npos) << fit.warnings[0];
+}
+
 }  // namespace
 }  // namespace phos

@@ -55,9 +55,12 @@ struct ScheduleFitOptions {
 };
 
 struct ScheduleState {
-  double kr = 0, kr_stderr = 0;                    // 1/s
-  double charge_rate = 0, charge_rate_stderr = 0;  // a = ke E under the light, 1/s
-  std::vector<double> emission, emission_stderr;   // per channel, the signal at r = 1
+  double kr = 0, kr_stderr = 0;  // 1/s
+  // a = ke E under the light, 1/s; stderr infinite (JSON null) when a
+  // reached a bound of its search (a tenth of a thirtieth of one per longest
+  // light, ten times three per smallest step): not resolved.
+  double charge_rate = 0, charge_rate_stderr = 0;
+  std::vector<double> emission, emission_stderr;  // per channel, the signal at r = 1
 };
 
 // The fit's residual over one decade of time after a light went off.
