@@ -292,5 +292,50 @@ TEST(ScheduleFit, AGlowBeforeTheFirstLightIsWarnedAbout) {
   EXPECT_NE(fit.warnings[0].find("the curve falls before the first light"), std::string::npos) << fit.warnings[0];
 }
 
+// The truth's state i at t under several windows, from a dark start at 0,
+// window by window in closed form.
+double TruthState(const Truth& truth, std::size_t i, const std::vector<LightWindow>& lights, double t) {
+  double r = 0, now = 0;
+  for (const LightWindow& w : lights) {
+    if (t < w.on_s) break;
+    r *= DecayFactor(truth.kr[i], w.on_s - now);
+    const double end = std::min(t, w.off_s);
+    r = ChargedState(truth.a[i], truth.kr[i], end - w.on_s, r);
+    now = end;
+  }
+  return r * DecayFactor(truth.kr[i], t - now);
+}
+
+TEST(ScheduleFit, TwoLightsOfOneCurve) {
+  // 100 s of light, 470 s dark, 50 s of light again while the glow of the
+  // first is still there, 800 s dark: the same states as from one light.
+  const std::vector<LightWindow> lights = {{30, 130}, {600, 650}};
+  for (unsigned seed = 3; seed <= 5; ++seed) {
+    const Truth truth = RandomTwoState(seed, 1);
+    std::mt19937 rng(seed);
+    std::normal_distribution<double> gauss(0, 1);
+    Curve curve;
+    curve.channels.resize(1);
+    curve.names = {"c0"};
+    for (int j = 0; j <= 1450; ++j) {
+      const double t = j;
+      double y = truth.background[0] + (t >= 30 && t < 130) * truth.prompt[0] + (t >= 600 && t < 650) * truth.prompt[0];
+      for (std::size_t i = 0; i < 2; ++i) y += truth.S[i][0] * TruthState(truth, i, lights, t);
+      curve.t_s.push_back(t);
+      curve.channels[0].push_back(y + 0.5 * gauss(rng));
+    }
+    ScheduleFitOptions options;
+    options.lights = lights;
+    const ScheduleFitSummary fit = FitSchedule(curve, options, "two lights");
+    ASSERT_EQ(fit.n_states, 2) << seed;
+    for (int i = 0; i < 2; ++i) EXPECT_NEAR(fit.states[i].kr, truth.kr[i], 0.03 * truth.kr[i]) << seed << " " << i;
+    // Decades counted from each switch-off: the first light's up to the second light.
+    ASSERT_FALSE(fit.residual_by_decade.empty());
+    EXPECT_EQ(fit.residual_by_decade.front().light, 0);
+    EXPECT_EQ(fit.residual_by_decade.back().light, 1);
+    EXPECT_EQ(fit.residual_by_decade.back().to_s, 1000);
+  }
+}
+
 }  // namespace
 }  // namespace phos
