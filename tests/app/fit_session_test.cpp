@@ -18,6 +18,7 @@
 #include <thread>
 #include <nlohmann/json.hpp>
 
+#include "phos/acquire/session_records.h"
 #include "phos/model/material.h"
 #include "phos/model/synthetic.h"
 #include "phos/util/json.h"
@@ -187,7 +188,7 @@ TEST(FitSessionCommand, PartialSessionsAndBadInput) {
     std::ofstream out(dir / "c" / "decay" / "frames.jsonl", std::ios::trunc);
     for (nlohmann::json line : lines) {
       line["saturated_fraction"] = 0.4;
-      out << line.dump() << "\n";
+      out << WithRecordChecksum(line).dump() << "\n";  // as if recorded so
     }
   }
   auto clipped = RunPhos("fit session " + (dir / "c").string() + " --out " + (dir / "k.json").string());
@@ -419,7 +420,8 @@ TEST(FitMapCommand, MapsASpatiallyVaryingSample) {
   EXPECT_TRUE(
       testing::IsOneLineUserError(RunPhos("fit map " + (dir / "all").string() + " --out " + (dir / "m6").string()),
                                   "is a 'all' session; a decay map needs a decay session (this folder's decay part: "
-                                  "phos fit map " + (dir / "all" / "decay").string() + ")"));
+                                  "phos fit map " +
+                                      (dir / "all" / "decay").string() + ")"));
 
   // Downstream readers check frames as resume does (docs/capture.md): a torn
   // last record is left out with a note; a truncated frame is refused in one
