@@ -182,6 +182,16 @@ TEST(FitSessionCommand, PartialSessionsAndBadInput) {
   EXPECT_NE(partial.out.find("excitation: 1 measurement(s) cut off in their tail left out"), std::string::npos)
       << partial.out;
 
+  // A fit stopped at its iteration limit writes nothing, unless kept.
+  auto cut = RunPhos("fit session " + (dir / "c").string() + " --max-iterations 1 --out " + (dir / "u.json").string());
+  EXPECT_TRUE(testing::IsOneLineUserError(cut, "did not converge: nothing written")) << cut.err;
+  EXPECT_FALSE(std::filesystem::exists(dir / "u.json"));
+  auto kept = RunPhos("fit session " + (dir / "c").string() + " --max-iterations 1 --keep-unconverged --out " +
+                      (dir / "u.json").string());
+  ASSERT_EQ(kept.exit_code, 0) << kept.err;
+  EXPECT_NE(kept.out.find("warning: written although the decay fit"), std::string::npos) << kept.out;
+  EXPECT_TRUE(std::filesystem::exists(dir / "u.json"));
+
   // Every decay frame clipped: said, and nothing written.
   {
     const std::vector<nlohmann::json> lines = testing::ReadJsonLines(dir / "c" / "decay" / "frames.jsonl");
