@@ -856,7 +856,8 @@ void RegisterFit(CLI::App& app) {
       f->add_option("--max-components", session->max_components, "choose nc by BIC up to N, 1-4 (default 3)")
           ->check(CLI::Range(1, 4));
   fixed_nc->excludes(chosen_nc);
-  f->add_option("--weights", session->weights, "poisson (default: photon counting) or none");
+  f->add_option("--weights", session->weights,
+                "poisson (the default here: a session's values are the camera's photon counts, in DN) or none");
   f->add_option("--compare", session->compare,
                 "a material to compare with (the one a simulated sample was made of): kr, spectrum and ke errors");
   f->add_flag("--sequential", session->sequential,
@@ -891,7 +892,7 @@ void RegisterFit(CLI::App& app) {
                "assemble <out>/tiles into decay-map.exr and kr.png, the same as one run writes; every tile\n"
                "must be done for the same session and options")
       ->excludes("--tile");
-  mp->add_option("--weights", map_args->weights, "poisson (default) or none");
+  mp->add_option("--weights", map_args->weights, "poisson (the default: pixels are photon counts) or none");
   mp->add_flag("--no-background", map_args->no_background, "no background term (dark signal already removed)");
   mp->add_option("--states", map_args->states,
                  "1 (default) or 2: exponentials per pixel. With 2, kr is the slow state's rate and kr2 the\n"
@@ -921,7 +922,7 @@ void RegisterFit(CLI::App& app) {
   batch_fixed_nc->excludes(
       b->add_option("--max-components", batch->max_components, "choose nc by BIC up to N, 1-4 (default 3)")
           ->check(CLI::Range(1, 4)));
-  b->add_option("--weights", batch->weights, "poisson (default) or none");
+  b->add_option("--weights", batch->weights, "poisson (the default: as fit session) or none");
   b->add_flag("--json", batch->json, "print one JSON object (the rows of the summary table) instead of the table");
   b->add_flag("--keep-unconverged", batch->keep_unconverged,
               "write an item's material even when a fit it holds did not converge (else the item fails)");

@@ -494,7 +494,9 @@ void RegisterFitCurve(CLI::App& fit) {
   auto chosen =
       d->add_option("--max-components", decay->max_components, "choose the count by BIC, up to N (1-4; default 3)");
   fixed->excludes(chosen);
-  d->add_option("--weights", decay->weights, "none or poisson (photon counting: weight 1/sqrt(value))")
+  d->add_option("--weights", decay->weights,
+                "none or poisson (photon counting: weight 1/sqrt(value)). none by default here, unlike fit\n"
+                "session: a curve file's unit is not known to be a count")
       ->capture_default_str();
   d->add_flag("--background", decay->background, "also fit a constant background per channel");
   d->add_flag("--amplitude-stderr", decay->amplitude_stderr,
@@ -509,7 +511,9 @@ void RegisterFitCurve(CLI::App& fit) {
           kCurveFiles +
           "Several files: one table row each (file, rate, L0, Linf, rss, samples).\n"
           "JSON: {\"file\",\"L0\",\"Linf\",\"rate\",\"rss\",\"seconds\",\"levels\" (several channels),..}");
-  c->add_option("--weights", charge->weights, "none or poisson")->capture_default_str();
+  c->add_option("--weights", charge->weights,
+                "none or poisson (none by default: a curve's unit is not known to be a count)")
+      ->capture_default_str();
   AddCurveOptions(c, charge, RunChargeCurve);
 }
 

@@ -69,6 +69,18 @@ TEST(CaptureDecayCommand, FramesWithoutGlowAreWarnedAbout) {
   EXPECT_EQ(glowing.err, "");
 }
 
+// The excitation protocol's lights are --excite, as in `capture all`; its
+// first name, --light, still works.
+TEST(CaptureExcitationCommand, ItsLightsAreExciteAsInCaptureAll) {
+  testing::TempDir dir;
+  const std::string orange = " --sim-material " + testing::Fixture("materials/orange.json").string();
+  for (const char* option : {"--excite", "--light"}) {
+    const auto bad = RunPhos("capture excitation" + orange + " " + option + " led999 --out " + (dir / "x").string());
+    EXPECT_TRUE(testing::IsOneLineUserError(bad, "--excite: unknown channel 'led999'")) << option << ": " << bad.err;
+    EXPECT_FALSE(std::filesystem::exists(dir / "x"));
+  }
+}
+
 TEST(CaptureExcitationCommand, WritesACompleteSession) {
   testing::TempDir dir;
   auto result = RunPhos("capture excitation --sim-material " + testing::Fixture("materials/orange.json").string() +
