@@ -34,6 +34,10 @@ inline constexpr CommandSummary kCommands[] = {
      "every --dt seconds from 0 to charge + decay, and at the end. Steps never straddle the light switch.\n"
      "Output: CSV t,r_1..r_nc,L_1..L_n (L = emitted radiance per band, Eq. 8.2), or --json\n"
      "{\"t\":[..],\"r\":[[..]],\"L\":[[..]],\"integrator\",\"steps\",\"warnings\"}."},
+    {"afterglow",
+     "The standard test of a glow product, simulated (DIN 67510-1 style): a physical material, charged\n"
+     "from dark by a source at an illuminance, then read in the dark: luminance in mcd/m² at given minutes,\n"
+     "the time to a threshold, and the marking L10/L60 - t. See docs/afterglow.md."},
     {"plot",
      "Plot the total emitted radiance (sum of the L_ columns) of 'phos simulate'\n"
      "CSV files over time, one line per file in the colour of the light it emits, into an SVG."},
@@ -80,6 +84,7 @@ int RunCommand(int argc, char** argv, const char* command, void (*register_comma
 
 void RegisterSimulate(CLI::App& app);
 void RegisterPlot(CLI::App& app);
+void RegisterAfterglow(CLI::App& app);
 void RegisterFit(CLI::App& app);
 // The curve fits under `phos fit` (decay-curve, charge-curve): app/cmd_fit_curve.cpp.
 void RegisterFitCurve(CLI::App& fit);
