@@ -81,8 +81,9 @@ Charge ChargeOf(const AfterglowArgs& args, const Material& material) {
   Charge charge;
   charge.E = IntegrateOverBands(spectrum, material.bands);
   for (double& e : charge.E) e *= scale;
-  charge.lux = scale * PhotopicIntegral(spectrum);
-  charge.w_m2 = scale * IntegrateAll(spectrum);
+  // The value given is reported as given; the other follows from the spectrum.
+  charge.lux = radiometric ? scale * PhotopicIntegral(spectrum) : args.illuminance_lux;
+  charge.w_m2 = radiometric ? args.irradiance_w_m2 : scale * IntegrateAll(spectrum);
   charge.lower_nm = spectrum.wavelength_nm.front();
   charge.upper_nm = spectrum.wavelength_nm.back();
   for (int b = 0; b < material.band_count(); ++b)
@@ -154,9 +155,9 @@ void RunAfterglow(const AfterglowArgs& args) {
                    "(ke in 1/s per W/m², Lambda in W/(sr m²) per 1/s of kr r)");
   const Charge charge = ChargeOf(args, material);
   const std::vector<double> r_end = ChargedStates(material, charge, args);
-  nlohmann::json out;
-  out["at_s"] = nlohmann::json::array();
-  out["luminance_mcd_m2"] = nlohmann::json::array();
+  nlohmann::ordered_json out;  // keys in the order docs/formats.md gives them
+  out["at_s"] = nlohmann::ordered_json::array();
+  out["luminance_mcd_m2"] = nlohmann::ordered_json::array();
   for (double minutes : args.at_min) {
     out["at_s"].push_back(60 * minutes);
     out["luminance_mcd_m2"].push_back(1e3 * LuminanceAfter(material, r_end, 60 * minutes));
@@ -176,15 +177,15 @@ void RunAfterglow(const AfterglowArgs& args) {
   }
   std::printf("'%s' from dark, charged %s s by %s at %s lx (%s W/m² over %s-%s nm), then dark:\n",
               material.name.c_str(), FormatShort(args.charge_s).c_str(), args.source.c_str(),
-              FormatShort(charge.lux).c_str(), FormatShort(charge.w_m2).c_str(), FormatDouble(charge.lower_nm).c_str(),
-              FormatDouble(charge.upper_nm).c_str());
+              FormatShort(charge.lux).c_str(), FormatShort(charge.w_m2).c_str(), FormatShort(charge.lower_nm).c_str(),
+              FormatShort(charge.upper_nm).c_str());
   for (std::size_t m = 0; m < args.at_min.size(); ++m)
     std::printf("  %8s min  %s mcd/m²\n", FormatShort(args.at_min[m]).c_str(),
                 ThreeDigits(out["luminance_mcd_m2"][m].get<double>()).c_str());
   const std::string threshold = FormatShort(args.threshold_mcd) + " mcd/m²";
   if (t_s)
     std::printf("below %s after %s s (%s min)\n", threshold.c_str(), FormatShort(*t_s, 6).c_str(),
-                FormatShort(*t_s / 60, 4).c_str());
+                FormatShort(std::floor(*t_s / 6) / 10, 6).c_str());
   else
     std::printf("still above %s after %s s\n", threshold.c_str(), FormatShort(kLongestSearch_s).c_str());
   std::printf("marking (DIN 67510-1 style, L10/L60 - t(%s) in mcd/m² and min): %s\n",

@@ -150,6 +150,17 @@ TEST(AfterglowCommand, TheTimeToTheThresholdIsWhereTheCurveCrossesIt) {
   }
 }
 
+// A glow that outlasts the search (32,000 years) has no time: null, and "never".
+TEST(AfterglowCommand, AGlowThatNeverFadesHasNoTime) {
+  testing::TempDir dir;
+  const Case c{SpectralGrid{{500, 600}}, {{1e-12, {1.0}, {1e9}}}, "d65", 1000, 300};
+  const nlohmann::json j = Afterglow(WriteMaterial(dir, c), c, "");
+  EXPECT_TRUE(j["time_to_threshold_s"].is_null());
+  EXPECT_EQ(j["marking"].get<std::string>().substr(j["marking"].get<std::string>().size() - 8), " - never");
+  const auto text = RunPhos("afterglow " + (dir / "m.json").string());
+  EXPECT_NE(text.out.find("still above 0.3 mcd/m² after 1e+12 s\n"), std::string::npos) << text.out;
+}
+
 // The fixture sign paint under the defaults (5 min at 1000 lx of D65): the
 // text a user reads and its marking.
 TEST(AfterglowCommand, TheSignPaintFixtureReadsAsASign) {
@@ -175,7 +186,9 @@ TEST(AfterglowCommand, ASpectrumFileIsASource) {
   const double a = 0.02 * 1.0;  // E = 1 W/m² in 400-500 nm
   const double r = static_cast<double>(testing::ClosedForm(0, a, 0.01, 100));
   EXPECT_TRUE(testing::RelativelyNear(j["luminance_mcd_m2"][0], 1e3 * Luminance({0, 0.01 * r}, c.bands), 1e-12));
-  EXPECT_NEAR(j["irradiance_w_m2"].get<double>(), 3.0, 1e-12);
+  EXPECT_EQ(j["irradiance_w_m2"].get<double>(), 3.0);
+  const double lux = 683.0 * 0.01 * PhotopicEfficiency().Integrate(400, 700);  // 0.01 W/(m² nm)
+  EXPECT_NEAR(j["illuminance_lux"].get<double>(), lux, 1e-12 * lux);
 }
 
 TEST(AfterglowCommand, BadInputIsOneLine) {
