@@ -6,7 +6,7 @@
 // V(lambda): the CIE 1924 photopic luminous efficiency function, equal to
 // ybar of the CIE 1931 2-degree standard colorimetric observer, as tabulated
 // at 1 nm from 360 to 830 nm in CIE S 010/ISO 23539:2005 ("Photometry - The
-// CIE system of physical photometry") and CIE 15:2004 Table T.4. Copied from
+// CIE system of physical photometry") and CIE 15:2004. Copied from
 // colour-science's "CIE 1924 Photopic Standard Observer" (CVRL's copy of the
 // CIE table); pbrt-v4's CIE_Y holds the same 471 values.
 //
@@ -15,13 +15,13 @@
 // "CIE 1951 Scotopic Standard Observer" (CVRL's copy of the CIE table).
 //
 // D65: CIE standard illuminant D65, relative spectral power distribution,
-// 300 to 830 nm at 5 nm, CIE 15:2004 Table T.1 (= ISO 11664-2:2007). Copied
+// 300 to 830 nm at 5 nm, CIE 15:2004 (its tables of data; = ISO 11664-2:2007). Copied
 // from colour-science (the CIE 15:2004 tables data, 300-780 nm) and, for
 // 785-830 nm, from pbrt-v4's CIE_Illum_D6500 rounded back from float to the
 // table's digits (the two copies agree to 6e-8 where both have values).
 //
 // F11: CIE illuminant F11 (a narrow three-band fluorescent lamp, CCT 4000 K),
-// 380 to 780 nm at 5 nm, CIE 15:2004 Table T.6. Copied from colour-science's
+// 380 to 780 nm at 5 nm, CIE 15:2004 (its tables of data). Copied from colour-science's
 // "FL11"; pbrt-v4's CIE_Illum_F11 agrees to 6e-8 (float rounding).
 
 #include "cie_tables.h"
