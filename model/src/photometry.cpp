@@ -156,14 +156,14 @@ double ScotopicLuminance(const std::vector<double>& band_radiance_w_sr_m2, const
   return Dot(band_radiance_w_sr_m2, ScotopicBandEfficacy(grid));
 }
 
-std::vector<double> BandIrradianceForIlluminance(const SampledSpectrum& s, double lux, const SpectralGrid& grid,
-                                                 const std::string& what) {
-  return Scaled(IntegrateOverBands(s, grid), ScaleForPhotometric(s, lux, what));
+std::vector<double> BandsForPhotometric(const SampledSpectrum& s, double photometric, const SpectralGrid& grid,
+                                        const std::string& what) {
+  return Scaled(IntegrateOverBands(s, grid), ScaleForPhotometric(s, photometric, what));
 }
 
-std::vector<double> BandIrradianceForIrradiance(const SampledSpectrum& s, double w_m2, const SpectralGrid& grid,
-                                                const std::string& what) {
-  return Scaled(IntegrateOverBands(s, grid), ScaleForRadiometric(s, w_m2, what));
+std::vector<double> BandsForRadiometric(const SampledSpectrum& s, double radiometric, const SpectralGrid& grid,
+                                        const std::string& what) {
+  return Scaled(IntegrateOverBands(s, grid), ScaleForRadiometric(s, radiometric, what));
 }
 
 }  // namespace phos

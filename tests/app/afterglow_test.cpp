@@ -69,7 +69,7 @@ std::string WriteMaterial(const testing::TempDir& dir, const Case& c) {
 // The luminance in mcd/m² t_s after the charge, from dark: per state the
 // closed form of Eq. 8.1 charging for charge_s, then e^{-kr t}; Eq. 8.2.
 double ClosedFormLuminance(const Case& c, double t_s) {
-  const std::vector<double> E = BandIrradianceForIlluminance(*StandardSource(c.source), c.lux, c.bands, c.source);
+  const std::vector<double> E = BandsForPhotometric(*StandardSource(c.source), c.lux, c.bands, c.source);
   std::vector<double> L(E.size(), 0.0);
   for (const State& s : c.states) {
     long double a = 0;

@@ -94,21 +94,21 @@ TEST(Photometry, ASourceScaledToAnIlluminanceGivesItBack) {
     for (double& v : scaled.value) v *= k;
     EXPECT_NEAR(PhotopicIntegral(scaled), lux, 1e-12 * lux) << name;
     const SpectralGrid fine = SpectralGrid::Uniform(300, 830, 530);
-    const std::vector<double> E = BandIrradianceForIlluminance(s, lux, fine, name);
+    const std::vector<double> E = BandsForPhotometric(s, lux, fine, name);
     // Lux of W/m² as cd/m² of W/(sr m²); V is not flat inside a 1 nm band
     // (at 405 nm it changes by 13% per nm), so the bands agree to 2e-3.
     EXPECT_NEAR(Luminance(E, fine), lux, 2e-3 * lux) << name;
     // Irradiance: the bands over the whole spectrum hold all of it.
     const double w_m2 = uniform(0.1, 100);
     double total = 0;
-    for (double e : BandIrradianceForIrradiance(s, w_m2, SpectralGrid{{250, 900}}, name)) total += e;
+    for (double e : BandsForRadiometric(s, w_m2, SpectralGrid{{250, 900}}, name)) total += e;
     EXPECT_NEAR(total, w_m2, 1e-12 * w_m2) << name;
   }
 }
 
 TEST(Photometry, BadSpectraAreRefused) {
   const SampledSpectrum infrared = LedSpectrum(1200, 10);
-  EXPECT_EQ(ErrorOf([&] { BandIrradianceForIlluminance(infrared, 1000, SpectralGrid::Paper(), "ir.csv"); }),
+  EXPECT_EQ(ErrorOf([&] { BandsForPhotometric(infrared, 1000, SpectralGrid::Paper(), "ir.csv"); }),
             "ir.csv: its spectrum has no light V(lambda) sees (360-830 nm): no photometric value scales it");
   EXPECT_FALSE(StandardSource("xenon"));
   testing::TempDir dir;

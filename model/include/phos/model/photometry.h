@@ -90,12 +90,15 @@ double Luminance(const std::vector<double>& band_radiance_w_sr_m2, const Spectra
 // Scotopic luminance in scotopic cd/m².
 double ScotopicLuminance(const std::vector<double>& band_radiance_w_sr_m2, const SpectralGrid& grid);
 
-// The band-integrated irradiance E[b] in W/m² (the E of Eq. 8.1) of a source
-// of spectral shape S at `lux` of illuminance, or at `w_m2` of irradiance
-// over S's tabulated range. `what` names the source in errors.
-std::vector<double> BandIrradianceForIlluminance(const SampledSpectrum& s, double lux, const SpectralGrid& grid,
-                                                 const std::string& what);
-std::vector<double> BandIrradianceForIrradiance(const SampledSpectrum& s, double w_m2, const SpectralGrid& grid,
-                                                const std::string& what);
+// The band integrals of a spectral shape S scaled to a photometric value
+// (ScaleForPhotometric): per band, W/m² of a source at `photometric` lx (the
+// E[b] of Eq. 8.1), W/sr of a light of that many cd, W/(sr m²) of a surface
+// of that many cd/m². `what` names the source in errors.
+std::vector<double> BandsForPhotometric(const SampledSpectrum& s, double photometric, const SpectralGrid& grid,
+                                        const std::string& what);
+// The same scaled to a radiometric value over S's tabulated range
+// (ScaleForRadiometric): W/m² per band of a source of `radiometric` W/m².
+std::vector<double> BandsForRadiometric(const SampledSpectrum& s, double radiometric, const SpectralGrid& grid,
+                                        const std::string& what);
 
 }  // namespace phos
