@@ -195,6 +195,9 @@ TEST(AfterglowCommand, BadInputIsOneLine) {
   testing::TempDir dir;
   const std::string paint = testing::Fixture("materials/physical/sign-paint.json").string();
   testing::WriteText(dir / "dark.csv", "wavelength_nm,irradiance\n1000,1\n1100,1\n");
+  testing::WriteText(dir / "unmeasured.json",
+                     R"({"schema": "phos.material/1", "name": "u", "units": "physical", "bands_nm": [400, 500, 600],
+                         "states": [{"kr": 0.01, "ke": [0.1, null], "Lambda": [0, 1]}]})");
   const std::pair<std::string, std::string> cases[] = {
       {testing::Fixture("materials/green.json").string(),
        "green.json: units: a relative material has no luminance in cd/m²: phos afterglow needs \"units\": "
@@ -212,6 +215,9 @@ TEST(AfterglowCommand, BadInputIsOneLine) {
       {paint + " --at-min 10,-1", "--at-min: expected a number >= 0, got -1"},
       {paint + " --illuminance-lux 1e300", "--illuminance-lux: gives"},
       {(dir / "missing.json").string(), "missing.json"},
+      {(dir / "unmeasured.json").string(),
+       "unmeasured.json: states[0].ke[1]: unknown (not measured) for band 500-600 nm: material 'u' cannot be charged "
+       "by --source d65 ("},
   };
   for (const auto& [arguments, expected] : cases)
     EXPECT_TRUE(testing::IsOneLineUserError(RunPhos("afterglow " + arguments), expected)) << arguments;
