@@ -250,8 +250,9 @@ TEST(SessionRecords, ARecordChecksumSurvivesItsFileAndFindsEveryChangedNumber) {
     EXPECT_NE(RecordChecksumProblem(changed).find("does not match its record_xxh3"), std::string::npos);
     changed = read_back;
     changed["exposure_s"] = numbers[0] * 4;
-    if (numbers[0] != 0 && std::isfinite(numbers[0] * 4))
+    if (numbers[0] != 0 && std::isfinite(numbers[0] * 4)) {
       EXPECT_NE(RecordChecksumProblem(changed).find("changed after it was written"), std::string::npos);
+    }
   }
   EXPECT_EQ(RecordChecksumProblem(nlohmann::json{{"event", "x"}}), "has no record_xxh3");
   nlohmann::json wrong_type = WithRecordChecksum({{"event", "x"}});

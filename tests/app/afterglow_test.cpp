@@ -136,8 +136,9 @@ TEST(AfterglowCommand, TheTimeToTheThresholdIsWhereTheCurveCrossesIt) {
     const nlohmann::json j = Afterglow(WriteMaterial(dir, c), c, "--threshold-mcd " + FormatDouble(threshold));
     const double t = j["time_to_threshold_s"];
     EXPECT_EQ(j["threshold_mcd_m2"].get<double>(), threshold);
-    if (c.states.size() == 1)
+    if (c.states.size() == 1) {
       EXPECT_TRUE(testing::RelativelyNear(t, std::log(L0 / threshold) / c.states[0].kr, 1e-9)) << trial;
+    }
     EXPECT_TRUE(testing::RelativelyNear(ClosedFormLuminance(c, t), threshold, 1e-9)) << trial;
     const std::string m = j["marking"];
     const auto slash = m.find('/'), dash = m.find(" - ");
