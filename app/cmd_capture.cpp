@@ -431,7 +431,7 @@ std::vector<std::pair<std::string, std::string>> LightsNamed(const Plan& plan) {
     named.push_back({"--light", SpectrumProtocolOptions::FromJson(plan.settings, where).charge_light});
   if (plan.protocol == ExcitationFrameFields::kProtocol)
     for (const std::string& light : ExcitationProtocolOptions::FromJson(plan.settings, where).lights)
-      named.push_back({"--light", light});
+      named.push_back({"--excite", light});
   if (plan.protocol == LvfCalibrationFrameFields::kProtocol) {
     const LvfCalibrationOptions o = LvfCalibrationOptions::FromJson(plan.settings, where);
     for (const CalibrationLine& line : o.lines) named.push_back({"calibration_lines", line.light});
@@ -820,8 +820,9 @@ void RegisterCaptureExcitation(CLI::App* capture) {
       "wait a fixed short delay and expose; t doubles from --first-charge-s until a doubling adds less\n"
       "than 3%, then the midpoints of the rising part are measured too. Resumable.");
   AddDeviceOptions(excitation, *excitation_args);
-  excitation->add_option("--light", excitation_args->excitation.lights,
-                         "light channel(s) to measure, one after the other (default led405)");
+  // --excite, as in `capture all`; --light, its first name, still works.
+  excitation->add_option("--excite,--light", excitation_args->excitation.lights,
+                         "light channel(s) to measure, one after the other (default led405; --light is the old name)");
   excitation->add_option("--reset-s", excitation_args->excitation.reset_s, "darkness before each charge (default 900)")
       ->check(kNonNegative);
   excitation

@@ -41,9 +41,20 @@ namespace {
 
 struct SessionArgs {
   std::string dir, out, report, compare, weights = "poisson";
-  int components = 0, max_components = 3;
+  int components = 0, max_components = 3, max_iterations = 0;
   bool json = false, sequential = false, joint = false;  // joint: the default, accepted for older scripts
+  bool keep_unconverged = false;
 };
+
+// A material whose fit stopped at its iteration limit is not written unless
+// the user asked to keep it (then it is, and the output says so).
+void RequireConverged(const SessionFit& fit, const std::string& dir, bool keep) {
+  if (fit.unconverged.empty() || keep) return;
+  ThrowUserError(dir, "",
+                 JoinComma(fit.unconverged) +
+                     " did not converge: nothing written (raise --max-iterations, or give --keep-unconverged to "
+                     "write it anyway)");
+}
 
 nlohmann::json OptionalJson(const std::optional<double>& v) { return v ? nlohmann::json(*v) : nlohmann::json(nullptr); }
 
@@ -104,6 +115,8 @@ void PrintSessionFit(const SessionArgs& args, const SessionFit& fit) {
   }
   if (fit.state_excitation && !fit.state_excitation->converged)
     std::printf("  excitation fit did not converge: %s\n", fit.state_excitation->termination.c_str());
+  for (const std::string& stage : fit.unconverged)
+    std::printf("  warning: written although %s did not converge (--keep-unconverged)\n", stage.c_str());
   if (fit.joint) {
     const JointFit& j = *fit.joint;
     std::string kr;
@@ -139,9 +152,11 @@ void RunFitSession(const SessionArgs& args) {
   options.max_components = args.max_components;
   options.weighting = ParseWeightsOption(args.weights);
   options.joint = !args.sequential;
+  options.max_iterations = args.max_iterations;
   std::optional<Material> truth;
   if (!args.compare.empty()) truth = LoadMaterial(args.compare);  // a bad file fails before any work
   const SessionFit fit = FitSession(args.dir, options);
+  RequireConverged(fit, args.dir, args.keep_unconverged);
   std::optional<MaterialComparison> comparison;
   if (truth) comparison = CompareMaterials(fit.material, *truth);
   for (const std::string& file : {args.out, args.report}) {
@@ -153,7 +168,8 @@ void RunFitSession(const SessionArgs& args) {
   SaveMaterial(fit.material, args.out);
   if (!args.report.empty())
     WriteFileAtomically(args.report, SessionReportHtml(fit, "phos fit session " + args.dir, comparison));
-  nlohmann::json json = {{"material", args.out}, {"seconds", fit.seconds}, {"notes", fit.notes}};
+  nlohmann::json json = {
+      {"material", args.out}, {"seconds", fit.seconds}, {"notes", fit.notes}, {"unconverged", fit.unconverged}};
   json["n_components"] = fit.decay->n_components;
   json["choice"] = fit.decay->choice;
   json["bic"] = fit.decay->bic;
@@ -460,6 +476,7 @@ struct BatchArgs {
   int jobs = 0, components = 0, max_components = 3;
   bool reports = true, json = false, merge = false;
   bool check = false;  // --check: the items and --task checked, nothing fitted or written
+  bool keep_unconverged = false;
 };
 
 // <item>.done.json: an item of a batch is done. Written last (after the
@@ -680,6 +697,7 @@ void FitBatchItem(const BatchArgs& args, const SessionFitOptions& options, const
   std::error_code ec;
   try {
     const SessionFit fit = FitSession(item, options);
+    RequireConverged(fit, item.string(), args.keep_unconverged);
     SaveMaterial(fit.material, base.string() + ".json");
     if (args.reports)
       WriteFileAtomically(base.string() + ".html", SessionReportHtml(fit, "phos fit batch: " + row->name));
@@ -838,7 +856,8 @@ void RegisterFit(CLI::App& app) {
       f->add_option("--max-components", session->max_components, "choose nc by BIC up to N, 1-4 (default 3)")
           ->check(CLI::Range(1, 4));
   fixed_nc->excludes(chosen_nc);
-  f->add_option("--weights", session->weights, "poisson (default: photon counting) or none");
+  f->add_option("--weights", session->weights,
+                "poisson (the default here: a session's values are the camera's photon counts, in DN) or none");
   f->add_option("--compare", session->compare,
                 "a material to compare with (the one a simulated sample was made of): kr, spectrum and ke errors");
   f->add_flag("--sequential", session->sequential,
@@ -848,6 +867,12 @@ void RegisterFit(CLI::App& app) {
   f->add_flag("--joint", session->joint, "write the joint refinement (the default; kept for older scripts)")
       ->excludes("--sequential");
   f->add_flag("--json", session->json, "print one JSON object");
+  f->add_option("--max-iterations", session->max_iterations,
+                "the solvers' iteration limit for the decay and excitation fits (default: 100 and 200)")
+      ->check(CLI::Range(1, 100000));
+  f->add_flag("--keep-unconverged", session->keep_unconverged,
+              "write the material even when a fit it holds stopped at its iteration limit (it is said);\n"
+              "without it such a fit writes nothing and exits 2");
   f->callback([session] { RunFitSession(*session); });
 
   auto map_args = std::make_shared<MapArgs>();
@@ -867,7 +892,7 @@ void RegisterFit(CLI::App& app) {
                "assemble <out>/tiles into decay-map.exr and kr.png, the same as one run writes; every tile\n"
                "must be done for the same session and options")
       ->excludes("--tile");
-  mp->add_option("--weights", map_args->weights, "poisson (default) or none");
+  mp->add_option("--weights", map_args->weights, "poisson (the default: pixels are photon counts) or none");
   mp->add_flag("--no-background", map_args->no_background, "no background term (dark signal already removed)");
   mp->add_option("--states", map_args->states,
                  "1 (default) or 2: exponentials per pixel. With 2, kr is the slow state's rate and kr2 the\n"
@@ -897,8 +922,10 @@ void RegisterFit(CLI::App& app) {
   batch_fixed_nc->excludes(
       b->add_option("--max-components", batch->max_components, "choose nc by BIC up to N, 1-4 (default 3)")
           ->check(CLI::Range(1, 4)));
-  b->add_option("--weights", batch->weights, "poisson (default) or none");
+  b->add_option("--weights", batch->weights, "poisson (the default: as fit session) or none");
   b->add_flag("--json", batch->json, "print one JSON object (the rows of the summary table) instead of the table");
+  b->add_flag("--keep-unconverged", batch->keep_unconverged,
+              "write an item's material even when a fit it holds did not converge (else the item fails)");
   b->add_option("--task", batch->task,
                 "i/N: fit only the i-th (0-based) of N near-equal consecutive shares of the items (a Slurm\n"
                 "array task); no summary.csv (the merge writes it); then <out>/tasks/task-i-of-N.json");

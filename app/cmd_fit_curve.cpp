@@ -81,7 +81,8 @@ struct CurveArgs {
   std::string weights = "none", plot;
   std::optional<double> from_s, to_s;
   int components = 0, max_components = 0;
-  bool json = false, background = false, amplitude_stderr = false;
+  int max_iterations = 100;
+  bool json = false, background = false, amplitude_stderr = false, keep_unconverged = false;
 };
 
 LoadedCurve LoadCurve(const std::string& path, const CurveArgs& args) {
@@ -234,6 +235,20 @@ void CheckWindow(const CurveArgs& args) {
     ThrowUserError("", "--from", FormatDouble(*args.from_s) + " s is after --to " + FormatDouble(*args.to_s) + " s");
 }
 
+// A fit that stopped at --max-iterations, not at a tolerance, is not a
+// result: the file fails (one line, exit 2 at the end) unless the user asked
+// to see it anyway, and then it says so.
+void RequireConverged(bool converged, const std::string& termination, const std::string& file, const CurveArgs& args,
+                      LoadedCurve* loaded) {
+  if (converged) return;
+  if (!args.keep_unconverged)
+    ThrowUserError(file, "",
+                   "the fit did not converge (" + termination +
+                       "): nothing reported; raise --max-iterations, or give --keep-unconverged to see it anyway");
+  loaded->warnings.push_back(file + ": the fit did not converge (" + termination +
+                             "); shown because of --keep-unconverged");
+}
+
 CurveResult FitDecayFile(const std::string& file, const CurveArgs& args, const DecayFitOptions& options) {
   LoadedCurve loaded = LoadCurve(file, args);
   const Curve& curve = loaded.curve;
@@ -243,6 +258,7 @@ CurveResult FitDecayFile(const std::string& file, const CurveArgs& args, const D
                               "same: fit the decay alone with --from " +
                               FormatShort(*peak_s, 6));
   const DecayFitSummary fit = FitDecay(curve, options, file);
+  RequireConverged(fit.converged, fit.termination, file, args, &loaded);
   if (!args.plot.empty())
     WritePlot(
         args.plot, curve, [&](int c, double t) { return EvaluateDecay(fit, c, t); },
@@ -271,6 +287,7 @@ CurveResult FitDecayFile(const std::string& file, const CurveArgs& args, const D
   j["bic"] = bic;
   j["choice"] = fit.choice;
   j["iterations"] = fit.iterations;
+  j["converged"] = fit.converged;
   j["weights"] = WeightingName(options.weighting);
   j["seconds"] = fit.seconds;
   AddCurveJson(loaded, args, &j);
@@ -323,6 +340,7 @@ void RunDecayCurve(const CurveArgs& args) {
   options.weighting = ParseWeightsOption(args.weights);
   options.background = args.background;
   options.amplitude_uncertainties = args.amplitude_stderr;
+  options.max_iterations = args.max_iterations;
   CheckWindow(args);
   FitEachFile(args, {"file", "nc", "rates (1/s)", "rss", "background", "samples"},
               [&](const std::string& file) { return FitDecayFile(file, args, options); });
@@ -332,6 +350,7 @@ CurveResult FitChargeFile(const std::string& file, const CurveArgs& args, const 
   LoadedCurve loaded = LoadCurve(file, args);
   const Curve& curve = loaded.curve;
   const ChargeFitSummary fit = FitCharge(curve, options, file);
+  RequireConverged(fit.converged, fit.termination, file, args, &loaded);
   // The charge model fits a fall as well (Linf below L0): a decay given to
   // the wrong command, whose one rate would pass for a charging speed.
   if (std::all_of(fit.levels.begin(), fit.levels.end(), [](const ChargeLevels& l) { return l.Linf < l.L0; }))
@@ -353,6 +372,7 @@ CurveResult FitChargeFile(const std::string& file, const CurveArgs& args, const 
                  {"rate_stderr", fit.rate_stderr},
                  {"rss", fit.rss},
                  {"weights", WeightingName(options.weighting)},
+                 {"converged", fit.converged},
                  {"seconds", fit.seconds}};
   if (curve.channel_count() > 1) {
     nlohmann::json levels = nlohmann::json::array();
@@ -400,6 +420,7 @@ void RunChargeCurve(const CurveArgs& args) {
   RequireOutputFile(args.plot, "--plot", kSvgExtension);
   ChargeFitOptions options;
   options.weighting = ParseWeightsOption(args.weights);
+  options.max_iterations = args.max_iterations;
   CheckWindow(args);
   FitEachFile(args, {"file", "rate (1/s)", "+-", "L0", "Linf", "rss", "samples"},
               [&](const std::string& file) { return FitChargeFile(file, args, options); });
@@ -421,6 +442,13 @@ void AddCurveOptions(CLI::App* command, const std::shared_ptr<CurveArgs>& args, 
       ->check(kFinite);
   command->add_option("--plot", args->plot, "write an SVG of the data against the fit (one file only)");
   command->add_flag("--json", args->json, "print one JSON object per file, one per line, each with \"file\"");
+  command
+      ->add_option("--max-iterations", args->max_iterations,
+                   "the solver's iterations per refinement; a fit that has not converged by then fails")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 100000));
+  command->add_flag("--keep-unconverged", args->keep_unconverged,
+                    "report a fit that did not converge (with a warning) instead of failing the file");
   command->callback([command, args, csv, positional, run] {
     args->files.clear();
     std::size_t next_csv = 0, next_positional = 0;
@@ -462,7 +490,9 @@ void RegisterFitCurve(CLI::App& fit) {
   auto chosen =
       d->add_option("--max-components", decay->max_components, "choose the count by BIC, up to N (1-4; default 3)");
   fixed->excludes(chosen);
-  d->add_option("--weights", decay->weights, "none or poisson (photon counting: weight 1/sqrt(value))")
+  d->add_option("--weights", decay->weights,
+                "none or poisson (photon counting: weight 1/sqrt(value)). none by default here, unlike fit\n"
+                "session: a curve file's unit is not known to be a count")
       ->capture_default_str();
   d->add_flag("--background", decay->background, "also fit a constant background per channel");
   d->add_flag("--amplitude-stderr", decay->amplitude_stderr,
@@ -477,7 +507,9 @@ void RegisterFitCurve(CLI::App& fit) {
           kCurveFiles +
           "Several files: one table row each (file, rate, L0, Linf, rss, samples).\n"
           "JSON: {\"file\",\"L0\",\"Linf\",\"rate\",\"rss\",\"seconds\",\"levels\" (several channels),..}");
-  c->add_option("--weights", charge->weights, "none or poisson")->capture_default_str();
+  c->add_option("--weights", charge->weights,
+                "none or poisson (none by default: a curve's unit is not known to be a count)")
+      ->capture_default_str();
   AddCurveOptions(c, charge, RunChargeCurve);
 
   RegisterFitSchedule(fit);

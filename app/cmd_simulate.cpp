@@ -1,5 +1,6 @@
 // phos simulate: one point of a material under a charge-then-dark schedule
-// (docs/formats.md, "What the commands write"). CSV t,r_1..r_nc,L_1..L_n or JSON {"t","r","L"}.
+// (docs/formats.md, "What the commands write"). CSV t,r_1..r_nc,L_1..L_n or JSON {"t","r","L"};
+// a physical material adds the luminance in cd/m² (luminance_cd_m2, photometry.h).
 
 #include <algorithm>
 #include <cstdio>
@@ -12,6 +13,7 @@
 #include "cli_finite.h"
 #include "commands.h"
 #include "phos/model/material.h"
+#include "phos/model/photometry.h"
 #include "phos/model/simulate.h"
 #include "phos/util/atomic_file.h"
 #include "phos/util/error.h"
@@ -52,23 +54,37 @@ std::vector<double> ParseBandValues(const std::string& text, int band_count, con
   return values;
 }
 
-std::string ToCsv(const SimulationResult& result) {
+// The luminance in cd/m² of every sample of a physical material (empty for a
+// relative one, whose radiance has no absolute scale).
+std::vector<double> LuminanceOf(const SimulationResult& result, const Material& material) {
+  if (material.units != Units::kPhysical) return {};
+  const std::vector<double> efficacy = PhotopicBandEfficacy(material.bands);
+  std::vector<double> Y(result.sample_count(), 0.0);
+  for (std::size_t m = 0; m < result.sample_count(); ++m)
+    for (int b = 0; b < result.nb; ++b) Y[m] += efficacy[b] * result.radiance(m, b);
+  return Y;
+}
+
+std::string ToCsv(const SimulationResult& result, const std::vector<double>& luminance) {
   std::ostringstream out;
   out << "t";
   for (int i = 1; i <= result.nc; ++i) out << ",r_" << i;
   for (int b = 1; b <= result.nb; ++b) out << ",L_" << b;
+  if (!luminance.empty()) out << ",luminance_cd_m2";
   out << "\n";
   for (std::size_t m = 0; m < result.sample_count(); ++m) {
     out << FormatDouble(result.t_s[m]);
     for (int i = 0; i < result.nc; ++i) out << "," << FormatDouble(result.state(m, i));
     for (int b = 0; b < result.nb; ++b) out << "," << FormatDouble(result.radiance(m, b));
+    if (!luminance.empty()) out << "," << FormatDouble(luminance[m]);
     out << "\n";
   }
   return out.str();
 }
 
 // Written by hand rather than through a JSON tree: a long run has millions of numbers.
-std::string ToJson(const SimulationResult& result, const std::string& integrator) {
+std::string ToJson(const SimulationResult& result, const std::vector<double>& luminance,
+                   const std::string& integrator) {
   std::ostringstream out;
   auto rows = [&](const std::vector<double>& data, int width) {
     out << "[";
@@ -85,6 +101,11 @@ std::string ToJson(const SimulationResult& result, const std::string& integrator
   rows(result.r, result.nc);
   out << ",\"L\":";
   rows(result.L, result.nb);
+  if (!luminance.empty()) {
+    out << ",\"luminance_cd_m2\":[";
+    for (std::size_t m = 0; m < luminance.size(); ++m) out << (m ? "," : "") << FormatDouble(luminance[m]);
+    out << "]";
+  }
   out << ",\"integrator\":\"" << integrator << "\",\"steps\":" << result.steps << ",\"warnings\":[";
   for (std::size_t w = 0; w < result.warnings.size(); ++w)
     out << (w ? "," : "") << nlohmann::json(result.warnings[w]).dump();
@@ -114,7 +135,8 @@ std::string ToSvg(const SimulationResult& result, const Material& material, doub
   PlotOptions options;
   options.title = "'" + material.name + "': emitted radiance (charge " + FormatDouble(charge_s) + " s, then dark)";
   options.x_label = "time since the start of the charge (s)";
-  options.y_label = "emitted radiance Lp per band (unit of Lambda)";
+  options.y_label = material.units == Units::kPhysical ? "emitted radiance Lp per band (W/(sr m²))"
+                                                       : "emitted radiance Lp per band (unit of Lambda)";
   return PlotSvg(series, options);
 }
 
@@ -169,7 +191,8 @@ void RunSimulate(const SimulateArgs& args) {
   SampleTheEnd(material, E, args, options, &result);
   for (const std::string& w : result.warnings) std::fprintf(stderr, "phos simulate: warning: %s\n", w.c_str());
 
-  std::string text = args.json ? ToJson(result, args.integrator) : ToCsv(result);
+  const std::vector<double> luminance = LuminanceOf(result, material);
+  std::string text = args.json ? ToJson(result, luminance, args.integrator) : ToCsv(result, luminance);
   if (!args.plot.empty()) WriteFileAtomically(args.plot, ToSvg(result, material, args.charge_s));
   if (args.out.empty()) {
     std::fwrite(text.data(), 1, text.size(), stdout);
@@ -187,7 +210,8 @@ void RegisterSimulate(CLI::App& app) {
   cmd->add_option("--charge-s", args->charge_s, "seconds of charging under --irradiance (default 0)")->check(kFinite);
   cmd->add_option("--irradiance", args->irradiance,
                   "band-integrated irradiance E while charging: one number (every band) or a comma list,\n"
-                  "one value per band of the material; bands whose ke is unknown must get 0");
+                  "one value per band of the material (W/m² for a physical material); bands whose ke is unknown\n"
+                  "must get 0");
   cmd->add_option("--decay-s", args->decay_s, "seconds of darkness after the charge (default 0)")->check(kFinite);
   cmd->add_option("--dt", args->dt_s,
                   "sample interval and step in seconds (default 1); the end of the schedule is sampled too\n"

@@ -33,7 +33,8 @@ inline constexpr CommandSummary kCommands[] = {
      "Starts from r = 0 (or --r0); t is measured from the start of the charge; one sample\n"
      "every --dt seconds from 0 to charge + decay, and at the end. Steps never straddle the light switch.\n"
      "Output: CSV t,r_1..r_nc,L_1..L_n (L = emitted radiance per band, Eq. 8.2), or --json\n"
-     "{\"t\":[..],\"r\":[[..]],\"L\":[[..]],\"integrator\",\"steps\",\"warnings\"}."},
+     "{\"t\":[..],\"r\":[[..]],\"L\":[[..]],\"integrator\",\"steps\",\"warnings\"}. A physical material\n"
+     "(\"units\": \"physical\") gives L in W/(sr m²) and adds its luminance, column or key luminance_cd_m2."},
     {"plot",
      "Plot the total emitted radiance (sum of the L_ columns) of 'phos simulate'\n"
      "CSV files over time, one line per file in the colour of the light it emits, into an SVG."},
@@ -57,6 +58,10 @@ inline constexpr CommandSummary kCommands[] = {
     {"slurm",
      "Run a render, a decay map or a fit batch on a Slurm cluster as a job array, then a merge job\n"
      "that checks every task's done record; 'phos slurm status DIR' counts them. See docs/scale.md."},
+    {"afterglow",
+     "The standard test of a glow product, simulated (DIN 67510-1 style): a physical material, charged\n"
+     "from dark by a source at an illuminance, then read in the dark: luminance in mcd/m² at given minutes,\n"
+     "the time to a threshold, and the marking L10/L60 - t. See docs/afterglow.md."},
 };
 // The summary of a command of kCommands ("" for another name).
 constexpr const char* Summary(std::string_view command) {
@@ -80,6 +85,7 @@ int RunCommand(int argc, char** argv, const char* command, void (*register_comma
 
 void RegisterSimulate(CLI::App& app);
 void RegisterPlot(CLI::App& app);
+void RegisterAfterglow(CLI::App& app);
 void RegisterFit(CLI::App& app);
 // The curve fits under `phos fit` (decay-curve, charge-curve): app/cmd_fit_curve.cpp.
 void RegisterFitCurve(CLI::App& fit);

@@ -84,11 +84,21 @@ void WriteAbortRecords(int signal_number, const char* const* switched_off, int s
     const int events = ::open(record.events_path, O_WRONLY | O_APPEND | O_CREAT | O_CLOEXEC, 0644);
     if (events >= 0) {
       for (int i = 0; i < switched_off_count; ++i) {
+        // Keys in sorted order, compact, as nlohmann::json dumps them: the
+        // text whose XXH3 is the line's record_xxh3 (session_records.h).
+        const char* signal_text = signal_number == SIGINT ? "SIGINT" : "SIGTERM";
+        char body[400];
+        const int m = std::snprintf(body, sizeof body,
+                                    "{\"by\":\"signal handler\",\"channel\":\"%s\",\"event\":\"light\",\"on\":false,"
+                                    "\"signal\":\"%s\"}",
+                                    switched_off[i], signal_text);
+        if (m <= 0 || m >= static_cast<int>(sizeof body)) continue;
         char line[512];
-        const int n = std::snprintf(line, sizeof line,
-                                    "{\"event\":\"light\",\"channel\":\"%s\",\"on\":false,\"by\":\"signal handler\","
-                                    "\"signal\":\"%s\"}\n",
-                                    switched_off[i], signal_number == SIGINT ? "SIGINT" : "SIGTERM");
+        const int n = std::snprintf(
+            line, sizeof line,
+            "{\"by\":\"signal handler\",\"channel\":\"%s\",\"event\":\"light\",\"on\":false,"
+            "\"record_xxh3\":\"%016llx\",\"signal\":\"%s\"}\n",
+            switched_off[i], static_cast<unsigned long long>(Xxh3(body, static_cast<std::size_t>(m))), signal_text);
         if (n > 0 && n < static_cast<int>(sizeof line)) WriteAll(events, line, static_cast<std::size_t>(n));
       }
       ::fsync(events);
@@ -115,12 +125,17 @@ int ArmAbortRecord(const std::filesystem::path& dir) {
     std::snprintf(record.final_path, sizeof record.final_path, "%s", final_path.c_str());
     std::snprintf(record.temporary, sizeof record.temporary, "%s", temporary.c_str());
     std::snprintf(record.events_path, sizeof record.events_path, "%s", events_path.c_str());
-    std::snprintf(record.sigint, sizeof record.sigint,
-                  "{\n  \"how\": \"aborted\",\n  \"why\": \"SIGINT (interrupted); lights switched off; frames.jsonl "
-                  "lists every frame kept\"\n}\n");
-    std::snprintf(record.sigterm, sizeof record.sigterm,
-                  "{\n  \"how\": \"aborted\",\n  \"why\": \"SIGTERM (terminated); lights switched off; frames.jsonl "
-                  "lists every frame kept\"\n}\n");
+    const auto stop_text = [](const char* why) {
+      StopRecord stop;
+      stop.how = "aborted";
+      stop.why = why;
+      stop.frames = -1;  // the handler cannot count; the frame list is the count
+      return WithRecordChecksum(stop.ToJson()).dump(2) + "\n";
+    };
+    std::snprintf(record.sigint, sizeof record.sigint, "%s",
+                  stop_text("SIGINT (interrupted); lights switched off; frames.jsonl lists every frame kept").c_str());
+    std::snprintf(record.sigterm, sizeof record.sigterm, "%s",
+                  stop_text("SIGTERM (terminated); lights switched off; frames.jsonl lists every frame kept").c_str());
     std::snprintf(record.resume_hint, sizeof record.resume_hint,
                   ": the lights are off and every frame listed is kept; 'phos capture resume %s' goes on where it "
                   "can\n",
@@ -173,13 +188,13 @@ SessionWriter::SessionWriter(std::filesystem::path dir, nlohmann::json start_rec
                    "use resume)");
   start_record["uid"] = NewUid();
   start_record["started_utc"] = UtcNow();
-  start_record["schema"] = "phos.session/1";
+  start_record["schema"] = kSessionSchema;
   // Through the typed record, so what is written is what every reader reads.
   const SessionRecord record = SessionRecord::FromJson(start_record, (dir_ / "session.json").string());
   std::filesystem::create_directories(dir_ / "frames", ec);
   if (ec) ThrowUserError(dir_.string(), "", "cannot create the session folder: " + ec.message());
-  WriteFileAtomically(dir_ / "session.json", start_record.dump(2) + "\n");
-  start_record_ = std::move(start_record);
+  start_record_ = WithRecordChecksum(std::move(start_record));
+  WriteFileAtomically(dir_ / "session.json", start_record_.dump(2) + "\n");
   abort_slot_ = ArmAbortRecord(dir_);
 }
 
@@ -273,7 +288,7 @@ SessionWriter::~SessionWriter() {
 }
 
 void SessionWriter::AppendLine(const std::string& file, const nlohmann::json& line) {
-  AppendJsonLine(dir_ / file, line);
+  AppendJsonLine(dir_ / file, WithRecordChecksum(line));
 }
 
 void SessionWriter::Event(nlohmann::json event) { AppendLine("events.jsonl", event); }
@@ -347,7 +362,7 @@ void SessionWriter::Stop(const std::string& how, const std::string& why) {
   stop.stopped_utc = UtcNow();
   // Counted from the records written, never from a counter.
   stop.frames = static_cast<int>(ReadFrameRecords(dir_).frames.size());
-  WriteFileAtomically(dir_ / "stop.json", stop.ToJson().dump(2) + "\n", {.sync = true});
+  WriteFileAtomically(dir_ / "stop.json", WithRecordChecksum(stop.ToJson()).dump(2) + "\n", {.sync = true});
 }
 
 void SessionWriter::StopQuietly(const std::string& how, const std::string& why) noexcept {
@@ -408,6 +423,9 @@ SessionCheck CheckSession(const std::filesystem::path& dir, bool decode_frames) 
   // Every frame record holds its protocol's fields, and the start record its
   // settings and devices, whole: resume cannot mend a record that lacks one.
   for (const std::string& text : ProtocolFieldProblems(dir, check.protocol, records)) problem(text);
+  // Every record as written: a number changed since (by hand, by a failing
+  // disk) cannot be mended, only reported.
+  for (const std::string& text : RecordChecksumProblems(dir)) problem(text);
   try {
     if (!check.protocol.empty()) CheckStartRecord(ReadSessionRecord(dir), (dir / "session.json").string());
   } catch (const UserError& e) {

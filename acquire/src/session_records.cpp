@@ -403,6 +403,106 @@ void RequireGoodFrames(const fs::path& session_dir, const FrameRecords& records)
   }
 }
 
+// ---- record checksums -------------------------------------------------------
+
+std::string RecordChecksum(const nlohmann::json& record) {
+  nlohmann::json without = record;
+  if (without.is_object()) without.erase(kRecordChecksumKey);
+  // Invalid UTF-8 cannot reach a record (the parser refuses it), and a
+  // record phos builds holds only its own strings; replace rather than throw.
+  const std::string text = without.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
+  return Xxh3Hex(text.data(), text.size());
+}
+
+nlohmann::json WithRecordChecksum(nlohmann::json record) {
+  record[kRecordChecksumKey] = RecordChecksum(record);
+  return record;
+}
+
+std::string RecordChecksumProblem(const nlohmann::json& record) {
+  if (!record.is_object() || !record.contains(kRecordChecksumKey)) return std::string("has no ") + kRecordChecksumKey;
+  const nlohmann::json& written = record[kRecordChecksumKey];
+  const std::string now = RecordChecksum(record);
+  if (!written.is_string() || written.get<std::string>() != now)
+    return "does not match its " + std::string(kRecordChecksumKey) + " (" + DescribeJson(written) +
+           "; its numbers give " + now + "): changed after it was written";
+  return "";
+}
+
+namespace {
+
+// A whole-file record (session.json, stop.json) against its checksum.
+void CheckRecordFile(const fs::path& path, bool required, std::vector<std::string>* problems) {
+  std::error_code ec;
+  if (!fs::exists(fs::symlink_status(path, ec))) return;
+  nlohmann::json record;
+  try {
+    record = ReadJsonFile(path);
+  } catch (const UserError&) {
+    return;  // a record that does not read is its reader's problem, said there
+  }
+  const std::string problem = RecordChecksumProblem(record);
+  if (!problem.empty() && (required || record.contains(kRecordChecksumKey)))
+    problems->push_back(path.string() + ": " + problem);
+}
+
+void CheckRecordLines(const fs::path& path, bool required, std::vector<std::string>* problems) {
+  JsonLinesFile file;
+  try {
+    file = ReadJsonLinesFile(path);
+  } catch (const UserError&) {
+    return;
+  }
+  for (const JsonLine& line : file.records) {
+    const std::string problem = RecordChecksumProblem(line.value);
+    if (!problem.empty() && (required || line.value.contains(kRecordChecksumKey)))
+      problems->push_back(path.string() + ":" + std::to_string(line.line) + ": " + problem);
+  }
+}
+
+// Frame records that give their file no size and checksum: nothing tells a
+// frame replaced by another image (even one of the right size) from the one
+// taken.
+void CheckFrameFileChecksums(const fs::path& path, std::vector<std::string>* problems) {
+  JsonLinesFile file;
+  try {
+    file = ReadJsonLinesFile(path);
+  } catch (const UserError&) {
+    return;
+  }
+  for (const JsonLine& line : file.records)
+    if (!line.value.contains("xxh3") || !line.value.contains("size_bytes"))
+      problems->push_back(path.string() + ":" + std::to_string(line.line) +
+                          ": gives no xxh3 and size_bytes for its frame file, so nothing can check the file");
+}
+
+}  // namespace
+
+std::vector<std::string> RecordChecksumProblems(const fs::path& session_dir) {
+  std::vector<std::string> problems;
+  bool required = true;
+  try {
+    required = ReadJsonFile(session_dir / "session.json").value("schema", "") != kSessionSchemaWithoutChecksums;
+  } catch (const UserError&) {
+    // No readable start record: its reader says so; check what can be.
+  } catch (const nlohmann::json::exception&) {}
+  CheckRecordFile(session_dir / "session.json", required, &problems);
+  CheckRecordLines(session_dir / "frames.jsonl", required, &problems);
+  CheckFrameFileChecksums(session_dir / "frames.jsonl", &problems);
+  CheckRecordLines(session_dir / "events.jsonl", required, &problems);
+  CheckRecordFile(session_dir / "stop.json", required, &problems);
+  return problems;
+}
+
+void RequireRecordChecksums(const fs::path& session_dir) {
+  const std::vector<std::string> problems = RecordChecksumProblems(session_dir);
+  if (!problems.empty())
+    ThrowUserError("", "",
+                   problems.front() +
+                       " ('phos capture verify' lists every problem; a record whose numbers changed "
+                       "cannot be trusted)");
+}
+
 // ---- session.json ----------------------------------------------------------
 
 nlohmann::json SessionRecord::ToJson() const {
@@ -417,8 +517,10 @@ nlohmann::json SessionRecord::ToJson() const {
 SessionRecord SessionRecord::FromJson(const nlohmann::json& j, const std::string& where) {
   SessionRecord r;
   r.schema = RequiredKey<std::string>(j, "schema", where);
-  if (r.schema != "phos.session/1")
-    KeyError(where, "schema", "expected \"phos.session/1\", got " + DescribeJson(j["schema"]));
+  if (r.schema != kSessionSchema && r.schema != kSessionSchemaWithoutChecksums)
+    KeyError(where, "schema",
+             std::string("expected \"") + kSessionSchema + "\" (or \"" + kSessionSchemaWithoutChecksums + "\"), got " +
+                 DescribeJson(j["schema"]));
   r.protocol = RequiredKey<std::string>(j, "protocol", where);
   static const std::set<std::string> kProtocols = {"lvf-calibration", "spectrum", "decay", "excitation", "all"};
   if (!kProtocols.count(r.protocol))
@@ -451,7 +553,9 @@ SessionRecord ReadSessionRecord(const fs::path& session_dir) {
 // ---- stop.json -------------------------------------------------------------
 
 nlohmann::json StopRecord::ToJson() const {
-  nlohmann::json j = {{"how", how}, {"frames", frames}, {"stopped_utc", stopped_utc}};
+  nlohmann::json j = {{"how", how}};
+  if (frames >= 0) j["frames"] = frames;  // the signal handler's record cannot count
+  if (!stopped_utc.empty()) j["stopped_utc"] = stopped_utc;
   if (!why.empty()) j["why"] = why;
   return j;
 }

@@ -156,6 +156,7 @@ EditSession::EditSession(const std::filesystem::path& scene, const std::filesyst
     base_unknown_ke_as_zero_.push_back(o.unknown_ke_as_zero);
   }
   solved_.assign(scene_.objects.size(), nullptr);
+  preset_.assign(scene_.objects.size(), "");
   // Band radiance -> linear sRGB: the renderer's own conversion (one pixel per band).
   const int nb = scene_.bands.band_count();
   render::Image unit(nb, 1, nb);
@@ -292,7 +293,9 @@ void EditSession::AddConstraint(int x, int y, double t_s) {
   const Material& now = *(solved_[hit.object] ? solved_[hit.object] : base_[hit.object]);
   Material known = now;
   AssumeUnknownKeZero(known);  // only a curve to start the target from
-  c.rgb = BandsToRgb(PredictRadiance(probe, known, {t_s - scene_.start_s})[0]);
+  c.bands = PredictRadiance(probe, known, {t_s - scene_.start_s})[0];
+  for (double& v : c.bands) v = std::max(v, 0.0);
+  c.rgb = BandsToRgb(c.bands);
   for (double& v : c.rgb) v = std::max(v, 0.0);
   if (*std::max_element(c.rgb.begin(), c.rgb.end()) <= 0)
     ThrowUserError("", "x, y",
@@ -312,6 +315,7 @@ void EditSession::UpdateConstraint(std::size_t index, const nlohmann::json& fiel
     const JsonField rgb = f["rgb"];
     if (rgb.ArraySize() != 3) rgb.Fail("expected 3 values (R, G, B), got " + std::to_string(rgb.ArraySize()));
     for (std::size_t k = 0; k < 3; ++k) c.rgb[k] = rgb.At(k).NumberInRange(0, kMaxRadiance);
+    c.bands.clear();  // a colour the user gives: its bands are RgbToBands's
     // The weight is 1 / |T|^2 and the solve meets a zero target with Lambda = 0:
     // the object would silently stop glowing.
     if (*std::max_element(c.rgb.begin(), c.rgb.end()) <= 0)
@@ -350,6 +354,7 @@ void EditSession::SetPreset(const std::string& object, const std::string& preset
   if (const std::string mismatch = render::BandGridMismatch(material->bands, scene_.bands); !mismatch.empty())
     ThrowUserError(it->second.string(), "bands_nm", mismatch);
   base_[o] = material;
+  preset_[o] = preset;
   Resolve();
 }
 
@@ -357,6 +362,10 @@ void EditSession::SetStates(int states) {
   if (states < 1 || states > 3) ThrowUserError("", "states", "expected 1, 2 or 3");
   states_ = states;
   Resolve();
+}
+
+int EditSession::StatesFor(const Material& wears) const {
+  return states_ ? *states_ : std::clamp(wears.state_count(), 1, kMaxEditStates);
 }
 
 void EditSession::SetPropagation(double falloff) {
@@ -367,6 +376,9 @@ void EditSession::SetPropagation(double falloff) {
 
 void EditSession::Resolve() {
   const auto start = std::chrono::steady_clock::now();
+  // What each object wears before this solve: the solve starts from it.
+  std::vector<std::shared_ptr<const Material>> wears(scene_.objects.size());
+  for (std::size_t o = 0; o < wears.size(); ++o) wears[o] = solved_[o] ? solved_[o] : base_[o];
   solutions_.clear();
   std::fill(solved_.begin(), solved_.end(), nullptr);
   // One problem per edited object: its constraints' points share its material.
@@ -377,14 +389,15 @@ void EditSession::Resolve() {
     p.source = "editor: '" + scene_.objects[c.object].name + "'";
     p.bands = scene_.bands;
     p.dt_s = dt_s_;
-    p.states = states_;
+    p.states = StatesFor(*wears[c.object]);
+    if (wears[c.object]->state_count() == p.states) p.start = *wears[c.object];
     p.points.push_back({c.irradiance, scene_.objects[c.object].albedo});
     Constraint constraint;
     constraint.kind = c.kind;
     constraint.point = static_cast<int>(p.points.size()) - 1;
     constraint.t_s = constraint.until_s = c.t_s - scene_.start_s;
     if (c.kind != Constraint::Kind::kTarget) constraint.until_s = scene_.end_s - scene_.start_s;  // "until the end"
-    constraint.radiance = RgbToBands(c.rgb);
+    constraint.radiance = c.bands.empty() ? RgbToBands(c.rgb) : c.bands;
     // Relative error counts: a faint glow matters as much as a lit look.
     double norm2 = 0;
     for (double v : constraint.radiance) norm2 += v * v;
@@ -395,8 +408,10 @@ void EditSession::Resolve() {
   for (auto& [object, problem] : problems) {
     Solution solution = Solve(problem);
     auto material = std::make_shared<Material>(solution.material);
-    material->name = scene_.objects[object].name + " (edited)";
-    material->albedo.reset();
+    if (!solution.kept_start) {  // a material kept as it was keeps its name and albedo
+      material->name = scene_.objects[object].name + " (edited)";
+      material->albedo.reset();
+    }
     solved_[object] = material;
     solutions_[object] = std::move(solution);
   }
@@ -490,6 +505,9 @@ nlohmann::json EditSession::State() const {
     objects.push_back({{"name", object.name},
                        {"phosphorescent", object.phosphor != nullptr},
                        {"material", object.phosphor ? object.phosphor->name : ""},
+                       {"states", object.phosphor ? StatesFor(*object.phosphor) : 0},
+                       // The preset it wears, "" when it wears its scene's material or an edit.
+                       {"preset", solved_[o] ? "" : preset_[o]},
                        {"edited", solved_[o] != nullptr},
                        {"export_name", object.phosphor ? ExportFileName(object.name) : ""},
                        {"unknown_ke", unknown_ke},
@@ -513,10 +531,14 @@ nlohmann::json EditSession::State() const {
     nlohmann::json curve = nlohmann::json::array();
     for (std::size_t k = 0; k + 1 < L.size(); ++k) curve.push_back(BandsToRgb(L[k]));
     const std::vector<double> predicted = BandsToRgb(L.back());
+    // Against the target the solve was given: the bands of a look taken at
+    // placement (whose RGB may lie outside sRGB, shown clamped), else the RGB.
+    const std::vector<double>& target = c.bands.empty() ? c.rgb : c.bands;
+    const std::vector<double>& got = c.bands.empty() ? predicted : L.back();
     double error = 0, norm = 0;
-    for (int k = 0; k < 3; ++k) {
-      error += std::pow(predicted[k] - c.rgb[k], 2);
-      norm += c.rgb[k] * c.rgb[k];
+    for (std::size_t k = 0; k < target.size(); ++k) {
+      error += std::pow(got[k] - target[k], 2);
+      norm += target[k] * target[k];
     }
     const char* kind = c.kind == Constraint::Kind::kTarget    ? "target"
                        : c.kind == Constraint::Kind::kAtLeast ? "at_least"
@@ -547,7 +569,7 @@ nlohmann::json EditSession::State() const {
           {"timeline", timeline_},
           {"objects", objects},
           {"presets", presets},
-          {"states", states_},
+          {"states", states_ ? nlohmann::json(*states_) : nlohmann::json(nullptr)},
           {"falloff", falloff_},
           {"constraints", constraints},
           {"solutions", solutions},

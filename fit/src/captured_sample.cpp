@@ -42,6 +42,8 @@ Part LoadPart(const fs::path& part_dir, const DevicesRecord& folder, std::vector
   part.frames = ReadProtocolFrames<Fields>(part_dir, records);
   part.switches = ReadLightSwitchEvents(part_dir);
   part.stop = StopOf(part_dir);
+  // Last, so a record that lacks a field is named as such first.
+  RequireRecordChecksums(part_dir);
   return part;
 }
 
@@ -80,6 +82,7 @@ CapturedSample LoadCapturedSample(const fs::path& dir) {
   sample.spectrum = LoadPartOf<CapturedSample::Spectrum>(dir, devices, &sample.notes);
   sample.decay = LoadPartOf<CapturedSample::Decay>(dir, devices, &sample.notes);
   sample.excitation = LoadPartOf<CapturedSample::Excitation>(dir, devices, &sample.notes);
+  RequireRecordChecksums(dir);
   return sample;
 }
 

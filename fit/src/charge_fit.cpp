@@ -147,6 +147,8 @@ ChargeFitSummary FitCharge(const Curve& curve, const ChargeFitOptions& options, 
   log_k = params[0];
   summary.rate = std::exp(log_k) / units.time_s;
   summary.iterations = static_cast<int>(solver_summary.iterations.size());
+  summary.converged = solver_summary.termination_type == ceres::CONVERGENCE;
+  if (!summary.converged) summary.termination = solver_summary.message;
   // A level that is not reached and a rate at the edge of what the samples
   // resolve mean the curve shows no saturating growth.
   const double edge = std::log(1.05);

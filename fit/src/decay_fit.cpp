@@ -99,6 +99,9 @@ struct Fit {
   int iterations = 0;
   bool valid = false;
   std::string why_invalid;
+  // The last refinement's: a stage only placed (never refined) counts as converged.
+  bool converged = true;
+  std::string termination;
 };
 
 // A'A and A'v for a tall matrix with at most 5 columns, by dot products:
@@ -148,7 +151,7 @@ void Project(const Data& d, const std::vector<double>& rates, Fit* fit) {
 // the background's column of ones. Computed once per fit, not per stage.
 struct RateGrid {
   Eigen::ArrayXd rates;
-  Eigen::MatrixXd columns;  // m x rates
+  Eigen::MatrixXd columns;                                   // m x rates
   std::vector<Eigen::ArrayXd> with_y, with_self, with_ones;  // [channel][rate]
 };
 
@@ -340,7 +343,13 @@ class VarProCost final : public ceres::CostFunction {
 class VarProNormalEquations {
  public:
   VarProNormalEquations(const Data& d, int nc)
-      : d_(d), nc_(nc), q_(nc + (d.background ? 1 : 0)), E_(d.m, nc), WPhi_(d.m, q_), Q_(d.m, q_), V_(d.m, nc),
+      : d_(d),
+        nc_(nc),
+        q_(nc + (d.background ? 1 : 0)),
+        E_(d.m, nc),
+        WPhi_(d.m, q_),
+        Q_(d.m, q_),
+        V_(d.m, nc),
         r_(d.m) {
     for (int c = 0; c < d.C; ++c) wy_.push_back(d.w[c] * d.y[c]);
   }
@@ -472,21 +481,29 @@ class VarProNormalEquations {
 // warning is switched off for this function alone.
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Warray-bounds"
-int LevenbergMarquardt(const Data& d, int max_iterations, std::vector<double>* theta) {
+int LevenbergMarquardt(const Data& d, int max_iterations, std::vector<double>* theta, bool* converged) {
   constexpr double kFunctionTolerance = 1e-10, kGradientTolerance = 1e-12, kParameterTolerance = 1e-10;
-  constexpr double kMinRelativeDecrease = 1e-3;   // a step must achieve this share of its predicted decrease
+  constexpr double kMinRelativeDecrease = 1e-3;  // a step must achieve this share of its predicted decrease
   constexpr double kMinDiagonal = 1e-6, kMaxDiagonal = 1e32;  // Ceres's min/max_lm_diagonal
   const int nc = static_cast<int>(theta->size());
   VarProNormalEquations equations(d, nc);
   VarProNormalEquations::Point here, there;
+  // Converged: stopped by a tolerance, as Ceres's CONVERGENCE (the trust
+  // region shrinking below its minimum included); not when the iterations
+  // ran out or the model stopped being finite.
+  *converged = false;
   if (!equations.Evaluate(theta->data(), &here)) return 0;
   SmallVector x(nc);
   for (int i = 0; i < nc; ++i) x[i] = (*theta)[i];
   double radius = 1e4, decrease = 2;  // Ceres's initial_trust_region_radius
   int iteration = 0;
-  while (iteration < max_iterations) {
+  bool stopped = false;  // by a tolerance
+  while (iteration < max_iterations && !stopped) {
     ++iteration;
-    if (here.Jtr.cwiseAbs().maxCoeff() <= kGradientTolerance) break;
+    if (here.Jtr.cwiseAbs().maxCoeff() <= kGradientTolerance) {
+      stopped = true;
+      break;
+    }
     // Newton's model where the reduced Hessian is positive definite (near a
     // minimum), Gauss-Newton's (Kaufman's J'J) elsewhere.
     const bool newton = here.hessian.llt().info() == Eigen::Success;
@@ -495,13 +512,19 @@ int LevenbergMarquardt(const Data& d, int max_iterations, std::vector<double>* t
     for (int i = 0; i < nc; ++i) A(i, i) += std::clamp(here.JtJ(i, i), kMinDiagonal, kMaxDiagonal) / radius;
     const SmallVector step = A.ldlt().solve(-here.Jtr);
     if (!step.allFinite()) break;
-    if (step.norm() <= kParameterTolerance * (x.norm() + kParameterTolerance)) break;
+    if (step.norm() <= kParameterTolerance * (x.norm() + kParameterTolerance)) {
+      stopped = true;
+      break;
+    }
     const SmallVector candidate = x + step;
     const double predicted = -(here.Jtr.dot(step) + 0.5 * step.dot(B * step));
     // Converged when even Newton's model (exact near the minimum) promises
     // less than the function tolerance (there rounding decides whether a step
     // "succeeds", and rejecting it only shrinks the region step by step).
-    if (newton && predicted <= kFunctionTolerance * here.cost) break;
+    if (newton && predicted <= kFunctionTolerance * here.cost) {
+      stopped = true;
+      break;
+    }
     const bool evaluated = equations.Evaluate(candidate.data(), &there);
     const double actual = evaluated ? here.cost - there.cost : -1;
     if (evaluated && predicted > 0 && actual > kMinRelativeDecrease * predicted) {
@@ -511,14 +534,15 @@ int LevenbergMarquardt(const Data& d, int max_iterations, std::vector<double>* t
       std::swap(here, there);
       radius = std::min(1e16, radius / std::max(1.0 / 3.0, 1.0 - std::pow(2 * rho - 1, 3)));
       decrease = 2;
-      if (actual <= kFunctionTolerance * previous) break;
+      stopped = actual <= kFunctionTolerance * previous;
     } else {
       radius /= decrease;
       decrease *= 2;
-      if (radius < 1e-32) break;
+      stopped = radius < 1e-32;
     }
   }
   for (int i = 0; i < nc; ++i) (*theta)[i] = x[i];
+  *converged = stopped;
   return iteration;
 }
 #pragma GCC diagnostic pop
@@ -526,7 +550,9 @@ int LevenbergMarquardt(const Data& d, int max_iterations, std::vector<double>* t
 // Refinement of the rates of `fit` by variable projection, then the
 // amplitudes and background at the refined rates.
 void Refine(const Data& d, int max_iterations, Fit* fit) {
-  fit->iterations += LevenbergMarquardt(d, max_iterations, &fit->theta);
+  fit->iterations += LevenbergMarquardt(d, max_iterations, &fit->theta, &fit->converged);
+  if (!fit->converged)
+    fit->termination = "no tolerance met in " + std::to_string(max_iterations) + " iterations (max_iterations)";
   std::vector<double> rates;
   for (double th : fit->theta) rates.push_back(std::exp(th));
   Project(d, rates, fit);
@@ -549,6 +575,8 @@ void RefineWithCeres(const Data& d, int max_iterations, Fit* fit) {
   ceres::Solver::Summary summary;
   ceres::Solve(options, &problem, &summary);
   fit->iterations += static_cast<int>(summary.iterations.size());
+  fit->converged = summary.IsSolutionUsable() && summary.termination_type == ceres::CONVERGENCE;
+  fit->termination = fit->converged ? "" : summary.message;
   std::vector<double> rates;
   for (double th : fit->theta) rates.push_back(std::exp(th));
   Project(d, rates, fit);
@@ -742,6 +770,8 @@ DecayFitSummary FitDecayWith(const Curve& curve, const DecayFitOptions& options,
     summary.choice = "BIC over 1.." + std::to_string(fits.size()) + " components: the fewest within 2 of the lowest";
   }
   Fit& fit = fits[chosen];
+  summary.converged = fit.converged;
+  summary.termination = fit.termination;
   const int nc = chosen + 1;
 
   // Uncertainties: the covariance of the refined parameters, scaled by the

@@ -372,6 +372,7 @@ DecayStage FitDecayStage(const CapturedSample::Decay& part, const SessionFitOpti
     decay_options.max_components = options.max_components;
     decay_options.weighting = options.weighting;
     decay_options.background = true;  // dark current
+    if (options.max_iterations > 0) decay_options.max_iterations = options.max_iterations;
     DecayFitSummary fit = FitDecay(stage.raw, decay_options, part.source);
     for (int pass = 0; pass < 2; ++pass) {
       stage.corrected = CorrectForExposure(stage.raw, fit);
@@ -460,7 +461,7 @@ std::vector<KeEstimate> KePerState(const std::vector<SessionFit::ExcitationLight
 }
 
 ExcitationStage FitExcitationStage(const CapturedSample::Excitation& part, const DecayFitSummary& decay, int nb,
-                                   Weighting weighting, std::vector<std::string>* notes) {
+                                   const SessionFitOptions& session_options, std::vector<std::string>* notes) {
   ExcitationStage stage;
   // The decay's background is the camera's dark signal per second (dark
   // current): the excitation frames carry it too, under the same camera.
@@ -489,7 +490,8 @@ ExcitationStage FitExcitationStage(const CapturedSample::Excitation& part, const
   }
   StateExcitationOptions options;
   for (const DecayComponent& c : decay.components) options.kr.push_back(c.rate);
-  options.weighting = weighting;
+  options.weighting = session_options.weighting;
+  if (session_options.max_iterations > 0) options.max_iterations = session_options.max_iterations;
   try {
     stage.fit = FitStateExcitation(stage.measurements, options, part.source);
     for (const std::string& note : stage.fit->notes) notes->push_back("excitation: " + note);
@@ -895,6 +897,16 @@ void RefineJointly(const CapturedSample& sample, const SessionFitOptions& option
   }
 }
 
+// Stage 7: the solves whose result the material holds although they stopped
+// at their iteration limit, not at a tolerance (the joint refinement, when
+// it did not converge, is not written, so it is not among them).
+void NoteUnconverged(SessionFit* result) {
+  if (result->decay && !result->decay->converged)
+    result->unconverged.push_back("the decay fit (" + result->decay->termination + ")");
+  if (result->state_excitation && !result->state_excitation->converged && !result->joint_written)
+    result->unconverged.push_back("the excitation fit (" + result->state_excitation->termination + ")");
+}
+
 }  // namespace
 
 SessionFit FitSession(const CapturedSample& sample, const SessionFitOptions& options) {
@@ -907,8 +919,8 @@ SessionFit FitSession(const CapturedSample& sample, const SessionFitOptions& opt
   FitCalibrationDecaySpectrum(sample, options, &result);
   // 4. Excitation per state and ke per band.
   if (PartThere(sample.excitation, ExcitationFrameFields::kProtocol, &result.notes)) {
-    ExcitationStage stage = FitExcitationStage(*sample.excitation, *result.decay, sample.bands.band_count(),
-                                               options.weighting, &result.notes);
+    ExcitationStage stage =
+        FitExcitationStage(*sample.excitation, *result.decay, sample.bands.band_count(), options, &result.notes);
     result.excitation = std::move(stage.lights);
     result.excitation_measurements = std::move(stage.measurements);
     result.state_excitation = std::move(stage.fit);
@@ -916,6 +928,7 @@ SessionFit FitSession(const CapturedSample& sample, const SessionFitOptions& opt
   }
   WriteSequentialMaterial(sample, &result);
   RefineJointly(sample, options, &result);
+  NoteUnconverged(&result);
   result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
   return result;
 }

@@ -10,6 +10,8 @@
 
 namespace phos {
 
+const char* UnitsName(Units units) { return units == Units::kPhysical ? "physical" : "relative"; }
+
 bool Material::ChargeableIn(int b) const {
   for (const ExcitedState& s : states)
     if (!s.ke_known(b)) return false;
@@ -26,17 +28,28 @@ double NonNegativeUpTo(const JsonField& field, double limit) {
   return v;
 }
 
+// "units": absent is relative, as every file written before units existed.
+Units ReadUnits(const JsonField& root) {
+  const auto field = root.Optional("units");
+  if (!field) return Units::kRelative;
+  const std::string name = field->String();
+  for (Units units : {Units::kRelative, Units::kPhysical})
+    if (name == UnitsName(units)) return units;
+  field->Fail("unknown units \"" + name + "\" (expected \"relative\" or \"physical\")");
+}
+
 }  // namespace
 
 Material MaterialFromJson(const nlohmann::json& json, const std::string& source) {
   JsonField root(json, source);
-  root.RejectUnknownKeys({"schema", "name", "bands_nm", "albedo", "states", "source"});
+  root.RejectUnknownKeys({"schema", "name", "units", "bands_nm", "albedo", "states", "source"});
   Material m;
   std::string schema = root["schema"].String();
   if (schema != kMaterialSchema)
     root["schema"].Fail("unknown schema \"" + schema + "\" (expected \"" + kMaterialSchema + "\")");
   m.name = root["name"].NonEmptyString();
   if (auto s = root.Optional("source")) m.source = s->String();
+  m.units = ReadUnits(root);
 
   JsonField bands = root["bands_nm"];
   if (bands.ArraySize() < 2) bands.Fail("expected at least 2 band edges (one band)");
@@ -104,6 +117,7 @@ nlohmann::json MaterialToJson(const Material& m) {
   j["schema"] = kMaterialSchema;
   j["name"] = m.name;
   if (!m.source.empty()) j["source"] = m.source;
+  if (m.units != Units::kRelative) j["units"] = UnitsName(m.units);  // relative files stay as they were
   j["bands_nm"] = m.bands.edges_nm;
   if (m.albedo) j["albedo"] = *m.albedo;
   j["states"] = nlohmann::json::array();

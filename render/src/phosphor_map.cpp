@@ -9,7 +9,9 @@
 #include "phos/fit/decay_map_file.h"
 #include "phos/model/closed_form.h"
 #include "phos/model/schedule.h"
+#include "phos/model/material.h"
 #include "phos/util/error.h"
+#include "phos/util/format.h"
 
 namespace phos::render {
 namespace {
@@ -19,6 +21,37 @@ struct StateChannels {
   int kr = -1;
   std::vector<int> amplitude;
 };
+
+// A pixel's place in the map's words: "pixel (x, y)".
+struct MapPixel {
+  int width = 0;
+  std::size_t index = 0;
+  std::string Name() const {
+    return "pixel (" + std::to_string(index % static_cast<std::size_t>(width)) + ", " +
+           std::to_string(index / static_cast<std::size_t>(width)) + ")";
+  }
+};
+
+// A decaying pixel's numbers must stay in the ranges a material's do
+// (model/material.h): a rate up to kMaxRate and finite amplitudes, or the
+// products the renderer forms overflow (an amplitude of inf rendered NaN
+// pixels; kr 1e30 was taken). A pixel that does not decay (kr NaN, 0 or
+// negative) is left out as before, whatever its amplitudes.
+void CheckMapPixel(const OIIO::ImageSpec& spec, const StateChannels& state, const float* px, float amplitude,
+                   const MapPixel& pixel, const std::string& where, const std::string& field,
+                   const std::string& named) {
+  const float kr = px[state.kr];
+  if (!(kr > 0)) return;  // no decay here (+inf decays, and is refused below)
+  if (!(kr <= kMaxRate))
+    ThrowUserError(where, field,
+                   named + pixel.Name() + ": " + spec.channelnames[state.kr] + " " + FormatShort(kr) +
+                       " /s is above the largest rate phos takes (" + FormatShort(kMaxRate) + " /s)");
+  for (int c : state.amplitude)
+    if (!std::isfinite(px[c]))
+      ThrowUserError(where, field, named + pixel.Name() + ": " + spec.channelnames[c] + " is " + FormatShort(px[c]));
+  if (!std::isfinite(amplitude))
+    ThrowUserError(where, field, named + pixel.Name() + ": its amplitudes sum past the largest float");
+}
 
 // Channel indices by name (EXR keeps channels in its own order).
 StateChannels FindStateChannels(const OIIO::ImageSpec& spec, const std::string& kr_name,
@@ -47,8 +80,7 @@ PhosphorMap ReadPhosphorMap(const std::filesystem::path& file, const std::string
   OIIO::ImageBuf image(file.string());
   if (!image.read(0, 0, /*force=*/true, OIIO::TypeDesc::FLOAT)) {
     std::string error = image.geterror();
-    ThrowUserError(where, field,
-                   named + "is not an image OpenImageIO can read" + (error.empty() ? "" : ": " + error));
+    ThrowUserError(where, field, named + "is not an image OpenImageIO can read" + (error.empty() ? "" : ": " + error));
   }
   const OIIO::ImageSpec& spec = image.spec();
   if (spec.find_attribute(fit::kDecayMapFirstRow))
@@ -82,6 +114,7 @@ PhosphorMap ReadPhosphorMap(const std::filesystem::path& file, const std::string
       float amplitude = 0;
       for (int c : states[i].amplitude) amplitude += px[c];
       const float kr = px[states[i].kr];
+      CheckMapPixel(spec, states[i], px, amplitude, MapPixel{map.width, p}, where, field, named);
       // A state decays where its rate is a finite positive number and it
       // emitted something; the fast state of a two-state map only where the
       // slow one does too.
@@ -105,8 +138,8 @@ void ApplyPhosphorMap(const PhosphorMap& map, const Material& material, const st
   // The scene's loader checks this too; a material swapped in later (--material, the editor) is checked here.
   if (c.nc != map.states)
     ThrowUserError(where, "phosphor_map",
-                   "the map has " + std::to_string(map.states) + " state(s) and the material '" + material.name +
-                       "' " + std::to_string(c.nc) + ": fit both with the same number (phos fit map --states)");
+                   "the map has " + std::to_string(map.states) + " state(s) and the material '" + material.name + "' " +
+                       std::to_string(c.nc) + ": fit both with the same number (phos fit map --states)");
   // order[k]: the material's state with the k-th smallest kr, to take the map's state k.
   std::vector<int> order(static_cast<std::size_t>(c.nc));
   for (int i = 0; i < c.nc; ++i) order[i] = i;
@@ -150,7 +183,16 @@ void ApplyPhosphorMap(const PhosphorMap& map, const Material& material, const st
       const float kr = map.kr_per_s[k * P + pixels[j]];
       if (kr != kr) continue;  // NaN: this state does not decay here
       c.kr_per_point[i * n + j] = kr;
-      c.emission_scale[i * n + j] = static_cast<float>(map.amplitude_dn_per_s[k * P + pixels[j]] / level(i, kr) / median);
+      const double scale = map.amplitude_dn_per_s[k * P + pixels[j]] / level(i, kr) / median;
+      // The scale multiplies the material's Lambda, so it is held to
+      // Lambda's range (model/material.h, kMaxLambda): one pixel 3e38 times
+      // the map's typical one rendered NaN.
+      if (!(scale <= kMaxLambda))
+        ThrowUserError(where, "phosphor_map",
+                       MapPixel{map.width, pixels[j]}.Name() + " glows " + FormatShort(scale) +
+                           " times the map's typical pixel (the median), above the " + FormatShort(kMaxLambda) +
+                           " a material's Lambda may reach: not a decay map phos fit map writes");
+      c.emission_scale[i * n + j] = static_cast<float>(scale);
     }
   }
 }

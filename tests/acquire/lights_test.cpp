@@ -121,6 +121,8 @@ void ExpectSignalSwitchesOff(int signal_number, const std::string& name) {
   EXPECT_EQ(events.back()["channel"], "lamp");
   EXPECT_EQ(events.back()["on"], false);
   EXPECT_EQ(events.back()["by"], "signal handler");
+  // Its records, the handler's own included, carry their checksums.
+  EXPECT_EQ(RecordChecksumProblems(dir / "session"), std::vector<std::string>{});
   // The person at the terminal is told what happened and how to go on, in one line.
   const std::string said = testing::ReadText(dir / "stderr");
   EXPECT_EQ(said, "phos capture: " + std::string(signal_number == SIGINT ? "interrupted" : "terminated") + " (" + name +

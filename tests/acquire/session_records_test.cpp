@@ -12,6 +12,8 @@
 #include <csignal>
 
 #include <cstdio>
+#include <cstring>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <set>
@@ -22,6 +24,7 @@
 #include "phos/acquire/sim_lab.h"
 #include "phos/util/error.h"
 #include "phos/util/json.h"
+#include "phos/util/random.h"
 #include "test_util.h"
 
 namespace phos {
@@ -211,6 +214,50 @@ TEST(SessionRecords, TheLinksResendsAndRetakesAreRecordedAndOlderRecordsWithoutT
   const FrameRecord old_record = FrameRecord::FromJson(older, "x");
   EXPECT_EQ(old_record.packets_resent, 0u);
   EXPECT_EQ(old_record.retakes, 0);
+}
+
+// A record's own checksum survives the trip through its file (written,
+// read back as text, parsed) for any numbers it holds, and any change of one
+// number, however small, is found.
+TEST(SessionRecords, ARecordChecksumSurvivesItsFileAndFindsEveryChangedNumber) {
+  SplitMix64 random(20261207);
+  for (int trial = 0; trial < 2000; ++trial) {
+    nlohmann::json record = {{"seq", static_cast<int>(random.Next() % 1000000) + 1},
+                             {"run", static_cast<std::uint64_t>(random.Next() % 7)},
+                             {"light", "led" + std::to_string(random.Next() % 1000)},
+                             {"note", "\u00e9t\u00e9 \u2192 \"q\"\n"}};
+    std::vector<double> numbers;
+    for (int i = 0; i < 6; ++i) {
+      // Any finite double: random bit patterns, subnormals and huge values included.
+      double v = 0;
+      do {
+        const std::uint64_t bits = random.Next();
+        std::memcpy(&v, &bits, sizeof v);
+      } while (!std::isfinite(v));
+      numbers.push_back(v);
+    }
+    record["exposure_s"] = numbers[0];
+    record["mean_signal_dn"] = std::vector<double>(numbers.begin() + 1, numbers.end());
+    const nlohmann::json signed_record = WithRecordChecksum(record);
+    const nlohmann::json read_back = nlohmann::json::parse(signed_record.dump() + "\n");
+    ASSERT_EQ(RecordChecksumProblem(read_back), "") << signed_record.dump();
+    ASSERT_EQ(RecordChecksumProblem(nlohmann::json::parse(signed_record.dump(2))), "");
+    // One number moved by one unit in the last place.
+    nlohmann::json changed = read_back;
+    const int which = static_cast<int>(random.Next() % 5);
+    double& v = numbers[1 + which];
+    changed["mean_signal_dn"][which] = std::nextafter(v, v > 0 ? 0.0 : 1.0);
+    EXPECT_NE(RecordChecksumProblem(changed).find("does not match its record_xxh3"), std::string::npos);
+    changed = read_back;
+    changed["exposure_s"] = numbers[0] * 4;
+    if (numbers[0] != 0 && std::isfinite(numbers[0] * 4)) {
+      EXPECT_NE(RecordChecksumProblem(changed).find("changed after it was written"), std::string::npos);
+    }
+  }
+  EXPECT_EQ(RecordChecksumProblem(nlohmann::json{{"event", "x"}}), "has no record_xxh3");
+  nlohmann::json wrong_type = WithRecordChecksum({{"event", "x"}});
+  wrong_type[kRecordChecksumKey] = 7;
+  EXPECT_NE(RecordChecksumProblem(wrong_type), "");
 }
 
 TEST(SessionRecords, ATornLastLineIsSkippedAndSetAsideNeverGluedOnto) {

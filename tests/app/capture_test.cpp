@@ -31,7 +31,8 @@ TEST(CaptureDecayCommand, WritesACompleteSession) {
   EXPECT_NE(result.out.find("12 frames"), std::string::npos) << result.out;  // 6 slots, 6 early frames
   nlohmann::json start = ReadJsonFile(dir / "s" / "session.json");
   EXPECT_EQ(start["protocol"], "decay");
-  EXPECT_EQ(start["schema"], "phos.session/1");
+  EXPECT_EQ(start["schema"], "phos.session/2");
+  EXPECT_EQ(RecordChecksumProblem(start), "");
   EXPECT_EQ(start["uid"].get<std::string>().size(), 32u);
   EXPECT_EQ(ReadJsonFile(dir / "s" / "stop.json")["how"], "complete");
   EXPECT_EQ(ReadJsonFile(dir / "s" / "stop.json")["frames"], 12);
@@ -62,9 +63,22 @@ TEST(CaptureDecayCommand, FramesWithoutGlowAreWarnedAbout) {
             std::string::npos)
       << dark.err;
   EXPECT_NE(dark.err.find("does 'led365' charge it?"), std::string::npos) << dark.err;
-  auto glowing = RunPhos("capture decay" + orange + " --out " + (dir / "blue").string() + " --charge-s 600 --duration-s 30");
+  auto glowing =
+      RunPhos("capture decay" + orange + " --out " + (dir / "blue").string() + " --charge-s 600 --duration-s 30");
   ASSERT_EQ(glowing.exit_code, 0) << glowing.err;
   EXPECT_EQ(glowing.err, "");
+}
+
+// The excitation protocol's lights are --excite, as in `capture all`; its
+// first name, --light, still works.
+TEST(CaptureExcitationCommand, ItsLightsAreExciteAsInCaptureAll) {
+  testing::TempDir dir;
+  const std::string orange = " --sim-material " + testing::Fixture("materials/orange.json").string();
+  for (const char* option : {"--excite", "--light"}) {
+    const auto bad = RunPhos("capture excitation" + orange + " " + option + " led999 --out " + (dir / "x").string());
+    EXPECT_TRUE(testing::IsOneLineUserError(bad, "--excite: unknown channel 'led999'")) << option << ": " << bad.err;
+    EXPECT_FALSE(std::filesystem::exists(dir / "x"));
+  }
 }
 
 TEST(CaptureExcitationCommand, WritesACompleteSession) {
@@ -144,6 +158,29 @@ using testing::ReadJsonLines;
 
 // Cuts a session back to its first `keep` frames, as if killed (kill -9)
 // right after recording them: later lines and files go, stop.json goes.
+// A session folder as phos wrote it before records had their own
+// checksums: schema phos.session/1, no record_xxh3 anywhere (frames.jsonl is
+// the caller's).
+void AsSchema1WithoutChecksums(const std::filesystem::path& session) {
+  nlohmann::json start = ReadJsonFile(session / "session.json");
+  start["schema"] = "phos.session/1";
+  start.erase(kRecordChecksumKey);
+  testing::WriteText(session / "session.json", start.dump(2) + "\n");
+  for (const char* name : {"events.jsonl"}) {
+    std::string text;
+    for (nlohmann::json line : ReadJsonLines(session / name)) {
+      line.erase(kRecordChecksumKey);
+      text += line.dump() + "\n";
+    }
+    testing::WriteText(session / name, text);
+  }
+  if (std::filesystem::exists(session / "stop.json")) {
+    nlohmann::json stop = ReadJsonFile(session / "stop.json");
+    stop.erase(kRecordChecksumKey);
+    testing::WriteText(session / "stop.json", stop.dump(2) + "\n");
+  }
+}
+
 void KillAfter(const std::filesystem::path& session, int keep) {
   const std::vector<nlohmann::json> lines = ReadJsonLines(session / "frames.jsonl");
   std::ofstream out(session / "frames.jsonl", std::ios::trunc);
@@ -234,8 +271,8 @@ TEST(CaptureResumeCommand, SaysWhatCannotBeResumed) {
 // The fit of orange's session, against orange: kr's and every measured ke's
 // relative error, the largest.
 double FitErrorAgainstOrange(const std::filesystem::path& session) {
-  auto fit = RunPhos("fit session " + session.string() + " --out " + (session.string() + "-fit.json") +
-                     " --compare " + testing::Fixture("materials/orange.json").string() + " --json");
+  auto fit = RunPhos("fit session " + session.string() + " --out " + (session.string() + "-fit.json") + " --compare " +
+                     testing::Fixture("materials/orange.json").string() + " --json");
   EXPECT_EQ(fit.exit_code, 0) << fit.err;
   if (fit.exit_code != 0) return 1;
   const nlohmann::json comparison = nlohmann::json::parse(fit.out)["comparison"];
@@ -276,13 +313,16 @@ TEST(CaptureResumeCommand, AnExcitationResumedAnywhereFitsAsWellAsAWholeOne) {
       EXPECT_EQ(lines[i].value("run", 0), i < static_cast<std::size_t>(keep) ? 0 : 1) << i;
     const double resumed_error = FitErrorAgainstOrange(cut);
     EXPECT_LT(resumed_error, 2e-3) << "cut after " << keep << " frames";
-    // As recorded before runs were counted: the same fit, from the clock.
+    // As recorded before runs were counted (and before records had their
+    // own checksums, phos.session/1): the same fit, from the clock.
     std::ofstream old(cut / "excitation" / "frames.jsonl", std::ios::trunc);
     for (nlohmann::json line : lines) {
       line.erase("run");
+      line.erase(kRecordChecksumKey);
       old << line.dump() << "\n";
     }
     old.close();
+    AsSchema1WithoutChecksums(cut / "excitation");
     EXPECT_EQ(FitErrorAgainstOrange(cut), resumed_error) << "cut after " << keep << " frames";
   }
 }

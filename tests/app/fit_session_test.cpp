@@ -18,6 +18,7 @@
 #include <thread>
 #include <nlohmann/json.hpp>
 
+#include "phos/acquire/session_records.h"
 #include "phos/model/material.h"
 #include "phos/model/synthetic.h"
 #include "phos/util/json.h"
@@ -181,13 +182,23 @@ TEST(FitSessionCommand, PartialSessionsAndBadInput) {
   EXPECT_NE(partial.out.find("excitation: 1 measurement(s) cut off in their tail left out"), std::string::npos)
       << partial.out;
 
+  // A fit stopped at its iteration limit writes nothing, unless kept.
+  auto cut = RunPhos("fit session " + (dir / "c").string() + " --max-iterations 1 --out " + (dir / "u.json").string());
+  EXPECT_TRUE(testing::IsOneLineUserError(cut, "did not converge: nothing written")) << cut.err;
+  EXPECT_FALSE(std::filesystem::exists(dir / "u.json"));
+  auto kept = RunPhos("fit session " + (dir / "c").string() + " --max-iterations 1 --keep-unconverged --out " +
+                      (dir / "u.json").string());
+  ASSERT_EQ(kept.exit_code, 0) << kept.err;
+  EXPECT_NE(kept.out.find("warning: written although the decay fit"), std::string::npos) << kept.out;
+  EXPECT_TRUE(std::filesystem::exists(dir / "u.json"));
+
   // Every decay frame clipped: said, and nothing written.
   {
     const std::vector<nlohmann::json> lines = testing::ReadJsonLines(dir / "c" / "decay" / "frames.jsonl");
     std::ofstream out(dir / "c" / "decay" / "frames.jsonl", std::ios::trunc);
     for (nlohmann::json line : lines) {
       line["saturated_fraction"] = 0.4;
-      out << line.dump() << "\n";
+      out << WithRecordChecksum(line).dump() << "\n";  // as if recorded so
     }
   }
   auto clipped = RunPhos("fit session " + (dir / "c").string() + " --out " + (dir / "k.json").string());
@@ -419,7 +430,8 @@ TEST(FitMapCommand, MapsASpatiallyVaryingSample) {
   EXPECT_TRUE(
       testing::IsOneLineUserError(RunPhos("fit map " + (dir / "all").string() + " --out " + (dir / "m6").string()),
                                   "is a 'all' session; a decay map needs a decay session (this folder's decay part: "
-                                  "phos fit map " + (dir / "all" / "decay").string() + ")"));
+                                  "phos fit map " +
+                                      (dir / "all" / "decay").string() + ")"));
 
   // Downstream readers check frames as resume does (docs/capture.md): a torn
   // last record is left out with a note; a truncated frame is refused in one

@@ -74,6 +74,24 @@ TEST(FitDecayCommand, JsonFollowsTheContract) {
   EXPECT_EQ(nlohmann::json::parse(fixed.out)["n_components"], 1);
 }
 
+// A fit stopped at its iteration limit is not a result: the file fails
+// (exit 2, one line) unless --keep-unconverged, which reports it with a warning.
+TEST(FitCurveCommands, AFitThatDidNotConvergeFailsUnlessKept) {
+  const std::string decay = testing::Fixture("curves/decay-two-components.csv").string();
+  const std::string charge = testing::Fixture("curves/charge.csv").string();
+  for (const std::string& command : {"fit decay-curve " + decay, "fit charge-curve " + charge}) {
+    const auto whole = RunPhos(command + " --json");
+    ASSERT_EQ(whole.exit_code, 0) << whole.err;
+    EXPECT_EQ(nlohmann::json::parse(whole.out)["converged"], true);
+    EXPECT_TRUE(testing::IsOneLineUserError(RunPhos(command + " --max-iterations 1"), "the fit did not converge"))
+        << command;
+    const auto kept = RunPhos(command + " --max-iterations 1 --keep-unconverged --json");
+    ASSERT_EQ(kept.exit_code, 0) << kept.err;
+    EXPECT_EQ(nlohmann::json::parse(kept.out)["converged"], false);
+    EXPECT_NE(kept.err.find("did not converge"), std::string::npos) << kept.err;
+  }
+}
+
 TEST(FitChargeCommand, JsonFollowsTheContract) {
   testing::TempDir dir;
   std::ostringstream csv;

@@ -13,6 +13,8 @@
 #include <nlohmann/json.hpp>
 
 #include "model/closed_form.h"
+#include "phos/model/material.h"
+#include "phos/model/photometry.h"
 #include "phos/util/csv.h"
 #include "phos/util/version.h"
 #include "test_util.h"
@@ -43,6 +45,34 @@ TEST(SimulateCommand, CsvFollowsTheContract) {
     EXPECT_TRUE(testing::RelativelyNear(table.columns[1][m], r, 1e-12)) << t;
     EXPECT_TRUE(testing::RelativelyNear(table.columns[5][m], 0.64 * kr * static_cast<double>(r), 1e-12));  // L_4
   }
+}
+
+// A physical material's radiance is in W/(sr m²), and its luminance in cd/m²
+// follows as a last column (CSV) or key (JSON); a relative material has none.
+TEST(SimulateCommand, APhysicalMaterialAddsItsLuminance) {
+  const std::string paint = testing::Fixture("materials/physical/sign-paint.json").string();
+  const Material material = LoadMaterial(paint);
+  const std::string run = "simulate --material " + paint + " --charge-s 300 --irradiance 0.2 --decay-s 600 --dt 60";
+  testing::TempDir dir;
+  ASSERT_EQ(RunPhos(run + " --out " + (dir / "p.csv").string()).exit_code, 0);
+  const CsvTable table = ReadCsv(dir / "p.csv");
+  ASSERT_EQ(table.header.back(), "luminance_cd_m2");
+  ASSERT_EQ(table.header.size(), 1u + 2u + 10u + 1u);
+  const auto result = RunPhos(run + " --json");
+  ASSERT_EQ(result.exit_code, 0) << result.err;
+  const nlohmann::json j = nlohmann::json::parse(result.out);
+  ASSERT_EQ(j["luminance_cd_m2"].size(), table.row_count());
+  for (std::size_t m = 0; m < table.row_count(); ++m) {
+    std::vector<double> L;
+    for (int b = 0; b < 10; ++b) L.push_back(table.columns[3 + b][m]);
+    const double Y = Luminance(L, material.bands);
+    EXPECT_TRUE(testing::RelativelyNear(table.columns.back()[m], Y, 1e-12, 1e-300)) << m;
+    EXPECT_TRUE(testing::RelativelyNear(j["luminance_cd_m2"][m], Y, 1e-12, 1e-300)) << m;
+  }
+  EXPECT_GT(table.columns.back()[5], 0.0);
+  const auto relative =
+      RunPhos("simulate --material " + Green() + " --charge-s 4 --irradiance " + kBlueLight + " --json");
+  EXPECT_FALSE(nlohmann::json::parse(relative.out).contains("luminance_cd_m2"));
 }
 
 TEST(SimulateCommand, JsonFollowsTheContract) {

@@ -56,6 +56,38 @@ TEST(EditSession, ConstraintsSolveAndTheCurvesPassThroughTheTargets) {
   EXPECT_FALSE(c.session.FramePng(40, 1.0).empty());
 }
 
+// An edit starts from what the object wears: placing a constraint at a
+// point's current look on a box wearing a two-state paint left it a
+// one-state material (kr 0.546/s) whose glow at 40 s fell to 1e-7, and the
+// page said 1 state and another preset. Now the material stays as it was,
+// and the state says its states and preset.
+TEST(EditSession, AConstraintAtTheCurrentLookKeepsTheMaterialTheObjectWears) {
+  Cornell c;
+  c.session.SetPreset("back wall", "two-state-ratio20");
+  const nlohmann::json before = c.session.MaterialJson("back wall");
+  nlohmann::json state = c.session.State();
+  EXPECT_EQ(state["objects"][2]["preset"], "two-state-ratio20");
+  EXPECT_EQ(state["objects"][2]["states"], 2);
+  EXPECT_TRUE(state["states"].is_null());  // the page's count: the object's own
+  c.session.AddConstraint(128, 64, 35);
+  c.session.AddConstraint(128, 64, 50);
+  EXPECT_EQ(c.session.MaterialJson("back wall"), before);
+  state = c.session.State();
+  for (const auto& constraint : state["constraints"]) EXPECT_LT(constraint["relative_error"].get<double>(), 1e-6);
+  EXPECT_EQ(state["objects"][2]["states"], 2);
+  // A new look is solved with the object's two states, from its material.
+  c.session.UpdateConstraint(1, {{"rgb", {0.0016, 0.008, 0.0048}}});
+  const nlohmann::json edited = c.session.MaterialJson("back wall");
+  EXPECT_EQ(edited["states"].size(), 2u);
+  // (Met to under 2%: the first target keeps its exact spectrum, the new
+  // one is an RGB colour's; the page calls a miss of 10% one.)
+  EXPECT_LT(c.session.State()["constraints"][1]["relative_error"].get<double>(), 2e-2);
+  // A count the user sets wins.
+  c.session.SetStates(1);
+  EXPECT_EQ(c.session.MaterialJson("back wall")["states"].size(), 1u);
+  EXPECT_EQ(c.session.State()["states"], 1);
+}
+
 // phos edit solve grew as n^1.7 in its constraints with no limit (10,000:
 // 20 s), and a target of 1e300 printed a cost of inf, exit 0: a constraints
 // file is refused at load past 1000 constraints, a radiance or weight past

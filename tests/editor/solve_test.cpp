@@ -186,6 +186,50 @@ TEST(EditorSolve, ReachesTheLookOfRandomTwoStateMaterials) {
   }
 }
 
+// Started from the material a point wears (Problem::start), a constraint at
+// its own look changes nothing: every parameter stays as it was, unknown ke
+// and name included, on fresh random materials of 1 to 3 states. Started
+// from a material that does not meet the targets, the solve still reaches
+// them (the start is one more candidate, not a constraint).
+TEST(EditorSolve, AConstraintAtTheCurrentLookKeepsTheMaterialItStartsFrom) {
+  std::mt19937 rng(20261208);
+  auto log_uniform = [&](double lo, double hi) {
+    return lo * std::pow(hi / lo, std::uniform_real_distribution<double>(0, 1)(rng));
+  };
+  for (int trial = 0; trial < 12; ++trial) {
+    const int nc = 1 + trial % 3;
+    std::vector<double> kr;
+    std::vector<std::vector<double>> ke(nc), Lambda(nc);
+    for (int i = 0; i < nc; ++i) {
+      kr.push_back(log_uniform(0.01, 1.0));
+      for (int b = 0; b < 3; ++b) {
+        ke[i].push_back(log_uniform(0.01, 0.5));
+        Lambda[i].push_back(log_uniform(0.05, 2.0));
+      }
+    }
+    Material wears = Truth(kRgb, kr, ke, Lambda);
+    wears.name = "aqua paint";
+    wears.states[0].ke[2].reset();  // unknown in a band the light reaches: taken as 0 by the curves
+    Material known = wears;
+    AssumeUnknownKeZero(known);
+    Problem p = FromTruth(known, {1.0, 0.6, 0.2}, {5, 12, 30});
+    p.start = wears;
+    const Solution kept = Solve(p);
+    SCOPED_TRACE("trial " + std::to_string(trial) + ", nc " + std::to_string(nc));
+    EXPECT_TRUE(kept.kept_start);
+    EXPECT_EQ(MaterialToJson(kept.material), MaterialToJson(wears));
+
+    // A start that misses the look (its rates 3 times off) is refined like
+    // any candidate; the look is reached as without it.
+    Material off = known;
+    for (ExcitedState& state : off.states) state.kr *= 3;
+    p.start = off;
+    const Solution solved = Solve(p);
+    EXPECT_FALSE(solved.kept_start);
+    EXPECT_LT(solved.cost, 1e-8 * Scale(p));
+  }
+}
+
 TEST(EditorSolve, BoundsAreMet) {
   // "At least 0.05 in green until 60 s" with a fast-fading look otherwise.
   const Material truth = Truth(kRgb, {0.5}, {{0.2, 0.1, 0.05}}, {{0.5, 2.0, 0.3}});
@@ -279,17 +323,23 @@ TEST(EditorSolve, BadPhasesNameTheField) {
   nlohmann::json j = phos::ReadJsonFile(phos::testing::Fixture("constraints/glow-sign-phases.json"));
   ASSERT_NO_THROW(ProblemFromJson(j, "c.json"));
   auto error = [&](const std::function<void(nlohmann::json&)>& edit) { return ErrorOfEdited(j, edit); };
-  EXPECT_NE(error([](nlohmann::json& c) { c["irradiance"][1]["duration_s"] = 90.2; }).find("not a whole number of frames"),
-            std::string::npos);
+  EXPECT_NE(
+      error([](nlohmann::json& c) { c["irradiance"][1]["duration_s"] = 90.2; }).find("not a whole number of frames"),
+      std::string::npos);
   EXPECT_NE(error([](nlohmann::json& c) { c["irradiance"][1]["duraton_s"] = 90; }).find("irradiance[1]"),
             std::string::npos);
-  EXPECT_NE(error([](nlohmann::json& c) { c["irradiance"][1] = {0, 0, 0}; }).find("irradiance[1]: a row among phases"),
+  EXPECT_NE(error([](nlohmann::json& c) {
+              c["irradiance"][1] = {0, 0, 0};
+            }).find("irradiance[1]: a row among phases"),
             std::string::npos);
   const nlohmann::json rows = phos::ReadJsonFile(phos::testing::Fixture("constraints/glow-sign.json"));
-  EXPECT_NE(ErrorOfEdited(rows, [&](nlohmann::json& c) { c["irradiance"][1] = j["irradiance"][1]; })  // a phase among rows
-                .find("irradiance[1]: a phase among rows"),
-            std::string::npos);
-  EXPECT_NE(error([](nlohmann::json& c) { c["irradiance"][0]["irradiance"] = {1, 2}; }).find("irradiance[0].irradiance"),
+  EXPECT_NE(
+      ErrorOfEdited(rows, [&](nlohmann::json& c) { c["irradiance"][1] = j["irradiance"][1]; })  // a phase among rows
+          .find("irradiance[1]: a phase among rows"),
+      std::string::npos);
+  EXPECT_NE(error([](nlohmann::json& c) {
+              c["irradiance"][0]["irradiance"] = {1, 2};
+            }).find("irradiance[0].irradiance"),
             std::string::npos);
   EXPECT_NE(error([](nlohmann::json& c) { c["irradiance"][0]["duration_s"] = -1; }).find("irradiance[0].duration_s"),
             std::string::npos);

@@ -145,6 +145,25 @@ TEST(DecayFit, BicChoosesTheTrueCountOnRandomCurves) {
   }
 }
 
+// Every fit on random curves converges at the default limit, by our own
+// refinement and by Ceres's; cut to one iteration, the same fits say they
+// did not, with the reason.
+TEST(DecayFit, SaysWhetherItConverged) {
+  std::mt19937 rng(23);
+  for (int trial = 0; trial < 20; ++trial) {
+    const RandomCurve random = MakeRandomCurve(rng);
+    DecayFitOptions options;
+    options.background = random.background;
+    EXPECT_TRUE(FitDecay(random.curve, options, "random").converged) << trial;
+    EXPECT_TRUE(FitDecayReference(random.curve, options, "random").converged) << trial;
+    options.max_iterations = 1;
+    const DecayFitSummary cut = FitDecay(random.curve, options, "random");
+    EXPECT_FALSE(cut.converged) << trial;
+    EXPECT_NE(cut.termination.find("max_iterations"), std::string::npos) << cut.termination;
+    EXPECT_FALSE(FitDecayReference(random.curve, options, "random").converged) << trial;
+  }
+}
+
 TEST(DecayFit, FastRefinementIsNeverWorseThanCeres) {
   // FitDecay's own Newton/Levenberg-Marquardt and covariance against the
   // same fit refined by Ceres (FitDecayReference), at every count and with

@@ -71,6 +71,25 @@ TEST(Material, SaveAndLoadRoundTrip) {
   }
 }
 
+// "units": absent is relative and is written back absent (every existing
+// file loads and saves as before); "physical" round-trips.
+TEST(Material, UnitsAreRelativeUnlessThePhysicalOnesAreNamed) {
+  nlohmann::json j = ReadJsonFile(testing::Fixture("materials/green.json"));
+  EXPECT_EQ(MaterialFromJson(j, "m.json").units, Units::kRelative);
+  EXPECT_EQ(MaterialToJson(MaterialFromJson(j, "m.json")), j);
+  j["units"] = "relative";
+  EXPECT_EQ(MaterialFromJson(j, "m.json").units, Units::kRelative);
+  j["units"] = "physical";
+  const Material physical = MaterialFromJson(j, "m.json");
+  EXPECT_EQ(physical.units, Units::kPhysical);
+  EXPECT_EQ(MaterialToJson(physical), j);
+  j["units"] = "SI";
+  EXPECT_EQ(ErrorOf([&] { MaterialFromJson(j, "m.json"); }),
+            "m.json: units: unknown units \"SI\" (expected \"relative\" or \"physical\")");
+  j["units"] = 1;
+  EXPECT_EQ(ErrorOf([&] { MaterialFromJson(j, "m.json"); }), "m.json: units: expected a string, got 1");
+}
+
 // Each broken file gives one message naming the file and the field.
 struct BrokenCase {
   const char* what;

@@ -155,7 +155,8 @@ TEST(PhosphorMask, BadMasksAreOneLine) {
   for (auto& object : json["objects"])
     for (const char* key : {"mesh", "phosphor"})
       if (object.contains(key))
-        object[key] = (std::filesystem::path(phos::testing::Fixture("scenes")) / object[key].get<std::string>()).string();
+        object[key] =
+            (std::filesystem::path(phos::testing::Fixture("scenes")) / object[key].get<std::string>()).string();
   auto error = [&](const std::function<void(nlohmann::json&)>& edit) {
     nlohmann::json edited = json;
     edit(edited);
@@ -210,7 +211,6 @@ TEST(PhosphorMask, BadMasksAreOneLine) {
             }).find("not an image"),
             std::string::npos);
 }
-
 
 // Glow on glow (phosphor_irradiance): a masked phosphor lights another by
 // the paint it has, not as if painted whole. Over the same quad, a uniform
@@ -282,8 +282,8 @@ RandomMap WriteRandomMap(const std::filesystem::path& dir, int states, unsigned 
   RandomMap map;
   map.states = states;
   map.exr = dir / ("map-" + std::to_string(states) + (tile ? "-tile" : "") + ".exr");
-  std::vector<std::string> names = {"kr", "amplitude.R", "amplitude.G", "amplitude.B", "background.R",
-                                    "background.G", "background.B", "rms"};
+  std::vector<std::string> names = {"kr",           "amplitude.R",  "amplitude.G",  "amplitude.B",
+                                    "background.R", "background.G", "background.B", "rms"};
   if (states == 2) names.insert(names.end(), {"kr2", "amplitude2.R", "amplitude2.G", "amplitude2.B"});
   const int nch = static_cast<int>(names.size()), n = kCells * kCells;
   std::mt19937 random(seed);
@@ -414,17 +414,18 @@ TEST(PhosphorMap, BadMapsAreOneLine) {
   WriteRandomMap(quad.dir, 1, 5, /*tile=*/true);
   const std::filesystem::path material = phos::testing::Fixture("materials/green.json");
   auto error = [&](const std::function<void(nlohmann::json&)>& edit) {
-    nlohmann::json scene = {{"schema", "phos.scene/1"},
-                            {"name", "mapped"},
-                            {"camera", {{"position", {0.5, 2, 0.5}}, {"look_at", {0.5, 0, 0.5}}, {"width", 8}, {"height", 8}}},
-                            {"time", {{"start_s", 0}, {"end_s", 1}, {"fps", 1}}},
-                            {"lights", nlohmann::json::array()},
-                            {"objects",
-                             {{{"name", "sample"},
-                               {"mesh", quad.obj.string()},
-                               {"albedo", 0.5},
-                               {"phosphor", material.string()},
-                               {"phosphor_map", "map-1.exr"}}}}};
+    nlohmann::json scene = {
+        {"schema", "phos.scene/1"},
+        {"name", "mapped"},
+        {"camera", {{"position", {0.5, 2, 0.5}}, {"look_at", {0.5, 0, 0.5}}, {"width", 8}, {"height", 8}}},
+        {"time", {{"start_s", 0}, {"end_s", 1}, {"fps", 1}}},
+        {"lights", nlohmann::json::array()},
+        {"objects",
+         {{{"name", "sample"},
+           {"mesh", quad.obj.string()},
+           {"albedo", 0.5},
+           {"phosphor", material.string()},
+           {"phosphor_map", "map-1.exr"}}}}};
     edit(scene["objects"][0]);
     try {
       const Scene loaded = SceneFromJson(scene, quad.dir, "mapped.json");
@@ -450,6 +451,34 @@ TEST(PhosphorMap, BadMapsAreOneLine) {
   fails_with([](nlohmann::json& o) { o["uv_resolution"] = kCells + 1; }, "finer than the map's 16 x 16");
   fails_with([](nlohmann::json& o) { o.erase("phosphor"); }, "give the material");
   fails_with([](nlohmann::json& o) { o["texels"] = "auto"; }, "\"uv\"");
+  // One decaying pixel's number out of range (the channels as written:
+  // kr, amplitude.R, .G, .B): refused naming the pixel, never rendered NaN.
+  auto with_pixel = [&](const std::string& name, int channel, float value) {
+    auto in = OIIO::ImageInput::open((quad.dir / "map-1.exr").string());
+    OIIO::ImageSpec spec = in->spec();
+    std::vector<float> px(static_cast<std::size_t>(spec.width) * spec.height * spec.nchannels);
+    in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, px.data());
+    in->close();
+    int p = 0;
+    while (!(px[p * spec.nchannels + spec.channelindex("kr")] > 0)) ++p;
+    px[p * spec.nchannels + spec.channelindex(channel == 0 ? "kr" : "amplitude.G")] = value;
+    auto out = OIIO::ImageOutput::create((quad.dir / name).string());
+    out->open((quad.dir / name).string(), spec);
+    out->write_image(OIIO::TypeDesc::FLOAT, px.data());
+    out->close();
+    return "pixel (" + std::to_string(p % spec.width) + ", " + std::to_string(p / spec.width) + ")";
+  };
+  const float inf = std::numeric_limits<float>::infinity();
+  std::string at = with_pixel("kr-1e30.exr", 0, 1e30f);
+  fails_with([](nlohmann::json& o) { o["phosphor_map"] = "kr-1e30.exr"; }, at + ": kr 1e+30 /s is above");
+  with_pixel("kr-inf.exr", 0, inf);
+  fails_with([](nlohmann::json& o) { o["phosphor_map"] = "kr-inf.exr"; }, "is above the largest rate");
+  at = with_pixel("amplitude-inf.exr", 1, inf);
+  fails_with([](nlohmann::json& o) { o["phosphor_map"] = "amplitude-inf.exr"; }, at + ": amplitude.G is inf");
+  with_pixel("amplitude-3e38.exr", 1, 3e38f);
+  fails_with([](nlohmann::json& o) { o["phosphor_map"] = "amplitude-3e38.exr"; }, "times the map's typical pixel");
+  with_pixel("amplitude-huge-sum.exr", 1, 3.4e38f);
+  EXPECT_NE(error([](nlohmann::json& o) { o["phosphor_map"] = "amplitude-huge-sum.exr"; }), "accepted");
   std::ofstream(quad.dir / "not-an-image.exr") << "text";
   fails_with([](nlohmann::json& o) { o["phosphor_map"] = "not-an-image.exr"; }, "not an image");
 }

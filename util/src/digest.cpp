@@ -14,9 +14,11 @@
 
 namespace phos {
 
+std::uint64_t Xxh3(const void* data, std::size_t size) { return XXH3_64bits(data, size); }
+
 std::string Xxh3Hex(const void* data, std::size_t size) {
   char text[17];
-  std::snprintf(text, sizeof text, "%016llx", static_cast<unsigned long long>(XXH3_64bits(data, size)));
+  std::snprintf(text, sizeof text, "%016llx", static_cast<unsigned long long>(Xxh3(data, size)));
   return text;
 }
 

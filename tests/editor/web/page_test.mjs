@@ -66,6 +66,11 @@ try {
   await page.goto(url);
   await page.waitForFunction(() => window.phos && window.phos.state);
   const timeline = await page.evaluate(() => window.phos.state.timeline);
+  // The page shows what the selected object wears: its own material (no
+  // preset) and its number of states, not the first preset and 1.
+  await page.selectOption("#object", "back wall");
+  assert.equal(await page.inputValue("#preset"), "");
+  assert.equal(await page.inputValue("#states"), "1");
   const frameAt = (t) => timeline.findIndex((x) => x >= t - 1e-9);
 
   // The frame shown at t = 0 after a late one is the first t = 0 frame (it

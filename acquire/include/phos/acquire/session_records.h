@@ -9,6 +9,10 @@
 //   events.jsonl   (free-form)    light switches and other events, each one JSON object
 //   stop.json      StopRecord     how it ended, and how many frames frames.jsonl lists
 //
+// Each record carries its own checksum, "record_xxh3" (see "Record
+// checksums" below), so a number changed after it was written (an
+// exposure_s multiplied by hand, a bit flipped on disk) is found, not fitted.
+//
 // JSON Lines files are append-only: each record is one write of one whole
 // line, then fsync. A crash inside that write leaves a last line without
 // its newline (torn); readers skip it and say so, and the writer that goes on
@@ -84,7 +88,8 @@ inline constexpr const char* kFrameRecordKeys[] = {"file",
                                                    "size_bytes",
                                                    "xxh3",
                                                    "packets_resent",
-                                                   "retakes"};
+                                                   "retakes",
+                                                   "record_xxh3"};
 
 struct FrameRecord {
   std::string file;      // frames/NNNNNN.tif, relative to the session folder
@@ -141,8 +146,42 @@ void RequireGoodFrames(const std::filesystem::path& session_dir, const FrameReco
 
 // ---- session.json ----------------------------------------------------------
 
+// ---- record checksums -------------------------------------------------------
+
+// Every record a session writes (session.json, each line of frames.jsonl and
+// events.jsonl, stop.json) carries "record_xxh3": the XXH3-64 of the record's
+// compact JSON text without that key, keys in sorted order (nlohmann::json's
+// own dump, which gives back the same text for a parsed record: numbers
+// print in their shortest round-trip form). The frame file's xxh3 protects
+// the pixels; this protects the numbers fits use (exposure_s,
+// mean_signal_dn, charge_s, ...). Sessions of schema kSessionSchema (from
+// phos 0.3) have it on every record; those of "phos.session/1" have none and
+// are read as before.
+inline constexpr const char* kRecordChecksumKey = "record_xxh3";
+inline constexpr const char* kSessionSchema = "phos.session/2";
+inline constexpr const char* kSessionSchemaWithoutChecksums = "phos.session/1";
+
+// The checksum of a record (its "record_xxh3", if any, left out).
+std::string RecordChecksum(const nlohmann::json& record);
+// The record with its "record_xxh3" set.
+nlohmann::json WithRecordChecksum(nlohmann::json record);
+// What a record's "record_xxh3" says of it: "" when it matches, else the
+// problem ("has no record_xxh3", "does not match its record_xxh3 ...").
+std::string RecordChecksumProblem(const nlohmann::json& record);
+
+// Every record of a session folder whose checksum is wrong, or missing in a
+// session that must have them (kSessionSchema), and every frame record that
+// gives no size_bytes and xxh3 for its file (nothing could then tell a
+// replaced frame): one line each, naming file:line. For `capture verify`.
+std::vector<std::string> RecordChecksumProblems(const std::filesystem::path& session_dir);
+// The first of them as a UserError, for the fits and resume, which are never
+// built on a record that changed after it was written.
+void RequireRecordChecksums(const std::filesystem::path& session_dir);
+
+// ---- session.json ----------------------------------------------------------
+
 struct SessionRecord {
-  std::string schema = "phos.session/1";
+  std::string schema = kSessionSchema;
   std::string protocol;  // lvf-calibration, spectrum, decay, excitation, all
   std::string uid, started_utc, phos_version;
   nlohmann::json sample = nlohmann::json::object();

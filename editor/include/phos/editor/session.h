@@ -23,6 +23,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <map>
+#include <optional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -78,10 +79,16 @@ class EditSession {
     std::vector<std::vector<double>> irradiance;  // per timeline frame, per band
     double t_s = 0;
     std::vector<double> rgb;  // target, linear sRGB
+    // The target per band when it is the point's look at placement (exact:
+    // RGB to bands is not the inverse of bands to RGB); emptied when the
+    // user sets rgb, then the target is RgbToBands(rgb).
+    std::vector<double> bands;
     double weight = 1;
     Constraint::Kind kind = Constraint::Kind::kTarget;
   };
   int ObjectIndex(const std::string& name) const;
+  // The states an edit of an object wearing `wears` solves for.
+  int StatesFor(const Material& wears) const;
   std::vector<double> RgbToBands(const std::vector<double>& rgb) const;
   std::vector<double> BandsToRgb(const std::vector<double>& bands) const;
   void Resolve();
@@ -93,12 +100,15 @@ class EditSession {
   std::map<std::string, std::filesystem::path> presets_;
   std::vector<double> timeline_;  // frame start times
   double dt_s_ = 0.1;
-  int states_ = 1;
+  // The number of states the solve gives an edited object: set on the page,
+  // or (nullopt) the object's own material's, so an edit starts from what it wears.
+  std::optional<int> states_;
   double falloff_ = 0;
   std::vector<PlacedConstraint> constraints_;
   std::vector<std::shared_ptr<const Material>> base_;    // per object: before edits (scene or preset)
   std::vector<bool> base_unknown_ke_as_zero_;            // per object: the scene file's "unknown_ke" policy
   std::vector<std::shared_ptr<const Material>> solved_;  // per object: solved, or null
+  std::vector<std::string> preset_;                      // per object: the preset set on it, or ""
   std::map<int, Solution> solutions_;                    // per edited object
   std::vector<double> xyz_to_rgb_weights_;               // 3 x nb: band radiance -> linear sRGB
   std::vector<int> wide_band_;                           // per band: 0 blue, 1 green, 2 red

@@ -54,6 +54,10 @@ struct Point {
   std::vector<double> albedo;                   // per band
 };
 
+// The most excited states the solve designs (the curve library's
+// combinations grow as its size to this power).
+inline constexpr int kMaxEditStates = 3;
+
 struct Problem {
   std::string source;
   SpectralGrid bands;
@@ -61,6 +65,12 @@ struct Problem {
   std::vector<Point> points;  // at least one; all with the same frame count
   int states = 1;
   std::vector<Constraint> constraints;
+  // The material the points wear now (the editor's object), when it has
+  // `states` states: the solve keeps it as it is when it already meets the
+  // constraints (a constraint placed at a point's current look changes
+  // nothing), and else refines from it as from the library's candidates.
+  // Its unknown ke count as 0 here, as the editor's curves take them.
+  std::optional<Material> start;
   std::size_t frames() const { return points.empty() ? 0 : points[0].irradiance.size(); }
   double end_s() const { return dt_s * static_cast<double>(frames()); }
 };
@@ -91,7 +101,8 @@ struct Solution {
   // Contradictions and constraints the model cannot meet: which, and by how much.
   std::vector<std::string> feedback;
   double seconds = 0;
-  int evaluations = 0;  // curve simulations (ours: library + Ceres)
+  int evaluations = 0;      // curve simulations (ours: library + Ceres)
+  bool kept_start = false;  // the material is Problem::start, unchanged: it met the constraints
 };
 
 struct SolveOptions {

@@ -35,6 +35,10 @@ struct ChargeFitSummary {
   double rss = 0;                    // plain sum of squared residuals, every channel
   int iterations = 0;
   double seconds = 0;
+  // Whether Ceres stopped at a tolerance (CONVERGENCE) rather than at
+  // max_iterations; termination is its message when not.
+  bool converged = true;
+  std::string termination;
 };
 
 // Fits every channel of the curve with one shared rate. A curve that neither

@@ -67,6 +67,10 @@ struct DecayFitSummary {
   std::string choice;       // how n_components was chosen, in words
   int iterations = 0;       // Ceres iterations, all stages
   double seconds = 0;       // wall time of the fit
+  // Whether the chosen fit's refinement stopped at a tolerance (Ceres's
+  // CONVERGENCE) rather than at max_iterations; termination says why not.
+  bool converged = true;
+  std::string termination;
 };
 
 // Fits the curve; bad data (too few samples, constant, not decaying) is a

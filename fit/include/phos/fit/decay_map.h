@@ -63,8 +63,8 @@ struct DecayMapOptions {
   int rate_grid_size = 48;  // log-spaced from 0.02 / span to 3 / smallest spacing
   bool background = true;
   Weighting weighting = Weighting::kPoisson;  // photon counting, scaled by sqrt(exposure)
-  int newton_steps = 4;  // at most; they stop when a step is below 1e-4 in log k
-  int states = 1;        // 1 or 2 (exponentials per pixel)
+  int newton_steps = 4;                       // at most; they stop when a step is below 1e-4 in log k
+  int states = 1;                             // 1 or 2 (exponentials per pixel)
   // Two states: the coarse grid whose pairs start the refinement (log-spaced
   // over the same range as the rate grid), and the refinement's steps.
   int pair_grid_size = 12;  // 10 to 20 find the same fits on the tests' stacks

@@ -96,6 +96,9 @@ struct SessionFitOptions {
   // for every parameter and its covariance counts kr's uncertainty in ke;
   // the sequential one holds kr fixed, so its ke intervals are too narrow.
   bool joint = true;
+  // The solvers' iteration limit for the decay and excitation fits; 0: each
+  // fit's own default (DecayFitOptions, StateExcitationOptions).
+  int max_iterations = 0;
 };
 
 // The joint refinement (any nc): every kr_i, the decay's amplitudes and
@@ -143,6 +146,10 @@ struct SessionFit {
   std::optional<JointFit> joint;   // with excitation data
   bool joint_written = false;      // the material is the joint refinement's
   std::vector<std::string> notes;  // what was left out or could not be fitted, and why
+  // The fits the material holds that stopped at their iteration limit rather
+  // than converging, each with the solver's reason: the command refuses to
+  // write such a material unless asked (--keep-unconverged).
+  std::vector<std::string> unconverged;
   double seconds = 0;
 };
 

@@ -14,6 +14,12 @@
 //           material (`phos fit session` writes them); readers that do not
 //           know them still load the file, and nothing in the model uses them
 // Albedo (diffuse reflectance per band) is optional: Table 8.1 does not give it.
+//
+// Units (docs/formats.md, "Units"): a material is relative (the default,
+// Table 8.1's normalized irradiance and radiance) or physical: ke in 1/s per
+// W/m² of band-integrated irradiance, Lambda in W/(sr m²) of band-integrated
+// radiance per 1/s of kr r, so that Eq. 8.2's Lp[b] is in W/(sr m²) and its
+// luminance in cd/m² (photometry.h).
 
 #include <filesystem>
 #include <optional>
@@ -44,6 +50,13 @@ inline constexpr int kMaxBands = 256;
 inline constexpr double kMaxIrradiance = 1e9;
 inline constexpr const char* kMaterialSchema = "phos.material/1";
 
+enum class Units {
+  kRelative,  // "relative": irradiance and radiance in the unit the ke and Lambda were measured in
+  kPhysical,  // "physical": E in W/m², Lp in W/(sr m²), per band
+};
+// "relative" or "physical", as the file says it.
+const char* UnitsName(Units units);
+
 struct ExcitedState {
   double kr = 0.0;                        // 1/s
   std::vector<std::optional<double>> ke;  // per band, 1/s per unit irradiance; nullopt = unknown
@@ -61,6 +74,7 @@ struct Material {
   std::optional<std::vector<double>> albedo;  // per band, in [0, 1]
   std::vector<ExcitedState> states;
   std::string source;  // provenance (optional, free text)
+  Units units = Units::kRelative;
 
   int band_count() const { return bands.band_count(); }
   int state_count() const { return static_cast<int>(states.size()); }

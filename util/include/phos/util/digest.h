@@ -21,5 +21,7 @@ struct FileDigest {
 };
 FileDigest DigestFile(const std::filesystem::path& path);
 std::string Xxh3Hex(const void* data, std::size_t size);
+// The same hash as a number; allocates nothing, so a signal handler may call it.
+std::uint64_t Xxh3(const void* data, std::size_t size);
 
 }  // namespace phos
