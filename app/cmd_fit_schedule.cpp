@@ -30,7 +30,8 @@ struct ScheduleArgs {
   std::vector<std::string> light_on;  // T0:T1, as given
   std::optional<int> states, max_states;
   std::optional<double> predict_charge_s;
-  bool json = false;
+  int max_iterations = 200;
+  bool json = false, keep_unconverged = false;
 };
 
 // "T0:T1" in seconds, T0 < T1, both finite.
@@ -63,6 +64,8 @@ ScheduleFitOptions OptionsOf(const ScheduleArgs& args) {
   options.states = args.states.value_or(0);
   options.max_states = args.max_states.value_or(options.max_states);
   options.weighting = ParseWeightsOption(args.weights);
+  options.max_iterations = args.max_iterations;
+  options.keep_unconverged = args.keep_unconverged;
   if (args.predict_charge_s && !(*args.predict_charge_s > 0))
     ThrowUserError("", "--predict-charge-s",
                    "expected a charge of more than 0 s, got " + FormatShort(*args.predict_charge_s, 6));
@@ -153,7 +156,7 @@ std::string ResultText(const LoadedCurve& loaded, const ScheduleFitSummary& fit,
   char line[512];
   std::snprintf(line, sizeof line, "%d state(s) (%s), rss %s, %zu samples, %.3g s%s\n", fit.n_states,
                 fit.choice.c_str(), FormatShort(fit.rss, 6).c_str(), curve.size(), fit.seconds,
-                fit.converged ? "" : " (the solve did not converge)");
+                fit.converged ? "" : " (did not converge)");
   std::string text = line;
   for (std::size_t i = 0; i < fit.states.size(); ++i) {
     const ScheduleState& s = fit.states[i];
@@ -230,6 +233,10 @@ void RunScheduleCurve(const ScheduleArgs& args) {
   const ScheduleFitSummary fit = FitSchedule(loaded.curve, options, loaded.file);
   std::vector<std::string> warnings = loaded.warnings;
   for (const std::string& warning : fit.warnings) warnings.push_back(loaded.file + ": " + warning);
+  if (!fit.converged)
+    warnings.push_back(loaded.file +
+                       ": the fit did not converge (the iteration limit); shown because of "
+                       "--keep-unconverged");
   for (const std::string& warning : warnings) std::fprintf(stderr, "phos: warning: %s\n", Printable(warning).c_str());
   std::optional<Prediction> prediction;
   if (args.predict_charge_s) prediction = Predict(fit, loaded.curve, options.lights, *args.predict_charge_s);
@@ -247,7 +254,8 @@ constexpr const char* kScheduleHelp =
     "and a background. The sample is assumed dark (r = 0) at the curve's first sample: start the curve\n"
     "before the first light, after the sample has rested. The number of states is chosen by BIC up to\n"
     "--max-states (default 6) or fixed (--states); more states than the curve supports are fitted fewer,\n"
-    "with a warning. Uncertainties are 1 sigma, scaled by the reduced chi-square. The residual is\n"
+    "with a warning; so are counts whose fit did not converge (--max-iterations, --keep-unconverged).\n"
+    "Uncertainties are 1 sigma, scaled by the reduced chi-square. The residual is\n"
     "reported per decade of time after each light's switch-off.\n"
     "Curve file: a header line (t, then one column per channel), rows of numbers; times in seconds unless\n"
     "the time column's name gives a unit.\n"
@@ -273,6 +281,13 @@ void RegisterFitSchedule(CLI::App& fit) {
   s->add_option("--predict-charge-s", args->predict_charge_s,
                 "also print the fitted model's curve after a charge of S seconds from dark (the same light)")
       ->check(kFinite);
+  s->add_option("--max-iterations", args->max_iterations,
+                "the solver's iterations per refinement; a count of states whose fit has not converged by then is "
+                "not chosen")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 100000));
+  s->add_flag("--keep-unconverged", args->keep_unconverged,
+              "let fits that did not converge count (with a warning) instead of passing them over");
   s->add_option("--plot", args->plot, "write an SVG of the data against the fit");
   s->add_flag("--json", args->json, "print one JSON object");
   s->callback([args] { RunScheduleCurve(*args); });

@@ -334,8 +334,9 @@ Stage Refine(const Data& d, Params p, const ScheduleFitOptions& options) {
 
 // Why a refined stage cannot count (empty if it can): every state present
 // (some S > 0), rates inside the resolvable range and more than 2% apart.
-std::string WhyInvalid(const Data& d, const Stage& stage) {
+std::string WhyInvalid(const Data& d, const Stage& stage, bool keep_unconverged) {
   if (!stage.usable) return "the solve failed";
+  if (!stage.converged && !keep_unconverged) return "the solve did not converge within the iteration limit";
   const Params& p = stage.p;
   std::vector<double> kr;
   for (int i = 0; i < p.n(); ++i) {
@@ -402,12 +403,13 @@ struct Choice {
 // choice as it is); the fewest states within 2 of the lowest (Kass and
 // Raftery's "not worth more than a bare mention"), or the count asked for,
 // or fewer when the curve cannot support it.
-Choice ChooseStates(const Data& d, const std::vector<Stage>& stages, int fixed, double log_unit) {
+Choice ChooseStates(const Data& d, const std::vector<Stage>& stages, int fixed, double log_unit,
+                    bool keep_unconverged) {
   Choice choice;
   const double N = static_cast<double>(d.m) * d.C;
   std::vector<std::string> why;
   for (std::size_t k = 0; k < stages.size(); ++k) {
-    why.push_back(WhyInvalid(d, stages[k]));
+    why.push_back(WhyInvalid(d, stages[k], keep_unconverged));
     const double rss = std::max(stages[k].cost, 1e-300 * N);
     const double bic =
         N * std::log(rss / N) + ParameterCount(static_cast<int>(k) + 1, d.C) * std::log(N) + N * log_unit;
@@ -448,9 +450,9 @@ ScheduleFitSummary Unscale(const Data& d, const Stage& stage, const CurveScale& 
     state.kr_stderr = state.kr * std::sqrt(stage.var_log_kr[i]);
     state.charge_rate = std::exp(p.log_a[i]) / units.time_s;
     state.charge_rate_stderr = state.charge_rate * std::sqrt(stage.var_log_a[i]);
-    // At a bound the covariance means nothing: the rate is only known to be
-    // beyond what the samples resolve.
-    if (std::fabs(p.log_a[i] - std::log(d.a_lo / 10)) < 1e-6 || std::fabs(p.log_a[i] - std::log(d.a_hi * 10)) < 1e-6)
+    // At a bound (within 10%) the covariance means nothing: the rate is
+    // only known to be beyond what the samples resolve.
+    if (p.log_a[i] < std::log(d.a_lo / 10) + 0.1 || p.log_a[i] > std::log(d.a_hi * 10) - 0.1)
       state.charge_rate_stderr = std::numeric_limits<double>::infinity();
     for (int c = 0; c < C; ++c) {
       state.emission.push_back(p.S[i * C + c] * units.value);
@@ -608,11 +610,14 @@ ScheduleFitSummary FitSchedule(const Curve& curve, const ScheduleFitOptions& opt
   // A weighted squared residual of the scaled curve in the data's units, as
   // its log: value^2 unweighted, value with Poisson weights 1 / sqrt(value).
   const double log_unit = (options.weighting == Weighting::kNone ? 2 : 1) * std::log(units.value);
-  Choice choice = ChooseStates(d, stages, options.states, log_unit);
+  Choice choice = ChooseStates(d, stages, options.states, log_unit, options.keep_unconverged);
   if (choice.index < 0)
-    ThrowUserError(
-        where, "",
-        stages.empty() ? "too few samples for one state" : "no state fits the curve: " + WhyInvalid(d, stages[0]));
+    ThrowUserError(where, "",
+                   stages.empty() ? "too few samples for one state"
+                                  : "no number of states fits the curve (1 state: " +
+                                        WhyInvalid(d, stages[0], options.keep_unconverged) +
+                                        "); nothing reported (raise --max-iterations, or give --keep-unconverged to "
+                                        "see an unconverged fit)");
   ScheduleFitSummary fit = Unscale(d, stages[choice.index], units);
   fit.bic = choice.bic;
   fit.choice = choice.text;

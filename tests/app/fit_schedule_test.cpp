@@ -123,6 +123,8 @@ TEST(FitScheduleCommand, BadInputGivesOneLineAndExitCode2) {
       {csv + " --light-on 30:330 --weights x", "--weights: expected none or poisson"},
       {(dir / "none.csv").string() + " --light-on 30:330", "none.csv: cannot open"},
       {"--light-on 30:330", "give one curve file"},
+      {csv + " --light-on 30:330 --max-iterations 1",
+       "c.csv: no number of states fits the curve (1 state: the solve did not converge within the iteration limit)"},
   };
   for (const Case& c : cases) {
     auto result = RunPhos("fit schedule-curve " + c.arguments);
@@ -141,6 +143,18 @@ TEST(FitScheduleCommand, MoreStatesThanTheCurveSupportsAreSaidAndFittedFewer) {
   const nlohmann::json j = nlohmann::json::parse(result.out);
   EXPECT_LT(j["n_states"].get<int>(), 3);
   EXPECT_EQ(j["warnings"].size(), 1u);
+}
+
+TEST(FitScheduleCommand, AnUnconvergedFitIsShownOnlyWhenAsked) {
+  testing::TempDir dir;
+  const std::string csv = WriteTwoStateCurve(dir, "c.csv");
+  auto result =
+      RunPhos("fit schedule-curve " + csv + " --light-on 30:330 --max-iterations 2 --keep-unconverged --json");
+  ASSERT_EQ(result.exit_code, 0) << result.err;
+  EXPECT_NE(result.err.find("the fit did not converge (the iteration limit); shown because of --keep-unconverged"),
+            std::string::npos)
+      << result.err;
+  EXPECT_FALSE(nlohmann::json::parse(result.out)["converged"].get<bool>());
 }
 
 }  // namespace

@@ -50,6 +50,11 @@ struct ScheduleFitOptions {
   int rate_grid_size = 40;    // kr scanned per added state
   int charge_grid_size = 12;  // a scanned per added state
   int max_iterations = 200;
+  // A refinement that stopped at max_iterations, not at a tolerance, is not
+  // a result (as for the decay fits): such a count of states is not chosen,
+  // and a fit with none converged is a UserError. True: they count, and
+  // converged says false.
+  bool keep_unconverged = false;
 
   bool IsValid(std::string* error) const;
 };
@@ -57,7 +62,7 @@ struct ScheduleFitOptions {
 struct ScheduleState {
   double kr = 0, kr_stderr = 0;  // 1/s
   // a = ke E under the light, 1/s; stderr infinite (JSON null) when a
-  // reached a bound of its search (a tenth of a thirtieth of one per longest
+  // reached (within 10%) a bound of its search (a tenth of a thirtieth of one per longest
   // light, ten times three per smallest step): not resolved.
   double charge_rate = 0, charge_rate_stderr = 0;
   std::vector<double> emission, emission_stderr;  // per channel, the signal at r = 1
