@@ -180,6 +180,28 @@ TEST(PhysicalRender, RandomLightsMatchTheAnalyticIrradiance) {
   }
 }
 
+// A quad or disk of luminance L (or radiance R) filling nearly the whole
+// sky above the floor gives it pi L (Lambert's formula: the configuration
+// factor of a 2 km light 1 m up is 1 - 3e-4), so the floor reads albedo L.
+TEST(PhysicalRender, AnAreaLightOverTheFloorGivesAlbedoTimesItsLuminance) {
+  TempDir dir;
+  for (const char* type : {"quad", "disk"})
+    for (const bool radiometric : {false, true}) {
+      nlohmann::json scene = FloorScene(0.5, Eigen::Vector3d::Zero(), 0.1);
+      nlohmann::json light = {{"type", type},
+                              {"position", {0, 1, 0}},
+                              {"normal", {0, -1, 0}},
+                              {radiometric ? "radiance_w_sr_m2" : "luminance_cd_m2", 40},
+                              {"spectrum", {{"type", "led"}, {"center_nm", 530}, {"fwhm_nm", 20}}}};
+      light[std::string(type) == "quad" ? "size_m" : "radius_m"] =
+          std::string(type) == "quad" ? nlohmann::json{2000, 2000} : nlohmann::json(1000);
+      scene["lights"].push_back(light);
+      const std::vector<double> bands = CentreBands(scene, dir.path());
+      const double got = radiometric ? std::accumulate(bands.begin(), bands.end(), 0.0) : Y(bands);
+      EXPECT_NEAR(got, 0.5 * 40, 2e-3 * 0.5 * 40) << type << (radiometric ? " W/(sr m2)" : " cd/m2");
+    }
+}
+
 // What `phos render` says of a scene: exit code and stderr.
 CommandResult RenderScene(const std::filesystem::path& dir, const nlohmann::json& scene,
                           const std::string& options = "") {
