@@ -619,7 +619,7 @@ void PrepareScene(const RenderArgs& args, RenderRun& r) {
     if (const std::string mismatch = render::BandGridMismatch(material->bands, r.scene.bands); !mismatch.empty())
       ThrowUserError(file, "bands_nm", mismatch);
     if (const std::string mismatch = render::UnitsMismatch(*material, file, r.scene.units); !mismatch.empty())
-      ThrowUserError("", "--material", mismatch);
+      ThrowUserError("", "--material", "'" + name + "': " + mismatch);
     object->phosphor = material;
     object->phosphor_path = file;
   }

@@ -400,8 +400,10 @@ std::vector<Light> ReadGltfLights(const JsonField& l, const SpectralGrid& bands,
   return lights;
 }
 
+// "phosphor" of object or volume `owner` (its name, for messages).
 void ReadPhosphor(const JsonField& o, const std::filesystem::path& base_dir, const Scene& scene,
-                  MaterialCache& materials, std::shared_ptr<const Material>& phosphor, std::string& path) {
+                  const std::string& owner, MaterialCache& materials, std::shared_ptr<const Material>& phosphor,
+                  std::string& path) {
   if (!o.Has("phosphor")) return;
   const std::filesystem::path file = SceneFile(o["phosphor"], base_dir, "phosphor");
   auto& material = materials[file.string()];
@@ -409,7 +411,7 @@ void ReadPhosphor(const JsonField& o, const std::filesystem::path& base_dir, con
   if (const std::string mismatch = BandGridMismatch(material->bands, scene.bands); !mismatch.empty())
     o["phosphor"].Fail("the material's bands_nm " + mismatch);
   if (const std::string mismatch = UnitsMismatch(*material, file.string(), scene.units); !mismatch.empty())
-    o["phosphor"].Fail(mismatch);
+    o["phosphor"].Fail("'" + owner + "': " + mismatch);
   phosphor = material;
   path = file.string();
 }
@@ -749,7 +751,7 @@ Object ReadObject(const JsonField& o, std::size_t i, const Scene& scene, const s
            " triangles, more than the limit of " + std::to_string(kMaxSceneTriangles) +
            " (a mesh used twice counts twice)");
   object.motion = ReadMotion(o);
-  ReadPhosphor(o, base_dir, scene, materials, object.phosphor, object.phosphor_path);
+  ReadPhosphor(o, base_dir, scene, object.name, materials, object.phosphor, object.phosphor_path);
   ReadObjectAlbedo(o, scene.bands, object);
   ReadPhosphorPolicy(o, object.phosphor != nullptr, object.unknown_ke_as_zero, object.initial);
   ReadObjectTexels(o, object);
@@ -847,7 +849,7 @@ Volume ReadVolume(const JsonField& f, std::size_t i, const Scene& scene, const s
                     std::to_string(kMaxVoxels));
   v.density = ReadDensity(f["density"], v);
   v.sigma_t_per_m = f["sigma_t_per_m"].NumberInRange(0, 1e9);
-  ReadPhosphor(f, base_dir, scene, materials, v.phosphor, v.phosphor_path);
+  ReadPhosphor(f, base_dir, scene, v.name, materials, v.phosphor, v.phosphor_path);
   if (f.Has("albedo"))
     v.albedo = ReadAlbedo(f["albedo"], scene.bands.band_count());
   else if (v.phosphor && v.phosphor->albedo)

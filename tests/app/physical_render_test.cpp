@@ -124,6 +124,33 @@ TEST(PhysicalRender, AGltfLampOf100ReadsInCandela) {
   EXPECT_NEAR(RenderedY(dir / "gltf-lamp.json", dir / "out", &result), kDoneWhenY, 0.01 * kDoneWhenY);
 }
 
+// A directional glTF light is in lux, down its node's -z axis (here turned
+// 30 degrees from straight down); a coloured one shows its intensity times
+// the colour's Rec. 709 luminance (a red point light of 100 cd as 21.26 cd).
+TEST(PhysicalRender, GltfLightsAreInLuxAndTheirColoursLuminance) {
+  TempDir dir;
+  for (const bool directional : {true, false}) {
+    nlohmann::json light = {{"type", directional ? "directional" : "point"}, {"intensity", directional ? 500 : 100}};
+    if (!directional) light["color"] = {1, 0, 0};
+    nlohmann::json node = {{"extensions", {{"KHR_lights_punctual", {{"light", 0}}}}}};
+    if (directional)  // -90 degrees about x points -z down; 30 more tilt it
+      node["rotation"] = {-std::sin(kPi / 4 + kPi / 12), 0, 0, std::cos(kPi / 4 + kPi / 12)};
+    else
+      node["translation"] = {0, 2, 0};
+    const nlohmann::json gltf = {{"asset", {{"version", "2.0"}}},
+                                 {"extensionsUsed", {"KHR_lights_punctual"}},
+                                 {"extensions", {{"KHR_lights_punctual", {{"lights", {light}}}}}},
+                                 {"scene", 0},
+                                 {"scenes", {{{"nodes", {0}}}}},
+                                 {"nodes", {node}}};
+    WriteText(dir / "light.gltf", gltf.dump());
+    nlohmann::json scene = FloorScene(0.8);
+    scene["lights"].push_back({{"type", "gltf"}, {"file", "light.gltf"}, {"spectrum", {{"type", "white_led"}}}});
+    const double expected = directional ? 0.8 * 500 * std::cos(kPi / 6) / kPi : 0.2126 * kDoneWhenY;
+    EXPECT_NEAR(Y(CentreBands(scene, dir.path())), expected, 1e-3 * expected) << (directional ? "lux" : "red");
+  }
+}
+
 // KHR_lights_punctual's range: the inverse square times
 // clamp(1 - (d / range)^4, 0, 1); past the range, nothing.
 TEST(PhysicalRender, AGltfLampsRangeWindowsItsFalloff) {
@@ -223,7 +250,8 @@ TEST(PhysicalRender, BadInputIsOneLineNamingTheFileAndField) {
     nlohmann::json scene = physical;
     scene.erase("bands_nm");
     scene["objects"][0]["phosphor"] = Fixture("materials/green.json").string();
-    ExpectOneLine(RenderScene(dir.path(), scene), {"bad.json", "objects[0].phosphor", "green.json", "relative"});
+    ExpectOneLine(RenderScene(dir.path(), scene),
+                  {"bad.json", "objects[0].phosphor", "'floor'", "green.json", "relative"});
   }
   {  // a relative scene, a physical material
     nlohmann::json scene = physical;
@@ -231,7 +259,8 @@ TEST(PhysicalRender, BadInputIsOneLineNamingTheFileAndField) {
     scene["lights"][0].erase("intensity_cd");
     scene["lights"][0]["intensity"] = 1;
     scene["objects"][0]["phosphor"] = Fixture("materials/physical/sign-paint.json").string();
-    ExpectOneLine(RenderScene(dir.path(), scene), {"bad.json", "objects[0].phosphor", "sign-paint.json", "physical"});
+    ExpectOneLine(RenderScene(dir.path(), scene),
+                  {"bad.json", "objects[0].phosphor", "'floor'", "sign-paint.json", "physical"});
   }
   {  // a light in both units
     nlohmann::json scene = physical;
@@ -275,6 +304,15 @@ TEST(PhysicalRender, BadInputIsOneLineNamingTheFileAndField) {
     const CommandResult r =
         RunPhos("render " + (dir / "lamp.json").string() + " --out " + (dir / "out").string() + " --exposure " + bad);
     ExpectOneLine(r, {"--exposure", "ev100:N", bad});
+  }
+  {  // --material: a physical material into a relative scene
+    nlohmann::json scene = physical;
+    scene.erase("units");
+    scene["lights"][0].erase("intensity_cd");
+    scene["lights"][0]["intensity"] = 1;
+    ExpectOneLine(
+        RenderScene(dir.path(), scene, "--material floor=" + Fixture("materials/physical/sign-paint.json").string()),
+        {"--material", "'floor'", "sign-paint.json", "physical"});
   }
   {  // ev100 on a relative scene
     const std::string cornell = Fixture("scenes/cornell-phosphor.json").string();
