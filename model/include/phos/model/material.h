@@ -56,6 +56,10 @@ enum class Units {
 };
 // "relative" or "physical", as the file says it.
 const char* UnitsName(Units units);
+class JsonField;  // phos/util/json.h
+// The "units" member of a material's or a scene's root: absent is relative,
+// as every file written before units existed; another name fails at it.
+Units ReadUnits(const JsonField& root);
 
 struct ExcitedState {
   double kr = 0.0;                        // 1/s
