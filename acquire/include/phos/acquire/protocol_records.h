@@ -70,6 +70,19 @@ struct DecayProtocolOptions {
   // fractions of the ADC range above black. Not recorded: a session resumes
   // and fits with these values.
   double low_fraction = 0.15, high_fraction = 0.7;
+  // A decay over hours (`--decay-span-s`): > 0 replaces the schedule above
+  // (interval_s, duration_s, early_frames) with frames log-spaced in delay,
+  // kSpanFramesPerDecade per decade, from the first slot at or after
+  // kSpanFirstSlot_s to span_s, and the exposure of each frame is predicted
+  // from the glow's fade (DecayFrameDelays, RunDecayProtocol). 0: not set,
+  // the schedule above. Written to session.json as "span_s" only when set,
+  // so a session without it (every session before it existed) reads as the
+  // schedule above.
+  double span_s = 0;
+  static constexpr int kSpanFramesPerDecade = 10;
+  static constexpr double kSpanFirstSlot_s = 0.1;
+  // The shortest span: one decade of log-spaced frames.
+  static constexpr double kSpanMin_s = 10 * kSpanFirstSlot_s;
 
   bool IsValid(std::string* error) const;
   nlohmann::json ToJson() const;
