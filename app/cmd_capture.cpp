@@ -428,7 +428,7 @@ void WarnIfBelowTheRange(const std::string& protocol, const fs::path& dir) {
   std::fprintf(stderr,
                "phos capture: warning: %s: from %s s after light-off the glow stayed under %s%% of the camera's "
                "range at the longest exposure (%s s): %d frames below the well-exposed range\n",
-               dir.string().c_str(), FormatShort(from_s, 3).c_str(),
+               dir.string().c_str(), FormatShort(from_s, 4).c_str(),
                FormatShort(100 * settings.low_fraction, 3).c_str(), FormatShort(settings.max_exposure_s, 3).c_str(),
                below);
 }
