@@ -13,7 +13,9 @@
 //
 // Every field a protocol writes is required when its record is read: a
 // record that lacks one, or has one of the wrong type, is a UserError naming
-// the file, the line and the field, never a default.
+// the file, the line and the field, never a default. The one exception is
+// the decay's span_s, written only when set: its absence is the schedule
+// sessions had before it (DecayProtocolOptions).
 //
 // In the session library (no image decoding), so fits read these without
 // linking the devices.
