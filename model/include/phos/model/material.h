@@ -32,7 +32,7 @@
 
 namespace phos {
 
-inline constexpr int kMaxStates = 4;
+inline constexpr int kMaxStates = 16;
 // The finite ranges a material file's values must lie in (docs/fuzzing.md,
 // "Limits"), so that every product the model forms (ke E, kr r, Lambda kr r,
 // e^{-kr t}) stays finite, in float as in double: kr and every ke in
