@@ -406,10 +406,38 @@ void WarnIfNoGlow(const std::string& protocol, const fs::path& dir) {
                settings.charge_light.c_str());
 }
 
+// A decay over a span whose glow went below the well-exposed range at the
+// longest exposure (the camera's floor for this protocol): its last frames
+// are kept, fainter than the rest, and one warning line on stderr says from
+// which delay, so a longer --max-exposure-s can lift them next time.
+void WarnIfBelowTheRange(const std::string& protocol, const fs::path& dir) {
+  if (protocol != "decay") return;
+  const DecayProtocolOptions settings =
+      DecayProtocolOptions::FromJson(ReadSessionRecord(dir).settings, (dir / "session.json").string() + ": settings");
+  if (!(settings.span_s > 0)) return;
+  int below = 0;
+  double from_s = 0;
+  for (const auto& [frame, line, fields] : ReadProtocolFrames<DecayFrameFields>(dir)) {
+    const double range = std::ldexp(1.0, frame.adc_bits) - 1 - frame.black_level_dn;
+    double brightest = 0;
+    for (double mean : fields.signal.mean_signal_dn) brightest = std::max(brightest, mean / range);
+    if (frame.exposure_s < settings.max_exposure_s * (1 - 1e-9) || brightest >= settings.low_fraction) continue;
+    if (below++ == 0) from_s = fields.delay_after_light_off_s;
+  }
+  if (below == 0) return;
+  std::fprintf(stderr,
+               "phos capture: warning: %s: from %s s after light-off the glow stayed under %s%% of the camera's "
+               "range at the longest exposure (%s s): %d frames below the well-exposed range\n",
+               dir.string().c_str(), FormatShort(from_s, 4).c_str(),
+               FormatShort(100 * settings.low_fraction, 3).c_str(), FormatShort(settings.max_exposure_s, 3).c_str(),
+               below);
+}
+
 void PrintSession(const std::string& protocol, const fs::path& dir) {
   Say("phos capture %s: %zu frames -> %s\n", protocol.c_str(), ReadFrameRecords(dir).frames.size(),
       dir.string().c_str());
   WarnIfNoGlow(protocol, dir);
+  WarnIfBelowTheRange(protocol, dir);
 }
 
 void Previews(const std::string& protocol, const fs::path& session_dir, const fs::path& into) {
@@ -467,6 +495,7 @@ struct AllArgs : CaptureArgs {
   std::string light;  // charge light (default: the lab's)
   std::vector<std::string> excite;
   double charge_s = 5400, duration_s = 180, interval_s = 5, reset_s = 900;
+  double decay_span_s = 0;  // 0: the decay's schedule of --interval-s and --duration-s
   int tail_frames = ExcitationProtocolOptions{}.tail_frames;
 };
 
@@ -538,6 +567,7 @@ void RunAllParts(const fs::path& dir, const AllSettings& parts, Devices& devices
     RunProtocol(plan, devices, session, false);
     Say("  %-16s %d frames\n", protocol.c_str(), static_cast<int>(ReadFrameRecords(part).frames.size()));
     WarnIfNoGlow(protocol, part);
+    WarnIfBelowTheRange(protocol, part);
   }
 }
 
@@ -571,6 +601,7 @@ void RunCaptureAll(AllArgs args) {
   decay.charge_s = args.charge_s;
   decay.duration_s = args.duration_s;
   decay.interval_s = args.interval_s;
+  decay.span_s = args.decay_span_s;
   ExcitationProtocolOptions excitation;
   excitation.lights = excite;
   excitation.reset_s = args.reset_s;
@@ -758,6 +789,11 @@ void AddDeviceOptions(CLI::App* cmd, CaptureArgs& args) {
                 "instead of the progress lines");
 }
 
+constexpr const char* kDecaySpanHelp =
+    "decay: seconds of decay to record over hours (e.g. 3600, 36000): frames log-spaced in delay, 10 per\n"
+    "decade from 0.1 s, each exposed for the glow predicted at its slot; replaces --interval-s,\n"
+    "--duration-s and --early-frames";
+
 struct DecayArgs : CaptureArgs {
   std::string light;
   DecayProtocolOptions decay;
@@ -797,6 +833,7 @@ void RegisterCaptureDecay(CLI::App* capture) {
   decay->add_option("--early-frames", decay_args->decay.early_frames,
                     "frames between the first two slots, at delays halving from --interval-s / 2, so a state\n"
                     "that decays in under a second is seen by several frames (default 6; 0: none)");
+  decay->add_option("--decay-span-s", decay_args->decay.span_s, kDecaySpanHelp)->check(kPositive);
   decay->add_option("--initial-exposure-s", decay_args->decay.initial_exposure_s, "first exposure (default 0.05)")
       ->check(kPositive);
   decay->add_option("--max-exposure-s", decay_args->decay.max_exposure_s, "longest exposure (default 4)")
@@ -917,6 +954,7 @@ void RegisterCaptureAll(CLI::App* capture) {
   all->add_option("--charge-s", all_args->charge_s, "decay: seconds of charging (default 5400)")->check(kNonNegative);
   all->add_option("--duration-s", all_args->duration_s, "decay: seconds recorded (default 180)")->check(kPositive);
   all->add_option("--interval-s", all_args->interval_s, "decay: seconds between frames (default 5)")->check(kPositive);
+  all->add_option("--decay-span-s", all_args->decay_span_s, kDecaySpanHelp)->check(kPositive);
   all->add_option("--reset-s", all_args->reset_s, "excitation: darkness before each charge (default 900)")
       ->check(kNonNegative);
   all->add_option("--tail-frames", all_args->tail_frames,

@@ -1,5 +1,6 @@
 #include "phos/acquire/protocol_records.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 
@@ -68,19 +69,31 @@ bool DecayProtocolOptions::IsValid(std::string* error) const {
     return *error = "need 0 < initial exposure <= max exposure", false;
   if (!(low_fraction > 0 && low_fraction < high_fraction && high_fraction < 1))
     return *error = "need 0 < low fraction < high fraction < 1", false;
+  if (span_s == 0) return true;  // not set: the schedule of interval_s and duration_s
+  if (!std::isfinite(span_s) || !(span_s > 0))
+    return *error =
+               "the decay span (--decay-span-s) must be a finite number of seconds > 0, got " + FormatDouble(span_s),
+           false;
+  if (span_s < kSpanMin_s || !(span_s > 10 * first_delay_s))
+    return *error = "the decay span (--decay-span-s) of " + FormatDouble(span_s) +
+                    " s is too short: it needs at least " + FormatDouble(std::max(kSpanMin_s, 10 * first_delay_s)) +
+                    " s (a decade of log-spaced frames after the first delay)",
+           false;
   return true;
 }
 
 nlohmann::json DecayProtocolOptions::ToJson() const {
-  return {{"charge_light", charge_light},
-          {"charge_s", charge_s},
-          {"interval_s", interval_s},
-          {"duration_s", duration_s},
-          {"first_delay_s", first_delay_s},
-          {"early_frames", early_frames},
-          {"initial_exposure_s", initial_exposure_s},
-          {"max_exposure_s", max_exposure_s},
-          {"gain", gain}};
+  nlohmann::json j = {{"charge_light", charge_light},
+                      {"charge_s", charge_s},
+                      {"interval_s", interval_s},
+                      {"duration_s", duration_s},
+                      {"first_delay_s", first_delay_s},
+                      {"early_frames", early_frames},
+                      {"initial_exposure_s", initial_exposure_s},
+                      {"max_exposure_s", max_exposure_s},
+                      {"gain", gain}};
+  if (span_s != 0) j["span_s"] = span_s;  // absent: the schedule of interval_s and duration_s
+  return j;
 }
 
 DecayProtocolOptions DecayProtocolOptions::FromJson(const nlohmann::json& j, const std::string& where) {
@@ -95,6 +108,9 @@ DecayProtocolOptions DecayProtocolOptions::FromJson(const nlohmann::json& j, con
   o.initial_exposure_s = f["initial_exposure_s"].Number();
   o.max_exposure_s = f["max_exposure_s"].Number();
   o.gain = f["gain"].NumberInRange(1e-6, 1e6);
+  // Optional, unlike every other key: sessions before it have none and keep
+  // their schedule. When there, a span IsValid would take.
+  if (const std::optional<JsonField> span = f.Optional("span_s")) o.span_s = span->NumberAtLeast(kSpanMin_s);
   return o;
 }
 

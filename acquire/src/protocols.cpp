@@ -108,7 +108,113 @@ void RunRecorded(SessionWriter& session, Lights& lights, const Clock& clock, con
 
 }  // namespace
 
+namespace {
+
+// The delays of a decay over hours (Sec. 8.4.4 for an afterglow that lasts):
+// the first frame at first_delay_s, then kSpanFramesPerDecade frames per
+// decade of delay ending at span_s, from the first of them at or after
+// kSpanFirstSlot_s. A t^-n glow changes by the same factor from each frame
+// to the next, so each is as informative as the one before, and 10 hours
+// take 56 frames rather than the 7200 of a frame every 5 s.
+std::vector<double> LogSpanDelays(const DecayProtocolOptions& options) {
+  const double n = DecayProtocolOptions::kSpanFramesPerDecade;
+  const double first_slot = std::max(DecayProtocolOptions::kSpanFirstSlot_s, options.first_delay_s);
+  const int steps = static_cast<int>(std::floor(n * std::log10(options.span_s / first_slot) + 1e-9));
+  std::vector<double> delays = {options.first_delay_s};
+  for (int k = steps; k >= 0; --k) {
+    const double delay = options.span_s * std::pow(10.0, -k / n);
+    if (delay > options.first_delay_s) delays.push_back(delay);
+  }
+  return delays;
+}
+
+// The time from frame m's slot to the next one's (after the last: the
+// schedule's own step).
+double SlotGap(const std::vector<double>& delays, std::size_t m, const DecayProtocolOptions& options) {
+  if (m + 1 < delays.size()) return delays[m + 1] - delays[m];
+  if (options.span_s > 0) return delays[m] * (std::pow(10.0, 1.0 / DecayProtocolOptions::kSpanFramesPerDecade) - 1);
+  return options.interval_s;
+}
+
+// Over a span, the exposure a faint glow needs may outlast the gap to the
+// next slot: it then runs on to end (with its readout) before a later slot,
+// and the slots it covers are skipped, so every frame stays on the log grid
+// and well exposed. The room for an exposure of `wanted_s` at slot m.
+double SpanRoom(const std::vector<double>& delays, std::size_t m, double wanted_s, double readout_s,
+                const DecayProtocolOptions& options) {
+  double room = 0.9 * SlotGap(delays, m, options) - readout_s;
+  for (std::size_t j = m + 2; room < wanted_s && j < delays.size(); ++j)
+    room = 0.9 * (delays[j] - delays[m]) - readout_s;
+  return room;
+}
+
+// The decay's exposure control. The schedule of interval_s: double the
+// exposure below low_fraction, halve it above high_fraction or on clipping.
+// Over a span (span_s > 0), the frames lie a growing time apart and the glow
+// fades by orders of magnitude, so a doubling per frame would lag: the next
+// exposure is set for the glow predicted at the next slot, the last two
+// frames' signal per second extrapolated as a power law of the delay (at
+// most no fade), to put the signal at the geometric middle of the
+// well-exposed range. It never shortens unless a frame came out too bright,
+// so it grows as the glow fades, up to max_exposure_s, where the glow goes
+// below the range: the camera's floor for this protocol.
+class DecayExposure {
+ public:
+  explicit DecayExposure(const DecayProtocolOptions& options)
+      : options_(options),
+        exposure_(options.initial_exposure_s),
+        target_(std::sqrt(options.low_fraction * options.high_fraction)) {}
+
+  // The exposure of a frame at `delay_s`, given at most `room_s`.
+  double For(double delay_s, double room_s) const {
+    double exposure = exposure_;
+    if (options_.span_s > 0 && !rates_.empty()) {
+      const auto& [t1, rate1] = rates_.back();
+      const auto& [t0, rate0] = rates_.front();
+      const double slope = rates_.size() == 2 ? std::log(rate1 / rate0) / std::log(t1 / t0) : 0;
+      exposure = std::max(exposure, target_ / (rate1 * std::min(1.0, std::pow(delay_s / t1, slope))));
+    }
+    return std::min({exposure, options_.max_exposure_s, std::max(1e-6, room_s)});
+  }
+
+  // What a frame at `delay_s` exposed for `exposure_s` showed: its brightest
+  // channel as a fraction of the range, and whether it clipped.
+  void Saw(double delay_s, double exposure_s, double brightest, bool clipped) {
+    if (options_.span_s == 0) {
+      if (brightest > options_.high_fraction || clipped)
+        exposure_ = std::max(exposure_ / 2, 1e-4);
+      else if (brightest < options_.low_fraction)
+        exposure_ = std::min(exposure_ * 2, options_.max_exposure_s);
+      return;
+    }
+    // A clipped frame under-reads the glow (and says the rates before it
+    // were wrong); one under 1% of the range reads mostly noise.
+    if (clipped) rates_.clear();
+    if (!clipped && brightest > 0.01) rates_.push_back({delay_s + exposure_s / 2, brightest / exposure_s});
+    // The glow cannot grow in the dark: a rate that did not fall is noise.
+    if (rates_.size() == 3) rates_.erase(rates_.begin());
+    if (rates_.size() == 2 && !(rates_[1].second < rates_[0].second)) rates_.erase(rates_.begin());
+    if (clipped)
+      exposure_ = std::max(exposure_s / 2, 1e-4);
+    else if (brightest > options_.high_fraction)
+      exposure_ = std::max(exposure_s * target_ / brightest, 1e-4);
+    else if (rates_.empty())
+      exposure_ = std::min(exposure_s * 2, options_.max_exposure_s);
+    else
+      exposure_ = exposure_s;  // the floor: never shorter unless too bright
+  }
+
+ private:
+  const DecayProtocolOptions& options_;
+  double exposure_;                               // the next exposure's floor
+  double target_;                                 // the signal aimed at, as a fraction of the range
+  std::vector<std::pair<double, double>> rates_;  // (mid-exposure delay, brightest fraction per second)
+};
+
+}  // namespace
+
 std::vector<double> DecayFrameDelays(const DecayProtocolOptions& options) {
+  if (options.span_s > 0) return LogSpanDelays(options);
   std::vector<double> delays = {options.first_delay_s};
   for (int j = options.early_frames; j >= 1; --j)
     delays.push_back(options.first_delay_s + options.interval_s / std::ldexp(1.0, j));
@@ -133,28 +239,28 @@ DecayProtocolResult RunDecayProtocol(Camera& camera, Lights& lights, Clock& cloc
     RecordLight(session, lights, clock, options.charge_light, false);
     result.light_off_s = clock.now_s();
 
-    double exposure = options.initial_exposure_s;
+    DecayExposure exposure(options);
     const std::vector<double> delays = DecayFrameDelays(options);
-    double readout_s = 0;  // the camera's time per frame beyond the exposure, as last measured
+    double readout_s = 0;     // the camera's time per frame beyond the exposure, as last measured
+    double busy_until_s = 0;  // on the clock: the last frame's end
     for (std::size_t m = 0; m < delays.size(); ++m) {
       const double start = result.light_off_s + delays[m];
+      if (options.span_s > 0 && busy_until_s > start) continue;  // a longer exposure ran over it
       clock.SleepUntil(start);
       // Never expose (and read out) past the next frame's start. A slot the
       // camera cannot take (its readout leaves under 0.1 ms of exposure, or
       // the slot is gone by now: early frames on a slow camera) is skipped.
-      const double gap = m + 1 < delays.size() ? delays[m + 1] - delays[m] : options.interval_s;
-      const double room = 0.9 * gap - readout_s;
+      const double delay = clock.now_s() - result.light_off_s;
+      const double room = options.span_s > 0 ? SpanRoom(delays, m, exposure.For(delay, HUGE_VAL), readout_s, options)
+                                             : 0.9 * SlotGap(delays, m, options) - readout_s;
       if (m + 1 < delays.size() && (room < 1e-4 || clock.now_s() >= result.light_off_s + delays[m + 1])) continue;
-      const double exposure_now = std::min(exposure, std::max(1e-6, room));
+      const double exposure_now = exposure.For(delay, room);
       Frame frame = camera.Capture(exposure_now, options.gain);
+      busy_until_s = clock.now_s();
       readout_s = std::max(0.0, clock.now_s() - frame.t_start_s - exposure_now);
       const double brightest = RecordFrame(session, frame, DecayFrameFields{frame.t_start_s - result.light_off_s, {}});
       ++result.frames;
-      // Auto-exposure for the next frame.
-      if (brightest > options.high_fraction || frame.SaturatedFraction() > 0)
-        exposure = std::max(exposure / 2, 1e-4);
-      else if (brightest < options.low_fraction)
-        exposure = std::min(exposure * 2, options.max_exposure_s);
+      exposure.Saw(frame.t_start_s - result.light_off_s, exposure_now, brightest, frame.SaturatedFraction() > 0);
     }
   });
   return result;

@@ -268,6 +268,113 @@ TEST(CaptureResumeCommand, SaysWhatCannotBeResumed) {
       testing::IsOneLineUserError(RunPhos("capture resume " + (dir / "nothing").string()), "is not a capture session"));
 }
 
+// A slow two-state material (kr 1e-3 and 1e-4 /s, orange's ke and Lambda)
+// written where the test runs: a glow that lasts hours.
+std::string SlowMaterial(const std::filesystem::path& dir) {
+  nlohmann::json material = ReadJsonFile(testing::Fixture("materials/orange.json"));
+  material["name"] = "slow";
+  material["states"].push_back(material["states"][0]);
+  material["states"][0]["kr"] = 1e-3;
+  material["states"][1]["kr"] = 1e-4;
+  testing::WriteText(dir / "slow.json", material.dump());
+  return " --sim-material " + (dir / "slow.json").string();
+}
+
+// A decay over 10 hours on the virtual clock: the span is recorded, the
+// frames are log-spaced and reach it, and where the glow falls below the
+// well-exposed range at the longest exposure one warning line says so; with
+// the camera's 30 s the hour stays in range and nothing is said.
+TEST(CaptureDecayCommand, ASpanOfHoursIsLogSpacedAndWarnsWhereTheGlowLeavesTheRange) {
+  testing::TempDir dir;
+  const std::string slow = SlowMaterial(dir.path());
+  auto ten = RunPhos("capture decay" + slow + " --decay-span-s 36000 --out " + (dir / "ten").string());
+  ASSERT_EQ(ten.exit_code, 0) << ten.err;
+  EXPECT_EQ(ReadJsonFile(dir / "ten" / "session.json")["settings"]["span_s"], 36000);
+  const std::vector<nlohmann::json> frames = ReadJsonLines(dir / "ten" / "frames.jsonl");
+  ASSERT_GE(frames.size(), 30u);
+  EXPECT_NEAR(frames.back()["delay_after_light_off_s"].get<double>(), 36000, 1e-6);
+  for (std::size_t m = 2; m < frames.size(); ++m) {
+    const double ratio =
+        frames[m]["delay_after_light_off_s"].get<double>() / frames[m - 1]["delay_after_light_off_s"].get<double>();
+    const double tenths = 10 * std::log10(ratio);  // whole tenths of a decade
+    EXPECT_NEAR(tenths, std::round(tenths), 1e-6) << m;
+    EXPECT_GE(std::round(tenths), 1) << m;
+  }
+  EXPECT_EQ(frames.back()["exposure_s"], 4);  // the longest, by default
+  EXPECT_NE(ten.err.find("the glow stayed under 15% of the camera's range at the longest exposure (4 s)"),
+            std::string::npos)
+      << ten.err;
+  EXPECT_EQ(std::count(ten.err.begin(), ten.err.end(), '\n'), 1) << ten.err;
+
+  auto hour =
+      RunPhos("capture decay" + slow + " --decay-span-s 3600 --max-exposure-s 30 --out " + (dir / "hour").string());
+  ASSERT_EQ(hour.exit_code, 0) << hour.err;
+  EXPECT_EQ(hour.err, "");
+  EXPECT_NEAR(ReadJsonLines(dir / "hour" / "frames.jsonl").back()["delay_after_light_off_s"].get<double>(), 3600, 1e-6);
+  // Without the option the schedule is the old one, and its settings say nothing of a span.
+  auto plain = RunPhos("capture decay" + slow + " --charge-s 60 --duration-s 20 --out " + (dir / "plain").string());
+  ASSERT_EQ(plain.exit_code, 0) << plain.err;
+  EXPECT_FALSE(ReadJsonFile(dir / "plain" / "session.json")["settings"].contains("span_s"));
+}
+
+TEST(CaptureDecayCommand, ABadSpanIsOneLineAndWritesNothing) {
+  testing::TempDir dir;
+  const std::string orange = " --sim-material " + testing::Fixture("materials/orange.json").string();
+  const std::string out = " --out " + (dir / "s").string();
+  struct Case {
+    std::string arguments, expected;
+  } cases[] = {
+      {"capture decay" + orange + out + " --decay-span-s 0", "--decay-span-s: expected a number > 0, got 0"},
+      {"capture decay" + orange + out + " --decay-span-s -3600", "--decay-span-s: expected a number > 0, got -3600"},
+      {"capture decay" + orange + out + " --decay-span-s inf", "--decay-span-s: expected a finite number, got inf"},
+      {"capture decay" + orange + out + " --decay-span-s nan", "expected a finite number, got nan"},
+      {"capture decay" + orange + out + " --decay-span-s 0.5",
+       "the decay span (--decay-span-s) of 0.5 s is too short: it needs at least 1 s"},
+      {"capture decay" + orange + out + " --decay-span-s 5 --first-delay-s 1",
+       "the decay span (--decay-span-s) of 5 s is too short: it needs at least 10 s"},
+      {"capture all" + orange + out + " --decay-span-s 0.5", "decay: the decay span (--decay-span-s) of 0.5 s"},
+      {"capture all" + orange + out + " --decay-span-s 0", "--decay-span-s: expected a number > 0, got 0"},
+  };
+  for (const Case& c : cases) {
+    auto result = RunPhos(c.arguments);
+    EXPECT_TRUE(testing::IsOneLineUserError(result, c.expected)) << c.arguments << ": " << result.err;
+    EXPECT_FALSE(std::filesystem::exists(dir / "s")) << c.arguments;
+  }
+}
+
+// Killed mid-decay over an hour, a decay still cannot be continued (the
+// glow faded unobserved): resume says so and keeps the frames; in an `all`
+// folder the decay is moved aside and taken again whole, over its span.
+TEST(CaptureResumeCommand, ADecayOverASpanKilledMidwayIsNotContinued) {
+  testing::TempDir dir;
+  const std::string slow = SlowMaterial(dir.path());
+  ASSERT_EQ(RunPhos("capture decay" + slow + " --decay-span-s 3600 --out " + (dir / "d").string()).exit_code, 0);
+  KillAfter(dir / "d", 20);
+  EXPECT_TRUE(
+      testing::IsOneLineUserError(RunPhos("capture resume " + (dir / "d").string()), "a decay cannot be continued"));
+  EXPECT_EQ(ReadJsonLines(dir / "d" / "frames.jsonl").size(), 20u);
+  EXPECT_FALSE(std::filesystem::exists(dir / "d" / "stop.json"));
+
+  const std::string all = (dir / "all").string();
+  ASSERT_EQ(RunPhos("capture all" + slow +
+                    " --decay-span-s 3600 --charge-s 600 --excite led420 --tail-frames 0 "
+                    "--reset-s 60 --out " +
+                    all)
+                .exit_code,
+            0);
+  KillAfter(dir / "all" / "decay", 20);
+  for (const char* part : {"excitation"}) std::filesystem::remove_all(dir / "all" / part);
+  std::filesystem::remove(dir / "all" / "stop.json");
+  auto resumed = RunPhos("capture resume " + all);
+  ASSERT_EQ(resumed.exit_code, 0) << resumed.err;
+  EXPECT_NE(resumed.out.find("decay cannot continue"), std::string::npos) << resumed.out;
+  EXPECT_EQ(ReadJsonLines(dir / "all" / "decay.interrupted-1" / "frames.jsonl").size(), 20u);
+  EXPECT_EQ(ReadJsonFile(dir / "all" / "decay" / "session.json")["settings"]["span_s"], 3600);
+  EXPECT_NEAR(ReadJsonLines(dir / "all" / "decay" / "frames.jsonl").back()["delay_after_light_off_s"].get<double>(),
+              3600, 1e-6);
+  EXPECT_EQ(ReadJsonFile(dir / "all" / "stop.json")["how"], "complete");
+}
+
 // The fit of orange's session, against orange: kr's and every measured ke's
 // relative error, the largest.
 double FitErrorAgainstOrange(const std::filesystem::path& session) {

@@ -13,7 +13,9 @@
 //
 // Every field a protocol writes is required when its record is read: a
 // record that lacks one, or has one of the wrong type, is a UserError naming
-// the file, the line and the field, never a default.
+// the file, the line and the field, never a default. The one exception is
+// the decay's span_s, written only when set: its absence is the schedule
+// sessions had before it (DecayProtocolOptions).
 //
 // In the session library (no image decoding), so fits read these without
 // linking the devices.
@@ -70,6 +72,19 @@ struct DecayProtocolOptions {
   // fractions of the ADC range above black. Not recorded: a session resumes
   // and fits with these values.
   double low_fraction = 0.15, high_fraction = 0.7;
+  // A decay over hours (`--decay-span-s`): > 0 replaces the schedule above
+  // (interval_s, duration_s, early_frames) with frames log-spaced in delay,
+  // kSpanFramesPerDecade per decade, from the first slot at or after
+  // kSpanFirstSlot_s to span_s, and the exposure of each frame is predicted
+  // from the glow's fade (DecayFrameDelays, RunDecayProtocol). 0: not set,
+  // the schedule above. Written to session.json as "span_s" only when set,
+  // so a session without it (every session before it existed) reads as the
+  // schedule above.
+  double span_s = 0;
+  static constexpr int kSpanFramesPerDecade = 10;
+  static constexpr double kSpanFirstSlot_s = 0.1;
+  // The shortest span: one decade of log-spaced frames.
+  static constexpr double kSpanMin_s = 10 * kSpanFirstSlot_s;
 
   bool IsValid(std::string* error) const;
   nlohmann::json ToJson() const;

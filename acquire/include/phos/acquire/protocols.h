@@ -35,7 +35,10 @@ using RigChange = std::function<void(const std::string& what, bool in_place)>;
 //
 // The frames' delays after light-off: first_delay_s, then the early frames
 // at first_delay_s + interval_s / 2^j (j = early_frames..1), then every
-// interval_s until duration_s.
+// interval_s until duration_s. Over a span (span_s > 0, a decay over
+// hours): first_delay_s, then span_s 10^(-k/10) for k = K..0, from the
+// first at or after 0.1 s, and each exposure is set for the glow predicted
+// at its slot (protocols.cpp, DecayExposure).
 std::vector<double> DecayFrameDelays(const DecayProtocolOptions& options);
 
 struct DecayProtocolResult {
