@@ -15,6 +15,7 @@
 
 #include "cli_finite.h"
 #include "commands.h"
+#include "curve_file.h"
 #include "phos/fit/charge_fit.h"
 #include "phos/fit/decay_fit.h"
 #include "phos/util/atomic_file.h"
@@ -32,32 +33,11 @@ Weighting ParseWeightsOption(const std::string& text) {
   return *weighting;
 }
 
-namespace {
-
-struct CurveArgs {
-  std::vector<std::string> csv, positional;  // as parsed
-  std::vector<std::string> files;            // both, in command-line order
-  std::string weights = "none", plot;
-  std::optional<double> from_s, to_s;
-  int components = 0, max_components = 0;
-  int max_iterations = 100;
-  bool json = false, background = false, amplitude_stderr = false, keep_unconverged = false;
-};
-
-// A file's curve as the fits get it: windowed, sorted, and what was done to it.
-struct LoadedCurve {
-  std::string file;
-  Curve curve;
-  TimeOrder order;
-  std::size_t samples_in_file = 0;
-  std::vector<std::string> warnings;
-};
-
 // First column: time, in seconds unless its name says another unit ("t_min":
 // converted, and said in a warning); every further column: one channel. The
 // window (--from, --to, in seconds) is applied first, then the samples are
 // sorted by time.
-LoadedCurve LoadCurve(const std::string& path, const CurveArgs& args) {
+LoadedCurve LoadCurveFile(const std::string& path, std::optional<double> from_s, std::optional<double> to_s) {
   CsvTable table = ReadCsv(path);
   if (table.header.size() < 2)
     ThrowUserError(path, "header",
@@ -78,19 +58,35 @@ LoadedCurve LoadCurve(const std::string& path, const CurveArgs& args) {
     curve.names.push_back(Printable(table.header[c]));  // printed in the text: no raw ESC or newline
   }
   loaded.samples_in_file = curve.size();
-  if (args.from_s || args.to_s) {
-    const double from = args.from_s.value_or(-HUGE_VAL), to = args.to_s.value_or(HUGE_VAL);
+  if (from_s || to_s) {
+    const double from = from_s.value_or(-HUGE_VAL), to = to_s.value_or(HUGE_VAL);
     const std::vector<double> times_s = curve.t_s;
     KeepTimeWindow(&curve, from, to);
     if (curve.size() == 0 && loaded.samples_in_file > 0) {
       const auto [lo, hi] = std::minmax_element(times_s.begin(), times_s.end());
-      ThrowUserError(path, args.from_s ? "--from" : "--to",
+      ThrowUserError(path, from_s ? "--from" : "--to",
                      "no sample in the window (the file's times run from " + FormatDouble(*lo) + " to " +
                          FormatDouble(*hi) + " s)");
     }
   }
   loaded.order = SortByTime(&curve, path);
   return loaded;
+}
+
+namespace {
+
+struct CurveArgs {
+  std::vector<std::string> csv, positional;  // as parsed
+  std::vector<std::string> files;            // both, in command-line order
+  std::string weights = "none", plot;
+  std::optional<double> from_s, to_s;
+  int components = 0, max_components = 0;
+  int max_iterations = 100;
+  bool json = false, background = false, amplitude_stderr = false, keep_unconverged = false;
+};
+
+LoadedCurve LoadCurve(const std::string& path, const CurveArgs& args) {
+  return LoadCurveFile(path, args.from_s, args.to_s);
 }
 
 // What sorting found, in words; empty when the file was in order without replicates.
@@ -515,6 +511,8 @@ void RegisterFitCurve(CLI::App& fit) {
                 "none or poisson (none by default: a curve's unit is not known to be a count)")
       ->capture_default_str();
   AddCurveOptions(c, charge, RunChargeCurve);
+
+  RegisterFitSchedule(fit);
 }
 
 }  // namespace phos::app

@@ -12,6 +12,7 @@
 
 #include <algorithm>
 #include <csignal>
+#include <cmath>
 #include <cstdlib>
 #include <cstring>
 #include <chrono>
@@ -19,6 +20,8 @@
 #include <filesystem>
 #include <iostream>
 #include <memory>
+#include <numeric>
+#include <optional>
 #include <regex>
 #include <set>
 #include <string>
@@ -29,6 +32,7 @@
 #include "cli_finite.h"
 #include "commands.h"
 #include "phos/model/material.h"
+#include "phos/model/photometry.h"
 #include "phos/render/exposure.h"
 #include "phos/render/night_vision.h"
 #include "phos/render/phosphor_map.h"
@@ -54,8 +58,9 @@ struct RenderArgs {
   int spp = 0, width = 0, height = 0;
   std::string exposure_text;  // --exposure as given: a number or "auto"
   bool exposure_given = false;
-  double exposure = 0;         // --exposure's number (0: not given or "auto")
-  bool exposure_auto = false;  // --exposure auto
+  double exposure = 0;          // --exposure's number (0: not given or "auto")
+  bool exposure_auto = false;   // --exposure auto
+  std::optional<double> ev100;  // --exposure ev100:N (a physical scene's camera)
   double night_vision_cd = 0;
   double budget_s = 0, quality = 0;
   bool transport_given = false, indirect_visibility = false;
@@ -300,15 +305,43 @@ void ZeroUnknownKeEverywhere(render::Scene* scene) {
                  Join(zeroed, "; ").c_str());
 }
 
-// --exposure: "auto" or a positive number, into exposure_auto and exposure.
+// --exposure: "auto", "ev100:N" or a positive number, into exposure_auto,
+// ev100 and exposure.
 void ParseExposureOption(RenderArgs* args) {
   if (!args->exposure_given) return;
   if (args->exposure_text == "auto") {
     args->exposure_auto = true;
     return;
   }
+  const std::string_view text = args->exposure_text;
+  if (text.starts_with("ev100:")) {
+    double ev100 = 0;
+    if (!ParseDouble(std::string(text.substr(6)), &ev100) || !(std::abs(ev100) <= 64))
+      ThrowUserError("", "--exposure",
+                     "expected ev100:N with N a number in [-64, 64], got \"" + args->exposure_text + "\"");
+    args->ev100 = ev100;
+    return;
+  }
   if (!ParseDouble(args->exposure_text, &args->exposure) || !(args->exposure > 0))
-    ThrowUserError("", "--exposure", "expected \"auto\" or a positive number, got \"" + args->exposure_text + "\"");
+    ThrowUserError("", "--exposure",
+                   "expected \"auto\", ev100:N or a positive number, got \"" + args->exposure_text + "\"");
+}
+
+// --exposure ev100:N of a physical scene: the scale before the tone map
+// that shows a luminance of 1.2 x 2^EV100 cd/m² (the luminance that
+// saturates the sensor at that EV100: L_max = 78 / (q S) x 2^EV100 at
+// S = 100 and lens attenuation q = 0.65, ISO 12232's saturation-based
+// speed, as Filament's physically based camera defines it (Filament
+// documentation, "Physically based camera": exposure = 1 / (1.2 x 2^EV100),
+// after Lagarde and de Rousiers 2014, "Moving Frostbite to PBR") as 1. pbrt-v4 (src/pbrt/film.cpp,
+// PixelSensor) scales by imagingRatio = exposure time x ISO / 100 instead,
+// with no saturation point. The PNG's linear RGB has Y = 1 for band radiance 1
+// in every band (BandsToLinearSrgb), which is K = sum_b w_b cd/m²
+// (PhotopicBandEfficacy), so the scale is K / (1.2 x 2^EV100).
+double Ev100Exposure(const render::Scene& scene, double ev100) {
+  const std::vector<double> efficacy = PhotopicBandEfficacy(scene.bands);
+  const double luminance_of_rgb_one = std::accumulate(efficacy.begin(), efficacy.end(), 0.0);
+  return luminance_of_rgb_one / (1.2 * std::exp2(ev100));
 }
 
 // The frames "exposure": "auto" meters: those after dark, or every frame when
@@ -392,10 +425,13 @@ void WriteFrameViews(const RenderArgs& args, const render::Scene& scene, std::si
 }
 
 // A frame's linear sRGB and bands back from its EXR (32-bit float, as
-// WriteExr wrote them: the values rendered, bit for bit).
+// WriteExr wrote them: the values rendered, bit for bit), by channel name:
+// the file keeps them sorted, a physical frame's "Y" before "band0" (and
+// "band10" before "band2").
 void ReadFrameExr(const std::filesystem::path& path, int band_count, render::Image* rgb, render::Image* bands) {
-  const render::Image exr = render::ReadImage(path);
-  PHOS_CHECK(exr.channels == 3 + band_count);
+  std::vector<std::string> names = {"R", "G", "B"};
+  for (int b = 0; b < band_count; ++b) names.push_back("band" + std::to_string(b));
+  const render::Image exr = render::ReadImageChannels(path, names);
   *rgb = render::Image(exr.width, exr.height, 3);
   *bands = render::Image(exr.width, exr.height, band_count);
   for (std::size_t p = 0; p < static_cast<std::size_t>(exr.width) * exr.height; ++p) {
@@ -561,6 +597,14 @@ void PrepareScene(const RenderArgs& args, RenderRun& r) {
     r.scene.camera.exposure_auto = false;
   }
   if (args.exposure_auto) r.scene.camera.exposure_auto = true;
+  if (args.ev100) {
+    if (r.scene.units != Units::kPhysical)
+      ThrowUserError("", "--exposure",
+                     "ev100 is a camera's exposure in physical units; the scene '" + args.scene +
+                         "' is relative (its radiances have no unit): give a number or auto");
+    r.scene.camera.exposure = Ev100Exposure(r.scene, *args.ev100);
+    r.scene.camera.exposure_auto = false;
+  }
   // --material OBJECT=FILE: try another (say, a freshly fitted) material in the scene.
   for (const std::string& assignment : args.materials) {
     const auto equals = assignment.find('=');
@@ -574,6 +618,8 @@ void PrepareScene(const RenderArgs& args, RenderRun& r) {
     auto material = std::make_shared<Material>(LoadMaterial(file));
     if (const std::string mismatch = render::BandGridMismatch(material->bands, r.scene.bands); !mismatch.empty())
       ThrowUserError(file, "bands_nm", mismatch);
+    if (const std::string mismatch = render::UnitsMismatch(*material, file, r.scene.units); !mismatch.empty())
+      ThrowUserError("", "--material", "'" + name + "': " + mismatch);
     object->phosphor = material;
     object->phosphor_path = file;
   }
@@ -744,7 +790,7 @@ nlohmann::json RenderFrame(const RenderArgs& args, RenderRun& r, std::size_t f, 
 
   const std::filesystem::path exr = std::filesystem::path(args.out) / (FrameStem(f) + ".exr");
   const std::filesystem::path png = std::filesystem::path(args.out) / (FrameStem(f) + ".png");
-  WriteExr(exr, rgb, bands, r.scene.bands, args.exr_compression);
+  WriteExr(exr, rgb, bands, r.scene.bands, args.exr_compression, r.scene.units);
   nlohmann::json entry = {{"t", t},
                           {"exr", exr.string()},
                           {"png", png.string()},
@@ -842,6 +888,11 @@ void ReportRun(const RenderArgs& args, const RenderRun& r, const RenderedFrames&
   if (r.choose) result["transport_choice"] = r.choice_json;
   result["unread_material"] = rendered.unread_material;
   result["exposure"] = exposure;
+  // A physical scene's EXRs are in W/(sr m²) per band with Y in cd/m²
+  // (WriteExr); a relative scene's JSON stays as it was.
+  if (r.scene.units == Units::kPhysical)
+    result["units"] = {{"scene", "physical"}, {"bands", "W/(sr m2)"}, {"Y", "cd/m2"}};
+  if (args.ev100) result["exposure_ev100"] = *args.ev100;
   if (r.scene.camera.exposure_auto)
     result["exposure_auto"] = {{"metered", metered.after_dark ? "after dark" : "all frames"},
                                {"metered_frames", chosen.metered_frames},
@@ -965,6 +1016,8 @@ void RegisterRender(CLI::App& app) {
                   "PNG exposure: a positive number, or auto: one exposure for the sequence that shows the median\n"
                   "glowing pixel of the brightest frame after dark (no light on; of all frames if none is) as\n"
                   "mid-grey, metered on their direct-transport frames under any transport (docs/render.md);\n"
+                  "or, for a physical scene, ev100:N: a camera at EV100 N, 1.2 x 2^N cd/m^2 shown as 1 before\n"
+                  "the tone map (Filament's exposure = 1 / (1.2 x 2^EV100));\n"
                   "default: the camera's \"exposure\" (1 if not given). EXR files are never scaled")
       ->each([args](const std::string&) { args->exposure_given = true; });
   cmd->add_option("--night-vision", args->night_vision_cd,

@@ -89,6 +89,8 @@ void RegisterAfterglow(CLI::App& app);
 void RegisterFit(CLI::App& app);
 // The curve fits under `phos fit` (decay-curve, charge-curve): app/cmd_fit_curve.cpp.
 void RegisterFitCurve(CLI::App& fit);
+// `phos fit schedule-curve` (app/cmd_fit_schedule.cpp); RegisterFitCurve registers it.
+void RegisterFitSchedule(CLI::App& fit);
 // `phos fit` holding only the curve fits: the executable phos-fit-curve, which needs no session reader.
 void RegisterFitCurvesOnly(CLI::App& app);
 void RegisterCapture(CLI::App& app);

@@ -38,7 +38,7 @@ std::string ExecutableFor(int argc, char** argv) {
   const std::string_view command = argv[1];
   if (command == "fit" && argc > 2) {
     const std::string_view sub = argv[2];
-    if (sub == "decay-curve" || sub == "charge-curve") return "phos-fit-curve";
+    if (sub == "decay-curve" || sub == "charge-curve" || sub == "schedule-curve") return "phos-fit-curve";
   }
   return "phos-" + std::string(command);
 }

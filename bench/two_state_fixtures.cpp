@@ -1,6 +1,7 @@
-// Writes fixtures/materials/two-state-*.json from the specs in
-// model/synthetic.h (TwoStateFixtureSpecs), so the origin of every two-state
-// fixture is this program and its stated parameters, not a hand edit.
+// Writes fixtures/materials/two-state-*.json and the many-trap fixtures
+// (sign-paint.json) from the specs in model/synthetic.h
+// (TwoStateFixtureSpecs, ManyTrapFixtureSpecs), so the origin of every
+// synthetic fixture is this program and its stated parameters, not a hand edit.
 //   build/bin/phos-two-state-fixtures --out fixtures/materials
 // With --random N it writes N random ones instead (RandomTwoStateMaterial,
 // seeds --seed .. --seed + N - 1), for checks on materials no test saw.
@@ -33,6 +34,12 @@ int main(int argc, char** argv) {
   for (const phos::TwoStateSpec& spec : specs) {
     const std::filesystem::path path = std::filesystem::path(out) / (spec.name + ".json");
     phos::SaveMaterial(phos::TwoStateMaterial(spec), path);
+    std::printf("wrote %s\n", path.string().c_str());
+  }
+  if (random > 0) return 0;
+  for (const phos::ManyTrapSpec& spec : phos::ManyTrapFixtureSpecs()) {
+    const std::filesystem::path path = std::filesystem::path(out) / (spec.name + ".json");
+    phos::SaveMaterial(phos::ManyTrapMaterial(spec), path);
     std::printf("wrote %s\n", path.string().c_str());
   }
   return 0;

@@ -187,6 +187,8 @@ bool SessionRecords(std::string_view data) {
   accepted &= Refusal([&] { ReadSessionRecord(dir); });
   accepted &= Refusal([&] { ReadStopRecord(dir); });
   accepted &= Refusal([&] { ReadEventRecords(dir); });
+  // Each record against its own checksum: a report, never a crash.
+  Refusal([&] { RecordChecksumProblems(dir); });
   accepted &= Refusal([&] {
     const FrameRecords records = ReadFrameRecords(dir);
     for (const FrameRecord& frame : records.frames) {

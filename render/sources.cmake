@@ -4,6 +4,7 @@
 # copy of this list once missed one).
 set(PHOS_RENDER_SOURCES
   src/scene.cpp
+  src/light_units.cpp
   src/mesh.cpp
   src/spectral_upsampling.cpp
   src/surface_textures.cpp

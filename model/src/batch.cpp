@@ -122,29 +122,35 @@ Real StepScalar(Real r, Real a, Real kr, Real h) {
     return Rk4Step(r, a, kr, h);
 }
 
-// Points [j0, j1) of a batch with kStates states; kPerPoint: each point has
-// its own kr and emission scale (BatchCoefficients::per_point). Returns max k (1/s).
-template <typename Real, Integrator kIntegrator, int kStates, bool kPerPoint>
+// Points [j0, j1) of a batch with kStates states, or with c.nc of them
+// (up to kMaxStates) when kStates is 0: the many-trap materials of 5 to 16
+// states (model/synthetic.h) take that one kernel, with the state loops not
+// unrolled, while 1 to 4 states keep theirs, the count a constant.
+// kPerPoint: each point has its own kr and emission scale
+// (BatchCoefficients::per_point). Returns max k (1/s).
+template <typename Real, Integrator kIntegrator, int kCount, bool kPerPoint>
 Real AdvanceRange(const BatchCoefficients<Real>& c, const Real* E, std::size_t E_stride, Real h, StateBatch<Real>& s,
                   Real* Lp, std::size_t Lp_stride, std::size_t j0, std::size_t j1) {
   using P = Packet<Real>;
   constexpr int W = kPacketSize<Real>;
+  constexpr int kSlots = kCount > 0 ? kCount : kMaxStates;
+  const int kStates = kCount > 0 ? kCount : c.nc;
   const std::size_t n = s.n;
   Real* r_base = s.r.data();
   const Real* kr_base = kPerPoint ? c.kr_per_point.data() : nullptr;
   const Real* scale_base = kPerPoint ? c.emission_scale.data() : nullptr;
-  P kr_uniform[kStates];
+  P kr_uniform[kSlots];
   for (int i = 0; i < kStates; ++i) kr_uniform[i] = ei::pset1<P>(c.kr[i]);
   P k_max = ei::pzero(P());
   std::size_t j = j0;
   for (; j + W <= j1; j += W) {
-    P a[kStates];
+    P a[kSlots];
     for (int i = 0; i < kStates; ++i) a[i] = ei::pzero(P());
     for (int b = 0; b < c.n_exc; ++b) {
       const P e = ei::ploadu<P>(E + b * E_stride + j);
       for (int i = 0; i < kStates; ++i) a[i] = ei::pmadd(ei::pset1<P>(c.ke[i * c.n_exc + b]), e, a[i]);
     }
-    P r[kStates];
+    P r[kSlots];
     for (int i = 0; i < kStates; ++i) {
       r[i] = ei::ploadu<P>(r_base + i * n + j);
       const P kr = kPerPoint ? ei::ploadu<P>(kr_base + i * n + j) : kr_uniform[i];
@@ -153,7 +159,7 @@ Real AdvanceRange(const BatchCoefficients<Real>& c, const Real* E, std::size_t E
     }
     if (Lp != nullptr) {
       // What each state emits per unit of emission[b, i]: r, or r times the point's scale.
-      P w[kStates];
+      P w[kSlots];
       for (int i = 0; i < kStates; ++i) w[i] = kPerPoint ? ei::pmul(ei::ploadu<P>(scale_base + i * n + j), r[i]) : r[i];
       for (int b = 0; b < c.n_em; ++b) {  // Eq. 8.2
         P L = ei::pmul(ei::pset1<P>(c.emission[b * kStates]), w[0]);
@@ -242,7 +248,8 @@ BatchCoefficients<Real> BatchCoefficients<Real>::Compile(const Material& materia
 template <typename Real, Integrator kIntegrator>
 Real AdvanceAll(const BatchCoefficients<Real>& c, const Real* E, std::size_t E_stride, Real h, StateBatch<Real>& s,
                 Real* Lp, std::size_t Lp_stride) {
-  // The state count is a template argument so that a[] and r[] stay in registers.
+  // The state count is a template argument so that a[] and r[] stay in
+  // registers; 0 for more than 4 (AdvanceRange).
   auto run = [&](auto states) {
     constexpr int kStates = decltype(states)::value;
     return ForEachChunk(s.n, [&](std::size_t j0, std::size_t j1) {
@@ -257,8 +264,8 @@ Real AdvanceAll(const BatchCoefficients<Real>& c, const Real* E, std::size_t E_s
     case 3: return static_cast<Real>(run(std::integral_constant<int, 3>()));
     case 4: return static_cast<Real>(run(std::integral_constant<int, 4>()));
   }
-  PHOS_CHECK(!"1 to 4 states");
-  return 0;
+  PHOS_CHECK(c.nc > 4 && c.nc <= kMaxStates);
+  return static_cast<Real>(run(std::integral_constant<int, 0>()));
 }
 
 template <typename Real>
@@ -312,8 +319,7 @@ void EmitRange(const BatchCoefficients<Real>& c, const StateBatch<Real>& s, Real
 
 // r *= e^{-kr h} with each point's own kr, a packet at a time.
 template <typename Real>
-void DecayRangePerPoint(const BatchCoefficients<Real>& c, Real h, StateBatch<Real>& s, std::size_t j0,
-                        std::size_t j1) {
+void DecayRangePerPoint(const BatchCoefficients<Real>& c, Real h, StateBatch<Real>& s, std::size_t j0, std::size_t j1) {
   using P = Packet<Real>;
   constexpr int W = kPacketSize<Real>;
   const P minus_h = ei::pset1<P>(-h);
@@ -322,7 +328,8 @@ void DecayRangePerPoint(const BatchCoefficients<Real>& c, Real h, StateBatch<Rea
     const Real* __restrict kr = c.kr_per_point.data() + static_cast<std::size_t>(i) * s.n;
     std::size_t j = j0;
     for (; j + W <= j1; j += W)
-      ei::pstoreu(r + j, ei::pmul(ei::ploadu<P>(r + j), ExpNonPositive<Real>(ei::pmul(ei::ploadu<P>(kr + j), minus_h))));
+      ei::pstoreu(r + j,
+                  ei::pmul(ei::ploadu<P>(r + j), ExpNonPositive<Real>(ei::pmul(ei::ploadu<P>(kr + j), minus_h))));
     for (; j < j1; ++j) r[j] *= DecayFactor(kr[j], h);
   }
 }

@@ -12,6 +12,15 @@ namespace phos {
 
 const char* UnitsName(Units units) { return units == Units::kPhysical ? "physical" : "relative"; }
 
+Units ReadUnits(const JsonField& root) {
+  const auto field = root.Optional("units");
+  if (!field) return Units::kRelative;
+  const std::string name = field->String();
+  for (Units units : {Units::kRelative, Units::kPhysical})
+    if (name == UnitsName(units)) return units;
+  field->Fail("unknown units \"" + name + "\" (expected \"relative\" or \"physical\")");
+}
+
 bool Material::ChargeableIn(int b) const {
   for (const ExcitedState& s : states)
     if (!s.ke_known(b)) return false;
@@ -26,16 +35,6 @@ double NonNegativeUpTo(const JsonField& field, double limit) {
   if (v > limit)
     field.Fail("expected at most " + FormatDouble(limit) + " (the limit phos accepts), got " + FormatDouble(v));
   return v;
-}
-
-// "units": absent is relative, as every file written before units existed.
-Units ReadUnits(const JsonField& root) {
-  const auto field = root.Optional("units");
-  if (!field) return Units::kRelative;
-  const std::string name = field->String();
-  for (Units units : {Units::kRelative, Units::kPhysical})
-    if (name == UnitsName(units)) return units;
-  field->Fail("unknown units \"" + name + "\" (expected \"relative\" or \"physical\")");
 }
 
 }  // namespace

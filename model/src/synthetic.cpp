@@ -5,6 +5,7 @@
 #include <random>
 #include <stdexcept>
 
+#include "phos/model/closed_form.h"
 #include "phos/util/format.h"
 
 namespace phos {
@@ -21,8 +22,8 @@ double LogUniformIn(std::mt19937_64& rng, double lo, double hi) {
   return std::exp(UniformIn(rng, std::log(lo), std::log(hi)));
 }
 
-void Require(bool ok, const std::string& what) {
-  if (!ok) throw std::invalid_argument("two-state spec: " + what);
+void Require(bool ok, const std::string& what, const char* spec = "two-state spec") {
+  if (!ok) throw std::invalid_argument(std::string(spec) + ": " + what);
 }
 
 // A Gaussian emission band integrated over each band and normalized to sum 1.
@@ -40,7 +41,103 @@ std::vector<double> EmissionShape(const SpectralGrid& grid, double peak_nm, doub
   return shape;
 }
 
+void RequireManyTrap(bool ok, const std::string& what) { Require(ok, what, "many-trap spec"); }
+
+void CheckManyTrapSpec(const ManyTrapSpec& spec) {
+  RequireManyTrap(spec.power > 0 && std::isfinite(spec.power), "power must be > 0");
+  RequireManyTrap(spec.from_s > 0 && spec.to_s > spec.from_s && std::isfinite(spec.to_s),
+                  "the span needs 0 < from_s < to_s");
+  RequireManyTrap(spec.states >= 2 && spec.states <= kMaxStates, "states must be 2 to " + std::to_string(kMaxStates));
+  RequireManyTrap(spec.margin >= 1 && std::isfinite(spec.margin), "margin must be >= 1");
+  RequireManyTrap(spec.glow > 0 && std::isfinite(spec.glow), "glow must be > 0");
+  RequireManyTrap(spec.ke > 0 && std::isfinite(spec.ke), "ke must be > 0");
+  RequireManyTrap(spec.emission_fwhm_nm > 0, "emission_fwhm_nm must be > 0");
+  RequireManyTrap(spec.excitation_shape.size() == kExcitedBands, "the excitation shape has one value per band 1-3");
+  for (double u : spec.excitation_shape) RequireManyTrap(u > 0 && u <= 1, "excitation shape values must be in (0, 1]");
+}
+
 }  // namespace
+
+ManyTrapStates ManyTrapRates(const ManyTrapSpec& spec) {
+  CheckManyTrapSpec(spec);
+  const double u_slow = std::log(1 / (spec.margin * spec.to_s)), u_fast = std::log(spec.margin / spec.from_s);
+  const int n = spec.states;
+  const double step = (u_fast - u_slow) / (n - 1);
+  ManyTrapStates states;
+  double total = 0;
+  for (int i = 0; i < n; ++i) {  // fastest first
+    const double kr = std::exp(u_fast - step * i);
+    const double node = i == 0 || i == n - 1 ? step / 2 : step;  // the trapezoid rule in ln k
+    double share = std::pow(kr, spec.power) * node;
+    if (i == n - 1) share += std::pow(kr, spec.power) / spec.power;  // every rate below k_min
+    states.kr.push_back(kr);
+    states.share.push_back(share);
+    total += share;
+  }
+  for (double& share : states.share) share /= total;
+  return states;
+}
+
+Material ManyTrapMaterial(const ManyTrapSpec& spec) {
+  const ManyTrapStates rates = ManyTrapRates(spec);
+  Material m;
+  m.name = spec.name;
+  m.bands = SpectralGrid::Paper();
+  const int nb = m.band_count(), n = spec.states;
+  const double largest = *std::max_element(spec.excitation_shape.begin(), spec.excitation_shape.end());
+  for (int i = 0; i < n; ++i) {
+    ExcitedState state;
+    state.kr = rates.kr[i];
+    state.ke.assign(static_cast<std::size_t>(nb), std::nullopt);
+    for (int b = 0; b < kExcitedBands; ++b) state.ke[b] = spec.ke * spec.excitation_shape[b] / largest;
+    // The peak moves with ln kr, fastest (i = 0) to slowest.
+    const double along = static_cast<double>(i) / (n - 1);
+    const double peak_nm =
+        spec.emission_peak_fast_nm + along * (spec.emission_peak_slow_nm - spec.emission_peak_fast_nm);
+    const std::vector<double> shape = EmissionShape(m.bands, peak_nm, spec.emission_fwhm_nm);
+    // Equilibrium under unit irradiance in band 1 (Eq. 8.1): A_i = kr r Lambda summed.
+    const double r = SteadyState(*state.ke[0], state.kr);
+    const double c = rates.share[i] * spec.glow / (state.kr * r);
+    for (int b = 0; b < nb; ++b) state.Lambda.push_back(c * shape[b]);
+    m.states.push_back(std::move(state));
+  }
+  m.source = "synthetic many-trap material (not measured): L ~ t^-" + FormatShort(spec.power) + " from " +
+             FormatShort(spec.from_s) + " s to " + FormatShort(spec.to_s) + " s after a long charge, " +
+             std::to_string(n) + " states, ke " + FormatShort(spec.ke) + ", emission " +
+             FormatShort(spec.emission_peak_fast_nm) + " to " + FormatShort(spec.emission_peak_slow_nm) + " nm (FWHM " +
+             FormatShort(spec.emission_fwhm_nm) + "); made by phos::ManyTrapMaterial (model/synthetic.h)";
+  ValidateMaterial(m, m.name);
+  return m;
+}
+
+ManyTrapSpec RandomManyTrapSpec(std::uint64_t seed, const ManyTrapRanges& r) {
+  std::mt19937_64 rng(seed);
+  ManyTrapSpec spec;
+  spec.power = UniformIn(rng, r.power_min, r.power_max);
+  spec.from_s = LogUniformIn(rng, r.from_min_s, r.from_max_s);
+  spec.to_s = spec.from_s * std::pow(10.0, UniformIn(rng, r.decades_min, r.decades_max));
+  spec.ke = LogUniformIn(rng, r.ke_min, r.ke_max);
+  spec.glow = LogUniformIn(rng, r.glow_min, r.glow_max);
+  spec.emission_peak_fast_nm = UniformIn(rng, r.emission_peak_min_nm, r.emission_peak_max_nm);
+  const double slow_peak_nm = UniformIn(rng, r.emission_peak_min_nm, r.emission_peak_max_nm);
+  spec.emission_peak_slow_nm = r.per_state_spectra ? slow_peak_nm : spec.emission_peak_fast_nm;
+  spec.emission_fwhm_nm = UniformIn(rng, r.emission_fwhm_min_nm, r.emission_fwhm_max_nm);
+  spec.name = "random-many-trap-" + std::to_string(seed);
+  return spec;
+}
+
+Material RandomManyTrapMaterial(std::uint64_t seed, const ManyTrapRanges& ranges) {
+  return ManyTrapMaterial(RandomManyTrapSpec(seed, ranges));
+}
+
+std::vector<ManyTrapSpec> ManyTrapFixtureSpecs() {
+  ManyTrapSpec sign;  // SrAl2O4:Eu,Dy-like: t^-1 from 1 min to 10 h, green at 520 nm
+  sign.name = "sign-paint";
+  sign.power = 1;
+  sign.from_s = 60;
+  sign.to_s = 36000;
+  return {sign};
+}
 
 Material TwoStateMaterial(const TwoStateSpec& spec) {
   Require(spec.slow_kr > 0 && std::isfinite(spec.slow_kr), "slow_kr must be > 0");

@@ -303,6 +303,7 @@ LightPose PoseAt(const Light& light, double t_s) {
   }
   if (light.positional()) {
     pose.at = light.PositionAt(t_s).cast<float>();
+    pose.range_m = static_cast<float>(light.range_m);
     if (light.kind == Light::Kind::kSpot) {
       pose.spot_axis = light.DirectionAt(t_s).cast<float>();
       pose.cos_inner = static_cast<float>(std::cos(light.inner_cone_deg * kPi / 180));
@@ -472,8 +473,8 @@ LightRay RayToLight(const SceneGeometry& geometry, const LightPose& light, const
     const float cosine = distance > 0 ? n.dot(d) / distance : 0.0f;
     if (!(cosine > 0)) return ray;  // behind the surface: only its front charges and reflects
     ray.direction = d / distance;
-    const float falloff = light.SpotFalloff(-ray.direction);
-    if (!(falloff > 0)) return ray;  // outside a spot's cone
+    const float falloff = light.SpotFalloff(-ray.direction) * light.RangeWindow(distance);
+    if (!(falloff > 0)) return ray;  // outside a spot's cone or the light's range
     ray.t_far = distance * (1 - 1e-4f) - geometry.ray_epsilon();
     ray.unit = falloff * cosine / distance2;
     return ray;

@@ -973,6 +973,12 @@ std::vector<PunctualLight> ParseGltfLights(std::string_view data, bool binary, c
       ThrowUserError(file_where, "lights",
                      "light '" + light.name + "' has an intensity outside [0, " + FormatDouble(kMaxIrradiance) + "]");
     light.intensity = source.intensity;
+    // KHR_lights_punctual: range, when defined, is > 0 and bounds a point or
+    // spot light's reach; tinygltf reads an absent one as 0.
+    if (!(source.range >= 0 && source.range <= kMaxCoordinate_m))
+      ThrowUserError(file_where, "lights",
+                     "light '" + light.name + "' has a range outside (0, " + FormatDouble(kMaxCoordinate_m) + "] m");
+    if (light.positional()) light.range_m = source.range;
     if (source.color.size() == 3) punctual.colour = Eigen::Vector3d(source.color[0], source.color[1], source.color[2]);
     if (!(punctual.colour.array() >= 0).all() || !(punctual.colour.array() <= 1).all())
       ThrowUserError(file_where, "lights", "light '" + light.name + "' has a color outside [0, 1]");

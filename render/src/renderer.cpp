@@ -13,6 +13,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include "phos/model/photometry.h"
 #include "phos/model/schedule.h"
 #include "phos/render/transport_quality.h"
 #include "phos/render/volume.h"
@@ -184,11 +185,18 @@ Image BandsToLinearSrgb(const Image& bands, const SpectralGrid& grid) {
 }
 
 void WriteExr(const std::filesystem::path& path, const Image& rgb, const Image& bands, const SpectralGrid& grid,
-              const std::string& compression) {
+              const std::string& compression, Units units) {
   const int nb = bands.channels;
-  OIIO::ImageSpec spec(rgb.width, rgb.height, 3 + nb, OIIO::TypeDesc::FLOAT);
+  const bool physical = units == Units::kPhysical;
+  const int channels = 3 + nb + (physical ? 1 : 0);
+  const std::vector<double> efficacy = physical ? PhotopicBandEfficacy(grid) : std::vector<double>();
+  OIIO::ImageSpec spec(rgb.width, rgb.height, channels, OIIO::TypeDesc::FLOAT);
   spec.channelnames = {"R", "G", "B"};
   for (int b = 0; b < nb; ++b) spec.channelnames.push_back("band" + std::to_string(b));
+  if (physical) {
+    spec.channelnames.push_back("Y");
+    spec.attribute("phos:units", "physical");
+  }
   spec.attribute("compression", compression);
   std::string edges;
   for (double e : grid.edges_nm) {
@@ -198,10 +206,14 @@ void WriteExr(const std::filesystem::path& path, const Image& rgb, const Image& 
   spec.attribute("phos:bands_nm", edges);
   // Interleaved in parallel into a table not zeroed first (each value is written).
   LargeTable<float> data;
-  data.resize(std::size_t(rgb.width) * rgb.height * (3 + nb));
+  data.resize(std::size_t(rgb.width) * rgb.height * channels);
   ForEachPixel(std::size_t(rgb.width) * rgb.height, [&](std::size_t p) {
-    std::copy_n(&rgb.pixels[3 * p], 3, &data[p * (3 + nb)]);
-    std::copy_n(&bands.pixels[p * nb], nb, &data[p * (3 + nb) + 3]);
+    std::copy_n(&rgb.pixels[3 * p], 3, &data[p * channels]);
+    std::copy_n(&bands.pixels[p * nb], nb, &data[p * channels + 3]);
+    if (!physical) return;
+    double luminance_cd_m2 = 0;  // Y = sum_b w_b L_b (photometry.h)
+    for (int b = 0; b < nb; ++b) luminance_cd_m2 += efficacy[b] * bands.pixels[p * nb + b];
+    data[p * channels + 3 + nb] = static_cast<float>(luminance_cd_m2);
   });
   WriteImageAtomically(path, spec, OIIO::TypeDesc::FLOAT, data.data());
 }
@@ -301,6 +313,26 @@ Image ReadImage(const std::filesystem::path& path) {
   Image image(spec.width, spec.height, spec.nchannels);
   if (!in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, image.pixels.data()))
     ThrowUserError(path.string(), "", "cannot read the image: " + in->geterror());
+  return image;
+}
+
+Image ReadImageChannels(const std::filesystem::path& path, const std::vector<std::string>& names) {
+  auto in = OIIO::ImageInput::open(path.string());
+  if (!in) ThrowUserError(path.string(), "", "cannot read the image: " + OIIO::geterror());
+  const OIIO::ImageSpec& spec = in->spec();
+  std::vector<int> source;
+  for (const std::string& name : names) {
+    const int c = spec.channelindex(name);
+    if (c < 0) ThrowUserError(path.string(), "", "the image has no channel '" + name + "'");
+    source.push_back(c);
+  }
+  Image all(spec.width, spec.height, spec.nchannels);
+  if (!in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, all.pixels.data()))
+    ThrowUserError(path.string(), "", "cannot read the image: " + in->geterror());
+  Image image(spec.width, spec.height, static_cast<int>(names.size()));
+  const std::size_t n = names.size(), pixels = std::size_t(spec.width) * spec.height;
+  for (std::size_t p = 0; p < pixels; ++p)
+    for (std::size_t k = 0; k < n; ++k) image.pixels[p * n + k] = all.pixels[p * spec.nchannels + source[k]];
   return image;
 }
 

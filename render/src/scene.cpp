@@ -1,15 +1,18 @@
 #include "phos/render/scene.h"
 
 #include "phos/render/phosphor_map.h"
+#include "phos/render/light_units.h"
 #include "phos/render/spectral_upsampling.h"
 
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <numeric>
 #include <random>
 
 #include <nlohmann/json.hpp>
 
+#include "phos/model/photometry.h"
 #include "phos/render/subsurface.h"
 #include "phos/util/error.h"
 #include "phos/util/format.h"
@@ -85,8 +88,9 @@ RigidMotion ReadMotion(const JsonField& object) {
   return motion;
 }
 
-// A light's emission spectrum, normalized to unit integral, as band integrals.
-std::vector<double> ReadSpectrum(const JsonField& field, const SpectralGrid& bands) {
+// A light's emission spectrum as band integrals, with its integral over all
+// wavelengths (the shapes are normalized to 1; "bands" is as given).
+LightSpectrum ReadLightSpectrum(const JsonField& field, const SpectralGrid& bands) {
   const std::string type = field["type"].String();
   SampledSpectrum spectrum;
   if (type == "led") {
@@ -110,11 +114,16 @@ std::vector<double> ReadSpectrum(const JsonField& field, const SpectralGrid& ban
       if (values[b] > kMaxIrradiance)
         field["values"].At(b).Fail("expected at most " + FormatDouble(kMaxIrradiance) + ", got " +
                                    FormatDouble(values[b]));
-    return values;
+    const double total = std::accumulate(values.begin(), values.end(), 0.0);
+    return {std::move(values), total};
   } else {
     field["type"].Fail("unknown spectrum type '" + type + "' (led, white_led, blackbody, sun, bands)");
   }
-  return IntegrateOverBands(spectrum, bands);
+  return {IntegrateOverBands(spectrum, bands), IntegrateAll(spectrum)};
+}
+
+std::vector<double> ReadSpectrum(const JsonField& field, const SpectralGrid& bands) {
+  return ReadLightSpectrum(field, bands).bands;
 }
 
 bool ReadBool(const JsonField& object, std::string_view key, bool fallback) {
@@ -198,10 +207,26 @@ void ScaleSpectrum(const JsonField& field, Light& light, const std::vector<doubl
   }
 }
 
+// A light's band values E_per_band: in a relative scene its spectrum times
+// "intensity"; in a physical one its value in W, lm, cd or lx through its
+// spectrum (light_units.h). Its kind is known.
+void ReadLightLevel(const JsonField& l, Light& light, const SpectralGrid& bands, Units units) {
+  RequireUnitsOfScene(l, units, "intensity");
+  if (units == Units::kPhysical) {
+    const PhysicalValue value = ReadPhysicalValue(l, QuantityOf(light.kind), light.kind == Light::Kind::kPoint);
+    light.E_per_band = PhysicalBands(l, value, ReadLightSpectrum(l["spectrum"], bands), bands);
+    return;
+  }
+  light.intensity = l["intensity"].NumberInRange(0, kMaxIrradiance);
+  light.E_per_band = ReadSpectrum(l["spectrum"], bands);
+  ScaleSpectrum(l["intensity"], light, std::vector<double>(light.E_per_band.size(), light.intensity));
+}
+
 // One entry of "lights": light `index` of the scene (its default name).
-Light ReadLight(const JsonField& l, std::size_t index, const SpectralGrid& bands) {
+Light ReadLight(const JsonField& l, std::size_t index, const SpectralGrid& bands, Units units) {
   l.RejectUnknownKeys({"name", "type", "position", "direction", "intensity", "spectrum", "schedule", "path", "normal",
-                       "thickness_m", "size_m", "tangent", "radius_m", "samples", "inner_cone_deg", "outer_cone_deg"});
+                       "thickness_m", "size_m", "tangent", "radius_m", "samples", "inner_cone_deg", "outer_cone_deg",
+                       PHOS_PHYSICAL_LIGHT_KEYS});
   Light light;
   light.name = l.Has("name") ? l["name"].NonEmptyString() : "light " + std::to_string(index);
   auto only = [&](const char* key, const char* owners) {
@@ -284,33 +309,26 @@ Light ReadLight(const JsonField& l, std::size_t index, const SpectralGrid& bands
   }
   if (type != "disk") only("radius_m", "a disk");
   if (!light.area()) only("samples", "a quad or disk");
-  light.intensity = l["intensity"].NumberInRange(0, kMaxIrradiance);
-  light.E_per_band = ReadSpectrum(l["spectrum"], bands);
-  ScaleSpectrum(l["intensity"], light, std::vector<double>(light.E_per_band.size(), light.intensity));
+  ReadLightLevel(l, light, bands, units);
   if (auto f = l.Optional("schedule")) light.schedule = ReadSchedule(*f);
   return light;
 }
 
 // An object's "emission": {"intensity": radiance, "spectrum", "schedule",
 // "samples"}: the front of each of its triangles is an area light.
-Light ReadEmission(const JsonField& f, const std::string& object_name, std::size_t object, const SpectralGrid& bands) {
-  f.RejectUnknownKeys({"intensity", "spectrum", "schedule", "samples"});
+Light ReadEmission(const JsonField& f, const std::string& object_name, std::size_t object, const SpectralGrid& bands,
+                   Units units) {
+  f.RejectUnknownKeys({"intensity", "spectrum", "schedule", "samples", PHOS_PHYSICAL_LIGHT_KEYS});
   Light light;
   light.kind = Light::Kind::kMesh;
   light.name = object_name;
   light.emitter_object = static_cast<int>(object);
-  light.intensity = f["intensity"].NumberInRange(0, kMaxIrradiance);
-  light.E_per_band = ReadSpectrum(f["spectrum"], bands);
-  ScaleSpectrum(f["intensity"], light, std::vector<double>(light.E_per_band.size(), light.intensity));
+  ReadLightLevel(f, light, bands, units);
   if (auto s = f.Optional("schedule")) light.schedule = ReadSchedule(*s);
   if (auto s = f.Optional("samples")) light.samples = s->Integer(1, 1024);
   return light;
 }
 
-// {"type": "gltf", "file": ..., "spectrum": ..., "intensity_scale": s,
-// "schedule": ...}: the KHR_lights_punctual lights of a glTF file, each with
-// the entry's spectrum, times its glTF intensity times s, times its glTF
-// colour upsampled to the bands (render/spectral_upsampling.h).
 // A file a scene names (`what`: "mesh", "phosphor", ...), relative to the
 // scene's folder; one that is not there fails at its field, saying which
 // folder it was looked in (a scene copied elsewhere loses its files).
@@ -326,14 +344,38 @@ std::filesystem::path SceneFile(const JsonField& f, const std::filesystem::path&
   return file;
 }
 
-std::vector<Light> ReadGltfLights(const JsonField& l, const SpectralGrid& bands,
-                                  const std::filesystem::path& base_dir) {
+// A glTF light of a physical scene: `value` photometric units (its
+// intensity times the entry's intensity_scale: cd, or lx for directional),
+// its spectrum tinted band by band by its colour (`colour`, upsampled from
+// `rgb`). The light shows value x the colour's luminance (Rec. 709 Y of the
+// linear RGB), as a renderer multiplying colour by intensity would: a white
+// light of 100 cd is 100 cd.
+std::vector<double> GltfPhysicalBands(const JsonField& l, const LightSpectrum& spectrum,
+                                      const std::vector<double>& colour, const Eigen::Vector3d& rgb, double value,
+                                      const SpectralGrid& bands) {
+  const double colour_luminance = 0.2126 * rgb[0] + 0.7152 * rgb[1] + 0.0722 * rgb[2];
+  LightSpectrum tinted = spectrum;
+  for (std::size_t b = 0; b < tinted.bands.size(); ++b) tinted.bands[b] *= colour[b];
+  if (!(value * colour_luminance > 0)) return std::vector<double>(tinted.bands.size(), 0.0);
+  // PhysicalBands names the field a problem is at: the entry's file.
+  const PhysicalValue photometric{"file", value * colour_luminance, true, 1.0};
+  return PhysicalBands(l, photometric, tinted, bands);
+}
+
+// {"type": "gltf", "file": ..., "spectrum": ..., "intensity_scale": s,
+// "schedule": ...}: the KHR_lights_punctual lights of a glTF file, each with
+// the entry's spectrum, times its glTF intensity times s, times its glTF
+// colour upsampled to the bands (render/spectral_upsampling.h). In a
+// physical scene the glTF intensity is in its own unit, cd for point and
+// spot, lx for directional, and the range window applies (GltfPhysicalBands).
+std::vector<Light> ReadGltfLights(const JsonField& l, const SpectralGrid& bands, const std::filesystem::path& base_dir,
+                                  Units units) {
   l.RejectUnknownKeys({"type", "file", "spectrum", "intensity_scale", "schedule"});
   const std::filesystem::path file = SceneFile(l["file"], base_dir, "glTF");
   std::vector<PunctualLight> punctual = LoadGltfLights(file, l["file"].source() + ": " + l["file"].path());
   if (punctual.empty()) l["file"].Fail("'" + file.string() + "' has no KHR_lights_punctual light in its scene");
   const double scale = l.Has("intensity_scale") ? l["intensity_scale"].NumberInRange(0, kMaxIrradiance) : 1.0;
-  const std::vector<double> spectrum = ReadSpectrum(l["spectrum"], bands);
+  const LightSpectrum spectrum = ReadLightSpectrum(l["spectrum"], bands);
   LightSchedule schedule;
   if (auto f = l.Optional("schedule")) schedule = ReadSchedule(*f);
   const RgbToBands upsample(bands);
@@ -341,24 +383,35 @@ std::vector<Light> ReadGltfLights(const JsonField& l, const SpectralGrid& bands,
   for (PunctualLight& p : punctual) {
     Light light = std::move(p.light);
     const std::vector<double> colour = upsample.Albedo({p.colour[0], p.colour[1], p.colour[2]});
-    std::vector<double> factor(colour.size());
-    for (std::size_t b = 0; b < colour.size(); ++b) factor[b] = light.intensity * scale * colour[b];
-    light.E_per_band = spectrum;
-    ScaleSpectrum(l.Has("intensity_scale") ? l["intensity_scale"] : l["file"], light, factor);
+    if (units == Units::kPhysical) {
+      light.E_per_band = GltfPhysicalBands(l, spectrum, colour, p.colour, light.intensity * scale, bands);
+    } else {
+      // glTF's range is the physical reading's: a relative scene keeps the
+      // inverse square to infinity it always had.
+      light.range_m = 0;
+      std::vector<double> factor(colour.size());
+      for (std::size_t b = 0; b < colour.size(); ++b) factor[b] = light.intensity * scale * colour[b];
+      light.E_per_band = spectrum.bands;
+      ScaleSpectrum(l.Has("intensity_scale") ? l["intensity_scale"] : l["file"], light, factor);
+    }
     light.schedule = schedule;
     lights.push_back(std::move(light));
   }
   return lights;
 }
 
-void ReadPhosphor(const JsonField& o, const std::filesystem::path& base_dir, const SpectralGrid& bands,
-                  MaterialCache& materials, std::shared_ptr<const Material>& phosphor, std::string& path) {
+// "phosphor" of object or volume `owner` (its name, for messages).
+void ReadPhosphor(const JsonField& o, const std::filesystem::path& base_dir, const Scene& scene,
+                  const std::string& owner, MaterialCache& materials, std::shared_ptr<const Material>& phosphor,
+                  std::string& path) {
   if (!o.Has("phosphor")) return;
   const std::filesystem::path file = SceneFile(o["phosphor"], base_dir, "phosphor");
   auto& material = materials[file.string()];
   if (!material) material = std::make_shared<Material>(LoadMaterial(file));
-  if (const std::string mismatch = BandGridMismatch(material->bands, bands); !mismatch.empty())
+  if (const std::string mismatch = BandGridMismatch(material->bands, scene.bands); !mismatch.empty())
     o["phosphor"].Fail("the material's bands_nm " + mismatch);
+  if (const std::string mismatch = UnitsMismatch(*material, file.string(), scene.units); !mismatch.empty())
+    o["phosphor"].Fail("'" + owner + "': " + mismatch);
   phosphor = material;
   path = file.string();
 }
@@ -698,7 +751,7 @@ Object ReadObject(const JsonField& o, std::size_t i, const Scene& scene, const s
            " triangles, more than the limit of " + std::to_string(kMaxSceneTriangles) +
            " (a mesh used twice counts twice)");
   object.motion = ReadMotion(o);
-  ReadPhosphor(o, base_dir, scene.bands, materials, object.phosphor, object.phosphor_path);
+  ReadPhosphor(o, base_dir, scene, object.name, materials, object.phosphor, object.phosphor_path);
   ReadObjectAlbedo(o, scene.bands, object);
   ReadPhosphorPolicy(o, object.phosphor != nullptr, object.unknown_ke_as_zero, object.initial);
   ReadObjectTexels(o, object);
@@ -721,7 +774,8 @@ void ReadObjects(const JsonField& objects, const std::filesystem::path& base_dir
   for (std::size_t i = 0; i < objects.ArraySize(); ++i) {
     const JsonField o = objects.At(i);
     Object object = ReadObject(o, i, scene, base_dir, materials, read);
-    if (auto f = o.Optional("emission")) scene.lights.push_back(ReadEmission(*f, object.name, i, scene.bands));
+    if (auto f = o.Optional("emission"))
+      scene.lights.push_back(ReadEmission(*f, object.name, i, scene.bands, scene.units));
     scene.objects.push_back(std::move(object));
   }
 }
@@ -738,25 +792,34 @@ void ReadLights(const JsonField& lights, const std::filesystem::path& base_dir, 
   for (std::size_t i = 0; i < lights.ArraySize(); ++i) {
     const JsonField l = lights.At(i);
     if (l.Has("type") && l["type"].String() == "gltf") {
-      for (Light& light : ReadGltfLights(l, scene.bands, base_dir)) scene.lights.push_back(std::move(light));
+      for (Light& light : ReadGltfLights(l, scene.bands, base_dir, scene.units))
+        scene.lights.push_back(std::move(light));
       if (scene.lights.size() > kMaxLights) l.Fail("the scene's lights up to this entry are " + too_many);
     } else {
-      scene.lights.push_back(ReadLight(l, i, scene.bands));
+      scene.lights.push_back(ReadLight(l, i, scene.bands, scene.units));
     }
   }
 }
 
 // The sky.
-Environment ReadEnvironment(const JsonField& f, const SpectralGrid& bands) {
-  f.RejectUnknownKeys({"spectrum", "radiance", "gradient", "schedule"});
+// (In a physical scene its radiance at the horizon, w_y = 0, in
+// radiance_w_sr_m2 or luminance_cd_m2: light_units.h.)
+Environment ReadEnvironment(const JsonField& f, const SpectralGrid& bands, Units units) {
+  f.RejectUnknownKeys({"spectrum", "radiance", "gradient", "schedule", PHOS_PHYSICAL_LIGHT_KEYS});
   Environment env;
-  env.L_per_band = ReadSpectrum(f["spectrum"], bands);
-  const double radiance = f["radiance"].NumberInRange(0, kMaxIrradiance);
-  for (double& l : env.L_per_band) {
-    l *= radiance;
-    if (!(l <= kMaxIrradiance))
-      f["radiance"].Fail("gives a radiance of " + FormatDouble(l) + " in a band, more than the limit of " +
-                         FormatDouble(kMaxIrradiance));
+  RequireUnitsOfScene(f, units, "radiance");
+  if (units == Units::kPhysical) {
+    const PhysicalValue value = ReadPhysicalValue(f, LightQuantity::kRadiance, false);
+    env.L_per_band = PhysicalBands(f, value, ReadLightSpectrum(f["spectrum"], bands), bands);
+  } else {
+    env.L_per_band = ReadSpectrum(f["spectrum"], bands);
+    const double radiance = f["radiance"].NumberInRange(0, kMaxIrradiance);
+    for (double& l : env.L_per_band) {
+      l *= radiance;
+      if (!(l <= kMaxIrradiance))
+        f["radiance"].Fail("gives a radiance of " + FormatDouble(l) + " in a band, more than the limit of " +
+                           FormatDouble(kMaxIrradiance));
+    }
   }
   if (f.Has("gradient")) env.gradient = f["gradient"].NumberInRange(-1, 1);
   if (auto sf = f.Optional("schedule")) env.schedule = ReadSchedule(*sf);
@@ -786,7 +849,7 @@ Volume ReadVolume(const JsonField& f, std::size_t i, const Scene& scene, const s
                     std::to_string(kMaxVoxels));
   v.density = ReadDensity(f["density"], v);
   v.sigma_t_per_m = f["sigma_t_per_m"].NumberInRange(0, 1e9);
-  ReadPhosphor(f, base_dir, scene.bands, materials, v.phosphor, v.phosphor_path);
+  ReadPhosphor(f, base_dir, scene, v.name, materials, v.phosphor, v.phosphor_path);
   if (f.Has("albedo"))
     v.albedo = ReadAlbedo(f["albedo"], scene.bands.band_count());
   else if (v.phosphor && v.phosphor->albedo)
@@ -881,6 +944,15 @@ bool Scene::AnyLightOnAt(double t_s) const {
          (environment && environment->schedule.LevelAt(t_s) > 0);
 }
 
+std::string UnitsMismatch(const Material& material, const std::string& file, Units scene_units) {
+  if (material.units == scene_units) return "";
+  const bool physical = scene_units == Units::kPhysical;
+  return std::string("the material '") + file + "' is " + UnitsName(material.units) + " and the scene " +
+         UnitsName(scene_units) + ": a render is in one unit throughout; " +
+         (physical ? "give the object a physical material (\"units\": \"physical\", docs/formats.md)"
+                   : "say \"units\": \"physical\" in the scene and give its lights in W, lm, cd or lx");
+}
+
 std::string BandGridMismatch(const SpectralGrid& material_bands, const SpectralGrid& scene_bands) {
   if (material_bands == scene_bands) return "";
   return material_bands.EdgesName() + " differ from the scene's " + scene_bands.EdgesName() +
@@ -894,13 +966,14 @@ Scene LoadScene(const std::filesystem::path& path) {
 
 Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& base_dir, const std::string& source) {
   const JsonField root(json, source);
-  root.RejectUnknownKeys({"schema", "name", "description", "bands_nm", "time", "texel_size_m", "camera", "render",
-                          "objects", "lights", "volumes", "environment"});
+  root.RejectUnknownKeys({"schema", "name", "description", "units", "bands_nm", "time", "texel_size_m", "camera",
+                          "render", "objects", "lights", "volumes", "environment"});
   if (root["schema"].String() != "phos.scene/1")
     root["schema"].Fail("expected \"phos.scene/1\", got " + DescribeJson(root["schema"].value()));
   Scene scene;
   scene.source = source;
   scene.name = root.Has("name") ? root["name"].String() : std::filesystem::path(source).stem().string();
+  scene.units = ReadUnits(root);
   scene.bands = SpectralGrid::Paper();
   if (auto f = root.Optional("bands_nm")) ReadBands(*f, scene.bands);
   if (auto time = root.Optional("time")) ReadTimes(*time, scene);
@@ -910,7 +983,7 @@ Scene SceneFromJson(const nlohmann::json& json, const std::filesystem::path& bas
   MaterialCache materials;  // of objects and volumes: each file loaded once
   ReadObjects(root["objects"], base_dir, materials, scene);
   ReadLights(root["lights"], base_dir, scene);
-  if (auto f = root.Optional("environment")) scene.environment = ReadEnvironment(*f, scene.bands);
+  if (auto f = root.Optional("environment")) scene.environment = ReadEnvironment(*f, scene.bands, scene.units);
   if (auto volumes = root.Optional("volumes")) {
     double voxels = 0;  // over every volume: they are all in memory at once
     for (std::size_t i = 0; i < volumes->ArraySize(); ++i)

@@ -208,7 +208,7 @@ void VolumeMedia::UpdateLight(int vi, int l, const LightPose& pose) {
                           const float distance2 = d.squaredNorm(), distance = std::sqrt(distance2);
                           if (!(distance > 0)) continue;
                           const Vec3f w = d / distance;
-                          const float falloff = pose.SpotFalloff(-w);
+                          const float falloff = pose.SpotFalloff(-w) * pose.RangeWindow(distance);
                           if (!(falloff > 0) || geometry_.Occluded(p, w, distance * (1 - 1e-4f))) continue;
                           cache.unit[j] = falloff * std::exp(-MediaOpticalDepth(p, w, distance)) / distance2;
                         } else {

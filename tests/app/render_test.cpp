@@ -634,7 +634,7 @@ TEST(RenderCommand, BadExposuresAreOneLineAndExitTwo) {
   const std::string out = " --out " + dir.path().string() + " --times 40 --width 8 --height 8";
   for (const std::string bad : {"autox", "-1", "nan", "inf", "0", "1e400", ""})
     EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + kCornell + out + " --exposure '" + bad + "'"),
-                                   "--exposure: expected \"auto\" or a positive number, got \"" + bad + "\""));
+                                   "--exposure: expected \"auto\", ev100:N or a positive number, got \"" + bad + "\""));
   EXPECT_TRUE(IsOneLineUserError(RunPhos("render " + CornellWithExposure(dir, "autox", "autox") + out),
                                  "autox.json: camera.exposure: expected \"auto\" or a number in [0, 1e9], got "));
   // A range of frames cannot see the others' frames after dark.

@@ -263,8 +263,10 @@ TEST(PhosCommand, AMistypedWordIsNamedWithTheNearestValidOne) {
       {"fit decay-curve --csv a.csv --component 2",
        "phos fit decay-curve: --component: unknown option; did you mean --components?"},
       {"fit decay-curv --csv a.csv", "phos fit: decay-curv: unknown subcommand; did you mean decay-curve?"},
-      {"fit schedule-curv",
-       "phos fit: schedule-curv: unknown subcommand (one of decay-curve, charge-curve, session, map, batch)"},
+      {"fit schedule-curv", "phos fit: schedule-curv: unknown subcommand; did you mean schedule-curve?"},
+      {"fit frobnicate",
+       "phos fit: frobnicate: unknown subcommand (one of decay-curve, charge-curve, schedule-curve, session, map, "
+       "batch)"},
       {"fit session dir --out m.json --max-component 2",
        "phos fit session: --max-component: unknown option; did you mean --max-components?"},
       {"capture decy --out x", "phos capture: decy: unknown subcommand; did you mean decay?"},

@@ -9,6 +9,7 @@
 
 #include "model/closed_form.h"
 #include "phos/model/simulate.h"
+#include "phos/model/synthetic.h"
 #include "phos/util/error.h"
 #include "test_util.h"
 
@@ -198,8 +199,8 @@ TEST(Batch, PerPointParametersMatchTheScalarStepsOfEachPoint) {
     double L3 = 0;
     for (int i = 0; i < 2; ++i) {
       const double kr = c.kr_per_point[i * n + j];
-      EXPECT_TRUE(testing::RelativelyNear(
-          scene.s.state(i)[j], before.state(i)[j] * std::exp(-static_cast<long double>(kr) * 600), 1e-13));
+      EXPECT_TRUE(testing::RelativelyNear(scene.s.state(i)[j],
+                                          before.state(i)[j] * std::exp(-static_cast<long double>(kr) * 600), 1e-13));
       L3 += m.states[i].Lambda[3] * m.states[i].kr * c.emission_scale[i * n + j] * scene.s.state(i)[j];
     }
     EXPECT_TRUE(testing::RelativelyNear(Lp[n + j], L3, 1e-13));
@@ -236,6 +237,50 @@ TEST(Batch, AUniformMapGivesTheUniformMaterialsBits) {
   DecayBatch<float>(mapped, 5.0f, b, Lb.data(), n);
   for (std::size_t k = 0; k < a.r.size(); ++k) EXPECT_TRUE(testing::RelativelyNear(b.r[k], a.r[k], 3e-7)) << k;
   for (std::size_t k = 0; k < La.size(); ++k) EXPECT_TRUE(testing::RelativelyNear(Lb[k], La[k], 3e-7)) << k;
+}
+
+TEST(Batch, ManyStatesMatchTheScalarStepsOfEveryIntegrator) {
+  // A many-trap material (5 to 16 states) takes the kernel whose state count
+  // is not a constant: per point and state the scalar step, uniform and mapped.
+  for (int states : {5, 9, 16}) {
+    ManyTrapSpec spec;
+    spec.states = states;
+    spec.from_s = 0.5;  // rates up to 60/s: a step of 0.01 s is stable for RK4
+    spec.to_s = 500;
+    const Material m = ManyTrapMaterial(spec);
+    const std::size_t n = 301;
+    for (bool mapped : {false, true}) {
+      auto c = BatchCoefficients<double>::Compile(m, {0, 1, 2}, {2, 3}, "m");
+      if (mapped) c = WithRandomMap(c, n, 11);
+      for (Integrator integrator : {Integrator::kExact, Integrator::kEuler, Integrator::kRk4}) {
+        std::mt19937 rng(static_cast<unsigned>(states));
+        std::uniform_real_distribution<double> u(0, 1);
+        std::vector<double> E(3 * n);
+        for (double& e : E) e = 10 * u(rng);
+        StateBatch<double> s(states, n);
+        for (double& r : s.r) r = u(rng);
+        const StateBatch<double> before = s;
+        std::vector<double> Lp(2 * n);
+        const double h = integrator == Integrator::kExact ? 3.0 : 0.01;
+        AdvanceBatch<double>(integrator, c, E.data(), n, h, s, Lp.data(), n);
+        for (std::size_t j = 0; j < n; j += 7) {
+          std::vector<double> E8(8, 0.0);
+          for (int b = 0; b < 3; ++b) E8[b] = E[b * n + j];
+          const std::vector<double> a = ExcitationRates(m, E8, "m");
+          double L3 = 0;
+          for (int i = 0; i < states; ++i) {
+            const double r0 = before.state(i)[j], kr = mapped ? c.kr_per_point[i * n + j] : m.states[i].kr;
+            const double r = integrator == Integrator::kExact   ? ExactStep(r0, a[i], kr, h)
+                             : integrator == Integrator::kEuler ? EulerStep(r0, a[i], kr, h)
+                                                                : Rk4Step(r0, a[i], kr, h);
+            EXPECT_TRUE(testing::RelativelyNear(s.state(i)[j], r, 1e-13)) << states << " " << i << " " << j;
+            L3 += m.states[i].Lambda[3] * m.states[i].kr * (mapped ? c.emission_scale[i * n + j] : 1.0) * r;
+          }
+          EXPECT_TRUE(testing::RelativelyNear(Lp[n + j], L3, 1e-12)) << states << " " << j;
+        }
+      }
+    }
+  }
 }
 
 }  // namespace phos

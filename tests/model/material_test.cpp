@@ -115,12 +115,12 @@ TEST(Material, ValidationNamesFileAndField) {
       {"edges", [](auto& j) { j["bands_nm"][3] = 400; },
        "bands_nm[3]: band edges must increase strictly (400 follows 475)"},
       {"no states", [](auto& j) { j["states"] = nlohmann::json::array(); },
-       "states: expected 1 to 4 excited states, got 0"},
-      {"five states",
+       "states: expected 1 to 16 excited states, got 0"},
+      {"seventeen states",
        [](auto& j) {
-         for (int i = 0; i < 4; ++i) j["states"].push_back(j["states"][0]);
+         for (int i = 0; i < 16; ++i) j["states"].push_back(j["states"][0]);
        },
-       "states: expected 1 to 4 excited states, got 5"},
+       "states: expected 1 to 16 excited states, got 17"},
       {"typo", [](auto& j) { j["states"][0]["Lamda"] = 1; },
        "states[0].Lamda: unknown field (expected one of: kr, ke, Lambda, kr_stderr, ke_stderr)"},
       {"albedo range", [](auto& j) { j["albedo"] = std::vector<double>(8, 1.5); },

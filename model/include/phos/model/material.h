@@ -32,7 +32,7 @@
 
 namespace phos {
 
-inline constexpr int kMaxStates = 4;
+inline constexpr int kMaxStates = 16;
 // The finite ranges a material file's values must lie in (docs/fuzzing.md,
 // "Limits"), so that every product the model forms (ke E, kr r, Lambda kr r,
 // e^{-kr t}) stays finite, in float as in double: kr and every ke in
@@ -56,6 +56,10 @@ enum class Units {
 };
 // "relative" or "physical", as the file says it.
 const char* UnitsName(Units units);
+class JsonField;  // phos/util/json.h
+// The "units" member of a material's or a scene's root: absent is relative,
+// as every file written before units existed; another name fails at it.
+Units ReadUnits(const JsonField& root);
 
 struct ExcitedState {
   double kr = 0.0;                        // 1/s

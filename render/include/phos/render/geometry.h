@@ -192,6 +192,16 @@ struct LightPose {
     const float a = std::clamp((spot_axis.dot(w) - cos_outer) * scale, 0.0f, 1.0f);
     return a * a;
   }
+  // Point, spot: KHR_lights_punctual's range window at `distance`,
+  // clamp(1 - (distance / range)^4, 0, 1) times the inverse square the
+  // caller applies (the glTF 2.0 extension's README, "Range Property");
+  // 1 without a range (range_m 0).
+  float range_m = 0;
+  float RangeWindow(float distance) const {
+    if (!(range_m > 0)) return 1.0f;
+    const float x2 = (distance / range_m) * (distance / range_m);
+    return std::clamp(1 - x2 * x2, 0.0f, 1.0f);
+  }
   // The point of a quad or disk at (u1, u2) in [0, 1)^2, uniform in area
   // (a disk by Shirley and Chiu's concentric map).
   Vec3f SamplePoint(float u1, float u2) const;
@@ -211,7 +221,8 @@ struct LightPose {
   bool operator==(const LightPose& o) const {
     return kind == o.kind && at == o.at && sheet_normal == o.sheet_normal && sheet_offset == o.sheet_offset &&
            sheet_half_m == o.sheet_half_m && normal == o.normal && u == o.u && v == o.v && samples == o.samples &&
-           spot_axis == o.spot_axis && cos_inner == o.cos_inner && cos_outer == o.cos_outer && object == o.object;
+           spot_axis == o.spot_axis && cos_inner == o.cos_inner && cos_outer == o.cos_outer && object == o.object &&
+           range_m == o.range_m;
   }
 };
 LightPose PoseAt(const Light& light, double t_s);

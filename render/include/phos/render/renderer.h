@@ -143,8 +143,12 @@ std::vector<double> BandToXyzWeights(const SpectralGrid& grid);
 // default) and "none", "rle", "zips", "piz" keep every float; "pxr24"
 // (floats to 24 bits) and "dwaa", "dwab" (lossy, for viewing) do not
 // (docs/render.md, "EXR compression", measures the trade).
+// A physical scene's (units kPhysical: band radiances in W/(sr m²)) holds one
+// more channel, "Y", after the bands: the photopic luminance in cd/m²,
+// sum_b w_b L_b with w_b = PhotopicBandEfficacy (phos/model/photometry.h),
+// and the header attribute "phos:units" = "physical".
 void WriteExr(const std::filesystem::path& path, const Image& rgb, const Image& bands, const SpectralGrid& grid,
-              const std::string& compression = "zip");
+              const std::string& compression = "zip", Units units = Units::kRelative);
 // For viewing: rgb * exposure through Reinhard's global operator (L / (1 + L)
 // on luminance), then the sRGB transfer: display values in [0, 1].
 Image ToneMap(const Image& rgb, double exposure);
@@ -168,5 +172,10 @@ void RequireKnownKe(const Scene& scene, const Material& material, const std::vec
                     const std::string& where);
 // Reads any image OpenImageIO reads, as float (tests, regression references).
 Image ReadImage(const std::filesystem::path& path);
+// The channels of an image named `names`, in that order. OpenEXR stores
+// channels sorted by name, and OpenImageIO gives R, G, B first and the rest
+// in that order: a physical frame's "Y" comes back before "band0". A
+// channel the file lacks is a UserError naming the file.
+Image ReadImageChannels(const std::filesystem::path& path, const std::vector<std::string>& names);
 
 }  // namespace phos::render

@@ -4,10 +4,14 @@
 // Everything spectral lives on one band grid, the scene's, which every
 // phosphor material must share: the coupled solver then needs no resampling.
 //
-// Units: metres, seconds, nanometres. Irradiance is in the units the
-// materials' ke were fitted in (Table 8.1: normalized irradiance), so a
-// point light's intensity is irradiance * m^2 at normal incidence, and a
-// directional light's is irradiance at normal incidence.
+// Units: metres, seconds, nanometres. A relative scene (the default) gives
+// irradiance in the units the materials' ke were fitted in (Table 8.1:
+// normalized irradiance), so a point light's intensity is irradiance * m^2
+// at normal incidence, and a directional light's is irradiance at normal
+// incidence. A physical scene ("units": "physical", docs/formats.md) holds
+// band irradiance in W/m², intensity in W/sr and radiance in W/(sr m²), its
+// lights given in W or in lm, cd, lx (light_units.h), and only physical
+// materials.
 
 #include <filesystem>
 #include <memory>
@@ -291,6 +295,10 @@ struct Light {
   // stratified over the light (geometry.h, UnitIrradiance).
   int samples = 16;
   int emitter_object = -1;  // kMesh: index into Scene::objects
+  // Point, spot: glTF KHR_lights_punctual's range, the distance where the
+  // light is cut off smoothly by the window (1 - (d / range)^4) clamped to
+  // [0, 1]; 0: none, the inverse square to infinity.
+  double range_m = 0;
   bool area() const { return kind == Kind::kQuad || kind == Kind::kDisk || kind == Kind::kMesh; }
   // At a position, its irradiance falling with the square of the distance.
   bool positional() const { return kind == Kind::kPoint || kind == Kind::kSpot; }
@@ -366,6 +374,9 @@ struct RenderSettings {
 struct Scene {
   std::string source;  // the file
   std::string name;
+  // "units": relative (the default) or physical: then band radiances are in
+  // W/(sr m²) and every phosphor is a physical material.
+  Units units = Units::kRelative;
   SpectralGrid bands;
   std::vector<Object> objects;
   std::vector<Light> lights;
@@ -395,6 +406,11 @@ inline constexpr const char* kUnknownKeRemedy =
 // ("" when they agree). The renderer keeps one
 // grid for every spectrum it holds.
 std::string BandGridMismatch(const SpectralGrid& material_bands, const SpectralGrid& scene_bands);
+
+// What is wrong when a phosphor material (read from `file`) is not in the
+// scene's units, relative or physical ("" when they agree): one line naming
+// the file, both units and the way out.
+std::string UnitsMismatch(const Material& material, const std::string& file, Units scene_units);
 
 // Loads and validates a scene. Paths inside it are relative to its folder.
 // Any problem is a UserError naming the file and the field.
@@ -439,10 +455,10 @@ Mesh ParseMesh(std::string_view data, const std::string& format, const std::file
 // The lights of a glTF 2.0 file's KHR_lights_punctual extension, placed by
 // their nodes (position: the node's origin; direction: its -z axis): point,
 // spot (cone angles from innerConeAngle and outerConeAngle) and directional,
-// with glTF's intensity (candela, or lux for directional) in `intensity`
-// and E_per_band empty: the scene gives the spectrum and the scale to its
-// irradiance units. `range` is not used (phos's lights fall off with the
-// square of the distance to infinity). Problems are UserErrors naming `where`.
+// with glTF's intensity (candela, or lux for directional) in `intensity`,
+// its range in range_m, and E_per_band empty: the scene gives the spectrum
+// (and, in a relative scene, the scale to its irradiance units). Problems
+// are UserErrors naming `where`.
 struct PunctualLight {
   Light light;
   Eigen::Vector3d colour = Eigen::Vector3d::Ones();  // linear RGB in [0, 1]
