@@ -11,6 +11,7 @@
 #include <random>
 
 #include "phos/model/simulate.h"
+#include "phos/model/synthetic.h"
 #include "phos/util/error.h"
 
 namespace phos {
@@ -124,6 +125,38 @@ TEST(ReduceStates, APowerLawOfSixteenStatesStaysWithinTheTolerance) {
     EXPECT_LT(r.states_after, 16) << span_s;
     EXPECT_LE(MaxRadianceError(m, r.material, schedule, OtherGrid(std::min(300.0, span_s / 2), span_s), "pl"), 0.01)
         << span_s;
+  }
+}
+
+TEST(ReduceStates, RandomManyTrapMaterialsStayWithinTheToleranceInEveryFrame) {
+  for (int seed = 1; seed <= 6; ++seed) {
+    ManyTrapRanges ranges;
+    ranges.per_state_spectra = seed % 2 == 0;
+    const Material m = RandomManyTrapMaterial(seed, ranges);
+    const IrradianceSchedule schedule = Charge(300, 3600);
+    StateReductionOptions options;
+    options.span_s = 3600;
+    options.tolerance = 0.02;
+    const StateReduction r = ReduceStates(m, schedule, options, "many-trap");
+    EXPECT_LT(r.states_after, r.states_before) << seed;
+    EXPECT_LE(MaxRadianceError(m, r.material, schedule, OtherGrid(300, 3600), "many-trap"), 0.02) << seed;
+    EXPECT_LE(SimulatedError(m, r.material, schedule), 0.02) << seed;
+  }
+}
+
+// The renderer's case: the sign-paint fixture in scenes of 1 min, 10 min
+// and 1 h after a 5 min charge, every frame of 1/30 s within 1%.
+TEST(ReduceStates, SignPaintKeepsEveryFrameWithinTheTolerance) {
+  const Material m = LoadMaterial(std::string(PHOS_FIXTURES_DIR) + "/materials/sign-paint.json");
+  for (double scene_s : {60.0, 600.0, 3600.0}) {
+    const IrradianceSchedule schedule = Charge(300, 300 + scene_s);
+    StateReductionOptions options;
+    options.span_s = 300 + scene_s;
+    options.tolerance = 0.01;
+    const StateReduction r = ReduceStates(m, schedule, options, "sign-paint");
+    EXPECT_LT(r.states_after, 16) << scene_s;
+    EXPECT_LE(r.max_error, 0.01) << scene_s;
+    EXPECT_LE(SimulatedError(m, r.material, schedule), 0.01) << scene_s;
   }
 }
 
