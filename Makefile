@@ -61,6 +61,7 @@ study: build
 	@build/bin/phos-appearance-study --out docs
 	@build/bin/phos-path-study --out docs
 	@build/bin/phos-two-state-map-study --out docs
+	@build/bin/phos-state-trade-study --out docs
 
 # The harnesses (fuzz/, its own CMake project: clang, libFuzzer, ASan + UBSan,
 # only the loaders' sources), each run for FUZZ_SECONDS, FUZZ_JOBS at a time (1; make test: all cores).
