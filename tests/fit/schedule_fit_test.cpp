@@ -212,25 +212,35 @@ TEST(ScheduleFit, ACurveOfOneChargePredictsAnother) {
 }
 
 TEST(ScheduleFit, TheUnitsOfTheDataAndOfTheTimeDoNotMatter) {
-  // Values times 1e-9 (a radiance in W/(sr m^2)) and times in milliseconds:
-  // the same states, rates times 1e-3, signals times 1e-9.
-  const Truth truth = RandomTwoState(5, 2);
-  const Curve curve = Simulate(truth, 30, 300, 1200, 1, 2e-3, 5);
-  Curve other = curve;
-  for (double& t : other.t_s) t *= 1e3;
-  for (auto& channel : other.channels)
-    for (double& v : channel) v *= 1e-9;
-  const ScheduleFitSummary fit = FitSchedule(curve, OneLight(30, 330), "s");
-  const ScheduleFitSummary scaled = FitSchedule(other, OneLight(30e3, 330e3), "ms");
-  ASSERT_EQ(scaled.n_states, fit.n_states);
-  EXPECT_EQ(scaled.bic.size(), fit.bic.size());
-  for (int i = 0; i < fit.n_states; ++i) {
-    EXPECT_NEAR(scaled.states[i].kr * 1e3, fit.states[i].kr, 1e-6 * fit.states[i].kr);
-    EXPECT_NEAR(scaled.states[i].charge_rate * 1e3, fit.states[i].charge_rate, 1e-6 * fit.states[i].charge_rate);
-    EXPECT_NEAR(scaled.states[i].kr_stderr * 1e3, fit.states[i].kr_stderr, 1e-4 * fit.states[i].kr_stderr);
-    EXPECT_NEAR(scaled.states[i].emission[1] * 1e9, fit.states[i].emission[1], 1e-6 * fit.states[i].emission[1]);
+  // Values times 10^k and times times 10^j (k from -30 to 30, j from -6 to 6,
+  // the extremes and random ones, as tests/fit/unit_equivariance_test.cpp
+  // holds the other curve fits to): the same states, rates times 10^-j,
+  // signals times 10^k. 1e-9 is a radiance in W/(sr m^2); 1e3 times in ms.
+  std::mt19937 rng(47);
+  std::uniform_int_distribution<int> value_exponent(-30, 30), time_exponent(-6, 6);
+  for (int trial = 0; trial < 4; ++trial) {
+    const int k = trial == 0 ? -30 : trial == 1 ? 30 : trial == 2 ? -9 : value_exponent(rng);
+    const int j = trial == 0 ? 6 : trial == 1 ? -6 : trial == 2 ? 3 : time_exponent(rng);
+    const double value = std::pow(10.0, k), time = std::pow(10.0, j);
+    SCOPED_TRACE("values x 1e" + std::to_string(k) + ", times x 1e" + std::to_string(j));
+    const Truth truth = RandomTwoState(5 + trial, 2);
+    const Curve curve = Simulate(truth, 30, 300, 1200, 1, 2e-3, 5 + trial);
+    Curve other = curve;
+    for (double& t : other.t_s) t *= time;
+    for (auto& channel : other.channels)
+      for (double& v : channel) v *= value;
+    const ScheduleFitSummary fit = FitSchedule(curve, OneLight(30, 330), "s");
+    const ScheduleFitSummary scaled = FitSchedule(other, OneLight(30 * time, 330 * time), "scaled");
+    ASSERT_EQ(scaled.n_states, fit.n_states);
+    EXPECT_EQ(scaled.bic.size(), fit.bic.size());
+    for (int i = 0; i < fit.n_states; ++i) {
+      EXPECT_NEAR(scaled.states[i].kr * time, fit.states[i].kr, 1e-6 * fit.states[i].kr);
+      EXPECT_NEAR(scaled.states[i].charge_rate * time, fit.states[i].charge_rate, 1e-6 * fit.states[i].charge_rate);
+      EXPECT_NEAR(scaled.states[i].kr_stderr * time, fit.states[i].kr_stderr, 1e-4 * fit.states[i].kr_stderr);
+      EXPECT_NEAR(scaled.states[i].emission[1] / value, fit.states[i].emission[1], 1e-6 * fit.states[i].emission[1]);
+    }
+    EXPECT_NEAR(scaled.background[0] / value, fit.background[0], 1e-6 * std::fabs(fit.background[0]) + 1e-9);
   }
-  EXPECT_NEAR(scaled.background[0] * 1e9, fit.background[0], 1e-6 * std::fabs(fit.background[0]) + 1e-9);
 }
 
 TEST(ScheduleFit, ABadScheduleIsOneLineNamingTheOption) {
