@@ -623,6 +623,9 @@ void PrepareScene(const RenderArgs& args, RenderRun& r) {
     object->phosphor = material;
     object->phosphor_path = file;
   }
+  // An object --material makes a phosphor gets texels: counted as the loader
+  // counts them, so --check refuses what the run would.
+  if (!args.materials.empty()) CheckTexelLimits(r.scene);
   if (args.unknown_ke == "zero") ZeroUnknownKeEverywhere(&r.scene);
 }
 

@@ -59,6 +59,27 @@ double ImageSum(const std::string& path) {
   return sum;
 }
 
+// --material can make a plain object a phosphor: its texels are counted
+// before --check says the run would go (it passed, and the run then refused).
+TEST(RenderCommand, AnObjectMadeAPhosphorByMaterialIsCountedByCheck) {
+  testing::TempDir dir;
+  nlohmann::json scene = nlohmann::json::parse(ReadText(Fixture("scenes/cornell-phosphor.json")));
+  scene["texel_size_m"] = 1e-3;
+  scene["objects"].push_back(
+      {{"name", "plain quad"}, {"shape", {{"type", "quad"}, {"size", {1e6, 1e6}}}}, {"albedo", 0.5}});
+  for (nlohmann::json& object : scene["objects"])
+    if (object.contains("mesh")) object["mesh"] = Fixture("scenes/" + object["mesh"].get<std::string>()).string();
+  for (nlohmann::json& object : scene["objects"])
+    if (object.contains("phosphor"))
+      object["phosphor"] = Fixture("scenes/" + object["phosphor"].get<std::string>()).string();
+  WriteText(dir / "big.json", scene.dump());
+  const std::string run = "render " + (dir / "big.json").string() + " --out " + (dir / "out").string() + " --check";
+  EXPECT_EQ(RunPhos(run).exit_code, 0);
+  const auto refused = RunPhos(run + " --material 'plain quad=" + Fixture("materials/green.json").string() + "'");
+  EXPECT_TRUE(IsOneLineUserError(refused, "texels ('plain quad'")) << refused.err;
+  EXPECT_FALSE(std::filesystem::exists(dir / "out"));
+}
+
 TEST(RenderCommand, NoPhosphorescenceLeavesTheDarkBoxBlack) {
   TempDir with, without;
   const std::string common = " --times 40 --width 24 --height 24 --json --out ";
