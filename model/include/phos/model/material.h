@@ -2,7 +2,7 @@
 // A phosphorescent material (Sec. 8.3, Eq. 8.1-8.2) and its file format
 // `phos.material/1` (docs/formats.md, "Material").
 //
-// Per excited state i (nc = 1..4 of them):
+// Per excited state i (nc = 1..kMaxStates of them):
 //   kr      decay rate, 1/s
 //   ke[b]   excitation rate per unit band-integrated irradiance E[b], 1/s per
 //           unit irradiance; a value may be unknown (JSON null) when it was
