@@ -26,8 +26,11 @@
 #include "phos/fit/decay_fit.h"
 #include "phos/fit/decay_map.h"
 #include "phos/fit/decay_map_file.h"
+#include "phos/fit/captured_sample.h"
 #include "phos/fit/session_fit.h"
 #include "phos/model/material.h"
+#include "phos/model/schedule.h"
+#include "phos/model/state_reduction.h"
 #include "phos/util/atomic_file.h"
 #include "phos/util/error.h"
 #include "phos/util/format.h"
@@ -44,7 +47,28 @@ struct SessionArgs {
   int components = 0, max_components = 3, max_iterations = 0;
   bool json = false, sequential = false, joint = false;  // joint: the default, accepted for older scripts
   bool keep_unconverged = false;
+  std::optional<double> span_s, tolerance;  // --span-s, --tolerance: only the states a scene of span_s needs
 };
+
+// Only the states a scene needs (model/state_reduction.h): the fitted
+// material reduced to the fewest states whose radiance stays within
+// --tolerance of it over --span-s, charged as the session's decay was (its
+// charge light for its charge time, from dark), then dark.
+std::optional<StateReduction> ReduceForSpan(const CapturedSample& sample, const Material& material,
+                                            const SessionArgs& args) {
+  if (!args.span_s) return std::nullopt;
+  if (!sample.decay) ThrowUserError(args.dir, "--span-s", "the session has no decay part to take its charge from");
+  const DecayCharge charge = ChargeBeforeDecay(*sample.decay);
+  if (charge.band_irradiance.empty())
+    ThrowUserError(args.dir, "--span-s",
+                   "the decay part records no band irradiance of its charge light: the states cannot be charged");
+  StateReductionOptions options;
+  options.span_s = *args.span_s;
+  options.tolerance = *args.tolerance;
+  const IrradianceSchedule schedule =
+      IrradianceSchedule::ChargeThenDecay(charge.band_irradiance, charge.charge_s, *args.span_s);
+  return ReduceStates(material, schedule, options, args.out);
+}
 
 // A material whose fit stopped at its iteration limit is not written unless
 // the user asked to keep it (then it is, and the output says so).
@@ -155,8 +179,10 @@ void RunFitSession(const SessionArgs& args) {
   options.max_iterations = args.max_iterations;
   std::optional<Material> truth;
   if (!args.compare.empty()) truth = LoadMaterial(args.compare);  // a bad file fails before any work
-  const SessionFit fit = FitSession(args.dir, options);
+  const CapturedSample sample = LoadCapturedSample(args.dir);
+  const SessionFit fit = FitSession(sample, options);
   RequireConverged(fit, args.dir, args.keep_unconverged);
+  const std::optional<StateReduction> reduced = ReduceForSpan(sample, fit.material, args);
   std::optional<MaterialComparison> comparison;
   if (truth) comparison = CompareMaterials(fit.material, *truth);
   for (const std::string& file : {args.out, args.report}) {
@@ -165,7 +191,7 @@ void RunFitSession(const SessionArgs& args) {
     if (!file.empty() && !parent.empty())
       std::filesystem::create_directories(parent, ec);  // a failure is named by the write
   }
-  SaveMaterial(fit.material, args.out);
+  SaveMaterial(reduced ? reduced->material : fit.material, args.out);
   if (!args.report.empty())
     WriteFileAtomically(args.report, SessionReportHtml(fit, "phos fit session " + args.dir, comparison));
   nlohmann::json json = {
@@ -191,7 +217,17 @@ void RunFitSession(const SessionArgs& args) {
                           {"a_stderr", fit.state_excitation->a_stderr}};
   if (fit.joint) json["joint"] = JointJson(*fit.joint, fit.joint_written);
   json["written"] = fit.joint_written ? "joint" : "sequential";
+  if (reduced)
+    json["reduced"] = {{"span_s", *args.span_s},
+                       {"tolerance", *args.tolerance},
+                       {"states_full", reduced->states_before},
+                       {"states_kept", reduced->states_after},
+                       {"max_radiance_error", reduced->max_error}};
   if (!args.json) PrintSessionFit(args, fit);
+  if (reduced && !args.json)
+    std::printf("  written with %d of its %d state(s): the fewest within %s over %s s (largest radiance error %s)\n",
+                reduced->states_after, reduced->states_before, FormatShort(*args.tolerance).c_str(),
+                FormatShort(*args.span_s).c_str(), FormatShort(reduced->max_error, 3).c_str());
   if (comparison) {
     json["comparison"] = ComparisonJson(*comparison);
     if (!args.json) PrintComparison(args.compare, *comparison);
@@ -870,6 +906,17 @@ void RegisterFit(CLI::App& app) {
   f->add_option("--max-iterations", session->max_iterations,
                 "the solvers' iteration limit for the decay and excitation fits (default: 100 and 200)")
       ->check(CLI::Range(1, 100000));
+  auto span = f->add_option("--span-s", session->span_s,
+                            "write only the states a scene of this many seconds needs: the fewest whose radiance\n"
+                            "stays within --tolerance of the full fit's, charged as the session's decay was, then dark")
+                  ->check(kFinite)
+                  ->check(kPositive);
+  auto tolerance = f->add_option("--tolerance", session->tolerance,
+                                 "with --span-s: the largest radiance error allowed, relative to the total (e.g. 0.02)")
+                       ->check(kFinite)
+                       ->check(kPositive);
+  span->needs(tolerance);
+  tolerance->needs(span);
   f->add_flag("--keep-unconverged", session->keep_unconverged,
               "write the material even when a fit it holds stopped at its iteration limit (it is said);\n"
               "without it such a fit writes nothing and exits 2");

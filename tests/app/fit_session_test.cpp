@@ -168,6 +168,45 @@ void KillAfter(const std::filesystem::path& session, int keep) {
   std::filesystem::remove(session / "stop.json");
 }
 
+// --span-s and --tolerance write only the states a scene of that span
+// needs (model/state_reduction.h): a two-state sample for a 2 s scene at a
+// loose tolerance keeps fewer states than it has, within the tolerance; a
+// tight one keeps both; either option alone is one line.
+TEST(FitSessionCommand, OnlyTheStatesASpanNeedsAreWritten) {
+  testing::TempDir dir;
+  ASSERT_EQ(RunPhos("capture all --sim-material " + testing::Fixture("materials/two-state-ratio20.json").string() +
+                    " --sim-size 48x12 --out " + (dir / "c").string())
+                .exit_code,
+            0);
+  auto fit = [&](const std::string& options, const std::string& out) {
+    const auto run =
+        RunPhos("fit session " + (dir / "c").string() + " --out " + (dir / out).string() + " --json " + options);
+    EXPECT_EQ(run.exit_code, 0) << run.err;
+    return run.exit_code == 0 ? nlohmann::json::parse(run.out) : nlohmann::json::object();
+  };
+  const nlohmann::json full = fit("", "full.json");
+  ASSERT_EQ(full["n_components"], 2);
+  EXPECT_FALSE(full.contains("reduced"));
+  const nlohmann::json loose = fit("--span-s 600 --tolerance 0.5", "loose.json");
+  ASSERT_TRUE(loose.contains("reduced"));
+  EXPECT_EQ(loose["reduced"]["states_full"], 2);
+  EXPECT_EQ(loose["reduced"]["states_kept"], 1);
+  EXPECT_LE(loose["reduced"]["max_radiance_error"].get<double>(), 0.5);
+  EXPECT_EQ(ReadJsonFile(dir / "loose.json")["states"].size(), 1u);
+  const nlohmann::json tight = fit("--span-s 600 --tolerance 1e-6", "tight.json");
+  EXPECT_EQ(tight["reduced"]["states_kept"], 2);
+  EXPECT_EQ(ReadJsonFile(dir / "tight.json")["states"].size(), 2u);
+  for (const char* alone : {"--span-s 60", "--tolerance 0.02"})
+    EXPECT_EQ(
+        RunPhos("fit session " + (dir / "c").string() + " --out " + (dir / "x.json").string() + " " + alone).exit_code,
+        2)
+        << alone;
+  EXPECT_TRUE(testing::IsOneLineUserError(RunPhos("fit session " + (dir / "c").string() + " --out " +
+                                                  (dir / "x.json").string() + " --span-s -1 --tolerance 0.02"),
+                                          "--span-s"));
+  EXPECT_FALSE(std::filesystem::exists(dir / "x.json"));
+}
+
 TEST(FitSessionCommand, PartialSessionsAndBadInput) {
   testing::TempDir dir;
   const std::string orange = testing::Fixture("materials/orange.json").string();
