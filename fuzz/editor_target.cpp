@@ -76,8 +76,7 @@ Response Send(int port, const std::string& request) {
   bool connected = ::connect(fd, reinterpret_cast<sockaddr*>(&address), sizeof address) == 0;
   if (!connected && errno == EINTR) {
     pollfd p{fd, POLLOUT, 0};
-    while (::poll(&p, 1, 5000) < 0 && errno == EINTR) {
-    }
+    while (::poll(&p, 1, 5000) < 0 && errno == EINTR) {}
     int error = 0;
     socklen_t length = sizeof error;
     connected = (p.revents & POLLOUT) && ::getsockopt(fd, SOL_SOCKET, SO_ERROR, &error, &length) == 0 && error == 0;
@@ -89,7 +88,7 @@ Response Send(int port, const std::string& request) {
   for (std::size_t sent = 0; sent < request.size();) {
     const ssize_t n = ::send(fd, request.data() + sent, request.size() - sent, MSG_NOSIGNAL);
     if (n < 0 && errno == EINTR) continue;  // libFuzzer's SIGALRM (its -timeout clock) interrupts calls
-    if (n <= 0) break;  // the server may answer (and close) before the whole body is read
+    if (n <= 0) break;                      // the server may answer (and close) before the whole body is read
     sent += static_cast<std::size_t>(n);
   }
   std::string text;
@@ -222,7 +221,7 @@ void PutBack(Editor& e, int route, std::string_view body, const Response& respon
       Must(port, Post(port, "/api/preset", nlohmann::json{{"object", object}, {"preset", it->second}}.dump()));
       break;
     }
-    case 4: Must(port, Post(port, "/api/settings", R"({"states": 1, "falloff": 0})")); break;
+    case 4: Must(port, Post(port, "/api/settings", R"({"states": null, "falloff": 0})")); break;
     case 5: {  // an export: what it wrote must be under the root; then the root is emptied
       const std::filesystem::path written = nlohmann::json::parse(response.body)["written"].get<std::string>();
       const std::string root = std::filesystem::weakly_canonical(e.root).string() + "/";

@@ -435,9 +435,13 @@ void PostSettings(EditSession& session, const httplib::Request& request, httplib
   const JsonField f(body, "request");
   f.RejectUnknownKeys({"states", "falloff"});
   // Both read before either is applied: a bad falloff leaves the states as they were.
-  const std::optional<int> states = f.Has("states") ? std::optional<int>(f["states"].Integer(1, 3)) : std::nullopt;
+  // states null: each object's own count again (what a session starts with).
+  const bool own_states = f.Has("states") && body["states"].is_null();
+  const std::optional<int> states =
+      f.Has("states") && !own_states ? std::optional<int>(f["states"].Integer(1, 3)) : std::nullopt;
   const std::optional<double> falloff =
       f.Has("falloff") ? std::optional<double>(f["falloff"].NumberInRange(0, 10)) : std::nullopt;
+  if (own_states) session.SetStates(std::nullopt);
   if (states) session.SetStates(*states);
   if (falloff) session.SetPropagation(*falloff);
   ReplyState(session, response);

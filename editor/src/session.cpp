@@ -358,8 +358,8 @@ void EditSession::SetPreset(const std::string& object, const std::string& preset
   Resolve();
 }
 
-void EditSession::SetStates(int states) {
-  if (states < 1 || states > 3) ThrowUserError("", "states", "expected 1, 2 or 3");
+void EditSession::SetStates(std::optional<int> states) {
+  if (states && (*states < 1 || *states > 3)) ThrowUserError("", "states", "expected 1, 2 or 3 (or null)");
   states_ = states;
   Resolve();
 }

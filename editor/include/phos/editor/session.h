@@ -55,7 +55,8 @@ class EditSession {
   void UpdateConstraint(std::size_t index, const nlohmann::json& fields);  // rgb, t_s, weight, kind
   void RemoveConstraint(std::size_t index);
   void SetPreset(const std::string& object, const std::string& preset);
-  void SetStates(int states);
+  // The states an edit solves for: 1 to 3, or nullopt for each object's own count.
+  void SetStates(std::optional<int> states);
   void SetPropagation(double falloff);
   // The material of an object; and the same written under root (a relative
   // path inside it, no "..", no control characters, at most 1024 bytes). The
