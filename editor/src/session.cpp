@@ -376,9 +376,11 @@ void EditSession::SetPropagation(double falloff) {
 
 void EditSession::Resolve() {
   const auto start = std::chrono::steady_clock::now();
-  // What each object wears before this solve: the solve starts from it.
-  std::vector<std::shared_ptr<const Material>> wears(scene_.objects.size());
-  for (std::size_t o = 0; o < wears.size(); ++o) wears[o] = solved_[o] ? solved_[o] : base_[o];
+  // What each object wore before any edit (the scene's material, or a
+  // preset): the solve starts from it, so a solve depends on the constraints
+  // and settings alone, never on the edits before it (undoing one gives the
+  // session it undid).
+  const std::vector<std::shared_ptr<const Material>>& wears = base_;
   solutions_.clear();
   std::fill(solved_.begin(), solved_.end(), nullptr);
   // One problem per edited object: its constraints' points share its material.
@@ -505,7 +507,7 @@ nlohmann::json EditSession::State() const {
     objects.push_back({{"name", object.name},
                        {"phosphorescent", object.phosphor != nullptr},
                        {"material", object.phosphor ? object.phosphor->name : ""},
-                       {"states", object.phosphor ? StatesFor(*object.phosphor) : 0},
+                       {"states", base_[o] ? StatesFor(*base_[o]) : 0},
                        // The preset it wears, "" when it wears its scene's material or an edit.
                        {"preset", solved_[o] ? "" : preset_[o]},
                        {"edited", solved_[o] != nullptr},
