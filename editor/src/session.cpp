@@ -293,10 +293,11 @@ void EditSession::AddConstraint(int x, int y, double t_s) {
   const Material& now = *(solved_[hit.object] ? solved_[hit.object] : base_[hit.object]);
   Material known = now;
   AssumeUnknownKeZero(known);  // only a curve to start the target from
-  c.bands = PredictRadiance(probe, known, {t_s - scene_.start_s})[0];
-  for (double& v : c.bands) v = std::max(v, 0.0);
-  c.rgb = BandsToRgb(c.bands);
+  c.look_bands = PredictRadiance(probe, known, {t_s - scene_.start_s})[0];
+  for (double& v : c.look_bands) v = std::max(v, 0.0);
+  c.rgb = BandsToRgb(c.look_bands);
   for (double& v : c.rgb) v = std::max(v, 0.0);
+  c.look_rgb = c.rgb;
   if (*std::max_element(c.rgb.begin(), c.rgb.end()) <= 0)
     ThrowUserError("", "x, y",
                    where + " is black at t = " + FormatShort(t_s, 4) +
@@ -315,7 +316,6 @@ void EditSession::UpdateConstraint(std::size_t index, const nlohmann::json& fiel
     const JsonField rgb = f["rgb"];
     if (rgb.ArraySize() != 3) rgb.Fail("expected 3 values (R, G, B), got " + std::to_string(rgb.ArraySize()));
     for (std::size_t k = 0; k < 3; ++k) c.rgb[k] = rgb.At(k).NumberInRange(0, kMaxRadiance);
-    c.bands.clear();  // a colour the user gives: its bands are RgbToBands's
     // The weight is 1 / |T|^2 and the solve meets a zero target with Lambda = 0:
     // the object would silently stop glowing.
     if (*std::max_element(c.rgb.begin(), c.rgb.end()) <= 0)
@@ -399,7 +399,7 @@ void EditSession::Resolve() {
     constraint.point = static_cast<int>(p.points.size()) - 1;
     constraint.t_s = constraint.until_s = c.t_s - scene_.start_s;
     if (c.kind != Constraint::Kind::kTarget) constraint.until_s = scene_.end_s - scene_.start_s;  // "until the end"
-    constraint.radiance = c.bands.empty() ? RgbToBands(c.rgb) : c.bands;
+    constraint.radiance = c.LookBands() ? *c.LookBands() : RgbToBands(c.rgb);
     // Relative error counts: a faint glow matters as much as a lit look.
     double norm2 = 0;
     for (double v : constraint.radiance) norm2 += v * v;
@@ -535,8 +535,8 @@ nlohmann::json EditSession::State() const {
     const std::vector<double> predicted = BandsToRgb(L.back());
     // Against the target the solve was given: the bands of a look taken at
     // placement (whose RGB may lie outside sRGB, shown clamped), else the RGB.
-    const std::vector<double>& target = c.bands.empty() ? c.rgb : c.bands;
-    const std::vector<double>& got = c.bands.empty() ? predicted : L.back();
+    const std::vector<double>& target = c.LookBands() ? *c.LookBands() : c.rgb;
+    const std::vector<double>& got = c.LookBands() ? L.back() : predicted;
     double error = 0, norm = 0;
     for (std::size_t k = 0; k < target.size(); ++k) {
       error += std::pow(got[k] - target[k], 2);

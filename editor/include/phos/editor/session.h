@@ -80,10 +80,13 @@ class EditSession {
     std::vector<std::vector<double>> irradiance;  // per timeline frame, per band
     double t_s = 0;
     std::vector<double> rgb;  // target, linear sRGB
-    // The target per band when it is the point's look at placement (exact:
-    // RGB to bands is not the inverse of bands to RGB); emptied when the
-    // user sets rgb, then the target is RgbToBands(rgb).
-    std::vector<double> bands;
+    // The point's look at placement, per band and as its rgb: while rgb is
+    // that colour the target is those bands (exact: RGB to bands is not the
+    // inverse of bands to RGB), else RgbToBands(rgb).
+    std::vector<double> look_bands, look_rgb;
+    const std::vector<double>* LookBands() const {
+      return rgb == look_rgb && !look_bands.empty() ? &look_bands : nullptr;
+    }
     double weight = 1;
     Constraint::Kind kind = Constraint::Kind::kTarget;
   };
